@@ -1,0 +1,97 @@
+"""Release checkpoints: ``model.safetensors`` (weights, cannot run code on load) beside
+``model.json`` (config, feature layout, normalisation, skeleton, data, licence) and
+``seeds.npz`` (20-frame feature windows from test-split takes, loaded without pickle).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from safetensors.numpy import load_file, save_file
+
+from .conventions import CONTACTS, JOINTS, LAYOUT, MODEL_FPS, PARENT_NAMES, UP_AXIS
+
+REPO = Path(__file__).resolve().parent.parent
+DEFAULT_MODEL = REPO / "models" / "strnn_default"
+
+
+class CheckpointError(ValueError):
+    """A model folder is missing files or holds an unsupported format."""
+
+
+@dataclass
+class Checkpoint:
+    """Everything inference needs: weights ``{name: float32 array}``, config dict,
+    normalisation ``mean``/``std`` ``[C]``, metadata and seed windows ``[K, m, C]``."""
+
+    weights: dict[str, np.ndarray]
+    config: dict
+    mean: np.ndarray
+    std: np.ndarray
+    meta: dict
+    seeds: np.ndarray
+    seed_names: list[str]
+
+
+def _atomic(path: Path, write):
+    tmp = path.with_name(path.name + ".tmp")
+    write(tmp)
+    os.replace(tmp, path)
+
+
+def save_release(folder: str | Path, weights: dict[str, np.ndarray], config: dict, mean, std,
+                 meta: dict, seeds: np.ndarray, seed_names: list[str]) -> Path:
+    """Write a release checkpoint folder atomically, file by file."""
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    doc = {
+        "format": "strnn-release-1",
+        "config": config,
+        "fps": MODEL_FPS,
+        "up_axis": "xyz"[UP_AXIS],
+        "units": "metres",
+        "layout": {"size": LAYOUT.size, "positions": [LAYOUT.positions.start, LAYOUT.positions.stop],
+                   "velocity": [LAYOUT.velocity.start, LAYOUT.velocity.stop], "yaw_rate": LAYOUT.yaw_rate,
+                   "contacts": [LAYOUT.contacts.start, LAYOUT.contacts.stop],
+                   "contact_names": [c for c, _ in CONTACTS]},
+        "skeleton": {"joints": list(JOINTS), "parents": [PARENT_NAMES[j] for j in JOINTS]},
+        "normalisation": {"mean": np.asarray(mean).tolist(), "std": np.asarray(std).tolist()},
+        **meta,
+    }
+    contiguous = {k: np.ascontiguousarray(v, dtype=np.float32) for k, v in weights.items()}
+    _atomic(folder / "model.safetensors", lambda p: save_file(contiguous, str(p)))
+    _atomic(folder / "model.json", lambda p: p.write_text(json.dumps(doc, indent=1)))
+    def write_seeds(p: Path):
+        with open(p, "wb") as f:  # a file object keeps np.savez from renaming the temporary file
+            np.savez(f, features=np.asarray(seeds, np.float32), names=np.array(seed_names, dtype=str))
+
+    _atomic(folder / "seeds.npz", write_seeds)
+    return folder
+
+
+def load_release(folder: str | Path | None = None) -> Checkpoint:
+    """Load a release checkpoint folder (default: the bundled model). Never unpickles."""
+    folder = Path(folder) if folder else DEFAULT_MODEL
+    if folder.is_file():
+        folder = folder.parent
+    for name in ("model.safetensors", "model.json"):
+        if not (folder / name).exists():
+            raise CheckpointError(f"{folder}: missing {name}; a model folder holds model.safetensors, "
+                                  "model.json and seeds.npz (see models/strnn_default)")
+    doc = json.loads((folder / "model.json").read_text())
+    if doc.get("format") != "strnn-release-1":
+        raise CheckpointError(f"{folder / 'model.json'}: unsupported format {doc.get('format')!r}")
+    if doc["layout"]["size"] != LAYOUT.size:
+        raise CheckpointError(f"{folder}: feature size {doc['layout']['size']} does not match this code's {LAYOUT.size}")
+    seeds, names = np.zeros((0, doc["config"]["encode_len"], LAYOUT.size), np.float32), []
+    if (folder / "seeds.npz").exists():
+        z = np.load(folder / "seeds.npz", allow_pickle=False)
+        seeds, names = z["features"], [str(n) for n in z["names"]]
+    norm = doc["normalisation"]
+    meta = {k: v for k, v in doc.items() if k not in ("config", "normalisation")}
+    return Checkpoint(load_file(str(folder / "model.safetensors")), doc["config"],
+                      np.array(norm["mean"], np.float32), np.array(norm["std"], np.float32), meta, seeds, names)
