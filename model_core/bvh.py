@@ -108,6 +108,8 @@ def read_bvh(path: str | Path, fps: float | None = None) -> Bvh:
                 count = int(take()[1])
             except ValueError:
                 raise _error(path, cline, f"CHANNELS of {name} needs a count") from None
+            if not 0 <= count <= 6:
+                raise _error(path, cline, f"CHANNELS of {name} has count {count}; expected 0 to 6")
             chans = [take()[1] for _ in range(count)]
             for c in chans:
                 if len(c) != 9 or c[0].upper() not in _AXES or c[1:].lower() not in ("position", "rotation"):
@@ -118,6 +120,8 @@ def read_bvh(path: str | Path, fps: float | None = None) -> Bvh:
             stack.append(len(bvh.names) - 1)
         elif key == "END":
             take("Site")
+            if not stack:
+                raise _error(path, line, "End Site outside of a joint block")
             parent = stack[-1]
             bvh.names.append(f"{bvh.names[parent]}_end")
             parents.append(parent)

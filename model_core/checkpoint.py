@@ -86,7 +86,8 @@ def load_release(folder: str | Path | None = None) -> Checkpoint:
     if doc.get("format") != "strnn-release-1":
         raise CheckpointError(f"{folder / 'model.json'}: unsupported format {doc.get('format')!r}")
     if doc["layout"]["size"] != LAYOUT.size:
-        raise CheckpointError(f"{folder}: feature size {doc['layout']['size']} does not match this code's {LAYOUT.size}")
+        raise CheckpointError(f"{folder}: feature size {doc['layout']['size']} does not match "
+                              f"this code's {LAYOUT.size}")
     seeds, names = np.zeros((0, doc["config"]["encode_len"], LAYOUT.size), np.float32), []
     if (folder / "seeds.npz").exists():
         z = np.load(folder / "seeds.npz", allow_pickle=False)

@@ -60,6 +60,7 @@ BODY_GROUPS: dict[str, tuple[str, ...]] = {
     "l_leg": ("l_upleg", "l_knee", "l_foot", "l_toe"),
     "r_leg": ("r_upleg", "r_knee", "r_foot", "r_toe"),
 }
+LIMBS = ("l_arm", "r_arm", "l_leg", "r_leg")
 
 
 @dataclass(frozen=True)
@@ -116,3 +117,12 @@ def yup_to_zup(p: np.ndarray) -> np.ndarray:
 def zup_to_yup(p: np.ndarray) -> np.ndarray:
     """Blender Z-up (x, y, z) -> Y-up (x, z, -y). Shape ``[..., 3]``."""
     return np.stack([p[..., 0], p[..., 2], -p[..., 1]], axis=-1)
+
+
+def group_channels() -> dict[str, list[int]]:
+    """Feature channels of each spatial-encoder group: the body groups, ``root``
+    (hips position + root motion) and ``contacts``."""
+    groups = {name: LAYOUT.joint_channels(joints).tolist() for name, joints in BODY_GROUPS.items()}
+    groups["root"] = LAYOUT.joint_channels(("hips",)).tolist() + list(range(LAYOUT.root.start, LAYOUT.root.stop))
+    groups["contacts"] = list(range(LAYOUT.contacts.start, LAYOUT.contacts.stop))
+    return groups

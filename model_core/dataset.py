@@ -179,7 +179,8 @@ def window_starts(lengths: list[int], window: int, stride: int = 1) -> np.ndarra
 
 @dataclass
 class Normaliser:
-    """Per-channel mean and std ``[C]``; contacts stay 0/1 (mean 0, std 1)."""
+    """Per-channel mean and std ``[C]``. All position channels share one std, so the loss
+    weighs a centimetre the same on every joint (as MPJPE does); contacts stay 0/1."""
 
     mean: np.ndarray
     std: np.ndarray
@@ -188,6 +189,7 @@ class Normaliser:
     def fit(cls, feats: np.ndarray, floor: float = 0.01) -> Normaliser:
         mean = feats.mean(0).astype(np.float32)
         std = np.maximum(feats.std(0), floor).astype(np.float32)
+        std[LAYOUT.positions] = feats[:, LAYOUT.positions].std(0).mean()
         mean[LAYOUT.contacts], std[LAYOUT.contacts] = 0.0, 1.0
         std[LAYOUT.yaw_rate] = max(std[LAYOUT.yaw_rate], 0.002)
         return cls(mean, std)

@@ -13,7 +13,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.ndimage import gaussian_filter1d
 
 from .conventions import CONTACT_JOINTS, JOINT_INDEX, LAYOUT, MODEL_FPS, UP_AXIS
 
@@ -22,6 +21,16 @@ from .conventions import CONTACT_JOINTS, JOINT_INDEX, LAYOUT, MODEL_FPS, UP_AXIS
 CONTACT_HEIGHT = 0.05  # metres
 CONTACT_SPEED = 0.6  # metres per second
 HEADING_SIGMA_FRAMES = 3.0
+
+
+def gaussian_smooth(x: np.ndarray, sigma: float) -> np.ndarray:
+    """Gaussian filter along axis 0 with edge padding; equals ``scipy.ndimage.gaussian_filter1d``
+    (mode ``nearest``, truncate 4). NumPy only, because Blender's Python has no SciPy."""
+    radius = int(4.0 * sigma + 0.5)
+    taps = np.exp(-0.5 * (np.arange(-radius, radius + 1) / sigma) ** 2)
+    taps /= taps.sum()
+    padded = np.concatenate([np.repeat(x[:1], radius, 0), x, np.repeat(x[-1:], radius, 0)])
+    return sum(w * padded[k:k + len(x)] for k, w in enumerate(taps))
 
 
 @dataclass
@@ -46,7 +55,7 @@ def heading(pos: np.ndarray, sigma: float = HEADING_SIGMA_FRAMES) -> np.ndarray:
     fwd = np.cross(across, np.array([0.0, 1.0, 0.0]))
     fwd[:, UP_AXIS] = 0.0
     if sigma > 0 and len(fwd) > 1:
-        fwd = gaussian_filter1d(fwd, sigma, axis=0, mode="nearest")
+        fwd = gaussian_smooth(fwd, sigma)
     return np.unwrap(np.arctan2(fwd[:, 0], fwd[:, 2]))
 
 

@@ -10,7 +10,7 @@ from dataclasses import asdict, dataclass
 import torch
 from torch import nn
 
-from .conventions import BODY_GROUPS, LAYOUT
+from .conventions import LAYOUT, LIMBS, group_channels as group_indices
 
 
 @dataclass
@@ -26,18 +26,6 @@ class STRNNConfig:
 
     def to_dict(self) -> dict:
         return asdict(self)
-
-
-def group_indices() -> dict[str, list[int]]:
-    """Feature channels of each spatial group (root = hips position + root motion)."""
-    groups = {name: LAYOUT.joint_channels(joints).tolist() for name, joints in BODY_GROUPS.items()}
-    hips = LAYOUT.joint_channels(("hips",)).tolist()
-    groups["root"] = hips + list(range(LAYOUT.root.start, LAYOUT.root.stop))
-    groups["contacts"] = list(range(LAYOUT.contacts.start, LAYOUT.contacts.stop))
-    return groups
-
-
-LIMBS = ("l_arm", "r_arm", "l_leg", "r_leg")
 
 
 class Block(nn.Sequential):

@@ -20,7 +20,8 @@ import torch.distributed as dist
 from torch.nn.parallel import DistributedDataParallel
 
 from .checkpoint import save_release
-from .dataset import MotionData, Normaliser, load_folder, window_starts
+from .dataset import SPLITS, MotionData, Normaliser, load_folder, window_starts
+from .features import features_to_positions, positions_to_features
 from .model import STRNN, STRNNConfig, smoothness_cost
 
 PHASES = ("spatio_temporal", "residual_pretrain", "residual_finetune")
@@ -41,8 +42,8 @@ class TrainConfig:
     noise_start: float = 0.1  # input-noise std at step 0 (normalised units)
     noise_zero_at: float = 0.5  # fraction of the first phase at which the noise reaches 0
     residual_noise: float = 0.05  # input noise while pre-training the filter on ground truth
-    denoise_fraction: float = 0.25  # share of each batch whose context also gets heavy noise ...
-    denoise_max: float = 1.0  # ... with a per-window std drawn from U(0, denoise_max): teaches denoising
+    denoise_fraction: float = 0.25  # share of each batch whose context is re-derived from noisy positions ...
+    denoise_max_cm: float = 6.0  # ... with a per-window noise std (cm) drawn from U(0, this): teaches denoising
     lr_final: float = 0.1  # cosine decay of the learning rate to this fraction within each phase
     seed: int = 0
     checkpoint_seconds: float = 120.0  # how often the resumable state is written
@@ -73,7 +74,9 @@ class Windows:
         clips = data.split(split)
         if not clips:
             raise ValueError(f"{data.root}: no clips in the {split!r} split")
-        self.feats = norm.encode(np.concatenate([c.features for c in clips])).astype(np.float32)
+        self.raw = np.concatenate([c.features for c in clips])
+        self.feats = norm.encode(self.raw).astype(np.float32)
+        self.norm = norm
         offsets = np.concatenate([[0], np.cumsum([len(c.features) for c in clips])[:-1]])
         starts = window_starts([len(c.features) for c in clips], length, stride)
         if len(starts) == 0:
@@ -87,32 +90,39 @@ class Windows:
     def batch(self, idx: np.ndarray) -> torch.Tensor:
         return torch.from_numpy(self.feats[self.starts[idx][:, None] + self.span])
 
+    def noisy_contexts(self, idx: np.ndarray, m: int, max_cm: float, rng: np.random.Generator) -> torch.Tensor:
+        """Normalised contexts ``(B, m, C)`` re-derived, as at inference, from the windows'
+        positions plus Gaussian noise of a per-window std drawn from U(0, ``max_cm``)."""
+        out = []
+        for s in self.starts[idx]:
+            pos = features_to_positions(self.raw[s:s + m])
+            pos = pos + rng.normal(0.0, rng.uniform(0, max_cm) / 100.0, pos.shape)
+            out.append(positions_to_features(pos)[0])
+        return torch.from_numpy(self.norm.encode(np.stack(out)).astype(np.float32))
 
-def window_loss(model: STRNN, window: torch.Tensor, cfg: TrainConfig, phase: str, noise: float, net=None):
+
+def window_loss(model: STRNN, window: torch.Tensor, cfg: TrainConfig, phase: str, noise: float, net=None,
+                noisy: torch.Tensor | None = None):
     """The loss of one phase on a batch of clean windows ``(B, m + n, C)``.
 
-    ``net`` is the (possibly data-parallel) wrapper that runs the first phase's forward.
+    ``noisy`` replaces the first contexts with ones derived from noisy positions; ``net`` is
+    the (possibly data-parallel) wrapper that runs the first phase's forward.
     """
     m = cfg.model.encode_len
     if phase == PHASES[1]:
         noisy = window + cfg.residual_noise * torch.randn_like(window)
         return (model.filter(noisy) - window).pow(2).mean()
-    context = corrupt(window[:, :m], cfg, noise)
+    context = window[:, :m]
+    if noisy is not None:
+        context = torch.cat([noisy, context[len(noisy):]])
+    if noise > 0:
+        context = context + noise * torch.randn_like(context)
     if phase == PHASES[2]:
         with torch.no_grad():
             decoded, predicted = model.spatio_temporal(context)
         return (model.filter(torch.cat([decoded, predicted], 1)) - window).pow(2).mean()
     out = (net or model)(context, use_filter=False)
     return (out - window).pow(2).mean() + cfg.smooth_weight * smoothness_cost(out)
-
-
-def corrupt(context: torch.Tensor, cfg: TrainConfig, noise: float) -> torch.Tensor:
-    """Add the scheduled noise to every window of ``(B, m, C)``, plus heavy noise to a share of them."""
-    b = context.shape[0]
-    std = torch.full((b, 1, 1), noise)
-    heavy = int(round(cfg.denoise_fraction * b))
-    std[:heavy] += cfg.denoise_max * torch.rand(heavy, 1, 1)
-    return context + std * torch.randn_like(context)
 
 
 def phase_progress(cfg: TrainConfig, step: int) -> float:
@@ -220,8 +230,11 @@ def train(cfg: TrainConfig, resume: bool = False, progress: bool = True) -> Path
             if saved is not None and saved["phase"] == phase:
                 opt.load_state_dict(saved["optimizer"])
             log.info("phase %s from step %d (%d parameters trained)", phase, step, sum(p.numel() for p in params))
-        window = train_w.batch(rng.integers(0, len(train_w), per_rank))
-        loss = window_loss(model, window, cfg, phase, noise_std(cfg, step), net=net)
+        idx = rng.integers(0, len(train_w), per_rank)
+        window = train_w.batch(idx)
+        heavy = idx[: int(round(cfg.denoise_fraction * len(idx)))] if phase != PHASES[1] else idx[:0]
+        noisy = train_w.noisy_contexts(heavy, cfg.model.encode_len, cfg.denoise_max_cm, rng) if len(heavy) else None
+        loss = window_loss(model, window, cfg, phase, noise_std(cfg, step), net=net, noisy=noisy)
         scale = float(cfg.lr_final + (1 - cfg.lr_final) * 0.5 * (1 + np.cos(np.pi * phase_progress(cfg, step))))
         for group in opt.param_groups:
             group["lr"] = group.setdefault("base_lr", group["lr"]) * scale
@@ -237,8 +250,8 @@ def train(cfg: TrainConfig, resume: bool = False, progress: bool = True) -> Path
         bar.update(loss.item(), phase)
         entry = None
         if rank == 0 and step % 50 == 0:
-            entry = {"step": step, "phase": phase, "loss": round(loss.item(), 6), "noise": round(noise_std(cfg, step), 4),
-                     "elapsed_s": round(time.time() - started, 1)}
+            entry = {"step": step, "phase": phase, "loss": round(loss.item(), 6),
+                     "noise": round(noise_std(cfg, step), 4), "elapsed_s": round(time.time() - started, 1)}
         if rank == 0 and val_w is not None and (step % cfg.val_every == 0 or step == cfg.steps):
             entry = entry or {"step": step, "phase": phase, "loss": round(loss.item(), 6)}
             entry["val_mse"] = round(validate(model, val_w, cfg), 6)
@@ -313,8 +326,8 @@ def write_release(model: STRNN, cfg: TrainConfig, data: MotionData, norm: Normal
     meta = {
         "training": {"command": cfg.command, "steps": cfg.steps, "optimizer": cfg.optimizer, "batch": cfg.batch,
                      "final": history[-1] if history else None},
-        "data": {"root": Path(data.root).name, "clips": {s: len(data.split(s)) for s in ("train", "validation", "test")},
-                 "frames": {s: int(sum(len(c.features) for c in data.split(s))) for s in ("train", "validation", "test")},
+        "data": {"root": Path(data.root).name, "clips": {s: len(data.split(s)) for s in SPLITS},
+                 "frames": {s: int(sum(len(c.features) for c in data.split(s))) for s in SPLITS},
                  "split_rule": "crc32(take key) % 20: 0-1 test, 2 validation, else train (model_core/dataset.py)"},
         "licence": "CC BY-NC 4.0 (trained on the Bandai Namco Research Motion Dataset, credit Bandai Namco "
                    "Research Inc.) and CMU Graphics Lab Motion Capture Database terms (data obtained from "

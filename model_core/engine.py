@@ -1,0 +1,237 @@
+"""NumPy inference engine for STRNN (no torch needed): predict, extrapolate, denoise.
+
+Loads the same release checkpoint as the torch model. Batch norms are folded into
+the layers that read them, the four spatial levels become one dense matrix each
+(zeros where the body graph has no edge), and the backward decoder and forward
+predictor step together, so a 20-frame window costs a few hundred small NumPy calls.
+Features in and out are RAW (un-normalised) ``[..., T, C]`` in :data:`LAYOUT` order.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from .checkpoint import Checkpoint, load_release
+from .conventions import LAYOUT, PARENTS
+from .features import RootStart, features_to_positions, integrate_root, positions_to_features
+from .spatial_fold import fold_spatial
+
+
+def _lstm(w: dict, prefix: str, suffix: str = "") -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(W_ih.T, W_hh.T, bias) with i, f, o rows halved so one tanh yields all gates."""
+    wih, whh = w[f"{prefix}.weight_ih{suffix}"], w[f"{prefix}.weight_hh{suffix}"]
+    b = w[f"{prefix}.bias_ih{suffix}"] + w[f"{prefix}.bias_hh{suffix}"]
+    h = whh.shape[1]
+    scale = np.ones(4 * h, np.float32)
+    scale[: 2 * h] = 0.5  # input and forget gates
+    scale[3 * h:] = 0.5  # output gate; sigmoid(z) = 0.5 * tanh(z / 2) + 0.5
+    return (wih * scale[:, None]).T.copy(), (whh * scale[:, None]).T.copy(), (b * scale).astype(np.float32)
+
+
+def _cell(gates: np.ndarray, c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """LSTM state update from pre-scaled gates ``[..., 4H]`` (PyTorch order i, f, g, o)."""
+    t = np.tanh(gates)
+    h = c.shape[-1]
+    i, f, g, o = t[..., :h], t[..., h:2 * h], t[..., 2 * h:3 * h], t[..., 3 * h:]
+    c = 0.5 * ((f + 1.0) * c + (i + 1.0) * g)
+    return 0.5 * (o + 1.0) * np.tanh(c), c
+
+
+class Engine:
+    """STRNN inference in NumPy. Build with :meth:`load`."""
+
+    def __init__(self, ckpt: Checkpoint):
+        cfg = ckpt.config
+        self.ckpt = ckpt
+        self.m, self.n, self.width = cfg["encode_len"], cfg["predict_len"], cfg["width"]
+        self.mean, self.std = ckpt.mean, ckpt.std
+        w = {k: v.astype(np.float32) for k, v in ckpt.weights.items()}
+        self.enc_frame, self.dec_frame, out_bn = fold_spatial(w, cfg)
+        # The last encoder batch norm (scale a, shift s) feeds each LSTM's input weights.
+        a, s = out_bn
+        wih, self.enc_whh, b = _lstm(w, "encoder", "_l0")
+        self.enc_wih, self.enc_b = a[:, None] * wih, b + s @ wih
+        dec, pred = _lstm(w, "decoder"), _lstm(w, "predictor")
+        self.step_wih = np.stack([a[:, None] * dec[0], a[:, None] * pred[0]])  # (2, W, 4H)
+        self.step_whh = np.stack([dec[1], pred[1]])
+        self.step_b = np.stack([dec[2] + s @ dec[0], pred[2] + s @ pred[0]])[:, None]  # (2, 1, 4H)
+        # The decoder's first input is the learnt start code, not a batch-normed frame code.
+        self.start_gates = (w["start"] - s) @ dec[0]
+        self.filter = [(w[f"filter.net.{i}.weight"].T.copy(), w[f"filter.net.{i}.bias"]) for i in (0, 2, 4, 6)] \
+            if cfg["residual"] else None
+
+    @classmethod
+    def load(cls, folder: str | Path | None = None) -> Engine:
+        """Load a release folder (default: the bundled model)."""
+        return cls(load_release(folder))
+
+    @property
+    def seeds(self) -> np.ndarray:
+        """Shipped seed windows, raw features ``[K, m, C]``."""
+        return self.ckpt.seeds
+
+    # ----------------------------------------------------------------- core
+    def _window(self, x: np.ndarray) -> np.ndarray:
+        """Normalised context ``(B, m, C)`` -> normalised window ``(B, m + n, C)``."""
+        b, m, c = x.shape
+        xin = self.enc_frame(x.reshape(b * m, c)) @ self.enc_wih
+        xin = (xin + self.enc_b).reshape(b, m, -1)
+        h = np.zeros((b, self.width), np.float32)
+        cs = np.zeros_like(h)
+        for t in range(m):
+            h, cs = _cell(xin[:, t] + h @ self.enc_whh, cs)
+        hs, cs = np.stack([h, h]), np.stack([cs, cs])  # (2, B, H): decoder, predictor
+        first = self.enc_frame(x[:, -1])  # (B, W)
+        gin = np.stack([np.broadcast_to(self.start_gates, (b, self.start_gates.shape[0])),
+                        first @ self.step_wih[1]]) + self.step_b
+        steps = max(self.m, self.n)
+        out = np.empty((2, steps, b, c), np.float32)
+        for t in range(steps):
+            hs, cs = _cell(gin + np.matmul(hs, self.step_whh), cs)
+            frames = self.dec_frame(hs.reshape(2 * b, -1))  # (2B, C)
+            out[:, t] = frames.reshape(2, b, c)
+            if t + 1 < steps:
+                gin = np.matmul(self.enc_frame(frames).reshape(2, b, -1), self.step_wih) + self.step_b
+        window = np.concatenate([out[0, : self.m][::-1], out[1, : self.n]]).transpose(1, 0, 2)  # (B, T, C)
+        if self.filter is not None:
+            y = window.reshape(b, -1)
+            z = y
+            for i, (wt, bias) in enumerate(self.filter):
+                z = z @ wt + bias
+                if i < 3:
+                    z = np.where(z > 0, z, np.expm1(np.minimum(z, 0)))  # ELU
+            window = (y + z).reshape(window.shape)
+        return window
+
+    def forward(self, context: np.ndarray) -> np.ndarray:
+        """Raw context ``[B, m, C]`` -> raw decoded context + prediction ``[B, m + n, C]``."""
+        x = ((np.asarray(context, np.float32) - self.mean) / self.std).astype(np.float32)
+        return self._window(x) * self.std + self.mean
+
+    def predict(self, context: np.ndarray) -> np.ndarray:
+        """Raw context ``[B, m, C]`` -> the next ``n`` raw frames ``[B, n, C]``."""
+        return self.forward(context)[:, self.m:]
+
+    def extrapolate(self, seed: np.ndarray, frames: int, keep_bone_lengths: bool = True) -> np.ndarray:
+        """Open-loop generation: repeat (take the last m frames, predict n more).
+
+        ``seed``: raw features ``[m, C]`` or ``[B, m, C]``; returns ``[frames, C]`` or
+        ``[B, frames, C]``. With ``keep_bone_lengths`` each predicted window is put back on
+        the seed's skeleton (bone directions kept) and contacts rounded before it is fed back.
+        """
+        seed = np.asarray(seed, np.float32)
+        single = seed.ndim == 2
+        ctx = seed[None] if single else seed
+        ctx = ctx[:, -self.m:]
+        lengths = bone_lengths(ctx) if keep_bone_lengths else None
+        chunks, total = [], 0
+        while total < frames:
+            new = self.predict(ctx)
+            if keep_bone_lengths:
+                new = project_to_skeleton(new, lengths)
+            chunks.append(new)
+            total += new.shape[1]
+            ctx = np.concatenate([ctx, new], 1)[:, -self.m:]
+        out = np.concatenate(chunks, 1)[:, :frames]
+        return out[0] if single else out
+
+    def denoise(self, feats: np.ndarray, stride: int | None = None) -> np.ndarray:
+        """Project raw features ``[F, C]`` (F >= m) onto the manifold: overlapping m-frame
+        windows through encoder and decoder, blended with a Hann weight."""
+        feats = np.asarray(feats, np.float32)
+        f = len(feats)
+        if f < self.m:
+            raise ValueError(f"denoising needs at least {self.m} frames, got {f}")
+        stride = stride or max(1, self.m // 4)
+        starts = sorted(set(range(0, f - self.m + 1, stride)) | {f - self.m})
+        windows = np.stack([feats[s:s + self.m] for s in starts])
+        decoded = self.forward(windows)[:, : self.m]
+        weight = np.hanning(self.m + 2)[1:-1].astype(np.float32)[:, None]
+        acc = np.zeros_like(feats)
+        norm = np.zeros((f, 1), np.float32)
+        for s, d in zip(starts, decoded):
+            acc[s:s + self.m] += weight * d
+            norm[s:s + self.m] += weight
+        return acc / norm
+
+    # ------------------------------------------------------ position level
+    def extend(self, positions: np.ndarray, frames: int, **kw) -> np.ndarray:
+        """Continue global positions ``[F, 21, 3]`` (metres, Y-up, 30 fps, F >= m) by
+        ``frames`` new frames ``[frames, 21, 3]``, root motion continuing."""
+        feats, start = positions_to_features(positions)
+        root, yaw = integrate_root(feats, start)
+        new = self.extrapolate(feats[-self.m:], frames, **kw)
+        joined = np.concatenate([feats[-1:], new])
+        return features_to_positions(joined, RootStart(root[-1], float(yaw[-1])))[1:]
+
+    def denoise_positions(self, positions: np.ndarray, root_weight: float = 1.0) -> np.ndarray:
+        """Denoise global positions ``[F, 21, 3]``: body from the model; the root path is the
+        least-squares blend of the noisy path and the model's velocities."""
+        feats, start = positions_to_features(positions)
+        clean = self.denoise(feats)
+        local = features_to_positions(clean, RootStart(np.zeros(3), 0.0))
+        root_model, yaw = integrate_root(clean, RootStart(np.zeros(3), 0.0))
+        noisy_root, noisy_yaw = integrate_root(feats, start)
+        root = blend_path(noisy_root, np.diff(root_model, axis=0), yaw, noisy_yaw, root_weight)
+        rot = _yaw_offset(noisy_yaw - yaw)
+        body = np.einsum("fij,fkj->fki", rot, local - root_model[:, None])
+        return (body + root[:, None]).astype(np.float32)
+
+
+def _yaw_offset(delta: np.ndarray) -> np.ndarray:
+    from .features import yaw_matrix
+
+    return yaw_matrix(np.unwrap(delta))
+
+
+def blend_path(noisy: np.ndarray, steps: np.ndarray, yaw_model: np.ndarray, yaw_noisy: np.ndarray,
+               weight: float) -> np.ndarray:
+    """Ground path ``[F, 3]`` minimising ``|p - noisy|^2 + weight * |diff(p) - steps'|^2`` where
+    ``steps'`` are the model's steps rotated into the noisy path's heading."""
+    rot = _yaw_offset(yaw_noisy - yaw_model)[:-1]
+    target = np.einsum("fij,fj->fi", rot, steps)
+    f = len(noisy)
+    # Normal equations (I + w D^T D) p = noisy + w D^T target: tridiagonal, solved by elimination.
+    diag = 1.0 + weight * np.r_[1.0, np.full(f - 2, 2.0), 1.0] if f > 1 else np.ones(1)
+    rhs = noisy.astype(np.float64).copy()
+    rhs[:-1] -= weight * target
+    rhs[1:] += weight * target
+    return solve_tridiagonal(np.full(f - 1, -weight), diag, rhs)
+
+
+def solve_tridiagonal(off: np.ndarray, diag: np.ndarray, rhs: np.ndarray) -> np.ndarray:
+    """Solve a symmetric tridiagonal system (``off`` ``[F-1]``, ``diag`` ``[F]``) for ``rhs`` ``[F, K]``."""
+    d, r = diag.astype(np.float64).copy(), rhs.astype(np.float64).copy()
+    for i in range(1, len(d)):
+        k = off[i - 1] / d[i - 1]
+        d[i] -= k * off[i - 1]
+        r[i] -= k * r[i - 1]
+    r[-1] /= d[-1]
+    for i in range(len(d) - 2, -1, -1):
+        r[i] = (r[i] - off[i] * r[i + 1]) / d[i]
+    return r
+
+
+def bone_lengths(feats: np.ndarray) -> np.ndarray:
+    """Median bone lengths ``[B, J]`` (0 for the root) of raw features ``[B, T, C]``."""
+    local = feats[..., LAYOUT.positions].reshape(*feats.shape[:-1], -1, 3)
+    bones = local[..., 1:, :] - local[..., PARENTS[1:], :]
+    return np.concatenate([np.zeros(feats.shape[:1] + (1,)), np.median(np.linalg.norm(bones, axis=-1), 1)], -1)
+
+
+def project_to_skeleton(feats: np.ndarray, lengths: np.ndarray) -> np.ndarray:
+    """Put raw features ``[B, T, C]`` back on bones of ``lengths`` ``[B, J]`` (directions kept,
+    parents first) and round the contacts."""
+    out = feats.copy()
+    local = feats[..., LAYOUT.positions].reshape(*feats.shape[:-1], -1, 3)
+    fixed = local.copy()
+    for j in range(1, local.shape[-2]):
+        p = PARENTS[j]
+        d = local[..., j, :] - local[..., p, :]
+        d /= np.maximum(np.linalg.norm(d, axis=-1, keepdims=True), 1e-8)
+        fixed[..., j, :] = fixed[..., p, :] + d * lengths[:, None, j, None]
+    out[..., LAYOUT.positions] = fixed.reshape(*feats.shape[:-1], -1)
+    out[..., LAYOUT.contacts] = np.round(np.clip(out[..., LAYOUT.contacts], 0, 1))
+    return out

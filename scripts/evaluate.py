@@ -1,0 +1,117 @@
+#!/usr/bin/env python3
+"""Evaluate an STRNN checkpoint on a folder of BVH files (metrics of DESIGN.md).
+
+Prediction MPJPE at 80..1000 ms for STRNN, zero- and constant-velocity always;
+long-horizon rollouts with --long-horizon FRAMES --seeds K; denoising against the
+best Butterworth filter and the noisy input with --denoise-std S [S ...].
+
+Example (the model card's figures):
+  python scripts/evaluate.py --data data/mocap --split test --long-horizon 20000 --seeds 20 \\
+      --denoise-std 3 --json out/eval.json
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+from pathlib import Path
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # small matmuls: BLAS threads only spin
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+from model_core.bvh import BvhError  # noqa: E402
+from model_core.checkpoint import DEFAULT_MODEL, CheckpointError  # noqa: E402
+from model_core.dataset import DataError, load_folder  # noqa: E402
+from model_core.engine import Engine  # noqa: E402
+from model_core.evaluation import evaluate_denoise, evaluate_long_horizon, evaluate_prediction, select_clips  # noqa: E402
+from model_core.rigs import RigError  # noqa: E402
+
+
+def parse_args(argv=None):
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--data", required=True, help="folder of .bvh files of a supported rig (searched recursively)")
+    p.add_argument("--checkpoint", default=str(DEFAULT_MODEL), help="release folder (default: bundled model)")
+    p.add_argument("--split", choices=("all", "train", "validation", "test"), default="all",
+                   help="which clips of the folder (the project's split rule); 'all' for a foreign folder")
+    p.add_argument("--json", help="write the results as JSON here")
+    p.add_argument("--long-horizon", type=int, metavar="FRAMES", help="open-loop rollout length")
+    p.add_argument("--seeds", type=int, default=20, help="number of long-horizon seeds")
+    p.add_argument("--reference", help="folder of BVH files for D_1nn and speed (default: --data's clips)")
+    p.add_argument("--denoise-std", type=float, nargs="+", metavar="S", help="noise std in cm")
+    p.add_argument("--cache", default="data/cache", help="folder for cached dataset arrays ('' = none)")
+    return p.parse_args(argv)
+
+
+def print_table(result: dict, extra: dict):
+    pred = result["prediction"]
+    print(f"\nPrediction MPJPE (cm), {result['clips']} clips, {result['windows']} windows")
+    print(f"{'horizon ms':<20}" + "".join(f"{h:>8}" for h in pred["horizons_ms"]))
+    for name, row in pred["mpjpe_cm"].items():
+        print(f"{name:<20}" + "".join(f"{v:8.2f}" for v in row))
+    best = [min(z, c) for z, c in zip(pred["mpjpe_cm"]["zero_velocity"], pred["mpjpe_cm"]["constant_velocity"])]
+    print(f"{'strnn / best base':<20}" + "".join(f"{s / b:8.2f}" for s, b in zip(pred["mpjpe_cm"]["strnn"], best)))
+    if "long_horizon" in result:
+        lh = result["long_horizon"]
+        print(f"\nLong horizon: {lh['seeds']} seeds x {lh['frames']} frames: exploded {lh['exploded']}, "
+              f"frozen {lh['frozen']}")
+        print("speed ratio of the last 1000 frames: " + " ".join(f"{r:.2f}" for r in lh["speed_ratio_last_1000"]))
+        blocks = [sum(b[i] for b in lh["d1nn_per_block"]) / len(lh["d1nn_per_block"])
+                  for i in range(len(lh["d1nn_per_block"][0]))]
+        print("mean D_1nn per 1000-frame block: " + " ".join(f"{d:.4f}" for d in blocks))
+        print("seeds: " + ", ".join(extra["seed_clips"]))
+    if "denoise" in result:
+        dn = result["denoise"]
+        print("\nDenoising MPJPE (cm)")
+        print(f"{'noise std cm':<20}" + "".join(f"{s:>8.1f}" for s in dn["std_cm"]))
+        for name, row in dn["mpjpe_cm"].items():
+            print(f"{name:<20}" + "".join(f"{v:8.2f}" for v in row))
+        print(f"{'best cutoff Hz':<20}" + "".join(f"{v:8.1f}" for v in extra["butterworth_cutoff_hz"]))
+
+
+def run(args) -> dict:
+    engine = Engine.load(args.checkpoint)
+    data = load_folder(args.data, cache_dir=args.cache or None)
+    for failure in data.failures:
+        print(f"skipped: {failure}", file=sys.stderr)
+    clips = select_clips(data, args.split)
+    print(f"evaluating {args.checkpoint} on {len(clips)} clips of {args.data} ({args.split})", file=sys.stderr)
+    pred = evaluate_prediction(engine, clips)
+    result = {"checkpoint": str(args.checkpoint), "data": str(args.data), "clips": len(clips),
+              "windows": pred.pop("windows"), "prediction": pred}
+    extra = {}
+    if args.long_horizon:
+        reference = select_clips(load_folder(args.reference, cache_dir=args.cache or None), "all") \
+            if args.reference else None
+        lh = evaluate_long_horizon(engine, clips, args.long_horizon, args.seeds, reference,
+                                   log=lambda m: print(m, file=sys.stderr))
+        extra["seed_clips"] = lh.pop("seed_clips")
+        result["long_horizon"] = lh
+    if args.denoise_std:
+        dn = evaluate_denoise(engine, clips, args.denoise_std)
+        extra["butterworth_cutoff_hz"] = dn.pop("butterworth_cutoff_hz")
+        result["denoise"] = dn
+    print_table(result, extra)
+    return result
+
+
+def main(argv=None) -> int:
+    args = parse_args(argv)
+    try:
+        result = run(args)
+    except (BvhError, RigError, DataError, CheckpointError, ValueError) as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
+    if args.json:
+        out = Path(args.json)
+        out.parent.mkdir(parents=True, exist_ok=True)
+        tmp = out.with_name(out.name + ".tmp")
+        tmp.write_text(json.dumps(result, indent=1))
+        os.replace(tmp, out)
+        print(f"\nwrote {out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
