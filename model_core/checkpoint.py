@@ -11,7 +11,11 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from safetensors.numpy import load_file, save_file
+
+try:  # the library where it is installed; Blender's Python lacks it, so reading has a fallback
+    from safetensors.numpy import load_file, save_file
+except ImportError:  # pragma: no cover - exercised in Blender
+    load_file = save_file = None
 
 from .conventions import CONTACTS, JOINTS, LAYOUT, MODEL_FPS, PARENT_NAMES, UP_AXIS
 
@@ -35,6 +39,32 @@ class Checkpoint:
     meta: dict
     seeds: np.ndarray
     seed_names: list[str]
+
+
+_DTYPES = {"F32": "<f4", "F64": "<f8", "F16": "<f2", "I64": "<i8", "I32": "<i4", "U8": "u1", "BOOL": "?"}
+
+
+def read_safetensors(path: str | Path) -> dict[str, np.ndarray]:
+    """Read a .safetensors file with NumPy alone: an 8-byte little-endian header length,
+    a JSON header of ``{name: {dtype, shape, data_offsets}}``, then the raw tensor bytes."""
+    raw = Path(path).read_bytes()
+    if len(raw) < 8:
+        raise CheckpointError(f"{path}: too short to be a safetensors file")
+    size = int.from_bytes(raw[:8], "little")
+    try:
+        header = json.loads(raw[8:8 + size])
+    except ValueError as e:
+        raise CheckpointError(f"{path}: unreadable safetensors header ({e})") from None
+    body = memoryview(raw)[8 + size:]
+    out = {}
+    for name, info in header.items():
+        if name == "__metadata__":
+            continue
+        if info["dtype"] not in _DTYPES:
+            raise CheckpointError(f"{path}: tensor {name!r} has unsupported dtype {info['dtype']}")
+        begin, end = info["data_offsets"]
+        out[name] = np.frombuffer(body[begin:end], dtype=_DTYPES[info["dtype"]]).reshape(info["shape"]).copy()
+    return out
 
 
 def _atomic(path: Path, write):
@@ -94,5 +124,6 @@ def load_release(folder: str | Path | None = None) -> Checkpoint:
         seeds, names = z["features"], [str(n) for n in z["names"]]
     norm = doc["normalisation"]
     meta = {k: v for k, v in doc.items() if k not in ("config", "normalisation")}
-    return Checkpoint(load_file(str(folder / "model.safetensors")), doc["config"],
+    reader = load_file if load_file is not None else read_safetensors
+    return Checkpoint(reader(str(folder / "model.safetensors")), doc["config"],
                       np.array(norm["mean"], np.float32), np.array(norm["std"], np.float32), meta, seeds, names)

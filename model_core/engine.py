@@ -9,6 +9,7 @@ Features in and out are RAW (un-normalised) ``[..., T, C]`` in :data:`LAYOUT` or
 
 from __future__ import annotations
 
+from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
@@ -30,13 +31,26 @@ def _lstm(w: dict, prefix: str, suffix: str = "") -> tuple[np.ndarray, np.ndarra
     return (wih * scale[:, None]).T.copy(), (whh * scale[:, None]).T.copy(), (b * scale).astype(np.float32)
 
 
+@lru_cache(maxsize=8)
+def _gate_affine(h: int) -> tuple[np.ndarray, np.ndarray]:
+    """(scale, shift) ``[4H]`` taking tanh of the pre-scaled gates to sigmoid (i, f, o) and tanh (g):
+    sigmoid(z) = 0.5 * tanh(z / 2) + 0.5."""
+    scale = np.full(4 * h, 0.5, np.float32)
+    scale[2 * h:3 * h] = 1.0
+    return scale, 1.0 - scale
+
+
 def _cell(gates: np.ndarray, c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """LSTM state update from pre-scaled gates ``[..., 4H]`` (PyTorch order i, f, g, o)."""
-    t = np.tanh(gates)
+    """LSTM state update from pre-scaled gates ``[..., 4H]`` (PyTorch order i, f, g, o).
+    Few, in-place NumPy calls: at batch 1 their overhead, not arithmetic, is the cost."""
     h = c.shape[-1]
-    i, f, g, o = t[..., :h], t[..., h:2 * h], t[..., 2 * h:3 * h], t[..., 3 * h:]
-    c = 0.5 * ((f + 1.0) * c + (i + 1.0) * g)
-    return 0.5 * (o + 1.0) * np.tanh(c), c
+    scale, shift = _gate_affine(h)
+    t = np.tanh(gates)
+    t *= scale
+    t += shift
+    c = t[..., h:2 * h] * c
+    c += t[..., :h] * t[..., 2 * h:3 * h]
+    return t[..., 3 * h:] * np.tanh(c), c
 
 
 class Engine:
@@ -221,17 +235,34 @@ def bone_lengths(feats: np.ndarray) -> np.ndarray:
     return np.concatenate([np.zeros(feats.shape[:1] + (1,)), np.median(np.linalg.norm(bones, axis=-1), 1)], -1)
 
 
+def _chain_matrices() -> tuple[np.ndarray, np.ndarray]:
+    """``bone [J-1, J]``: joint positions -> bone vectors (joint j minus its parent, row j-1);
+    ``chain [J, J-1]``: bone vectors -> joint offsets from the root (the bones from the root to j)."""
+    j = len(PARENTS)
+    bone = np.zeros((j - 1, j), np.float32)
+    bone[np.arange(j - 1), np.arange(1, j)] = 1.0
+    bone[np.arange(j - 1), PARENTS[1:]] -= 1.0
+    chain = np.zeros((j, j - 1), np.float32)
+    for joint in range(1, j):
+        k = joint
+        while k > 0:
+            chain[joint, k - 1] = 1.0
+            k = PARENTS[k]
+    return bone, chain
+
+
+_BONE, _CHAIN = _chain_matrices()
+
+
 def project_to_skeleton(feats: np.ndarray, lengths: np.ndarray) -> np.ndarray:
     """Put raw features ``[B, T, C]`` back on bones of ``lengths`` ``[B, J]`` (directions kept,
-    parents first) and round the contacts."""
+    the root where it was) and round the contacts. Two small matmuls instead of a loop over joints."""
     out = feats.copy()
     local = feats[..., LAYOUT.positions].reshape(*feats.shape[:-1], -1, 3)
-    fixed = local.copy()
-    for j in range(1, local.shape[-2]):
-        p = PARENTS[j]
-        d = local[..., j, :] - local[..., p, :]
-        d /= np.maximum(np.linalg.norm(d, axis=-1, keepdims=True), 1e-8)
-        fixed[..., j, :] = fixed[..., p, :] + d * lengths[:, None, j, None]
+    d = np.tensordot(local, _BONE, axes=([-2], [1]))  # bone vectors (B, T, 3, J-1)
+    norm = np.sqrt(np.einsum("...dj,...dj->...j", d, d))[..., None, :]
+    d *= lengths[:, None, None, 1:] / np.maximum(norm, 1e-8)
+    fixed = local[..., :1, :] + np.tensordot(d, _CHAIN, axes=([-1], [1])).swapaxes(-1, -2)  # (B, T, J, 3)
     out[..., LAYOUT.positions] = fixed.reshape(*feats.shape[:-1], -1)
     out[..., LAYOUT.contacts] = np.round(np.clip(out[..., LAYOUT.contacts], 0, 1))
     return out

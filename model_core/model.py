@@ -22,7 +22,7 @@ class STRNNConfig:
     spatial: bool = True  # hierarchical body-part encoder; False = "Temporal" (one linear layer)
     residual: bool = True  # residual filter over decoded + predicted frames
     residual_width: int = 512  # hidden units of the residual filter
-    dropout: float = 0.1  # after each spatial layer
+    dropout: float = 0.0  # after each spatial layer (paper: 0.1; 0 trains better at width 128, see the model card)
 
     def to_dict(self) -> dict:
         return asdict(self)

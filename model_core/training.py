@@ -31,7 +31,7 @@ PHASES = ("spatio_temporal", "residual_pretrain", "residual_finetune")
 class TrainConfig:
     data: str  # folder of BVH files (searched recursively)
     out: str = "runs/default"  # training state, log and release checkpoint go here
-    model: STRNNConfig = field(default_factory=lambda: STRNNConfig(width=256))
+    model: STRNNConfig = field(default_factory=lambda: STRNNConfig(width=128))
     steps: int = 5000  # optimiser steps over all phases
     phase_split: tuple[float, float, float] = (0.8, 0.05, 0.15)  # fraction of steps per phase
     batch: int = 128  # windows per step (split across data-parallel ranks)
@@ -334,3 +334,18 @@ def write_release(model: STRNN, cfg: TrainConfig, data: MotionData, norm: Normal
                    "mocap.cs.cmu.edu; the database was created with funding from NSF EIA-0196217)",
     }
     save_release(folder, weights, cfg.model.to_dict(), norm.mean, norm.std, meta, seeds, names)
+
+
+def export_state(cfg: TrainConfig, folder: Path | None = None) -> Path:
+    """Write a release folder from ``cfg.out/train_state.pt`` as it is now (a model mid-training)."""
+    state_path = Path(cfg.out) / "train_state.pt"
+    if not state_path.exists():
+        raise ValueError(f"{state_path}: no training state to export")
+    saved = torch.load(state_path, weights_only=True)
+    data = load_folder(cfg.data, cache_dir=cfg.cache, progress=False)
+    norm = Normaliser.fit(np.concatenate([c.features for c in data.split("train")]))
+    model = STRNN(cfg.model)
+    model.load_state_dict(saved["model"])
+    folder = folder or Path(cfg.out) / f"release_step{saved['step']}"
+    write_release(model, cfg, data, norm, json.loads(saved["history"]), folder)
+    return folder

@@ -18,7 +18,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from model_core.dataset import DataError  # noqa: E402
 from model_core.model import STRNNConfig  # noqa: E402
-from model_core.training import TrainConfig, train  # noqa: E402
+from model_core.training import TrainConfig, export_state, train  # noqa: E402
 
 VARIANTS = {
     "composite": dict(spatial=True, residual=True),  # the full model (paper: Composite)
@@ -32,10 +32,11 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--data", required=True, help="folder of .bvh files (searched recursively)")
     p.add_argument("--out", default="runs/default", help="output folder (state, log, release)")
     p.add_argument("--variant", choices=VARIANTS, default="composite", help="architecture (paper's ablations)")
-    p.add_argument("--width", type=int, default=256, help="L4 width and LSTM size (paper: 512)")
+    p.add_argument("--width", type=int, default=128, help="L4 width and LSTM size (paper: 512)")
     p.add_argument("--encode-len", type=int, default=20, help="context frames m")
     p.add_argument("--predict-len", type=int, default=20, help="predicted frames n")
     p.add_argument("--residual-width", type=int, default=512, help="hidden units of the residual filter")
+    p.add_argument("--dropout", type=float, default=0.0, help="dropout after each spatial layer (paper: 0.1)")
     p.add_argument("--steps", type=int, default=5000, help="optimiser steps over all phases")
     p.add_argument("--batch", type=int, default=128, help="windows per step")
     p.add_argument("--optimizer", choices=("adam", "adadelta"), default="adam")
@@ -48,6 +49,8 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--max-minutes", type=float, default=0.0, help="stop with a checkpoint after this long")
     p.add_argument("--checkpoint-seconds", type=float, default=120.0, help="seconds between checkpoints")
     p.add_argument("--resume", action="store_true", help="continue from OUT/train_state.pt")
+    p.add_argument("--export", action="store_true",
+                   help="only write OUT/release_stepN from OUT/train_state.pt (try a model mid-training)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     return p.parse_args(argv)
 
@@ -59,14 +62,14 @@ def main(argv=None) -> int:
 
         torch.set_num_threads(args.threads)
     model = STRNNConfig(width=args.width, encode_len=args.encode_len, predict_len=args.predict_len,
-                        residual_width=args.residual_width, **VARIANTS[args.variant])
+                        residual_width=args.residual_width, dropout=args.dropout, **VARIANTS[args.variant])
     cfg = TrainConfig(data=args.data, out=args.out, model=model, steps=args.steps, batch=args.batch,
                       optimizer=args.optimizer, lr=args.lr, smooth_weight=args.smooth_weight,
                       noise_start=args.noise_start, seed=args.seed, cache=args.cache, max_minutes=args.max_minutes,
                       checkpoint_seconds=args.checkpoint_seconds,
                       command="python scripts/train.py " + " ".join(shlex.quote(a) for a in (argv or sys.argv[1:])))
     try:
-        release = train(cfg, resume=args.resume, progress=not args.quiet)
+        release = export_state(cfg) if args.export else train(cfg, resume=args.resume, progress=not args.quiet)
     except (DataError, ValueError) as e:
         print(f"error: {e}", file=sys.stderr)
         return 2

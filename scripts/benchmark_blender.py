@@ -1,0 +1,223 @@
+"""Benchmark Extend Clip in Blender: a 1,000-frame clip on a 60-bone rig extended by 1,000 frames.
+
+Builds the extension, installs it into the bpy module (a temporary user repository, as the
+tests do), builds a 60-bone armature with a 1,000-frame keyed action, runs the Extend worker
+and prints the time of each stage (read, model, solve, write) beside the floor: reading and
+writing the same keys with bulk ``foreach_get`` / ``foreach_set`` and nothing else.
+
+    python scripts/benchmark_blender.py
+    python scripts/benchmark_blender.py --model runs/default/release --frames 1000 --repeat 3
+    python scripts/benchmark_blender.py --untrained   # timing only: a randomly initialised model
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+REPO = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(REPO))
+sys.path.insert(0, str(REPO / "scripts"))
+
+import bpy  # noqa: E402
+
+from model_core.conventions import JOINTS, PARENT_NAMES, yup_to_zup  # noqa: E402
+from model_core.synthetic import _offset  # noqa: E402
+
+FINGERS = ("Thumb", "Index", "Middle", "Ring", "Pinky")
+
+
+def untrained_release(folder: Path) -> Path:
+    """A randomly initialised model of the default size, saved as a release (timing only)."""
+    import torch
+
+    from model_core.checkpoint import save_release
+    from model_core.conventions import LAYOUT
+    from model_core.model import STRNN, STRNNConfig
+
+    torch.manual_seed(0)
+    cfg = STRNNConfig()
+    model = STRNN(cfg).eval()
+    weights = {k: v.detach().numpy() for k, v in model.state_dict().items() if v.dtype.is_floating_point}
+    seeds = np.zeros((1, cfg.encode_len, LAYOUT.size), np.float32)
+    return save_release(folder, weights, cfg.to_dict(), np.zeros(LAYOUT.size), np.ones(LAYOUT.size),
+                        {"licence": "untrained, for benchmarks only"}, seeds, ["zeros"])
+
+
+def find_model(args) -> Path:
+    if args.model:
+        return args.model
+    for candidate in [REPO / "models" / "strnn_default", *sorted(REPO.glob("runs/*/release"))]:
+        if (candidate / "model.json").exists():
+            return candidate
+    if not args.untrained:
+        raise SystemExit("no trained model (models/strnn_default or runs/*/release): pass --model or --untrained")
+    return untrained_release(Path(tempfile.mkdtemp()) / "untrained")
+
+
+def install(out: Path) -> str:
+    """Build and install the extension; returns its package name."""
+    import build_extension
+
+    zip_path = build_extension.main(["--out", str(out), "--no-validate"])
+    prefs = bpy.context.preferences
+    if prefs.extensions.repos.get("strnn_bench") is None:
+        prefs.extensions.repos.new(name="strnn_bench", module="strnn_bench", custom_directory=str(out / "repo"),
+                                   source="USER")
+    bpy.ops.extensions.package_install_files(filepath=str(zip_path), repo="strnn_bench", enable_on_install=True)
+    return "bl_ext.strnn_bench.strnn_motion"
+
+
+def rig_bones() -> list[tuple]:
+    """(name, parent, head, tail) of a 60-bone Mixamo-style body: 5 fingers and twist bones."""
+    j = {}
+    for joint in JOINTS:
+        parent = PARENT_NAMES[joint]
+        j[joint] = (j[parent] if parent else np.array([0.0, 0.95, 0.0])) + _offset(joint)
+    j = {k: yup_to_zup(v) for k, v in j.items()}
+    mid = lambda a, b, t=0.5: a + (b - a) * t
+    up = np.array([0, 0, 0.1])
+    chest = mid(j["spine"], j["spine1"])
+    bones = [("Hips", None, j["hips"], j["spine"]), ("Spine", "Hips", j["spine"], chest),
+             ("Spine1", "Spine", chest, j["spine1"]), ("Spine2", "Spine1", j["spine1"], j["neck"]),
+             ("Neck", "Spine2", j["neck"], j["head"]), ("Head", "Neck", j["head"], j["head"] + 2 * up)]
+    for s, side in (("l", "Left"), ("r", "Right")):
+        p = lambda k, s=s: j[f"{s}_{k}"]
+        bones += [(f"{side}Shoulder", "Spine2", mid(j["neck"], p("arm"), 0.3) - up, p("arm")),
+                  (f"{side}Arm", f"{side}Shoulder", p("arm"), p("elbow")),
+                  (f"{side}ArmTwist", f"{side}Arm", mid(p("arm"), p("elbow")), p("elbow")),
+                  (f"{side}ForeArm", f"{side}Arm", p("elbow"), p("wrist")),
+                  (f"{side}ForeArmTwist", f"{side}ForeArm", mid(p("elbow"), p("wrist")), p("wrist")),
+                  (f"{side}Hand", f"{side}ForeArm", p("wrist"), mid(p("wrist"), p("fingertip"), 0.4)),
+                  (f"{side}UpLeg", "Hips", p("upleg"), p("knee")),
+                  (f"{side}UpLegTwist", f"{side}UpLeg", mid(p("upleg"), p("knee")), p("knee")),
+                  (f"{side}Leg", f"{side}UpLeg", p("knee"), p("foot")),
+                  (f"{side}LegTwist", f"{side}Leg", mid(p("knee"), p("foot")), p("foot")),
+                  (f"{side}Foot", f"{side}Leg", p("foot"), p("toe")),
+                  (f"{side}ToeBase", f"{side}Foot", p("toe"), p("toe") + np.array([0, -0.06, 0]))]
+        for f, finger in enumerate(FINGERS):
+            spread = np.array([0.0, 0.02 * (f - 2), 0.0])
+            pts = [mid(p("wrist"), p("fingertip"), t) + spread for t in (0.4, 0.6, 0.8, 1.0)]
+            for k in range(3):
+                parent = f"{side}Hand" if k == 0 else f"{side}Hand{finger}{k}"
+                bones.append((f"{side}Hand{finger}{k + 1}", parent, pts[k], pts[k + 1]))
+    return [("mixamorig:" + n, p and "mixamorig:" + p, h, t) for n, p, h, t in bones]
+
+
+def build_scene(frames: int):
+    """The armature with a keyed clip: every bone's quaternion waves, the hips walk forward."""
+    bpy.ops.wm.read_homefile(use_empty=True)
+    bpy.context.scene.render.fps = 30
+    arm = bpy.data.armatures.new("Bench")
+    obj = bpy.data.objects.new("Bench", arm)
+    bpy.context.scene.collection.objects.link(obj)
+    bpy.context.view_layer.objects.active = obj
+    bpy.ops.object.mode_set(mode="EDIT")
+    for name, parent, head, tail in rig_bones():
+        eb = arm.edit_bones.new(name)
+        eb.head, eb.tail = head, tail
+        eb.parent = arm.edit_bones[parent] if parent else None
+    bpy.ops.object.mode_set(mode="OBJECT")
+    action = bpy.data.actions.new("Walk")
+    obj.animation_data_create().action = action
+    t = np.arange(1, frames + 1, dtype=np.float64)
+    rng = np.random.default_rng(0)
+    for pb in obj.pose.bones:
+        angle = 0.2 * np.sin(2 * np.pi * t / 30 + rng.uniform(0, 6))
+        axis = rng.normal(size=3)
+        axis /= np.linalg.norm(axis)
+        quat = np.concatenate([np.cos(angle / 2)[:, None], np.sin(angle / 2)[:, None] * axis], 1)
+        channels = [("rotation_quaternion", quat)]
+        if pb.parent is None:
+            channels.append(("location", np.stack([0 * t, 0.02 * t, 0.02 * np.sin(4 * np.pi * t / 30)], 1)))
+        for prop, values in channels:
+            for i in range(values.shape[1]):
+                fc = fcurve_new(obj, action, f'pose.bones["{pb.name}"].{prop}', i, pb.name)
+                key(fc, t, values[:, i])
+    return obj
+
+
+def fcurve_new(obj, action, path: str, index: int, group: str):
+    """A new F-curve on the legacy (4.2) or layered (4.4+) action API."""
+    if not hasattr(action, "slots"):
+        return action.fcurves.new(path, index=index, action_group=group)
+    from bpy_extras import anim_utils
+
+    ad = obj.animation_data
+    if ad.action_slot is None:
+        ad.action_slot = action.slots.new(id_type="OBJECT", name=obj.name)
+    return anim_utils.action_ensure_channelbag_for_slot(action, ad.action_slot).fcurves.new(path, index=index)
+
+
+def key(fc, frames: np.ndarray, values: np.ndarray) -> None:
+    fc.keyframe_points.add(len(frames))
+    fc.keyframe_points.foreach_set("co", np.stack([frames, values], 1).astype(np.float32).ravel())
+    fc.keyframe_points.foreach_set("interpolation", np.ones(len(frames), np.int32))  # LINEAR
+    fc.update()
+
+
+def floor_time(obj, frames: int) -> tuple[float, float]:
+    """Seconds to read all keys of the action, and to write as many keys into a new action."""
+    from bpy_extras import anim_utils
+
+    action = obj.animation_data.action
+    bag = anim_utils.action_get_channelbag_for_slot(action, obj.animation_data.action_slot) \
+        if hasattr(action, "slots") else action
+    t0 = time.perf_counter()
+    data = []
+    for fc in bag.fcurves:
+        buf = np.empty(2 * len(fc.keyframe_points), np.float32)
+        fc.keyframe_points.foreach_get("co", buf)
+        data.append((fc.data_path, fc.array_index, buf))
+    t1 = time.perf_counter()
+    new = bpy.data.actions.new("Floor")
+    slot_obj = bpy.data.objects.new("FloorTarget", None)
+    slot_obj.animation_data_create().action = new
+    for path, index, buf in data:
+        fc = fcurve_new(slot_obj, new, path, index, "")
+        fc.keyframe_points.add(frames)
+        fc.keyframe_points.foreach_set("co", buf[: 2 * frames])
+        fc.update()
+    t2 = time.perf_counter()
+    bpy.data.actions.remove(new)
+    bpy.data.objects.remove(slot_obj)
+    return t1 - t0, t2 - t1
+
+
+def main(argv: list[str] | None = None) -> dict:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--frames", type=int, default=1000, help="clip length and frames to add (default 1000)")
+    parser.add_argument("--model", type=Path, default=None, help="release folder (default: bundled or runs/*)")
+    parser.add_argument("--untrained", action="store_true", help="use a random model when none is trained")
+    parser.add_argument("--repeat", type=int, default=3, help="runs; the fastest is reported (default 3)")
+    args = parser.parse_args(argv)
+    model = find_model(args)
+    package = install(Path(tempfile.mkdtemp()))
+    bpy.context.preferences.addons[package].preferences.model_folder = str(model)
+    workers = importlib.import_module(package + ".strnn_addon.workers")
+    best: dict = {}
+    for _ in range(args.repeat):
+        obj = build_scene(args.frames)
+        read_floor, write_floor = floor_time(obj, args.frames)
+        timings: dict = {}
+        start = time.perf_counter()
+        workers.extend_clip(bpy.context, obj, frames=args.frames, timings=timings)
+        timings["total"] = time.perf_counter() - start
+        timings.update(floor_read=read_floor, floor_write=write_floor)
+        if not best or timings["total"] < best["total"]:
+            best = timings
+    print(f"model: {model}\nrig: {len(obj.data.bones)} bones, clip {args.frames} frames + {args.frames} new")
+    for stage in ("read", "model", "solve", "write", "total"):
+        print(f"  {stage:6s} {best[stage]:7.3f} s")
+    print(f"  floor: read keys {best['floor_read']:.3f} s, write keys {best['floor_write']:.3f} s")
+    return best
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,190 @@
+"""Operators: thin wrappers that gather options and hand them to the workers."""
+
+from __future__ import annotations
+
+import bpy
+from bpy.props import BoolProperty, FloatProperty, IntProperty
+
+from . import mapping
+from .pipeline import UserError, check_object
+from .props import joint_label
+
+
+class _Staged:
+    """Runs a worker generator (see workers.py): all at once in ``execute`` (scripts, redo panel),
+    stage by stage from a timer in ``modal`` when invoked from the UI, with progress in the status
+    bar and Esc to cancel between stages (nothing is written before the last stage)."""
+
+    def steps(self, context):
+        raise NotImplementedError
+
+    def done(self, action) -> str:
+        raise NotImplementedError
+
+    def execute(self, context):
+        from .workers import STAGES, run
+
+        wm = context.window_manager
+        wm.progress_begin(0, len(STAGES))
+        try:
+            action = run(self.steps(context), lambda stage: wm.progress_update(STAGES.index(stage)))
+        except UserError as e:
+            self.report({"ERROR"}, str(e))
+            return {"CANCELLED"}
+        finally:
+            wm.progress_end()
+        self.report({"INFO"}, self.done(action))
+        return {"FINISHED"}
+
+    def invoke(self, context, event):
+        if context.window is None:
+            return self.execute(context)
+        self._steps = self.steps(context)
+        return self._advance(context) or self._start(context)
+
+    def _start(self, context):
+        wm = context.window_manager
+        self._timer = wm.event_timer_add(0.01, window=context.window)
+        wm.modal_handler_add(self)
+        return {"RUNNING_MODAL"}
+
+    def modal(self, context, event):
+        if event.type == "ESC":
+            self._stop(context)
+            self.report({"WARNING"}, "Cancelled; nothing was changed")
+            return {"CANCELLED"}
+        if event.type != "TIMER":
+            return {"RUNNING_MODAL"}  # hold other input until the work is done
+        return self._advance(context) or {"RUNNING_MODAL"}
+
+    def _advance(self, context):
+        """Run the next stage; the operator's final result when the work ends, else None."""
+        from .workers import STAGES
+
+        try:
+            stage = next(self._steps)
+        except StopIteration as stop:
+            self._stop(context)
+            self.report({"INFO"}, self.done(stop.value))
+            return {"FINISHED"}
+        except UserError as e:
+            self._stop(context)
+            self.report({"ERROR"}, str(e))
+            return {"CANCELLED"}
+        wm = context.window_manager
+        wm.progress_begin(0, len(STAGES))
+        wm.progress_update(STAGES.index(stage))
+        if context.workspace:
+            context.workspace.status_text_set(f"STRNN {self.bl_label}: {stage}... (Esc to cancel)")
+        return None
+
+    def _stop(self, context):
+        self._steps.close()
+        wm = context.window_manager
+        if getattr(self, "_timer", None):
+            wm.event_timer_remove(self._timer)
+            self._timer = None
+        wm.progress_end()
+        if context.workspace:
+            context.workspace.status_text_set(None)
+
+
+class STRNN_OT_extend_clip(_Staged, bpy.types.Operator):
+    """Continue the active armature's action with the motion model; writes a new action"""
+
+    bl_idname = "strnn.extend_clip"
+    bl_label = "Extend Clip"
+    bl_options = {"REGISTER", "UNDO"}
+
+    frames: IntProperty(name="Frames", default=120, min=1, soft_max=2000,
+                        description="How many frames to add after the action's last frame")
+    context_frames: IntProperty(name="Context", default=0, min=0, soft_max=600,
+                                description="Frames before the end the model reads; 0: just enough (20 at 30 fps)")
+
+    def steps(self, context):
+        from .workers import extend_steps
+
+        return extend_steps(context, context.active_object, frames=self.frames, context_frames=self.context_frames)
+
+    def done(self, action) -> str:
+        return f"Added {self.frames} frames in new action {action.name!r}"
+
+
+class STRNN_OT_denoise_action(_Staged, bpy.types.Operator):
+    """Clean the active armature's action with the motion model; writes a new action"""
+
+    bl_idname = "strnn.denoise_action"
+    bl_label = "Denoise Action"
+    bl_options = {"REGISTER", "UNDO"}
+
+    strength: FloatProperty(name="Strength", default=1.0, min=0.0, max=1.0, subtype="FACTOR",
+                            description="Blend between the original (0) and the model's output (1)")
+    use_range: BoolProperty(name="Frame Range", default=False,
+                            description="Denoise only Start to End instead of the whole action")
+    frame_start: IntProperty(name="Start", default=1, description="First frame to denoise")
+    frame_end: IntProperty(name="End", default=250, description="Last frame to denoise")
+
+    def steps(self, context):
+        from .workers import denoise_steps
+
+        start, end = (self.frame_start, self.frame_end) if self.use_range else (None, None)
+        return denoise_steps(context, context.active_object, frame_start=start, frame_end=end,
+                             strength=self.strength)
+
+    def done(self, action) -> str:
+        return f"Denoised into new action {action.name!r}"
+
+
+class STRNN_OT_auto_map(bpy.types.Operator):
+    """Map the active armature's bones to the model's 21 joints from their names and hierarchy"""
+
+    bl_idname = "strnn.auto_map"
+    bl_label = "Auto-Map Bones"
+    bl_options = {"REGISTER", "UNDO"}
+
+    def execute(self, context):
+        obj = context.active_object
+        if obj is None or obj.type != "ARMATURE":
+            self.report({"ERROR"}, "Select an armature to map its bones")
+            return {"CANCELLED"}
+        if obj.data.library is not None:
+            self.report({"ERROR"}, f"The armature {obj.data.name!r} is linked: make it local to store a bone map")
+            return {"CANCELLED"}
+        family, found = mapping.auto_map(obj.data)
+        mapping.store_map(obj.data, found, family)
+        missing = [joint_label(j) for j in mapping.bonemap.missing(found)]
+        if missing:
+            self.report({"WARNING"}, f"Mapped {21 - len(missing)} of 21 joints; pick these by hand: "
+                                     + ", ".join(missing))
+        else:
+            self.report({"INFO"}, f"Mapped all 21 joints ({family} rig)")
+        return {"FINISHED"}
+
+
+class STRNN_OT_clear_map(bpy.types.Operator):
+    """Forget the active armature's bone map"""
+
+    bl_idname = "strnn.clear_map"
+    bl_label = "Clear Bone Map"
+    bl_options = {"REGISTER", "UNDO"}
+
+    @classmethod
+    def poll(cls, context):
+        obj = context.active_object
+        return obj is not None and obj.type == "ARMATURE" and obj.data.library is None
+
+    def execute(self, context):
+        mapping.store_map(context.active_object.data, {})
+        return {"FINISHED"}
+
+
+def check_message(obj) -> str:
+    """Why the operators would refuse ``obj`` ('' when they would run)."""
+    try:
+        check_object(obj)
+    except UserError as e:
+        return str(e)
+    return ""
+
+
+classes = (STRNN_OT_extend_clip, STRNN_OT_denoise_action, STRNN_OT_auto_map, STRNN_OT_clear_map)

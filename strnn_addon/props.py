@@ -1,0 +1,98 @@
+"""Properties: the bone map stored on the armature data, and the add-on preferences."""
+
+from __future__ import annotations
+
+import bpy
+from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, PointerProperty, StringProperty
+
+from ..model_core.conventions import JOINTS
+
+ADDON_ID = __package__.rpartition(".")[0]  # the extension's module, e.g. bl_ext.user_default.strnn_motion
+TAIL_JOINTS = ("l_toe", "r_toe", "l_fingertip", "r_fingertip")
+
+
+def joint_label(joint: str) -> str:
+    """``"l_upleg"`` -> ``"Left Upleg"``."""
+    side = {"l": "Left ", "r": "Right "}.get(joint[:1], "") if joint[1:2] == "_" else ""
+    word = joint[2:] if side else joint
+    return side + word.replace("1", " 1").title()
+
+
+def _map_annotations() -> dict:
+    ann = {}
+    for joint in JOINTS:
+        ann[joint] = StringProperty(name=joint_label(joint),
+                                    description=f"Bone whose head is the canonical {joint_label(joint)} joint")
+    for joint in TAIL_JOINTS:
+        ann[f"{joint}_tail"] = BoolProperty(
+            name="Tail", description=f"The {joint_label(joint)} joint is the bone's tail, not its head")
+    ann["family"] = StringProperty(name="Rig Family", description="The rig family the last auto-map recognised")
+    return ann
+
+
+STRNN_PG_bone_map = type("STRNN_PG_bone_map", (bpy.types.PropertyGroup,), {
+    "__annotations__": _map_annotations(),
+    "__doc__": "Which bone carries each of the 21 canonical joints (saved with the armature)",
+})
+
+
+def _engines(self, context):
+    items = [("NUMPY", "NumPy", "Run the model with NumPy (works in every Blender)")]
+    try:
+        import torch  # noqa: F401
+
+        items.append(("TORCH", "PyTorch", "Run the model with PyTorch (installed in this Blender)"))
+    except ImportError:
+        pass
+    return items
+
+
+class STRNN_AP_preferences(bpy.types.AddonPreferences):
+    bl_idname = ADDON_ID
+
+    model_folder: StringProperty(
+        name="Model Folder", subtype="DIR_PATH", default="",
+        description="Folder with model.safetensors and model.json; empty: the bundled model")
+    engine: EnumProperty(name="Engine", items=_engines, description="Which library runs the model")
+    threads: IntProperty(name="Threads", default=0, min=0, max=256,
+                         description="CPU threads for the model; 0: as many as Blender uses")
+
+    def draw(self, context):
+        col = self.layout.column()
+        col.prop(self, "model_folder")
+        col.prop(self, "engine")
+        col.prop(self, "threads")
+
+
+def preferences(context):
+    """This add-on's preferences, or None when not registered as an add-on (tests import it bare)."""
+    addon = context.preferences.addons.get(ADDON_ID)
+    return addon.preferences if addon else None
+
+
+class STRNN_PG_settings(bpy.types.PropertyGroup):
+    """Sidebar options (per scene) handed to the operators."""
+
+    extend_frames: IntProperty(name="Frames", default=120, min=1, soft_max=2000,
+                               description="How many frames to add after the action's last frame")
+    context_frames: IntProperty(name="Context", default=0, min=0, soft_max=600,
+                                description="Frames before the end the model reads; 0: just enough (20 at 30 fps)")
+    denoise_strength: FloatProperty(name="Strength", default=1.0, min=0.0, max=1.0, subtype="FACTOR",
+                                    description="Blend between the original (0) and the model's output (1)")
+    denoise_use_range: BoolProperty(name="Frame Range", default=False,
+                                    description="Denoise only a range of frames instead of the whole action")
+    denoise_start: IntProperty(name="Start", default=1, description="First frame to denoise")
+    denoise_end: IntProperty(name="End", default=250, description="Last frame to denoise")
+
+
+classes = (STRNN_PG_bone_map, STRNN_PG_settings, STRNN_AP_preferences)
+
+
+def register_properties():
+    bpy.types.Armature.strnn_map = PointerProperty(type=STRNN_PG_bone_map)
+    bpy.types.Scene.strnn = PointerProperty(type=STRNN_PG_settings)
+
+
+def unregister_properties():
+    del bpy.types.Scene.strnn
+    del bpy.types.Armature.strnn_map

@@ -1,0 +1,128 @@
+"""The STRNN tab in the 3D Viewport sidebar (Object and Pose mode)."""
+
+from __future__ import annotations
+
+import bpy
+
+from ..model_core.conventions import JOINTS
+from .operators import check_message
+from .props import TAIL_JOINTS, joint_label
+
+
+class _Sidebar:
+    bl_space_type = "VIEW_3D"
+    bl_region_type = "UI"
+    bl_category = "STRNN"
+
+    @classmethod
+    def poll(cls, context):
+        return context.mode in {"OBJECT", "POSE"}
+
+
+class STRNN_PT_main(_Sidebar, bpy.types.Panel):
+    bl_label = "STRNN Motion"
+
+    def draw(self, context):
+        obj = context.active_object
+        problem = check_message(obj)
+        col = self.layout.column()
+        if problem:
+            col.label(text=problem.split(":")[0], icon="ERROR")
+            return
+        col.label(text=f"{obj.name}: {obj.animation_data.action.name}", icon="ACTION")
+
+
+class STRNN_PT_extend(_Sidebar, bpy.types.Panel):
+    bl_label = "Extend"
+    bl_parent_id = "STRNN_PT_main"
+
+    def draw(self, context):
+        settings = context.scene.strnn
+        col = self.layout.column(align=True)
+        col.prop(settings, "extend_frames")
+        col.prop(settings, "context_frames")
+        op = self.layout.operator("strnn.extend_clip", icon="TRACKING_FORWARDS")
+        op.frames, op.context_frames = settings.extend_frames, settings.context_frames
+
+
+class STRNN_PT_denoise(_Sidebar, bpy.types.Panel):
+    bl_label = "Denoise"
+    bl_parent_id = "STRNN_PT_main"
+
+    def draw(self, context):
+        settings = context.scene.strnn
+        col = self.layout.column(align=True)
+        col.prop(settings, "denoise_strength", slider=True)
+        col.prop(settings, "denoise_use_range")
+        row = col.row(align=True)
+        row.active = settings.denoise_use_range
+        row.prop(settings, "denoise_start")
+        row.prop(settings, "denoise_end")
+        op = self.layout.operator("strnn.denoise_action", icon="MOD_SMOOTH")
+        op.strength, op.use_range = settings.denoise_strength, settings.denoise_use_range
+        op.frame_start, op.frame_end = settings.denoise_start, settings.denoise_end
+
+
+class STRNN_PT_bone_map(_Sidebar, bpy.types.Panel):
+    bl_label = "Bone Map"
+    bl_parent_id = "STRNN_PT_main"
+    bl_options = {"DEFAULT_CLOSED"}
+
+    @classmethod
+    def poll(cls, context):
+        obj = context.active_object
+        return super().poll(context) and obj is not None and obj.type == "ARMATURE"
+
+    def draw(self, context):
+        arm = context.active_object.data
+        props = arm.strnn_map
+        layout = self.layout
+        row = layout.row(align=True)
+        row.operator("strnn.auto_map", icon="AUTOMERGE_ON")
+        row.operator("strnn.clear_map", text="", icon="X")
+        missing = [j for j in JOINTS if not getattr(props, j) or getattr(props, j) not in arm.bones]
+        if missing:
+            layout.label(text=f"Missing: {', '.join(joint_label(j) for j in missing)}", icon="ERROR")
+        else:
+            layout.label(text=f"All 21 joints mapped{f' ({props.family})' if props.family else ''}",
+                         icon="CHECKMARK")
+        col = layout.column(align=True)
+        for joint in JOINTS:
+            row = col.row(align=True)
+            row.prop_search(props, joint, arm, "bones", text=joint_label(joint))
+            if joint in TAIL_JOINTS:
+                row.prop(props, f"{joint}_tail", text="", icon="BONE_DATA", toggle=True)
+
+
+class STRNN_MT_menu(bpy.types.Menu):
+    """STRNN operators in the Object > Animation and Pose menus (so F3 search finds them)."""
+
+    bl_label = "STRNN Motion"
+
+    def draw(self, context):
+        layout = self.layout
+        layout.operator("strnn.extend_clip", icon="TRACKING_FORWARDS")
+        layout.operator("strnn.denoise_action", icon="MOD_SMOOTH")
+        layout.separator()
+        layout.operator("strnn.auto_map", icon="AUTOMERGE_ON")
+
+
+def menu_entry(self, context):
+    self.layout.menu("STRNN_MT_menu")
+
+
+MENUS = ("VIEW3D_MT_object_animation", "VIEW3D_MT_pose")
+
+
+def register_menus():
+    for name in MENUS:
+        getattr(bpy.types, name).append(menu_entry)
+
+
+def unregister_menus():
+    for name in MENUS:
+        getattr(bpy.types, name).remove(menu_entry)
+
+
+classes = (STRNN_PT_main, STRNN_PT_extend, STRNN_PT_denoise, STRNN_PT_bone_map, STRNN_MT_menu)
+

@@ -1,0 +1,136 @@
+"""Extend Clip and Denoise Action, as keyword-only workers the operators call.
+
+Each worker is a generator that yields the name of each stage (read, model, solve,
+write) before running it, so the operators can show progress and stop on Esc between
+stages; :func:`run` drives one to the end. Every check and all the computing happen
+before the new action is created, so a failure or a cancel leaves the file unchanged.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from ..model_core.solve import solve
+from . import engine_bridge, pipeline, rig_io
+from .pipeline import UserError
+from .props import preferences
+
+STAGES = ("read", "model", "solve", "write")
+
+
+def _noop(stage: str) -> None:
+    pass
+
+
+def _model_call(fn, *args):
+    """Run one model call, turning model and engine errors into a :class:`UserError`."""
+    try:
+        return fn(*args)
+    except engine_bridge.EngineError as e:
+        raise UserError(str(e)) from e
+    except ValueError as e:
+        raise UserError(f"The model could not run on this clip: {e}") from e
+
+
+def run(steps, progress=_noop):
+    """Drive a worker generator to the end, calling ``progress(stage)`` at each stage; returns its result."""
+    while True:
+        try:
+            progress(next(steps))
+        except StopIteration as stop:
+            return stop.value
+
+
+def extend_clip(context, obj, *, progress=_noop, **options):
+    """:func:`extend_steps` run to the end; returns the new action."""
+    return run(extend_steps(context, obj, **options), progress)
+
+
+def denoise_action(context, obj, *, progress=_noop, **options):
+    """:func:`denoise_steps` run to the end; returns the new action."""
+    return run(denoise_steps(context, obj, **options), progress)
+
+
+def _context_range(clip, context_frames: int, frames: int) -> np.ndarray:
+    """Scene frames ``[C]`` the model reads: the action's last ``context_frames`` (0: just enough)."""
+    need = pipeline.min_scene_frames(clip.fps)
+    span = clip.last - clip.first + 1
+    n_ctx = max(context_frames, need)
+    if n_ctx > span:
+        raise UserError(f"The action {clip.action.name!r} has {span} frames; extending needs at least "
+                        f"{n_ctx} at {clip.fps:g} fps (the model reads {pipeline.MIN_MODEL_FRAMES} "
+                        "frames at 30 fps): use a longer action or a smaller context")
+    if frames < 1:
+        raise UserError("Frames to add must be at least 1")
+    return np.arange(clip.last - n_ctx + 1, clip.last + 1, dtype=np.float64)
+
+
+def extend_steps(context, obj, *, frames: int = 120, context_frames: int = 0, timings: dict | None = None):
+    """Continue ``obj``'s action by ``frames`` scene frames from its last ``context_frames``
+    (0: just enough for the model's 20-frame context). A generator: yields each stage's
+    name before running it (so a caller can report progress or stop), returns the new action."""
+    timings = {} if timings is None else timings
+    t0 = time.perf_counter()
+    clip = pipeline.prepare(context, obj)
+    ctx_frames = _context_range(clip, context_frames, frames)
+    yield "read"
+    pos = pipeline.joint_positions(context, clip, ctx_frames)
+    held_loc, held_rot, _ = rig_io.read_local_pose(clip.obj, clip.rig, clip.channels.fcurves, ctx_frames[-1:])
+    previous = pipeline.raw_rotations(clip, clip.last)
+    t1 = time.perf_counter()
+    yield "model"
+    new_pos = _model_call(engine_bridge.extend, _prefs(context), pos, clip.fps, frames)
+    t2 = time.perf_counter()
+    yield "solve"
+    targets = pipeline.to_armature(clip, new_pos)
+    loc, rot = solve(clip.rig, clip.anchors, targets, np.repeat(held_loc, frames, 0), np.repeat(held_rot, frames, 0))
+    t3 = time.perf_counter()
+    yield "write"
+    new_frames = clip.last + 1 + np.arange(frames, dtype=np.float64)
+    action = _write_new(context, clip, "extended", new_frames, loc, rot, previous, None)
+    timings.update(read=t1 - t0, model=t2 - t1, solve=t3 - t2, write=time.perf_counter() - t3)
+    return action
+
+
+def denoise_steps(context, obj, *, frame_start: int | None = None, frame_end: int | None = None,
+                  strength: float = 1.0):
+    """Denoise ``obj``'s action over [frame_start, frame_end] (default: the whole action),
+    blending the model's output by ``strength``. A generator like :func:`extend_steps`."""
+    clip = pipeline.prepare(context, obj)
+    a = clip.first if frame_start is None else max(int(frame_start), clip.first)
+    b = clip.last if frame_end is None else min(int(frame_end), clip.last)
+    need = pipeline.min_scene_frames(clip.fps)
+    if b - a + 1 < need:
+        raise UserError(f"The frame range {a}-{b} of {clip.action.name!r} has {max(b - a + 1, 0)} frames; "
+                        f"denoising needs at least {need} at {clip.fps:g} fps: widen the range")
+    frames = np.arange(a, b + 1, dtype=np.float64)
+    yield "read"
+    pos = pipeline.joint_positions(context, clip, frames)
+    ref_loc, ref_rot, _ = rig_io.read_local_pose(clip.obj, clip.rig, clip.channels.fcurves, frames)
+    previous = pipeline.raw_rotations(clip, a)
+    yield "model"
+    clean = _model_call(engine_bridge.denoise, _prefs(context), pos, clip.fps, float(strength))
+    yield "solve"
+    loc, rot = solve(clip.rig, clip.anchors, pipeline.to_armature(clip, clean), ref_loc, ref_rot)
+    yield "write"
+    return _write_new(context, clip, "denoised", frames, loc, rot, previous, (a, b))
+
+
+def _prefs(context):
+    return preferences(context)
+
+
+def _write_new(context, clip, suffix, frames, loc, rot, previous, replace):
+    """Create the new action, key it and assign it; on failure remove it again."""
+    action = pipeline.new_action_from(clip, suffix)
+    try:
+        pipeline.write_pose(clip, action, frames, loc, rot, previous, replace)
+        pipeline.finish(context, clip, action)
+    except Exception:
+        import bpy
+
+        bpy.data.actions.remove(action)
+        raise
+    return action

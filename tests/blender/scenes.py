@@ -1,0 +1,237 @@
+"""Small scenes built in code: a BVH file of a walking body, Mixamo- and Rigify-named armatures."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import bpy
+import numpy as np
+
+from model_core.bvh_export import write_bvh
+from model_core.synthetic import walking_skeleton
+
+REPO = Path(__file__).resolve().parents[2]
+
+
+def release_folder() -> Path | None:
+    """$STRNN_TEST_MODEL, the bundled model, or any trained release under runs/ (None: no model yet)."""
+    if os.environ.get("STRNN_TEST_MODEL"):
+        return Path(os.environ["STRNN_TEST_MODEL"])
+    bundled = REPO / "models" / "strnn_default"
+    if (bundled / "model.json").exists():
+        return bundled
+    found = sorted(REPO.glob("runs/*/release/model.json"))
+    return found[0].parent if found else None
+
+
+def find_mocap() -> Path | None:
+    """Unpacked motion capture (git-ignored data/mocap, or ../shared/mocap), None when absent."""
+    for root in (REPO / "data" / "mocap", REPO.parent / "shared" / "mocap"):
+        if any(root.glob("*/*/*.bvh")) or any(root.glob("*/*/*/*.bvh")):
+            return root
+    return None
+
+
+def walk_bvh(folder: Path, frames: int = 90, fps: float = 30.0) -> Path:
+    """Write a procedural walk as a BVH file (Mixamo joint names, metres, Y-up)."""
+    return write_bvh(folder / "walk.bvh", walking_skeleton(frames, fps=fps), fps=fps)
+
+
+def import_bvh(path: Path, **kw):
+    """Import with Blender's own BVH importer; returns the new armature object."""
+    assert bpy.ops.import_anim.bvh(filepath=str(path), **kw) == {"FINISHED"}
+    return bpy.context.active_object
+
+
+def action_of(obj):
+    return obj.animation_data.action if obj.animation_data else None
+
+
+def fcurves_of(obj, action=None):
+    """F-curves of ``action`` (default: the active one) on ``obj``'s slot, any Blender version."""
+    action = action or action_of(obj)
+    if not hasattr(action, "slots"):
+        return list(action.fcurves)
+    from bpy_extras import anim_utils
+
+    slot = obj.animation_data.action_slot if obj.animation_data.action == action else action.slots[0]
+    bag = anim_utils.action_get_channelbag_for_slot(action, slot)
+    return list(bag.fcurves) if bag else []
+
+
+def key_snapshot(obj, action=None) -> dict:
+    """{(data_path, index): keyframe co array} of an action, for 'nothing changed' checks."""
+    out = {}
+    for fc in fcurves_of(obj, action):
+        co = np.empty(2 * len(fc.keyframe_points), dtype=np.float32)
+        fc.keyframe_points.foreach_get("co", co)
+        out[(fc.data_path, fc.array_index)] = co
+    return out
+
+
+def same_keys(a: dict, b: dict) -> bool:
+    return a.keys() == b.keys() and all(np.array_equal(a[k], b[k]) for k in a)
+
+
+def _rest_joints() -> dict[str, np.ndarray]:
+    """Canonical joint rest positions, Blender axes (Z up, facing -Y, left = +X), metres."""
+    from model_core.conventions import JOINTS, PARENT_NAMES, yup_to_zup
+    from model_core.synthetic import _offset
+
+    pos: dict[str, np.ndarray] = {}
+    for joint in JOINTS:
+        parent = PARENT_NAMES[joint]
+        base = pos[parent] if parent else np.array([0.0, 0.95, 0.0])
+        pos[joint] = base + _offset(joint)
+    return {j: yup_to_zup(p) for j, p in pos.items()}
+
+
+def _mid(a, b, t=0.5):
+    return a + (b - a) * t
+
+
+def mixamo_bones() -> list[tuple]:
+    """(name, parent, head, tail) of a Mixamo-style skeleton (``mixamorig:`` names)."""
+    j = _rest_joints()
+    up, fwd = np.array([0, 0, 0.1]), np.array([0, -0.06, 0])
+    chest = _mid(j["spine"], j["spine1"])
+    bones = [("Hips", None, j["hips"], j["spine"]), ("Spine", "Hips", j["spine"], chest),
+             ("Spine1", "Spine", chest, j["spine1"]), ("Spine2", "Spine1", j["spine1"], j["neck"]),
+             ("Neck", "Spine2", j["neck"], j["head"]), ("Head", "Neck", j["head"], j["head"] + up * 2)]
+    for s, side in (("l", "Left"), ("r", "Right")):
+        hand = [j[f"{s}_wrist"], *(_mid(j[f"{s}_wrist"], j[f"{s}_fingertip"], t) for t in (0.45, 0.65, 0.85)),
+                j[f"{s}_fingertip"]]
+        bones += [(f"{side}Shoulder", "Spine2", _mid(j["neck"], j[f"{s}_arm"], 0.3) - up, j[f"{s}_arm"]),
+                  (f"{side}Arm", f"{side}Shoulder", j[f"{s}_arm"], j[f"{s}_elbow"]),
+                  (f"{side}ForeArm", f"{side}Arm", j[f"{s}_elbow"], j[f"{s}_wrist"]),
+                  (f"{side}Hand", f"{side}ForeArm", hand[0], hand[1])]
+        parents = [f"{side}Hand"] + [f"{side}HandMiddle{k}" for k in (1, 2)]
+        bones += [(f"{side}HandMiddle{k}", parents[k - 1], hand[k], hand[k + 1]) for k in (1, 2, 3)]
+        bones += [(f"{side}HandMiddle4", f"{side}HandMiddle3", hand[4], hand[4] - up * 0.2),
+                  (f"{side}UpLeg", "Hips", j[f"{s}_upleg"], j[f"{s}_knee"]),
+                  (f"{side}Leg", f"{side}UpLeg", j[f"{s}_knee"], j[f"{s}_foot"]),
+                  (f"{side}Foot", f"{side}Leg", j[f"{s}_foot"], j[f"{s}_toe"]),
+                  (f"{side}ToeBase", f"{side}Foot", j[f"{s}_toe"], j[f"{s}_toe"] + fwd)]
+    return [("mixamorig:" + n, p and "mixamorig:" + p, h, t) for n, p, h, t in bones]
+
+
+def rigify_bones() -> list[tuple]:
+    """(name, parent, head, tail) of Rigify-style deform bones (``DEF-`` names, split limbs)."""
+    j = _rest_joints()
+    up, fwd = np.array([0, 0, 0.1]), np.array([0, -0.06, 0])
+    spine = [j["hips"], j["spine"], _mid(j["spine"], j["spine1"]), j["spine1"], j["neck"], _mid(j["neck"], j["head"]),
+             j["head"], j["head"] + up * 2]
+    bones = [("root", None, np.zeros(3), fwd * 3)]
+    names = ["DEF-spine"] + [f"DEF-spine.{k:03d}" for k in range(1, 7)]
+    bones += [(names[k], "root" if k == 0 else names[k - 1], spine[k], spine[k + 1]) for k in range(7)]
+    def split(name, parent, a, b, S):
+        """A limb bone in two halves, like Rigify's twist segments."""
+        return [(f"DEF-{name}.{S}", parent, a, _mid(a, b)), (f"DEF-{name}.{S}.001", f"DEF-{name}.{S}", _mid(a, b), b)]
+
+    for s, S in (("l", "L"), ("r", "R")):
+        bones += [(f"DEF-shoulder.{S}", "DEF-spine.003", _mid(j["neck"], j[f"{s}_arm"], 0.3) - up, j[f"{s}_arm"])]
+        bones += split("upper_arm", f"DEF-shoulder.{S}", j[f"{s}_arm"], j[f"{s}_elbow"], S)
+        bones += split("forearm", f"DEF-upper_arm.{S}.001", j[f"{s}_elbow"], j[f"{s}_wrist"], S)
+        hand = [_mid(j[f"{s}_wrist"], j[f"{s}_fingertip"], t) for t in (0.0, 0.45, 0.65, 0.85, 1.0)]
+        bones += [(f"DEF-hand.{S}", f"DEF-forearm.{S}.001", hand[0], hand[1])]
+        parents = [f"DEF-hand.{S}", f"DEF-f_middle.01.{S}", f"DEF-f_middle.02.{S}"]
+        bones += [(f"DEF-f_middle.0{k}.{S}", parents[k - 1], hand[k], hand[k + 1]) for k in (1, 2, 3)]
+        bones += split("thigh", "DEF-spine", j[f"{s}_upleg"], j[f"{s}_knee"], S)
+        bones += split("shin", f"DEF-thigh.{S}.001", j[f"{s}_knee"], j[f"{s}_foot"], S)
+        bones += [(f"DEF-foot.{S}", f"DEF-shin.{S}.001", j[f"{s}_foot"], j[f"{s}_toe"]),
+                  (f"DEF-toe.{S}", f"DEF-foot.{S}", j[f"{s}_toe"], j[f"{s}_toe"] + fwd)]
+    return bones
+
+
+def build_armature(name: str, bones: list[tuple], rotation_mode: str = "QUATERNION"):
+    """An armature object made in edit mode from (name, parent, head, tail), active and selected."""
+    arm = bpy.data.armatures.new(name)
+    obj = bpy.data.objects.new(name, arm)
+    bpy.context.scene.collection.objects.link(obj)
+    bpy.context.view_layer.objects.active = obj
+    obj.select_set(True)
+    bpy.ops.object.mode_set(mode="EDIT")
+    for bone, parent, head, tail in bones:
+        eb = arm.edit_bones.new(bone)
+        eb.head, eb.tail = head, tail
+        if parent:
+            eb.parent = arm.edit_bones[parent]
+    bpy.ops.object.mode_set(mode="OBJECT")
+    for pb in obj.pose.bones:
+        pb.rotation_mode = rotation_mode
+    return obj
+
+
+def key_walk(obj, frames: int = 60, hips: str = "", legs=(), knees=(), arms=(), step: float = 0.02):
+    """Key a crude walk with Blender's own ``keyframe_insert``: the hips bone moves forward
+    (-Y), legs and arms swing in opposition, knees bend. Bone names in pairs (left, right)."""
+    from mathutils import Euler
+
+    for f in range(1, frames + 1):
+        phase = 2 * np.pi * f / 30.0
+        pose = {}
+        for side, sign in ((0, 1.0), (1, -1.0)):
+            if legs:
+                pose[legs[side]] = Euler((0.5 * sign * np.sin(phase), 0, 0))
+            if knees:
+                pose[knees[side]] = Euler((0.6 * max(0.0, np.sin(phase + sign)), 0, 0))
+            if arms:
+                pose[arms[side]] = Euler((-0.4 * sign * np.sin(phase), 0, 0))
+        for bone, euler in pose.items():
+            _key_rotation(obj.pose.bones[bone], euler, f)
+        pb = obj.pose.bones[hips]
+        pb.location = (0.0, step * f, 0.02 * np.sin(2 * phase))  # bone space: +Y runs along the hips bone
+        pb.keyframe_insert("location", frame=f)
+        _key_rotation(pb, Euler((0, 0.05 * np.sin(phase), 0)), f)
+
+
+def _key_rotation(pb, euler, frame: int) -> None:
+    mode = pb.rotation_mode
+    if mode == "QUATERNION":
+        pb.rotation_quaternion = euler.to_quaternion()
+        pb.keyframe_insert("rotation_quaternion", frame=frame)
+    elif mode == "AXIS_ANGLE":
+        axis, angle = euler.to_quaternion().to_axis_angle()
+        pb.rotation_axis_angle = (angle, *axis)
+        pb.keyframe_insert("rotation_axis_angle", frame=frame)
+    else:
+        pb.rotation_euler = euler.to_matrix().to_euler(mode)
+        pb.keyframe_insert("rotation_euler", frame=frame)
+
+
+def mixamo_walk(frames: int = 60):
+    """A Mixamo-named armature (quaternions; an axis-angle and a YXZ forearm) with a keyed walk."""
+    obj = build_armature("Mixamo", mixamo_bones())
+    obj.pose.bones["mixamorig:LeftForeArm"].rotation_mode = "AXIS_ANGLE"
+    obj.pose.bones["mixamorig:RightForeArm"].rotation_mode = "YXZ"
+    n = lambda *names: tuple("mixamorig:" + x for x in names)
+    key_walk(obj, frames, "mixamorig:Hips", n("LeftUpLeg", "RightUpLeg"), n("LeftLeg", "RightLeg"),
+             n("LeftArm", "RightArm"))
+    return obj
+
+
+def rigify_walk(frames: int = 60):
+    """A Rigify-style deform armature (quaternions) with a keyed walk."""
+    obj = build_armature("Rigify", rigify_bones())
+    key_walk(obj, frames, "DEF-spine", ("DEF-thigh.L", "DEF-thigh.R"), ("DEF-shin.L", "DEF-shin.R"),
+             ("DEF-upper_arm.L", "DEF-upper_arm.R"))
+    return obj
+
+
+def addon_module(addon, name: str):
+    """A submodule of the installed extension, e.g. ``addon_module(addon, "strnn_addon.pipeline")``."""
+    import importlib
+
+    return importlib.import_module(f"{addon.__name__}.{name}")
+
+
+def evaluated_joints(addon, obj, frames) -> np.ndarray:
+    """World canonical joints ``[F, 21, 3]`` (Blender axes) as Blender evaluates them, frame by frame."""
+    pipeline = addon_module(addon, "strnn_addon.pipeline")
+    rig_io = addon_module(addon, "strnn_addon.rig_io")
+    solve = addon_module(addon, "model_core.solve")
+    clip = pipeline.prepare(bpy.context, obj)
+    pose, world = rig_io.pose_matrices_evaluated(bpy.context, obj, clip.rig, np.asarray(frames, dtype=np.float64))
+    local = solve.anchor_positions(clip.rig, clip.anchors, pose)
+    return np.einsum("fij,fkj->fki", world[:, :3, :3], local) + world[:, None, :3, 3]

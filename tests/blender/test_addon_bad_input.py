@@ -1,0 +1,88 @@
+"""Every bad input gets a clear message (what is wrong, how to fix it) and changes nothing."""
+
+from __future__ import annotations
+
+import bpy
+import pytest
+from scenes import action_of, build_armature, import_bvh, key_snapshot, same_keys, walk_bvh
+
+
+def state() -> tuple:
+    """Everything an operator could change: actions with their keys, assignments, scene range."""
+    keys = {a.name: (a.use_fake_user, key_snapshot_of(a)) for a in bpy.data.actions}
+    assigned = {o.name: (action_of(o).name if action_of(o) else None) for o in bpy.data.objects}
+    maps = {a.name: a.strnn_map.hips for a in bpy.data.armatures}
+    return keys, assigned, maps, bpy.context.scene.frame_end
+
+
+def key_snapshot_of(action) -> dict:
+    users = [o for o in bpy.data.objects if action_of(o) == action]
+    return key_snapshot(users[0], action) if users else {}
+
+
+def refuse(op_name: str, match: str) -> None:
+    """The operator must fail with ``match`` in its message and leave the file as it was."""
+    before = state()
+    with pytest.raises(RuntimeError, match=match):
+        getattr(bpy.ops.strnn, op_name)()
+    after = state()
+    assert after[1:] == before[1:] and before[0].keys() == after[0].keys()
+    assert all(before[0][k][0] == after[0][k][0] and same_keys(before[0][k][1], after[0][k][1]) for k in before[0])
+
+
+OPS = ["extend_clip", "denoise_action"]
+
+
+@pytest.mark.parametrize("op", OPS)
+def test_no_active_object(addon, op):
+    refuse(op, "No active object")
+
+
+@pytest.mark.parametrize("op", OPS)
+def test_not_an_armature(addon, op):
+    bpy.ops.mesh.primitive_cube_add()
+    refuse(op, "not an armature")
+
+
+@pytest.mark.parametrize("op", OPS)
+def test_armature_without_action(addon, op):
+    build_armature("Bare", [("a", None, (0, 0, 0), (0, 0, 1))])
+    refuse(op, "has no action")
+
+
+@pytest.mark.parametrize("op", OPS)
+def test_fewer_than_20_frames(addon, tmp_path, op):
+    import_bvh(walk_bvh(tmp_path, frames=15))
+    refuse(op, "needs at least 20")
+
+
+@pytest.mark.parametrize("op", OPS)
+def test_rig_that_cannot_be_mapped_lists_missing_joints(addon, tmp_path, op):
+    obj = import_bvh(walk_bvh(tmp_path, frames=40))
+    for i, bone in enumerate(obj.data.bones):
+        bone.name = f"bone{i}"
+    refuse(op, r"no bone found for .*Left Knee")
+
+
+@pytest.mark.parametrize("op", OPS)
+@pytest.mark.parametrize("scale", [(0, 1, 1), (1, -1, 1)], ids=["zero", "negative"])
+def test_zero_or_negative_scale(addon, tmp_path, op, scale):
+    obj = import_bvh(walk_bvh(tmp_path, frames=40))
+    obj.scale = scale
+    refuse(op, "zero or negative scale")
+
+
+@pytest.mark.parametrize("op", OPS)
+def test_linked_armature(addon, tmp_path, op):
+    obj = import_bvh(walk_bvh(tmp_path, frames=40))
+    name = obj.name
+    library = tmp_path / "library.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(library))
+    bpy.ops.wm.read_homefile(use_empty=True)
+    with bpy.data.libraries.load(str(library), link=True) as (src, dst):
+        dst.objects = [name]
+    linked = dst.objects[0]
+    bpy.context.scene.collection.objects.link(linked)
+    bpy.context.view_layer.objects.active = linked
+    assert linked.library is not None
+    refuse(op, "linked from")

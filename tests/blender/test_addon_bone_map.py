@@ -1,0 +1,91 @@
+"""Auto-mapping bones onto the 21 canonical joints, and the map saved with the armature."""
+
+from __future__ import annotations
+
+import bpy
+import pytest
+from scenes import build_armature, find_mocap, import_bvh, mixamo_bones, rigify_bones, walk_bvh
+
+from model_core.conventions import JOINTS
+
+FAMILY_CLIPS = {
+    "bandai_namco": "bandai-namco/dataset-2/dataset-2_walk_normal_001.bvh",
+    "iclone_cc_base": "cmu/iclone/002_01.bvh",
+    "acrnn": "cmu/acrnn-dance/salsa/01.bvh",
+    "cmu_cgspeed": "cmu/cgspeed/tmoco_02_01.bvh",
+    "cmu_bvh11": "cmu/cgspeed/bvh11_131_01.bvh",
+}
+UNREAL = [("pelvis", None), ("spine_01", "pelvis"), ("spine_02", "spine_01"), ("spine_03", "spine_02"),
+          ("neck_01", "spine_03"), ("head", "neck_01")] + [
+    (f"{bone}_{s}", parent.format(s=s)) for s in "lr" for bone, parent in (
+        ("clavicle", "spine_03"), ("upperarm", "clavicle_{s}"), ("lowerarm", "upperarm_{s}"), ("hand", "lowerarm_{s}"),
+        ("thigh", "pelvis"), ("calf", "thigh_{s}"), ("foot", "calf_{s}"), ("ball", "foot_{s}"))]
+
+
+def stored(obj) -> dict:
+    return {j: getattr(obj.data.strnn_map, j) for j in JOINTS}
+
+
+def auto_map(obj) -> dict:
+    bpy.context.view_layer.objects.active = obj
+    assert bpy.ops.strnn.auto_map() == {"FINISHED"}
+    return stored(obj)
+
+
+def test_mixamo_armature_maps_fully(addon):
+    found = auto_map(build_armature("Mixamo", mixamo_bones()))
+    assert found["l_upleg"] == "mixamorig:LeftUpLeg" and found["spine1"] == "mixamorig:Spine2"
+    assert found["l_fingertip"] == "mixamorig:LeftHandMiddle4"
+    assert bpy.context.active_object.data.strnn_map.family == "mixamo"
+
+
+def test_rigify_deform_bones_map_fully(addon):
+    obj = build_armature("Rigify", rigify_bones())
+    found = auto_map(obj)
+    assert found["hips"] == "DEF-spine" and found["head"] == "DEF-spine.006"
+    assert found["r_knee"] == "DEF-shin.R" and found["r_wrist"] == "DEF-hand.R"
+    assert obj.data.strnn_map.family == "rigify_deform"
+
+
+def test_generic_left_right_heuristic_maps_unreal_names(addon):
+    j = {n: (0.0, 0.0, float(i)) for i, (n, _) in enumerate(UNREAL)}
+    bones = [(n, p, j[n], (j[n][0], 0.1, j[n][2])) for n, p in UNREAL]
+    obj = build_armature("Mannequin", bones)
+    found = auto_map(obj)
+    assert all(found.values()), [k for k, v in found.items() if not v]
+    assert (found["hips"], found["spine"], found["spine1"], found["neck"]) == ("pelvis", "spine_01", "spine_03",
+                                                                               "neck_01")
+    assert (found["l_knee"], found["r_toe"], found["l_arm"]) == ("calf_l", "ball_r", "upperarm_l")
+    assert found["l_fingertip"] == "hand_l" and obj.data.strnn_map.l_fingertip_tail
+
+
+def test_unmappable_rig_lists_missing_joints(addon):
+    obj = build_armature("Blob", [("a", None, (0, 0, 0), (0, 0, 1)), ("b", "a", (0, 0, 1), (0, 0, 2))])
+    bpy.ops.strnn.auto_map()
+    assert not obj.data.strnn_map.l_knee
+
+
+def test_bvh_fixture_maps_and_map_is_saved_in_blend(addon, tmp_path):
+    obj = import_bvh(walk_bvh(tmp_path))
+    name = obj.name
+    found = auto_map(obj)
+    assert all(found.values())
+    obj.data.strnn_map.l_wrist = "LeftForeArm"  # a hand edit must survive save and reload
+    path = tmp_path / "mapped.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(path))
+    bpy.ops.wm.read_homefile(use_empty=True)
+    bpy.ops.wm.open_mainfile(filepath=str(path))
+    arm = bpy.data.objects[name].data
+    assert arm.strnn_map.l_wrist == "LeftForeArm"
+    assert arm.strnn_map.l_upleg == found["l_upleg"]
+
+
+@pytest.mark.parametrize("family", sorted(FAMILY_CLIPS))
+def test_bvh_imports_of_every_rig_family_map_fully(addon, family):
+    root = find_mocap()
+    if root is None or not (root / FAMILY_CLIPS[family]).exists():
+        pytest.skip("motion capture not unpacked (data/mocap or ../shared/mocap)")
+    obj = import_bvh(root / FAMILY_CLIPS[family])
+    found = auto_map(obj)
+    assert all(found.values()), [k for k, v in found.items() if not v]
+    assert obj.data.strnn_map.family == family

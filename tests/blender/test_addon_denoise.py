@@ -1,0 +1,87 @@
+"""Denoise Action: a new action over a frame range, strength blending, unmapped bones untouched."""
+
+from __future__ import annotations
+
+import bpy
+import numpy as np
+from scenes import (
+    action_of,
+    evaluated_joints,
+    fcurves_of,
+    find_mocap,
+    import_bvh,
+    key_snapshot,
+    mixamo_walk,
+    same_keys,
+    walk_bvh,
+)
+
+
+def denoise(**kw) -> tuple:
+    obj = bpy.context.active_object
+    old, before = action_of(obj), key_snapshot(obj)
+    assert bpy.ops.strnn.denoise_action(**kw) == {"FINISHED"}
+    new = action_of(obj)
+    assert new is not old and new.name.startswith(old.name) and old.use_fake_user
+    assert same_keys(before, key_snapshot(obj, old))
+    assert tuple(new.frame_range) == tuple(old.frame_range)
+    return old, new
+
+
+def test_identity_model_keeps_the_motion(tmp_path, fake_model, addon):
+    obj = import_bvh(walk_bvh(tmp_path, frames=60))
+    frames = np.arange(1, 61)
+    before = evaluated_joints(addon, obj, frames)
+    denoise()
+    after = evaluated_joints(addon, obj, frames)
+    assert np.abs(after - before).max() < 1e-4
+
+
+def test_range_and_unmapped_bones(fake_model, addon, monkeypatch):
+    obj = mixamo_walk(60)
+    frames = np.arange(1, 61)
+    before = evaluated_joints(addon, obj, frames)
+    shift = np.array([0.0, 0.05, 0.0])  # a stand-in "denoiser" that lifts the body by 5 cm (Y-up)
+    monkeypatch.setattr(fake_model, "denoise", lambda prefs, pos, fps, strength: pos + strength * shift)
+    old, new = denoise(use_range=True, frame_start=21, frame_end=40, strength=0.5)
+    after = evaluated_joints(addon, obj, frames)
+    lift = (after - before)[..., 2]  # Blender Z
+    assert np.abs(after[:20] - before[:20]).max() < 1e-5 and np.abs(after[40:] - before[40:]).max() < 1e-5
+    assert np.allclose(lift[20:40, 0], 0.025, atol=1e-4)  # half strength, hips
+    old_keys, new_keys = key_snapshot(obj, old), key_snapshot(obj, new)
+    for key in old_keys:
+        if "Middle1" in key[0] or "Middle2" in key[0]:
+            assert np.array_equal(old_keys[key], new_keys[key])
+
+
+def test_strength_zero_changes_no_motion(fake_model, addon, monkeypatch):
+    obj = mixamo_walk(40)
+    frames = np.arange(1, 41)
+    before = evaluated_joints(addon, obj, frames)
+    monkeypatch.setattr(fake_model, "denoise", lambda prefs, pos, fps, strength: pos + strength * 0.1)
+    denoise(strength=0.0)
+    assert np.abs(evaluated_joints(addon, obj, frames) - before).max() < 1e-4
+
+
+def test_denoise_noisy_clip_with_model(real_model, addon, tmp_path):
+    root = find_mocap()
+    clip = root / "bandai-namco/dataset-2/dataset-2_walk_normal_001.bvh" if root else None
+    obj = import_bvh(clip if clip and clip.exists() else walk_bvh(tmp_path, frames=90), update_scene_fps=True)
+    frames = np.arange(int(action_of(obj).frame_range[0]), int(action_of(obj).frame_range[1]) + 1)
+    clean = evaluated_joints(addon, obj, frames)
+    rng = np.random.default_rng(0)
+    for fc in fcurves_of(obj):  # shake every rotation by about 2 degrees
+        if fc.data_path.endswith("rotation_euler"):
+            co = np.empty(2 * len(fc.keyframe_points), np.float32)
+            fc.keyframe_points.foreach_get("co", co)
+            co[1::2] += rng.normal(0, 0.035, len(co) // 2)
+            fc.keyframe_points.foreach_set("co", co)
+            fc.update()
+    noisy = evaluated_joints(addon, obj, frames)
+    denoise()
+    out = evaluated_joints(addon, obj, frames)
+    assert np.isfinite(out).all()
+    err_noisy = np.linalg.norm(noisy - clean, axis=-1).mean()
+    err_out = np.linalg.norm(out - clean, axis=-1).mean()
+    print(f"noisy {err_noisy:.4f}, denoised {err_out:.4f} (scene units)")
+    assert 0 < err_noisy and err_out < 3 * err_noisy

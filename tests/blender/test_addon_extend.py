@@ -1,0 +1,135 @@
+"""Extend Clip on BVH imports and on armatures built in code.
+
+With a stand-in model (constant velocity) the new frames must put the rig's joints exactly
+where the model says; with the real model (skipped when none is trained) the result must
+continue the clip without a jump, neither freeze nor explode, and keep bone lengths.
+"""
+
+from __future__ import annotations
+
+import bpy
+import numpy as np
+import pytest
+from scenes import (
+    action_of,
+    addon_module,
+    evaluated_joints,
+    fcurves_of,
+    find_mocap,
+    import_bvh,
+    key_snapshot,
+    mixamo_walk,
+    rigify_walk,
+    same_keys,
+    walk_bvh,
+)
+
+CLIPS = {
+    "bandai_namco": "bandai-namco/dataset-2/dataset-2_walk_normal_001.bvh",
+    "iclone_cc_base": "cmu/iclone/002_01.bvh",
+    "acrnn": "cmu/acrnn-dance/salsa/01.bvh",
+    "cmu_cgspeed": "cmu/cgspeed/tmoco_02_01.bvh",
+}
+
+
+def extend(frames: int) -> tuple:
+    """Run the operator on the active object; (old action, new action, old keys)."""
+    obj = bpy.context.active_object
+    old = action_of(obj)
+    before = key_snapshot(obj)
+    assert bpy.ops.strnn.extend_clip(frames=frames) == {"FINISHED"}
+    return old, action_of(obj), before
+
+
+def check_new_action(obj, old, new, before, frames: int) -> None:
+    assert new is not old and new.name.startswith(old.name)
+    assert old.use_fake_user and same_keys(before, key_snapshot(obj, old))
+    assert new.frame_range[1] == old.frame_range[1] + frames
+
+
+def expected_constant_velocity(pos: np.ndarray, frames: int) -> np.ndarray:
+    """What the stand-in model makes of ``pos`` ``[F, 21, 3]``: the last pose moving on at the hips' velocity."""
+    return pos[-1] + (pos[-1, 0] - pos[-2, 0]) * np.arange(1, frames + 1)[:, None, None]
+
+
+@pytest.mark.parametrize("fps", [30, 24, 60])
+def test_extend_bvh_fixture_follows_the_model(tmp_path, fake_model, addon, fps):
+    obj = import_bvh(walk_bvh(tmp_path, frames=90))
+    bpy.context.scene.render.fps = fps
+    last = int(action_of(obj).frame_range[1])
+    old, new, before = extend(40)
+    check_new_action(obj, old, new, before, 40)
+    assert bpy.context.scene.frame_end >= last + 40
+    pos = evaluated_joints(addon, obj, np.arange(last - 1, last + 41))
+    want = expected_constant_velocity(pos[:2], 40)
+    err = np.linalg.norm(pos[2:] - want, axis=-1)
+    assert err.max() < 0.01, err.max()
+
+
+@pytest.mark.parametrize("make", [mixamo_walk, rigify_walk], ids=["mixamo", "rigify"])
+def test_extend_built_armatures_follows_the_model(fake_model, addon, make):
+    obj = make(60)
+    original = evaluated_joints(addon, obj, np.arange(1, 61))
+    old, new, before = extend(30)
+    check_new_action(obj, old, new, before, 30)
+    assert np.abs(evaluated_joints(addon, obj, np.arange(1, 61)) - original).max() < 1e-5  # old frames unchanged
+    pos = evaluated_joints(addon, obj, np.arange(59, 91))
+    err = np.linalg.norm(pos[2:] - expected_constant_velocity(pos[:2], 30), axis=-1)
+    assert err.max() < 1e-3, err.max()
+    hips = obj.data.strnn_map.hips
+    loc_keys = [fc for fc in fcurves_of(obj) if fc.data_path == f'pose.bones["{hips}"].location']
+    assert loc_keys and all(fc.keyframe_points[-1].co[0] == 90 for fc in loc_keys)  # root motion continues
+    for fc in fcurves_of(obj):  # bones outside the map keep their keys
+        if "Middle1" in fc.data_path or "f_middle.01" in fc.data_path:
+            assert fc.keyframe_points[-1].co[0] <= 60
+
+
+def seam_and_speed(pos: np.ndarray, n_ctx: int) -> tuple[float, float]:
+    """(seam step / largest context step, new mean speed / context mean speed) of joints ``[F, 21, 3]``."""
+    step = np.linalg.norm(np.diff(pos, axis=0), axis=-1).mean(-1)  # mean joint displacement per frame
+    ctx, seam, new = step[: n_ctx - 1], step[n_ctx - 1], step[n_ctx:]
+    return seam / ctx.max(), new.mean() / ctx.mean()
+
+
+def bone_length_change(addon, obj, frames: np.ndarray) -> float:
+    """Largest relative change of any bone's length (parent head to head) against the first frame;
+    the hips bone moves freely (root motion), so its link to its parent is left out."""
+    rig_io = addon_module(addon, "strnn_addon.rig_io")
+    pipeline = addon_module(addon, "strnn_addon.pipeline")
+    clip = pipeline.prepare(bpy.context, obj)
+    rig, hips = clip.rig, clip.anchors.bone[0]
+    pose, _ = rig_io.pose_matrices_evaluated(bpy.context, obj, rig, frames.astype(np.float64))
+    child = np.flatnonzero((rig.parents >= 0) & (np.arange(len(rig.names)) != hips))
+    heads = pose[..., :3, 3]  # (F, B, 3)
+    length = np.linalg.norm(heads[:, child] - heads[:, rig.parents[child]], axis=-1)
+    keep = length[0] > 1e-3 * length[0].max()  # coincident heads have no length to keep
+    return float(np.abs(length[:, keep] / length[:1, keep] - 1).max(initial=0.0))
+
+
+def check_real_extension(addon, obj, frames: int) -> None:
+    last = int(action_of(obj).frame_range[1])
+    old, new, before = extend(frames)
+    check_new_action(obj, old, new, before, frames)
+    span = np.arange(last - 29, last + frames + 1)
+    pos = evaluated_joints(addon, obj, span)
+    assert np.isfinite(pos).all()
+    seam, speed = seam_and_speed(pos, 30)
+    lengths = bone_length_change(addon, obj, span)
+    print(f"seam {seam:.2f}, speed ratio {speed:.2f}, bone length change {lengths:.5f}")
+    assert seam < 3.0, "jump at the seam"
+    assert 0.05 < speed < 5.0, "frozen or exploding"
+    assert lengths < 1e-3
+
+
+@pytest.mark.parametrize("family", sorted(CLIPS))
+def test_extend_real_clip_with_model(real_model, addon, family):
+    root = find_mocap()
+    if root is None or not (root / CLIPS[family]).exists():
+        pytest.skip("motion capture not unpacked (data/mocap or ../shared/mocap)")
+    obj = import_bvh(root / CLIPS[family], update_scene_fps=True)
+    check_real_extension(addon, obj, 60)
+
+
+@pytest.mark.parametrize("make", [mixamo_walk, rigify_walk], ids=["mixamo", "rigify"])
+def test_extend_built_armature_with_model(real_model, addon, make):
+    check_real_extension(addon, make(60), 60)

@@ -1,0 +1,28 @@
+"""The installed extension registers, and its operators run from scripts (EXEC and INVOKE)."""
+
+import bpy
+from scenes import action_of, import_bvh, key_snapshot, same_keys, walk_bvh
+
+
+def test_registered(addon):
+    assert hasattr(bpy.ops.strnn, "extend_clip") and hasattr(bpy.ops.strnn, "denoise_action")
+    assert hasattr(bpy.types, "STRNN_PT_main")
+    assert bpy.context.preferences.addons[addon.__name__].preferences.model_folder == ""
+
+
+def test_auto_map_then_extend(tmp_path, fake_model):
+    obj = import_bvh(walk_bvh(tmp_path))
+    assert bpy.ops.strnn.auto_map() == {"FINISHED"}
+    before = key_snapshot(obj)
+    old = action_of(obj)
+    assert bpy.ops.strnn.extend_clip(frames=30) == {"FINISHED"}
+    new = action_of(obj)
+    assert new != old and old.use_fake_user and new.name == "walk.extended"
+    assert same_keys(before, key_snapshot(obj, old))
+    assert new.frame_range[1] == 120
+
+
+def test_invoke_without_a_window_runs_at_once(tmp_path, fake_model):
+    obj = import_bvh(walk_bvh(tmp_path))
+    assert bpy.ops.strnn.denoise_action("INVOKE_DEFAULT") == {"FINISHED"}
+    assert action_of(obj).name == "walk.denoised"

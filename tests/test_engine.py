@@ -1,0 +1,188 @@
+"""The NumPy inference engine against its torch twin, on small random releases.
+
+Each release is a random width-64 STRNN whose batch-norm statistics and residual filter
+(zero-initialised by the model) are randomised, so that every folded term matters.
+"""
+
+from __future__ import annotations
+
+import pickle
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+torch = pytest.importorskip("torch")
+
+from model_core.checkpoint import DEFAULT_MODEL, REPO, CheckpointError, load_release, save_release  # noqa: E402
+from model_core.conventions import LAYOUT  # noqa: E402
+from model_core.engine import Engine, bone_lengths  # noqa: E402
+from model_core.model import STRNN, STRNNConfig  # noqa: E402
+from model_core.torch_engine import TorchEngine  # noqa: E402
+
+C = LAYOUT.size
+VARIANTS = [(s, r) for s in (True, False) for r in (True, False)]  # (spatial, residual)
+
+
+def random_release(folder, spatial=True, residual=True, m=10, n=10, seed=0):
+    """Save a random STRNN as a release in ``folder``; return (eval-mode model, mean [C], std [C])."""
+    torch.manual_seed(seed)
+    rng = np.random.default_rng(seed)
+    cfg = STRNNConfig(width=64, encode_len=m, predict_len=n, spatial=spatial, residual=residual,
+                      residual_width=32)
+    model = STRNN(cfg)
+    with torch.no_grad():
+        for mod in model.modules():
+            if isinstance(mod, torch.nn.BatchNorm1d):
+                mod.running_mean.normal_(0.0, 0.3)
+                mod.running_var.uniform_(0.5, 2.0)
+                mod.weight.uniform_(0.5, 1.5)
+                mod.bias.normal_(0.0, 0.1)
+        model.start.normal_(0.0, 0.5)
+        if residual:
+            model.filter.net[-1].weight.normal_(0.0, 0.02)
+            model.filter.net[-1].bias.normal_(0.0, 0.02)
+    model.eval()
+    weights = {k: v.numpy() for k, v in model.state_dict().items() if v.dtype.is_floating_point}
+    mean = rng.normal(0.0, 0.2, C).astype(np.float32)
+    std = rng.uniform(0.5, 1.5, C).astype(np.float32)
+    seeds = (mean + std * rng.normal(size=(3, m, C))).astype(np.float32)
+    save_release(folder, weights, cfg.to_dict(), mean, std, {"licence": "test"}, seeds, ["a", "b", "c"])
+    return model, mean, std
+
+
+@pytest.fixture
+def release(tmp_path):
+    folder = tmp_path / "release"
+    random_release(folder)
+    return folder
+
+
+def torch_forward(model, raw, mean, std):
+    with torch.no_grad():
+        out = model(torch.from_numpy(((raw - mean) / std).astype(np.float32)))
+    return out.numpy() * std + mean
+
+
+@pytest.mark.parametrize("spatial,residual", VARIANTS)
+@pytest.mark.parametrize("m,n", [(10, 10), (6, 9), (9, 6)])
+def test_numpy_forward_matches_torch(tmp_path, spatial, residual, m, n):
+    model, mean, std = random_release(tmp_path, spatial, residual, m, n)
+    engine = Engine.load(tmp_path)
+    raw = engine.seeds
+    want = torch_forward(model, raw, mean, std)
+    got = engine.forward(raw)
+    assert got.shape == (3, m + n, C)
+    np.testing.assert_allclose(got, want, atol=1e-4, rtol=0)
+    np.testing.assert_allclose(engine.predict(raw), want[:, m:], atol=1e-4, rtol=0)
+    np.testing.assert_allclose(TorchEngine.load(tmp_path).forward(raw), want, atol=1e-5, rtol=0)
+
+
+def test_extrapolate_shapes_and_batch_matches_single(release):
+    engine = Engine.load(release)
+    seeds, frames = engine.seeds, 3 * engine.n + 5  # not a whole number of windows
+    batch = engine.extrapolate(seeds, frames)
+    assert batch.shape == (3, frames, C)
+    for i in range(3):
+        single = engine.extrapolate(seeds[i], frames)
+        assert single.shape == (frames, C)
+        np.testing.assert_allclose(single, batch[i], atol=1e-5, rtol=0)
+    longer = np.concatenate([seeds[0], seeds[1]])  # only the last m frames are context
+    np.testing.assert_array_equal(engine.extrapolate(longer, 7), engine.extrapolate(seeds[1], 7))
+    assert engine.extrapolate(seeds[0], 7, keep_bone_lengths=False).shape == (7, C)
+
+
+def test_torch_engine_extrapolates_like_numpy(release):
+    seeds = Engine.load(release).seeds
+    want = Engine.load(release).extrapolate(seeds, 25)
+    got = TorchEngine.load(release).extrapolate(seeds, 25)
+    assert got.shape == want.shape == (3, 25, C)
+    np.testing.assert_allclose(got, want, atol=1e-4, rtol=0)
+
+
+def test_extrapolate_keeps_seed_bone_lengths(release):
+    engine = Engine.load(release)
+    seed = engine.seeds[0]
+    out = engine.extrapolate(seed, 2 * engine.n)
+    per_frame = bone_lengths(out[:, None])  # [F, J]: T = 1, so the median is the frame's own
+    np.testing.assert_allclose(per_frame, np.broadcast_to(bone_lengths(seed[None]), per_frame.shape),
+                               atol=1e-4, rtol=0)
+    contacts = out[:, LAYOUT.contacts]
+    assert set(np.unique(contacts)) <= {0.0, 1.0}
+
+
+def test_denoise_shape(release):
+    engine = Engine.load(release)
+    rng = np.random.default_rng(1)
+    feats = (engine.mean + engine.std * rng.normal(size=(engine.m * 3 + 1, C))).astype(np.float32)
+    out = engine.denoise(feats)
+    assert out.shape == feats.shape and np.isfinite(out).all()
+    assert TorchEngine.load(release).denoise(feats).shape == feats.shape
+    with pytest.raises(ValueError, match="at least"):
+        engine.denoise(feats[: engine.m - 1])
+
+
+def test_loading_never_unpickles(release, monkeypatch):
+    def refuse(*args, **kwargs):
+        raise AssertionError("a release must load without pickle")
+
+    monkeypatch.setattr(pickle, "load", refuse)
+    monkeypatch.setattr(pickle, "loads", refuse)
+    monkeypatch.setattr(torch, "load", refuse)
+    Engine.load(release)
+    TorchEngine.load(release)
+    assert sorted(p.name for p in release.iterdir()) == ["model.json", "model.safetensors", "seeds.npz"]
+
+
+def test_pickled_seeds_are_refused(release):
+    with open(release / "seeds.npz", "wb") as f:
+        np.savez(f, features=np.zeros((1, 10, C), np.float32), names=np.array([object()], dtype=object))
+    with pytest.raises(ValueError, match="allow_pickle"):
+        load_release(release)
+
+
+def test_missing_config_is_a_clear_error(release):
+    (release / "model.json").unlink()
+    with pytest.raises(CheckpointError, match="missing model.json"):
+        Engine.load(release)
+    with pytest.raises(CheckpointError, match="missing model.json"):
+        TorchEngine.load(release)
+
+
+def test_config_mismatch_is_a_clear_error(release):
+    doc = (release / "model.json").read_text().replace('"width": 64', '"width": 32')
+    (release / "model.json").write_text(doc)
+    with pytest.raises(CheckpointError, match="do not match its config"):
+        TorchEngine.load(release)
+
+
+def test_numpy_engine_does_not_import_torch():
+    code = "import sys, model_core.engine, model_core.benchmark; sys.exit('torch' in sys.modules)"
+    assert subprocess.run([sys.executable, "-c", code], cwd=REPO).returncode == 0
+
+
+@pytest.mark.skipif(not (DEFAULT_MODEL / "model.safetensors").exists(), reason="no bundled model yet")
+def test_bundled_model():
+    engine, twin = Engine.load(), TorchEngine.load()
+    seeds = engine.seeds
+    assert len(seeds) > 0 and seeds.shape[1:] == (engine.m, C)
+    np.testing.assert_allclose(engine.forward(seeds), twin.forward(seeds), atol=1e-4, rtol=0)
+    out = engine.extrapolate(seeds[:4], 4 * engine.n)
+    assert out.shape == (4, 4 * engine.n, C) and np.isfinite(out).all()
+
+
+def test_numpy_safetensors_reader_matches_the_library(tmp_path):
+    """Blender's Python has no safetensors package: the NumPy reader must give the same arrays."""
+    from safetensors.numpy import load_file, save_file
+
+    from model_core.checkpoint import read_safetensors
+
+    arrays = {"a": np.arange(12, dtype=np.float32).reshape(3, 4), "b": np.array([1, -2], dtype=np.int64),
+              "c": np.zeros((0, 5), np.float32)}
+    save_file(arrays, str(tmp_path / "x.safetensors"))
+    ours, lib = read_safetensors(tmp_path / "x.safetensors"), load_file(str(tmp_path / "x.safetensors"))
+    assert ours.keys() == lib.keys()
+    for k in lib:
+        assert ours[k].dtype == lib[k].dtype
+        np.testing.assert_array_equal(ours[k], lib[k])

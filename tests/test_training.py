@@ -1,0 +1,97 @@
+"""Training: the model learns, a resumed run equals an uninterrupted one, and
+data-parallel training runs under torchrun with two CPU processes."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+from safetensors.numpy import load_file
+
+from model_core.bvh_export import write_bvh
+from model_core.model import STRNN, STRNNConfig, smoothness_cost
+from model_core.synthetic import walking_skeleton
+from model_core.training import TrainConfig, train
+
+REPO = Path(__file__).resolve().parent.parent
+
+
+@pytest.fixture(scope="module")
+def walk_folder(tmp_path_factory) -> Path:
+    """A dozen synthetic walking clips written as BVH files."""
+    root = tmp_path_factory.mktemp("walks")
+    for i in range(12):
+        pos = walking_skeleton(frames=90, speed=0.8 + 0.1 * i, radius=3.0 + i)
+        write_bvh(root / f"walk_{i:02d}.bvh", pos)
+    return root
+
+
+def tiny(**kw) -> STRNNConfig:
+    return STRNNConfig(width=16, residual_width=16, **kw)
+
+
+def test_overfits_one_batch():
+    torch.manual_seed(0)
+    model = STRNN(tiny(dropout=0.0))
+    x = torch.randn(8, 40, model.cfg.frame_size) * 0.5
+    opt = torch.optim.Adam(model.parameters(), 3e-3)
+    losses = []
+    for _ in range(150):
+        out = model(x[:, :20])
+        loss = (out - x).pow(2).mean() + 0.1 * smoothness_cost(out)
+        opt.zero_grad()
+        loss.backward()
+        opt.step()
+        losses.append(loss.item())
+    assert losses[-1] < 0.5 * losses[0]
+
+
+def _cfg(folder: Path, out: Path, **kw) -> TrainConfig:
+    return TrainConfig(data=str(folder), out=str(out), model=tiny(), steps=8, batch=8, cache="",
+                       val_every=4, checkpoint_seconds=1e9, **kw)
+
+
+def test_resume_equals_uninterrupted_run(walk_folder, tmp_path):
+    whole = train(_cfg(walk_folder, tmp_path / "whole"), progress=False)
+    cut = _cfg(walk_folder, tmp_path / "cut", max_minutes=1e-9)  # stops, with a checkpoint, after one step
+    train(cut, progress=False)
+    assert not (tmp_path / "cut" / "release").exists()
+    resumed = train(_cfg(walk_folder, tmp_path / "cut"), resume=True, progress=False)
+    assert "resumed at step 1" in (tmp_path / "cut" / "train.log").read_text()
+    a, b = load_file(str(whole / "model.safetensors")), load_file(str(resumed / "model.safetensors"))
+    assert a.keys() == b.keys()
+    for k in a:
+        np.testing.assert_allclose(a[k], b[k], atol=1e-6, err_msg=k)
+
+
+def test_release_has_config_seeds_and_licence(walk_folder, tmp_path):
+    import json
+
+    release = train(_cfg(walk_folder, tmp_path / "run"), progress=False)
+    doc = json.loads((release / "model.json").read_text())
+    assert doc["config"]["width"] == 16 and doc["fps"] == 30.0
+    assert len(doc["normalisation"]["mean"]) == doc["layout"]["size"]
+    assert "CC BY-NC 4.0" in doc["licence"]
+    seeds = np.load(release / "seeds.npz", allow_pickle=False)
+    assert seeds["features"].shape[1:] == (20, doc["layout"]["size"])
+
+
+def test_torchrun_two_cpu_processes(walk_folder, tmp_path):
+    torchrun = Path(sys.executable).parent / "torchrun"
+    if not torchrun.exists():
+        pytest.skip("torchrun is not installed beside this Python")
+    out = tmp_path / "ddp"
+    cmd = [str(torchrun), "--standalone", "--nproc_per_node", "2", str(REPO / "scripts" / "train.py"),
+           "--data", str(walk_folder), "--out", str(out), "--steps", "10", "--batch", "8", "--width", "16",
+           "--residual-width", "16", "--cache", "", "--quiet", "--threads", "1"]
+    env = dict(os.environ, OMP_NUM_THREADS="1")
+    done = subprocess.run(cmd, capture_output=True, text=True, timeout=300, env=env)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert (out / "release" / "model.safetensors").exists()
+    log = (out / "train.log").read_text()
+    assert "phase residual_finetune" in log
