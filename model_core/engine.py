@@ -56,6 +56,8 @@ def _cell(gates: np.ndarray, c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 class Engine:
     """STRNN inference in NumPy. Build with :meth:`load`."""
 
+    seam_frames = 10.0  # fade-out (frames) of the seam correction in predict(); chosen on the validation split
+
     def __init__(self, ckpt: Checkpoint):
         cfg = ckpt.config
         self.ckpt = ckpt
@@ -125,8 +127,19 @@ class Engine:
         return self._window(x) * self.std + self.mean
 
     def predict(self, context: np.ndarray) -> np.ndarray:
-        """Raw context ``[B, m, C]`` -> the next ``n`` raw frames ``[B, n, C]``."""
-        return self.forward(context)[:, self.m:]
+        """Raw context ``[B, m, C]`` -> the next ``n`` raw frames ``[B, n, C]``.
+
+        Seam correction: the decoder's error on the last context frame (its offset from the
+        true frame) is carried into the prediction and fades out over ``seam_frames`` frames,
+        so the continuation starts where the context ends (0 turns it off)."""
+        context = np.asarray(context, np.float32)
+        window = self.forward(context)
+        pred = window[:, self.m:]
+        if self.seam_frames > 0:
+            offset = context[:, -1, LAYOUT.positions] - window[:, self.m - 1, LAYOUT.positions]
+            fade = np.exp(-np.arange(1, self.n + 1, dtype=np.float32) / self.seam_frames)
+            pred[..., LAYOUT.positions] += fade[None, :, None] * offset[:, None]
+        return pred
 
     def extrapolate(self, seed: np.ndarray, frames: int, keep_bone_lengths: bool = True) -> np.ndarray:
         """Open-loop generation: repeat (take the last m frames, predict n more).

@@ -67,13 +67,11 @@ class TorchEngine:
         out = self.model((x - self._mean) / self._std)
         return (out * self._std + self._mean).cpu().numpy()
 
-    def predict(self, context: np.ndarray) -> np.ndarray:
-        """Raw context ``[B, m, C]`` -> the next ``n`` raw frames ``[B, n, C]``."""
-        return self.forward(context)[:, self.m:]
-
     # The rollout, the windowed denoiser and the position-level wrappers only call
     # predict/forward and read m, so the NumPy engine's own code runs here unchanged:
     # the two engines cannot drift apart.
+    seam_frames = Engine.seam_frames
+    predict = Engine.predict
     extrapolate = Engine.extrapolate
     denoise = Engine.denoise
     extend = Engine.extend

@@ -3,7 +3,8 @@
 
 Prediction MPJPE at 80..1000 ms for STRNN, zero- and constant-velocity always;
 long-horizon rollouts with --long-horizon FRAMES --seeds K; denoising against the
-best Butterworth filter and the noisy input with --denoise-std S [S ...].
+best Butterworth filter and the noisy input with --denoise-std S [S ...]; path following
+(path error, foot skate and knee pops before/after foot lock, synthesis speed) with --paths.
 
 Example (the model card's figures):
   python scripts/evaluate.py --data data/mocap --split test --long-horizon 20000 --seeds 20 \\
@@ -41,6 +42,9 @@ def parse_args(argv=None):
     p.add_argument("--reference", help="folder of BVH files for D_1nn and speed (default: --data's clips)")
     p.add_argument("--denoise-std", type=float, nargs="+", metavar="S", help="noise std in cm")
     p.add_argument("--cache", default="data/cache", help="folder for cached dataset arrays ('' = none)")
+    p.add_argument("--paths", action="store_true",
+                   help="path following (needs torch): line, circle, S-curve, figure-eight from walking seeds")
+    p.add_argument("--path-seeds", type=int, default=3, help="walking seeds per path")
     return p.parse_args(argv)
 
 
@@ -68,6 +72,8 @@ def print_table(result: dict, extra: dict):
         for name, row in dn["mpjpe_cm"].items():
             print(f"{name:<20}" + "".join(f"{v:8.2f}" for v in row))
         print(f"{'best cutoff Hz':<20}" + "".join(f"{v:8.1f}" for v in extra["butterworth_cutoff_hz"]))
+    if "paths" in result:
+        print_paths(result["paths"])
 
 
 def run(args) -> dict:
@@ -92,8 +98,31 @@ def run(args) -> dict:
         dn = evaluate_denoise(engine, clips, args.denoise_std)
         extra["butterworth_cutoff_hz"] = dn.pop("butterworth_cutoff_hz")
         result["denoise"] = dn
+    if args.paths:
+        result["paths"] = run_paths(args, clips)
     print_table(result, extra)
     return result
+
+
+def run_paths(args, clips) -> dict:
+    from model_core.control import PathFollower
+    from model_core.path_evaluation import evaluate_paths, synthesis_speed, walking_seeds
+
+    follower = PathFollower.load(args.checkpoint)
+    paths = evaluate_paths(follower, clips, args.path_seeds, log=lambda m: print(m, file=sys.stderr))
+    paths["synthesis_fps_1000"] = synthesis_speed(follower, walking_seeds(clips, 1)[0][1])
+    return paths
+
+
+def print_paths(pt: dict) -> None:
+    print(f"\nPath following ({len(pt['seed_clips'])} walking seeds; skate on the model's contact frames)")
+    print(f"{'path':<14}{'mean cm':>9}{'max cm':>9}{'skate raw':>11}{'locked':>8}{'bone err':>10}{'pops raw':>10}"
+          f"{'locked':>8}")
+    for i, name in enumerate(pt["names"]):
+        print(f"{name:<14}{pt['mean_cm'][i]:9.1f}{pt['max_cm'][i]:9.1f}{pt['foot_skate_cm']['raw'][i]:11.2f}"
+              f"{pt['foot_skate_cm']['locked'][i]:8.2f}{pt['bone_error'][i]:10.4f}{pt['knee_pops']['raw'][i]:10d}"
+              f"{pt['knee_pops']['locked'][i]:8d}")
+    print(f"curve synthesis: {pt['synthesis_fps_1000']:.0f} frames/s for a 1000-frame path")
 
 
 def main(argv=None) -> int:

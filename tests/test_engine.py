@@ -75,6 +75,7 @@ def test_numpy_forward_matches_torch(tmp_path, spatial, residual, m, n):
     got = engine.forward(raw)
     assert got.shape == (3, m + n, C)
     np.testing.assert_allclose(got, want, atol=1e-4, rtol=0)
+    engine.seam_frames = 0  # the raw prediction, without the seam correction
     np.testing.assert_allclose(engine.predict(raw), want[:, m:], atol=1e-4, rtol=0)
     np.testing.assert_allclose(TorchEngine.load(tmp_path).forward(raw), want, atol=1e-5, rtol=0)
 
@@ -186,3 +187,16 @@ def test_numpy_safetensors_reader_matches_the_library(tmp_path):
     for k in lib:
         assert ours[k].dtype == lib[k].dtype
         np.testing.assert_array_equal(ours[k], lib[k])
+
+
+def test_seam_correction_carries_the_context_offset_into_the_prediction(tmp_path):
+    random_release(tmp_path, True, True, 10, 10)
+    engine = Engine.load(tmp_path)
+    raw = engine.seeds
+    window = engine.forward(raw)
+    offset = raw[:, -1, LAYOUT.positions] - window[:, 9, LAYOUT.positions]
+    engine.seam_frames = 4.0
+    pred = engine.predict(raw)
+    np.testing.assert_allclose(pred[:, :, LAYOUT.positions] - window[:, 10:, LAYOUT.positions],
+                               np.exp(-np.arange(1, 11) / 4.0)[None, :, None] * offset[:, None], atol=1e-4)
+    np.testing.assert_allclose(pred[:, :, LAYOUT.velocity], window[:, 10:, LAYOUT.velocity], atol=1e-6)
