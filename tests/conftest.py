@@ -9,6 +9,11 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
+# Tiny models on a small machine: BLAS/OpenMP worker threads only spin against each other
+# (and against anything else running), which made one 150-step test take minutes.
+for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
+
 import pytest
 
 REPO = Path(__file__).resolve().parent.parent
