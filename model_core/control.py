@@ -9,7 +9,15 @@ off the learnt manifold. Costs (DESIGN.md), over the predicted window:
 - ``H_ctr``: squared deviation of the root channels (velocity, yaw rate; normalised
   units) from the control signal;
 - ``H_bone``: squared relative deviation of bone lengths from the seed's skeleton;
-- ``H_fp``: squared horizontal foot speed (cm / frame), weighted by the predicted contacts.
+- ``H_fp``: squared horizontal foot speed (cm / frame), weighted by the predicted contacts;
+- and, beyond the paper, H_ctr integrated: the squared distance of the window's root
+  positions from where the control signal aims them (10 cm units), which stops small
+  velocity errors from adding up along the path.
+
+Only the predictor LSTM cell is fine-tuned by default; the frozen encoder state and
+decoded context are computed once per window and the frozen spatial networks run folded
+(:mod:`spatial_fold`), so a 1,000-frame path takes a few seconds on one CPU thread.
+Each window's pose jump at its first frame is faded out (:func:`smooth_seam`).
 
 Features are RAW ``[T, C]`` in :data:`conventions.LAYOUT` order; positions are metres,
 Y-up, :data:`conventions.MODEL_FPS`, the standard skeleton (see :mod:`motion_ops`).
@@ -29,6 +37,7 @@ from .conventions import CONTACT_JOINTS, LAYOUT, MODEL_FPS, PARENTS, UP_AXIS
 from .engine import bone_lengths, project_to_skeleton
 from .features import RootStart, features_to_positions, heading, integrate_root, positions_to_features, yaw_matrix
 from .paths import Path, Steering, control_signal
+from .spatial_fold import fold_spatial
 from .torch_engine import build_model
 
 WALK_SPEED = 1.3  # m/s used when the seed barely moves (its own speed cannot steer anything)
@@ -39,10 +48,10 @@ POSITION_SCALE = 0.1  # metres: root position errors are costed in units of 10 c
 class ControlSettings:
     speed: float | None = None  # m/s along the path; None: the seed motion's own ground speed
     steps: int = 4  # fine-tuning steps of the weight copy per window (0: plain prediction)
-    lr: float = 3e-3  # Adam learning rate of the fine-tuned copy (Adam moves each weight about lr per step)
+    lr: float = 1e-3  # Adam learning rate of the fine-tuned copy (Adam moves each weight about lr per step)
     w_ctr: float = 1.0  # weight of H_ctr
     w_bone: float = 10.0  # weight of H_bone
-    w_fp: float = 0.05  # weight of H_fp
+    w_fp: float = 0.5  # weight of H_fp
     w_pos: float = 1.0  # weight of the root positions' deviation from the path (H_ctr integrated; 10 cm units)
     tune: str = "predictor"  # which weights the copy fine-tunes: "predictor" (LSTM cell, fast) or "all"
     return_frames: float = 30.0  # frames over which an offset from the path (and its heading) is steered out
@@ -84,6 +93,16 @@ def foot_speed_cm(raw: torch.Tensor) -> torch.Tensor:
     return 100.0 * torch.linalg.vector_norm(feet[1:] - feet[:-1], dim=-1)
 
 
+def _folded_frames(ckpt: Checkpoint):
+    """The frozen spatial encoder and decoder of ``ckpt`` as folded torch functions ``(N, C) -> (N, W)``
+    and ``(N, W) -> (N, C)``, equal to ``STRNN.encode_frame`` / ``decode_frame`` in eval mode."""
+    w = {k: np.asarray(v, np.float32) for k, v in ckpt.weights.items()}
+    to = lambda a: torch.from_numpy(np.array(a, np.float32))  # noqa: E731 (a writable copy)
+    enc, dec, (scale, shift) = fold_spatial(w, ckpt.config, to=to, tanh=torch.tanh)
+    scale, shift = to(scale), to(shift)
+    return (lambda x: enc(x) * scale + shift), dec
+
+
 def smooth_seam(ctx: np.ndarray, new: np.ndarray, frames: int) -> np.ndarray:
     """Raw window ``new`` ``[n, C]`` with the jump of its body pose from the raw context ``[m, C]``
     faded out over ``frames`` frames (:func:`motion_ops.blend_seam` on the root-local joints)."""
@@ -111,6 +130,7 @@ class PathFollower:
         for p in self.tuned:
             p.requires_grad_(True)
         self.pretrained = [p.detach().clone() for p in self.tuned]
+        self.encode_frame, self.decode_frame = _folded_frames(ckpt)
 
     @classmethod
     def load(cls, folder: str | FilePath | None = None, settings: ControlSettings | None = None) -> PathFollower:
@@ -177,24 +197,25 @@ class PathFollower:
     def _predictor_pass(self, x: torch.Tensor):
         """A function giving the normalised prediction ``[n, C]`` of context ``x`` ``[1, m, C]`` that reruns
         only the predictor: what the fine-tuned predictor cannot change (encoder state, decoded context,
-        first input) is computed once, so each fine-tuning step costs about half a full pass."""
-        model = self.model
+        first input) is computed once, and the frozen spatial networks run folded (a few dense layers,
+        as in the NumPy engine), so a fine-tuning step costs a fraction of a full pass."""
+        model, enc, dec = self.model, self.encode_frame, self.decode_frame
         with torch.no_grad():
-            _, (h, c) = model.encoder(model.encode_frames(x))
+            _, (h, c) = model.encoder(enc(x[0])[None])
             state, step, decoded = (h[0], c[0]), model.start.expand_as(h[0]), []
             for _ in range(self.m):  # the backward decoder, as STRNN.spatio_temporal runs it
                 state = model.decoder(step, state)
-                decoded.append(model.decode_frame(state[0]))
-                step = model.encode_frame(decoded[-1])
+                decoded.append(dec(state[0]))
+                step = enc(decoded[-1])
             decoded = torch.stack(decoded[::-1], 1)  # (1, m, C), chronological
-            first = model.encode_frames(x[:, -1:])[:, 0]
+            first = enc(x[:, -1])
 
         def forward() -> torch.Tensor:
             state, step, frames = (h[0], c[0]), first, []
             for _ in range(self.n):
                 state = model.predictor(step, state)
-                frames.append(model.decode_frame(state[0]))
-                step = model.encode_frame(frames[-1])
+                frames.append(dec(state[0]))
+                step = enc(frames[-1])
             window = torch.cat([decoded, torch.stack(frames, 1)], 1)  # (1, m + n, C)
             return (model.filter(window) if model.filter is not None else window)[0, self.m:]
 

@@ -44,20 +44,28 @@ def _blocks(w: dict, prefix: str, keys, n_in: int, rows_of, width: int):
     return mat, bias, (scale, shift)
 
 
-def fold_spatial(w: dict, cfg: dict) -> tuple[Callable, Callable, tuple[Array, Array]]:
+def _same(a: Array) -> Array:
+    return a
+
+
+def fold_spatial(w: dict, cfg: dict, to: Callable = _same,
+                 tanh: Callable = np.tanh) -> tuple[Callable, Callable, tuple[Array, Array]]:
     """Return ``enc(x (N, C)) -> (N, W)`` (before the last batch norm), ``dec(h (N, W)) -> (N, C)``
-    and the last encoder batch norm ``(a, s)``, which the caller folds into the LSTMs."""
+    and the last encoder batch norm ``(a, s)``, which the caller folds into the LSTMs.
+
+    ``to`` converts each folded matrix and ``tanh`` is the activation, so the same layers run on
+    another array library (``torch.from_numpy`` and ``torch.tanh``: differentiable twins)."""
     c, width = cfg["frame_size"], cfg["width"]
     if not cfg["spatial"]:
-        we, be = w["encode_frame.weight"].T.copy(), w["encode_frame.bias"]
-        wd, bd = w["decode_frame.weight"].T.copy(), w["decode_frame.bias"]
+        we, be = to(w["encode_frame.weight"].T.copy()), to(w["encode_frame.bias"])
+        wd, bd = to(w["decode_frame.weight"].T.copy()), to(w["decode_frame.bias"])
         identity = (np.ones(width, np.float32), np.zeros(width, np.float32))
         return (lambda x: x @ we + be), (lambda h: h @ wd + bd), identity
-    enc, out_bn = _fold_encoder(w, c, width)
-    return enc, _fold_decoder(w, c, width), out_bn
+    enc, out_bn = _fold_encoder(w, c, width, to, tanh)
+    return enc, _fold_decoder(w, c, width, to, tanh), out_bn
 
 
-def _fold_encoder(w: dict, c: int, width: int):
+def _fold_encoder(w: dict, c: int, width: int, to: Callable = _same, tanh: Callable = np.tanh):
     g = group_channels()
     w1, w2, w3 = width // 8, width // 4, width // 2
     parts = ("torso",) + LIMBS
@@ -80,20 +88,21 @@ def _fold_encoder(w: dict, c: int, width: int):
     m4h, b4 = _fold(bn3, w4[: 2 * w3], w["encode_frame.l4.0.bias"])
     m4x = np.zeros((c, width), np.float32)
     m4x[g["root"] + g["contacts"]] = w4[2 * w3:]
-    first = np.concatenate([m1, m4x], 1)  # one matmul feeds L1 and L4's direct inputs
     n1 = m1.shape[1]
+    first = to(np.concatenate([m1, m4x], 1))  # one matmul feeds L1 and L4's direct inputs
+    b1, m2, b2, m3, b3, m4h, b4 = (to(np.ascontiguousarray(a)) for a in (b1, m2, b2, m3, b3, m4h, b4))
 
     def enc(x: Array) -> Array:
         z = x @ first
-        t = np.tanh(z[:, :n1] + b1)
-        t = np.tanh(t @ m2 + b2)
-        t = np.tanh(t @ m3 + b3)
-        return np.tanh(t @ m4h + z[:, n1:] + b4)
+        t = tanh(z[:, :n1] + b1)
+        t = tanh(t @ m2 + b2)
+        t = tanh(t @ m3 + b3)
+        return tanh(t @ m4h + z[:, n1:] + b4)
 
     return enc, _bn(w, "encode_frame.l4.3")
 
 
-def _fold_decoder(w: dict, c: int, width: int) -> Callable:
+def _fold_decoder(w: dict, c: int, width: int, to: Callable = _same, tanh: Callable = np.tanh) -> Callable:
     g = group_channels()
     w1, w2, w3 = width // 8, width // 4, width // 2
     m4, b4, bn4 = _blocks(w, "decode_frame.l4", ("upper", "lower"), width, lambda k, W: [(slice(None), W)], w3)
@@ -118,14 +127,15 @@ def _fold_decoder(w: dict, c: int, width: int) -> Callable:
         bias[g[k]] = w[f"decode_frame.out.{k}.bias"]
     bias[g["torso"]] = w["decode_frame.torso.bias"]
     out_l, bias = _fold(bn2, out_l, bias)
-    first = np.concatenate([m4, out_h], 1)
     n4 = m4.shape[1]
+    first = to(np.concatenate([m4, out_h], 1))
+    b4, m3, b3, m2, b2, out_l, bias = (to(np.ascontiguousarray(a)) for a in (b4, m3, b3, m2, b2, out_l, bias))
 
     def dec(h: Array) -> Array:
         z = h @ first
-        t = np.tanh(z[:, :n4] + b4)
-        t = np.tanh(t @ m3 + b3)
-        t = np.tanh(t @ m2 + b2)
+        t = tanh(z[:, :n4] + b4)
+        t = tanh(t @ m3 + b3)
+        t = tanh(t @ m2 + b2)
         return t @ out_l + z[:, n4:] + bias
 
     return dec

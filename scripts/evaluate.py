@@ -115,13 +115,16 @@ def run_paths(args, clips) -> dict:
 
 
 def print_paths(pt: dict) -> None:
-    print(f"\nPath following ({len(pt['seed_clips'])} walking seeds; skate on the model's contact frames)")
+    print(f"\nPath following ({len(pt['seed_clips'])} walking seeds; skate on detected contact frames)")
     print(f"{'path':<14}{'mean cm':>9}{'max cm':>9}{'skate raw':>11}{'locked':>8}{'bone err':>10}{'pops raw':>10}"
           f"{'locked':>8}")
     for i, name in enumerate(pt["names"]):
         print(f"{name:<14}{pt['mean_cm'][i]:9.1f}{pt['max_cm'][i]:9.1f}{pt['foot_skate_cm']['raw'][i]:11.2f}"
               f"{pt['foot_skate_cm']['locked'][i]:8.2f}{pt['bone_error'][i]:10.4f}{pt['knee_pops']['raw'][i]:10d}"
               f"{pt['knee_pops']['locked'][i]:8d}")
+    claimed = pt["foot_skate_model_contacts_cm"]
+    print("skate on the model's own contact channels, raw -> locked: "
+          + ", ".join(f"{r:.2f} -> {k:.2f}" for r, k in zip(claimed["raw"], claimed["locked"])))
     print(f"curve synthesis: {pt['synthesis_fps_1000']:.0f} frames/s for a 1000-frame path")
 
 

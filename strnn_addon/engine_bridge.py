@@ -84,3 +84,50 @@ def extend(prefs, positions: np.ndarray, fps: float, frames: int) -> np.ndarray:
 def denoise(prefs, positions: np.ndarray, fps: float, strength: float) -> np.ndarray:
     """Denoised ``positions`` ``[F, 21, 3]`` (same space and frames), blended by ``strength``."""
     return motion_ops.denoise_positions(engine_from_prefs(prefs), positions, fps, strength)
+
+
+_FOLLOWERS: dict[str, object] = {}
+TORCH_MISSING = ("Follow Curve needs PyTorch, which this Blender's Python does not have (Extend, Denoise "
+                 "and Foot Lock work without it): install the CPU build of torch into Blender's Python, e.g. "
+                 "'<blender python> -m pip install torch --index-url https://download.pytorch.org/whl/cpu'")
+
+
+def load_follower(folder: str = "", threads: int = 0):
+    """The torch path follower for ``folder`` ('' = bundled), cached; :class:`EngineError` without torch."""
+    try:
+        import importlib
+
+        importlib.import_module("torch")
+    except ImportError as e:
+        raise EngineError(TORCH_MISSING) from e
+    path = Path(folder) if folder else bundled_model()
+    if str(path) not in _FOLLOWERS:
+        if not (path / "model.json").exists():
+            raise EngineError(f"No model at {path}: set a folder holding model.json and model.safetensors "
+                              "in Preferences > Add-ons > STRNN Motion > Model Folder")
+        _set_threads("TORCH", threads)
+        from ..model_core.control import PathFollower
+
+        try:
+            _FOLLOWERS.clear()
+            _FOLLOWERS[str(path)] = PathFollower.load(path)
+        except (ValueError, OSError, KeyError) as e:
+            raise EngineError(f"Could not load the model at {path}: {e}") from e
+    return _FOLLOWERS[str(path)]
+
+
+def follow_curve(prefs, points: np.ndarray, cyclic: bool, fps: float, frames: int | None, speed: float | None,
+                 steps: int, context: np.ndarray | None = None, rest: np.ndarray | None = None) -> np.ndarray:
+    """Positions ``[frames, 21, 3]`` (Y-up scene units at ``fps``) walking the curve ``points`` ``[P, 3]``
+    (Y-up) after ``context`` ``[F, 21, 3]``, or from a shipped seed sized like ``rest`` ``[21, 3]``."""
+    from dataclasses import replace
+
+    follower = load_follower(bpy_path(prefs.model_folder) if prefs else "", prefs.threads if prefs else 0)
+    from ..model_core.control import follow_curve_positions  # after the check: it needs torch
+
+    saved = follower.settings
+    follower.settings = replace(saved, steps=int(steps))
+    try:
+        return follow_curve_positions(follower, points, cyclic, fps, frames, speed, context, rest)
+    finally:
+        follower.settings = saved

@@ -3,11 +3,11 @@
 from __future__ import annotations
 
 import bpy
-from bpy.props import BoolProperty, FloatProperty, IntProperty
+from bpy.props import BoolProperty, FloatProperty, IntProperty, StringProperty
 
 from . import mapping
 from .pipeline import UserError, check_object
-from .props import joint_label
+from .props import FOOT_LOCK_TIP, joint_label
 
 
 class _Staged:
@@ -100,11 +100,13 @@ class STRNN_OT_extend_clip(_Staged, bpy.types.Operator):
                         description="How many frames to add after the action's last frame")
     context_frames: IntProperty(name="Context", default=0, min=0, soft_max=600,
                                 description="Frames before the end the model reads; 0: just enough (20 at 30 fps)")
+    foot_lock: BoolProperty(name="Foot Lock", default=False, description=FOOT_LOCK_TIP)
 
     def steps(self, context):
         from .workers import extend_steps
 
-        return extend_steps(context, context.active_object, frames=self.frames, context_frames=self.context_frames)
+        return extend_steps(context, context.active_object, frames=self.frames, context_frames=self.context_frames,
+                            foot_lock=self.foot_lock)
 
     def done(self, action) -> str:
         return f"Added {self.frames} frames in new action {action.name!r}"
@@ -123,16 +125,68 @@ class STRNN_OT_denoise_action(_Staged, bpy.types.Operator):
                             description="Denoise only Start to End instead of the whole action")
     frame_start: IntProperty(name="Start", default=1, description="First frame to denoise")
     frame_end: IntProperty(name="End", default=250, description="Last frame to denoise")
+    foot_lock: BoolProperty(name="Foot Lock", default=False, description=FOOT_LOCK_TIP)
 
     def steps(self, context):
         from .workers import denoise_steps
 
         start, end = (self.frame_start, self.frame_end) if self.use_range else (None, None)
         return denoise_steps(context, context.active_object, frame_start=start, frame_end=end,
-                             strength=self.strength)
+                             strength=self.strength, foot_lock=self.foot_lock)
 
     def done(self, action) -> str:
         return f"Denoised into new action {action.name!r}"
+
+
+class STRNN_OT_foot_lock(_Staged, bpy.types.Operator):
+    """Pin the active armature's feet on the ground while they touch it (leg IK); writes a new action"""
+
+    bl_idname = "strnn.foot_lock"
+    bl_label = "Foot Lock"
+    bl_options = {"REGISTER", "UNDO"}
+
+    blend: FloatProperty(name="Blend", default=0.15, min=0.0, soft_max=0.5, max=2.0, unit="TIME_ABSOLUTE",
+                         description="Seconds over which each lock fades in before a contact and out after it")
+    use_range: BoolProperty(name="Frame Range", default=False,
+                            description="Lock only Start to End instead of the whole action")
+    frame_start: IntProperty(name="Start", default=1, description="First frame to lock")
+    frame_end: IntProperty(name="End", default=250, description="Last frame to lock")
+
+    def steps(self, context):
+        from .workers import foot_lock_steps
+
+        start, end = (self.frame_start, self.frame_end) if self.use_range else (None, None)
+        return foot_lock_steps(context, context.active_object, frame_start=start, frame_end=end, blend=self.blend)
+
+    def done(self, action) -> str:
+        return f"Locked the feet into new action {action.name!r}"
+
+
+class STRNN_OT_follow_curve(_Staged, bpy.types.Operator):
+    """Make the active armature walk along a curve with the motion model (needs PyTorch); writes a new action"""
+
+    bl_idname = "strnn.follow_curve"
+    bl_label = "Follow Curve"
+    bl_options = {"REGISTER", "UNDO"}
+
+    curve: StringProperty(name="Curve", default="",
+                          description="Name of the curve object to follow; empty: the selected curve")
+    frames: IntProperty(name="Frames", default=0, min=0, soft_max=5000,
+                        description="How many frames to make; 0: until the curve ends (one lap if cyclic)")
+    speed: FloatProperty(name="Speed", default=0.0, min=0.0, soft_max=5.0, unit="VELOCITY",
+                         description="Walking speed along the curve; 0: the motion's own speed")
+    foot_lock: BoolProperty(name="Foot Lock", default=True, description=FOOT_LOCK_TIP)
+    steering: IntProperty(name="Steering Steps", default=4, min=0, soft_max=20,
+                          description="Fine-tuning steps per 20-frame window that pull the motion onto the curve")
+
+    def steps(self, context):
+        from .curve_worker import follow_curve_steps
+
+        return follow_curve_steps(context, context.active_object, curve=self.curve, frames=self.frames,
+                                  speed=self.speed, foot_lock=self.foot_lock, steps=self.steering)
+
+    def done(self, action) -> str:
+        return f"Walked the curve into new action {action.name!r}"
 
 
 class STRNN_OT_auto_map(bpy.types.Operator):
@@ -187,4 +241,5 @@ def check_message(obj) -> str:
     return ""
 
 
-classes = (STRNN_OT_extend_clip, STRNN_OT_denoise_action, STRNN_OT_auto_map, STRNN_OT_clear_map)
+classes = (STRNN_OT_extend_clip, STRNN_OT_denoise_action, STRNN_OT_foot_lock, STRNN_OT_follow_curve,
+           STRNN_OT_auto_map, STRNN_OT_clear_map)

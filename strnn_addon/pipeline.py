@@ -49,8 +49,9 @@ def min_scene_frames(fps: float) -> int:
     return max(MIN_MODEL_FRAMES, int(math.ceil((MIN_MODEL_FRAMES - 1) * fps / MODEL_FPS - 1e-6)) + 1)
 
 
-def check_object(obj) -> None:
-    """Raise :class:`UserError` unless ``obj`` is an editable, animated armature with positive scale."""
+def check_object(obj, need_action: bool = True) -> None:
+    """Raise :class:`UserError` unless ``obj`` is an editable, animated (or, without ``need_action``,
+    any) armature with positive scale."""
     if obj is None:
         raise UserError("No active object: select an armature with an action in the 3D Viewport")
     if obj.type != "ARMATURE":
@@ -60,9 +61,9 @@ def check_object(obj) -> None:
             raise UserError(f"The {what} {data.name!r} is linked from {data.library.filepath!r} and cannot be "
                             "changed: make it local (Object > Relations > Make Local) or add a library override")
     action = obj.animation_data.action if obj.animation_data else None
-    if action is None:
+    if action is None and need_action:
         raise UserError(f"{obj.name!r} has no action: assign one in the Action Editor, or import a BVH")
-    if action.library is not None:
+    if action is not None and action.library is not None:
         raise UserError(f"The action {action.name!r} is linked from a library: make it local first")
     world = np.array(obj.matrix_world)[:3, :3]
     if min(obj.scale) <= 0 or np.linalg.det(world) <= 1e-12:
@@ -117,15 +118,22 @@ def new_action_from(clip: Clip, suffix: str):
     return new
 
 
+def leg_bones(clip: Clip) -> list[int]:
+    """The written bones from each upper leg down (what a foot lock changes)."""
+    uplegs = [int(clip.anchors.bone[JOINT_INDEX[j]]) for j in ("l_upleg", "r_upleg")]
+    return [b for b in written_bones(clip) if any(clip.rig.is_ancestor(u, b) for u in uplegs)]
+
+
 def write_pose(clip: Clip, action, frames: np.ndarray, loc: np.ndarray, rot: np.ndarray,
-               previous: dict, replace: tuple[float, float] | None) -> None:
+               previous: dict, replace: tuple[float, float] | None, bones: list[int] | None = None) -> None:
     """Key the solved rotations of mapped bones (and the hips bone's location) at ``frames``.
 
     ``loc`` ``[F, B, 3]``, ``rot`` ``[F, B, 3, 3]``; ``previous`` {bone: raw channel values} keeps
-    Euler angles and quaternion signs continuous with the keys before."""
+    Euler angles and quaternion signs continuous with the keys before; ``bones``: only these
+    (default: all :func:`written_bones`)."""
     channels = anim.Channels(action, clip.obj.animation_data, ensure=True)
     hips = int(clip.anchors.bone[JOINT_INDEX["hips"]])
-    for b in written_bones(clip):
+    for b in written_bones(clip) if bones is None else bones:
         pb = clip.obj.pose.bones[clip.rig.names[b]]
         prop, values = encode_rotation(pb.rotation_mode, rot[:, b], previous.get(pb.name))
         _key_property(clip, channels, pb, prop, frames, values, replace)

@@ -9,6 +9,7 @@ from ..model_core.conventions import JOINTS
 
 ADDON_ID = __package__.rpartition(".")[0]  # the extension's module, e.g. bl_ext.user_default.strnn_motion
 TAIL_JOINTS = ("l_toe", "r_toe", "l_fingertip", "r_fingertip")
+FOOT_LOCK_TIP = "Then pin the feet on the ground while they touch it (leg IK against foot sliding)"
 
 
 def joint_label(joint: str) -> str:
@@ -83,6 +84,21 @@ class STRNN_PG_settings(bpy.types.PropertyGroup):
                                     description="Denoise only a range of frames instead of the whole action")
     denoise_start: IntProperty(name="Start", default=1, description="First frame to denoise")
     denoise_end: IntProperty(name="End", default=250, description="Last frame to denoise")
+    extend_foot_lock: BoolProperty(name="Foot Lock", default=False, description=FOOT_LOCK_TIP)
+    denoise_foot_lock: BoolProperty(name="Foot Lock", default=False, description=FOOT_LOCK_TIP)
+    lock_blend: FloatProperty(name="Blend", default=0.15, min=0.0, soft_max=0.5, max=2.0, unit="TIME_ABSOLUTE",
+                              description="Seconds over which each lock fades in before a contact and out after it")
+    lock_use_range: BoolProperty(name="Frame Range", default=False,
+                                 description="Lock the feet only in a range of frames instead of the whole action")
+    lock_start: IntProperty(name="Start", default=1, description="First frame to lock")
+    lock_end: IntProperty(name="End", default=250, description="Last frame to lock")
+    curve: PointerProperty(name="Curve", type=bpy.types.Object, poll=lambda self, obj: obj.type == "CURVE",
+                           description="The curve to walk along (Bezier, NURBS or poly; its centre line)")
+    curve_frames: IntProperty(name="Frames", default=0, min=0, soft_max=5000,
+                              description="How many frames to make; 0: until the curve ends (one lap if cyclic)")
+    curve_speed: FloatProperty(name="Speed", default=0.0, min=0.0, soft_max=5.0, unit="VELOCITY",
+                               description="Walking speed along the curve; 0: the motion's own speed")
+    curve_foot_lock: BoolProperty(name="Foot Lock", default=True, description=FOOT_LOCK_TIP)
 
 
 classes = (STRNN_PG_bone_map, STRNN_PG_settings, STRNN_AP_preferences)

@@ -41,8 +41,10 @@ class STRNN_PT_extend(_Sidebar, bpy.types.Panel):
         col = self.layout.column(align=True)
         col.prop(settings, "extend_frames")
         col.prop(settings, "context_frames")
+        col.prop(settings, "extend_foot_lock")
         op = self.layout.operator("strnn.extend_clip", icon="TRACKING_FORWARDS")
         op.frames, op.context_frames = settings.extend_frames, settings.context_frames
+        op.foot_lock = settings.extend_foot_lock
 
 
 class STRNN_PT_denoise(_Sidebar, bpy.types.Panel):
@@ -58,9 +60,45 @@ class STRNN_PT_denoise(_Sidebar, bpy.types.Panel):
         row.active = settings.denoise_use_range
         row.prop(settings, "denoise_start")
         row.prop(settings, "denoise_end")
+        col.prop(settings, "denoise_foot_lock")
         op = self.layout.operator("strnn.denoise_action", icon="MOD_SMOOTH")
         op.strength, op.use_range = settings.denoise_strength, settings.denoise_use_range
         op.frame_start, op.frame_end = settings.denoise_start, settings.denoise_end
+        op.foot_lock = settings.denoise_foot_lock
+
+
+class STRNN_PT_foot_lock(_Sidebar, bpy.types.Panel):
+    bl_label = "Foot Lock"
+    bl_parent_id = "STRNN_PT_main"
+
+    def draw(self, context):
+        settings = context.scene.strnn
+        col = self.layout.column(align=True)
+        col.prop(settings, "lock_blend")
+        col.prop(settings, "lock_use_range")
+        row = col.row(align=True)
+        row.active = settings.lock_use_range
+        row.prop(settings, "lock_start")
+        row.prop(settings, "lock_end")
+        op = self.layout.operator("strnn.foot_lock", icon="SNAP_ON")
+        op.blend, op.use_range = settings.lock_blend, settings.lock_use_range
+        op.frame_start, op.frame_end = settings.lock_start, settings.lock_end
+
+
+class STRNN_PT_follow_curve(_Sidebar, bpy.types.Panel):
+    bl_label = "Follow Curve"
+    bl_parent_id = "STRNN_PT_main"
+
+    def draw(self, context):
+        settings = context.scene.strnn
+        col = self.layout.column(align=True)
+        col.prop(settings, "curve")
+        col.prop(settings, "curve_frames")
+        col.prop(settings, "curve_speed")
+        col.prop(settings, "curve_foot_lock")
+        op = self.layout.operator("strnn.follow_curve", icon="CURVE_PATH")
+        op.curve = settings.curve.name if settings.curve else ""
+        op.frames, op.speed, op.foot_lock = settings.curve_frames, settings.curve_speed, settings.curve_foot_lock
 
 
 class STRNN_PT_bone_map(_Sidebar, bpy.types.Panel):
@@ -103,6 +141,8 @@ class STRNN_MT_menu(bpy.types.Menu):
         layout = self.layout
         layout.operator("strnn.extend_clip", icon="TRACKING_FORWARDS")
         layout.operator("strnn.denoise_action", icon="MOD_SMOOTH")
+        layout.operator("strnn.foot_lock", icon="SNAP_ON")
+        layout.operator("strnn.follow_curve", icon="CURVE_PATH")
         layout.separator()
         layout.operator("strnn.auto_map", icon="AUTOMERGE_ON")
 
@@ -124,5 +164,6 @@ def unregister_menus():
         getattr(bpy.types, name).remove(menu_entry)
 
 
-classes = (STRNN_PT_main, STRNN_PT_extend, STRNN_PT_denoise, STRNN_PT_bone_map, STRNN_MT_menu)
+classes = (STRNN_PT_main, STRNN_PT_extend, STRNN_PT_denoise, STRNN_PT_foot_lock, STRNN_PT_follow_curve,
+           STRNN_PT_bone_map, STRNN_MT_menu)
 

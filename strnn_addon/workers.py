@@ -1,4 +1,4 @@
-"""Extend Clip and Denoise Action, as keyword-only workers the operators call.
+"""Extend Clip, Denoise Action and Foot Lock, as keyword-only workers the operators call.
 
 Each worker is a generator that yields the name of each stage (read, model, solve,
 write) before running it, so the operators can show progress and stop on Esc between
@@ -12,12 +12,14 @@ import time
 
 import numpy as np
 
+from ..model_core import footlock
 from ..model_core.solve import solve
 from . import engine_bridge, pipeline, rig_io
 from .pipeline import UserError
 from .props import preferences
 
 STAGES = ("read", "model", "solve", "write")
+MIN_LOCK_FRAMES = 3
 
 
 def _noop(stage: str) -> None:
@@ -53,6 +55,11 @@ def denoise_action(context, obj, *, progress=_noop, **options):
     return run(denoise_steps(context, obj, **options), progress)
 
 
+def lock_feet(context, obj, *, progress=_noop, **options):
+    """:func:`foot_lock_steps` run to the end; returns the new action."""
+    return run(foot_lock_steps(context, obj, **options), progress)
+
+
 def _context_range(clip, context_frames: int, frames: int) -> np.ndarray:
     """Scene frames ``[C]`` the model reads: the action's last ``context_frames`` (0: just enough)."""
     need = pipeline.min_scene_frames(clip.fps)
@@ -67,10 +74,12 @@ def _context_range(clip, context_frames: int, frames: int) -> np.ndarray:
     return np.arange(clip.last - n_ctx + 1, clip.last + 1, dtype=np.float64)
 
 
-def extend_steps(context, obj, *, frames: int = 120, context_frames: int = 0, timings: dict | None = None):
+def extend_steps(context, obj, *, frames: int = 120, context_frames: int = 0, foot_lock: bool = False,
+                 timings: dict | None = None):
     """Continue ``obj``'s action by ``frames`` scene frames from its last ``context_frames``
-    (0: just enough for the model's 20-frame context). A generator: yields each stage's
-    name before running it (so a caller can report progress or stop), returns the new action."""
+    (0: just enough for the model's 20-frame context), feet locked on the new frames when
+    ``foot_lock``. A generator: yields each stage's name before running it (so a caller can
+    report progress or stop), returns the new action."""
     timings = {} if timings is None else timings
     t0 = time.perf_counter()
     clip = pipeline.prepare(context, obj)
@@ -82,6 +91,9 @@ def extend_steps(context, obj, *, frames: int = 120, context_frames: int = 0, ti
     t1 = time.perf_counter()
     yield "model"
     new_pos = _model_call(engine_bridge.extend, _prefs(context), pos, clip.fps, frames)
+    if foot_lock:
+        new_pos = _lock(np.concatenate([pos, new_pos]), clip.fps, fixed=np.arange(len(pos) + frames) < len(pos))
+        new_pos = new_pos[len(pos):]
     t2 = time.perf_counter()
     yield "solve"
     targets = pipeline.to_armature(clip, new_pos)
@@ -95,9 +107,10 @@ def extend_steps(context, obj, *, frames: int = 120, context_frames: int = 0, ti
 
 
 def denoise_steps(context, obj, *, frame_start: int | None = None, frame_end: int | None = None,
-                  strength: float = 1.0):
+                  strength: float = 1.0, foot_lock: bool = False):
     """Denoise ``obj``'s action over [frame_start, frame_end] (default: the whole action),
-    blending the model's output by ``strength``. A generator like :func:`extend_steps`."""
+    blending the model's output by ``strength``, then lock the feet when ``foot_lock``.
+    A generator like :func:`extend_steps`."""
     clip = pipeline.prepare(context, obj)
     a = clip.first if frame_start is None else max(int(frame_start), clip.first)
     b = clip.last if frame_end is None else min(int(frame_end), clip.last)
@@ -112,21 +125,67 @@ def denoise_steps(context, obj, *, frame_start: int | None = None, frame_end: in
     previous = pipeline.raw_rotations(clip, a)
     yield "model"
     clean = _model_call(engine_bridge.denoise, _prefs(context), pos, clip.fps, float(strength))
+    if foot_lock:
+        clean = _lock(clean, clip.fps)
     yield "solve"
     loc, rot = solve(clip.rig, clip.anchors, pipeline.to_armature(clip, clean), ref_loc, ref_rot)
     yield "write"
     return _write_new(context, clip, "denoised", frames, loc, rot, previous, (a, b))
 
 
+def foot_lock_steps(context, obj, *, frame_start: int | None = None, frame_end: int | None = None,
+                    blend: float = footlock.FootLockSettings.blend_s):
+    """Pin the feet of ``obj``'s action on the ground while they touch it, over [frame_start,
+    frame_end] (default: the whole action), fading locks in and out over ``blend`` seconds.
+    Only the leg bones get new keys. A generator like :func:`extend_steps`."""
+    clip = pipeline.prepare(context, obj)
+    a = clip.first if frame_start is None else max(int(frame_start), clip.first)
+    b = clip.last if frame_end is None else min(int(frame_end), clip.last)
+    if b - a + 1 < MIN_LOCK_FRAMES:
+        raise UserError(f"The frame range {a}-{b} of {clip.action.name!r} has {max(b - a + 1, 0)} frames; "
+                        f"foot lock needs at least {MIN_LOCK_FRAMES}: widen the range")
+    frames = np.arange(max(a - 1, clip.first), min(b + 1, clip.last) + 1, dtype=np.float64)
+    inside = (frames >= a) & (frames <= b)  # plus one untouched frame either side to continue from
+    yield "read"
+    pos = pipeline.joint_positions(context, clip, frames)
+    ref_loc, ref_rot, _ = rig_io.read_local_pose(clip.obj, clip.rig, clip.channels.fcurves, frames)
+    previous = pipeline.raw_rotations(clip, a)
+    yield "model"
+    contacts = _lock(pos, clip.fps, detect_only=True)
+    if not contacts[inside].any():
+        raise UserError(f"No foot touches the ground in frames {a}-{b} of {clip.action.name!r} (feet near their "
+                        "lowest height and slower than 0.6 m/s): nothing to lock")
+    locked = _lock(pos, clip.fps, contacts=contacts, fixed=~inside, blend=blend)
+    yield "solve"
+    loc, rot = solve(clip.rig, clip.anchors, pipeline.to_armature(clip, locked), ref_loc, ref_rot)
+    yield "write"
+    return _write_new(context, clip, "footlocked", frames[inside], loc[inside], rot[inside], previous, (a, b),
+                      bones=pipeline.leg_bones(clip))
+
+
+def _lock(pos, fps, *, blend: float | None = None, detect_only: bool = False, **kw):
+    """:func:`footlock.foot_lock` of scene positions ``[F, 21, 3]`` (or, with ``detect_only``, their
+    contacts ``[F, 4]``), its errors as :class:`UserError`."""
+    settings = footlock.FootLockSettings()
+    if blend is not None:
+        settings.blend_s = max(float(blend), 0.0)
+    try:
+        if detect_only:
+            return footlock.detect_foot_contacts(pos, fps)
+        return footlock.foot_lock(pos, fps, settings=settings, **kw)
+    except ValueError as e:
+        raise UserError(f"Foot lock could not run on this clip: {e}") from e
+
+
 def _prefs(context):
     return preferences(context)
 
 
-def _write_new(context, clip, suffix, frames, loc, rot, previous, replace):
-    """Create the new action, key it and assign it; on failure remove it again."""
+def _write_new(context, clip, suffix, frames, loc, rot, previous, replace, bones=None):
+    """Create the new action, key it (``bones``: only these) and assign it; on failure remove it again."""
     action = pipeline.new_action_from(clip, suffix)
     try:
-        pipeline.write_pose(clip, action, frames, loc, rot, previous, replace)
+        pipeline.write_pose(clip, action, frames, loc, rot, previous, replace, bones)
         pipeline.finish(context, clip, action)
     except Exception:
         import bpy

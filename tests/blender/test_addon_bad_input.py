@@ -30,7 +30,9 @@ def refuse(op_name: str, match: str) -> None:
     assert all(before[0][k][0] == after[0][k][0] and same_keys(before[0][k][1], after[0][k][1]) for k in before[0])
 
 
-OPS = ["extend_clip", "denoise_action"]
+MODEL_OPS = ["extend_clip", "denoise_action"]
+ACTION_OPS = MODEL_OPS + ["foot_lock"]
+OPS = ACTION_OPS + ["follow_curve"]  # Follow Curve also starts an armature that has no action
 
 
 @pytest.mark.parametrize("op", OPS)
@@ -44,13 +46,13 @@ def test_not_an_armature(addon, op):
     refuse(op, "not an armature")
 
 
-@pytest.mark.parametrize("op", OPS)
+@pytest.mark.parametrize("op", ACTION_OPS)
 def test_armature_without_action(addon, op):
     build_armature("Bare", [("a", None, (0, 0, 0), (0, 0, 1))])
     refuse(op, "has no action")
 
 
-@pytest.mark.parametrize("op", OPS)
+@pytest.mark.parametrize("op", MODEL_OPS)  # foot lock needs no 20-frame context
 def test_fewer_than_20_frames(addon, tmp_path, op):
     import_bvh(walk_bvh(tmp_path, frames=15))
     refuse(op, "needs at least 20")

@@ -6,7 +6,8 @@ import bpy
 import pytest
 from scenes import build_armature, import_bvh, walk_bvh
 
-PANELS = ("STRNN_PT_main", "STRNN_PT_extend", "STRNN_PT_denoise", "STRNN_PT_bone_map")
+PANELS = ("STRNN_PT_main", "STRNN_PT_extend", "STRNN_PT_denoise", "STRNN_PT_foot_lock", "STRNN_PT_follow_curve",
+          "STRNN_PT_bone_map")
 
 
 class Layout:
@@ -47,7 +48,7 @@ def test_registered_in_sidebar_and_menus(addon):
     for name in PANELS:
         cls = getattr(bpy.types, name)
         assert cls.bl_space_type == "VIEW_3D" and cls.bl_region_type == "UI" and cls.bl_category == "STRNN"
-    for op in ("extend_clip", "denoise_action", "auto_map"):
+    for op in ("extend_clip", "denoise_action", "foot_lock", "follow_curve", "auto_map"):
         rna = getattr(bpy.ops.strnn, op).get_rna_type()
         assert rna.description, f"{op} has no tooltip"
     assert hasattr(bpy.types, "STRNN_MT_menu")

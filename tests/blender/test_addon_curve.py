@@ -1,0 +1,154 @@
+"""Follow Curve: curve sampling (Bezier, NURBS, poly; bevelled curves give their centre line),
+the operator with a trained model (skipped without one or without torch), and bad input."""
+
+from __future__ import annotations
+
+import importlib
+import sys
+
+import bpy
+import numpy as np
+import pytest
+from scenes import action_of, addon_module, evaluated_joints, import_bvh, key_snapshot, mixamo_bones, same_keys
+
+from model_core.bvh_export import write_bvh
+from model_core.synthetic import walking_skeleton
+
+
+def curve_module(addon):
+    return addon_module(addon, "strnn_addon.curves")
+
+
+def add_curve(kind: str, **kw):
+    """A curve object made by Blender's own operators: 'bezier_circle', 'nurbs_path', 'poly'."""
+    if kind == "poly":
+        data = bpy.data.curves.new("Poly", "CURVE")
+        spline = data.splines.new("POLY")
+        pts = kw.pop("points", [(0, 0, 0), (0, -3, 0)])
+        spline.points.add(len(pts) - 1)
+        for p, co in zip(spline.points, pts):
+            p.co = (*co, 1.0)
+        obj = bpy.data.objects.new("Poly", data)
+        bpy.context.scene.collection.objects.link(obj)
+        return obj
+    getattr(bpy.ops.curve, f"primitive_{kind}_add")(**kw)
+    return bpy.context.active_object
+
+
+def ground_distance(points: np.ndarray, curve: np.ndarray) -> np.ndarray:
+    """Distance ``[N]`` on the ground (Blender XY) from each point ``[N, 3]`` to a dense polyline ``[P, 3]``."""
+    a, b = curve[:-1, :2], curve[1:, :2]
+    ab = b - a
+    p = points[:, None, :2]
+    t = np.clip(np.sum((p - a) * ab, -1) / np.maximum(np.sum(ab * ab, -1), 1e-12), 0, 1)
+    return np.linalg.norm(a + t[..., None] * ab - p, axis=-1).min(1)
+
+
+def test_bevelled_bezier_circle_gives_its_centre_line_in_world_space(addon):
+    obj = add_curve("bezier_circle", radius=1.0, location=(3.0, 1.0, 0.5))
+    obj.scale = (2.0, 2.0, 2.0)
+    obj.data.bevel_depth, obj.data.extrude = 0.3, 0.2
+    objects, curves_before = len(bpy.data.objects), len(bpy.data.curves)
+    points, cyclic = curve_module(addon).curve_points(bpy.context, obj)
+    assert cyclic and len(points) > 20
+    np.testing.assert_allclose(np.linalg.norm(points[:, :2] - [3.0, 1.0], axis=-1), 2.0, atol=0.02)
+    np.testing.assert_allclose(points[:, 2], 0.5, atol=1e-6)
+    assert obj.data.bevel_depth == pytest.approx(0.3) and obj.data.extrude == pytest.approx(0.2)
+    assert len(bpy.data.objects) == objects and len(bpy.data.curves) == curves_before
+
+
+@pytest.mark.parametrize("kind", ["nurbs_path", "poly"])
+def test_open_curves(addon, kind):
+    obj = add_curve(kind)
+    points, cyclic = curve_module(addon).curve_points(bpy.context, obj)
+    assert not cyclic and len(points) >= 2
+    length = np.linalg.norm(np.diff(points, axis=0), axis=-1).sum()
+    assert length == pytest.approx(3.0 if kind == "poly" else 4.0, rel=0.05)
+
+
+@pytest.fixture
+def torch_model(real_model):
+    pytest.importorskip("torch")
+    return real_model
+
+
+def follow(**kw):
+    obj = bpy.context.active_object
+    old = action_of(obj)
+    before = key_snapshot(obj) if old else {}
+    assert bpy.ops.strnn.follow_curve(**kw) == {"FINISHED"}
+    new = action_of(obj)
+    assert new is not None and new is not old
+    if old is not None:
+        assert old.use_fake_user and same_keys(before, key_snapshot(obj, old))
+    return old, new
+
+
+def test_bezier_circle_continues_an_action(addon, torch_model, tmp_path):
+    obj = import_bvh(write_bvh(tmp_path / "walk.bvh", walking_skeleton(40)), update_scene_fps=True)
+    hips = evaluated_joints(addon, obj, [40])[0, 0]
+    circle = add_curve("bezier_circle", radius=2.0, location=(hips[0] - 2.0, hips[1], 0.0))
+    bpy.context.view_layer.objects.active = obj
+    old, new = follow(curve=circle.name, frames=120)
+    assert new.frame_range[1] == old.frame_range[1] + 120
+    joints = evaluated_joints(addon, obj, np.arange(41, 161))
+    points, _ = curve_module(addon).curve_points(bpy.context, circle)
+    dist = ground_distance(joints[:, 0], np.concatenate([points, points[:1]]))
+    print(f"hips to curve: mean {100 * dist.mean():.1f} cm, max {100 * dist.max():.1f} cm")
+    assert np.isfinite(joints).all() and dist.mean() < 0.3 and dist[30:].max() < 0.6
+
+
+def test_nurbs_path_starts_an_armature_without_action(addon, torch_model):
+    from scenes import build_armature
+
+    build_armature("Mixamo", mixamo_bones())
+    obj = bpy.context.active_object
+    path = add_curve("nurbs_path", location=(1.0, 2.0, 0.0))  # 4 m along +X
+    bpy.context.view_layer.objects.active = obj
+    _, new = follow(curve=path.name)
+    first, last = (int(f) for f in new.frame_range)
+    assert first == bpy.context.scene.frame_start and last - first > 30
+    joints = evaluated_joints(addon, obj, np.arange(first, last + 1))
+    points, _ = curve_module(addon).curve_points(bpy.context, path)
+    dist = ground_distance(joints[:, 0], points)
+    print(f"hips to curve: mean {100 * dist.mean():.1f} cm, max {100 * dist.max():.1f} cm")
+    assert dist.mean() < 0.3
+    assert joints[-1, 0, 0] > joints[0, 0, 0] + 2.0, "walks along the path (+X)"
+
+
+def refused(match: str, **kw) -> None:
+    """Follow Curve must fail with ``match`` and change no action or assignment."""
+    obj = bpy.context.active_object
+    action, names = action_of(obj), sorted(a.name for a in bpy.data.actions)
+    objects = sorted(o.name for o in bpy.data.objects)
+    with pytest.raises(RuntimeError, match=match):
+        bpy.ops.strnn.follow_curve(**kw)
+    assert action_of(obj) is action and sorted(a.name for a in bpy.data.actions) == names
+    assert sorted(o.name for o in bpy.data.objects) == objects
+
+
+def test_no_curve(addon, tmp_path):
+    import_bvh(write_bvh(tmp_path / "walk.bvh", walking_skeleton(40)))
+    refused("No curve to follow")
+
+
+def test_not_a_curve(addon, tmp_path):
+    obj = import_bvh(write_bvh(tmp_path / "walk.bvh", walking_skeleton(40)))
+    refused("not a curve", curve=obj.name)
+
+
+def test_zero_length_curve(addon, tmp_path):
+    obj = import_bvh(write_bvh(tmp_path / "walk.bvh", walking_skeleton(40)))
+    dot = add_curve("poly", points=[(1, 1, 0), (1, 1, 0), (1, 1, 2)])  # only vertical: no ground length
+    bpy.context.view_layer.objects.active = obj
+    refused("zero length", curve=dot.name)
+
+
+def test_torch_missing(addon, tmp_path, monkeypatch, real_model):
+    bridge = importlib.import_module(addon.__name__ + ".strnn_addon.engine_bridge")
+    monkeypatch.setitem(sys.modules, "torch", None)  # import torch now raises ImportError
+    monkeypatch.setattr(bridge, "_FOLLOWERS", {})
+    obj = import_bvh(write_bvh(tmp_path / "walk.bvh", walking_skeleton(40)))
+    curve = add_curve("poly")
+    bpy.context.view_layer.objects.active = obj
+    refused("needs PyTorch", curve=curve.name)

@@ -1,0 +1,145 @@
+"""Foot Lock: the operator on a sliding clip, its frame range, and the Foot lock option of
+Extend and Denoise. Skate is measured on the joints Blender evaluates, on the contacts of
+the clip before the lock."""
+
+from __future__ import annotations
+
+import bpy
+import numpy as np
+import pytest
+from scenes import action_of, evaluated_joints, import_bvh, key_snapshot, same_keys
+
+from model_core import footlock as fl
+from model_core.bvh_export import write_bvh
+from model_core.conventions import JOINT_INDEX, zup_to_yup
+from model_core.synthetic import walking_skeleton
+
+LEG_WORDS = ("UpLeg", "Leg", "Foot", "Toe")  # Mixamo names of the leg bones a BVH import has
+LEG_JOINTS = [JOINT_INDEX[f"{s}_{j}"] for s in "lr" for j in ("knee", "foot", "toe")]
+
+
+def sliding_walk(frames: int = 90, speed: float = 1.3) -> np.ndarray:
+    """A walk ``[F, 21, 3]`` (metres, Y-up, 30 fps) whose whole body drifts, so planted feet slide."""
+    t = np.arange(frames) / 30.0
+    drift = np.stack([np.sin(2 * np.pi * 1.1 * t), 0 * t, np.cos(2 * np.pi * 0.7 * t)], -1) * 0.05
+    return walking_skeleton(frames, speed=speed) + drift[:, None].astype(np.float32)
+
+
+def import_sliding(tmp_path, frames: int = 90, **kw):
+    return import_bvh(write_bvh(tmp_path / "slide.bvh", sliding_walk(frames, **kw)))
+
+
+def joints(addon, obj, frames) -> np.ndarray:
+    """Evaluated world joints ``[F, 21, 3]`` in model axes (Y-up), scene units."""
+    return zup_to_yup(evaluated_joints(addon, obj, frames))
+
+
+def lock(**kw):
+    """Run Foot Lock on the active object; check the new action and the untouched original."""
+    obj = bpy.context.active_object
+    old, before = action_of(obj), key_snapshot(obj)
+    assert bpy.ops.strnn.foot_lock(**kw) == {"FINISHED"}
+    new = action_of(obj)
+    assert new is not old and new.name.startswith(old.name) and old.use_fake_user
+    assert same_keys(before, key_snapshot(obj, old))
+    assert tuple(new.frame_range) == tuple(old.frame_range)
+    return old, new
+
+
+def leg_lengths(pos: np.ndarray) -> np.ndarray:
+    """Thigh and shin lengths ``[F, 4]``."""
+    pairs = [(f"{s}_{a}", f"{s}_{b}") for s in "lr" for a, b in (("upleg", "knee"), ("knee", "foot"))]
+    return np.stack([np.linalg.norm(pos[:, JOINT_INDEX[a]] - pos[:, JOINT_INDEX[b]], axis=-1) for a, b in pairs], -1)
+
+
+def test_foot_lock_reduces_skate_on_a_sliding_clip(addon, tmp_path):
+    obj = import_sliding(tmp_path)
+    frames = np.arange(1, 91)
+    before = joints(addon, obj, frames)
+    contacts = fl.detect_foot_contacts(before)
+    old, new = lock()
+    after = joints(addon, obj, frames)
+    skate_before, skate_after = fl.foot_skate_cm(before, contacts), fl.foot_skate_cm(after, contacts)
+    print(f"skate {skate_before:.2f} -> {skate_after:.2f} cm/frame")
+    assert skate_before > 0.8 and skate_after <= 0.5
+    assert fl.knee_pops(after) <= fl.knee_pops(before)
+    np.testing.assert_allclose(leg_lengths(after), leg_lengths(before), atol=1e-4)
+    body = np.setdiff1d(np.arange(21), LEG_JOINTS)
+    assert np.abs(after[:, body] - before[:, body]).max() < 1e-5, "only the legs move"
+    old_keys, new_keys = key_snapshot(obj, old), key_snapshot(obj, new)
+    for key, co in old_keys.items():
+        if not any(word in key[0] for word in LEG_WORDS):
+            assert np.array_equal(co, new_keys[key]), f"{key} changed"
+
+
+def test_frame_range_changes_only_its_frames(addon, tmp_path):
+    obj = import_sliding(tmp_path)
+    frames = np.arange(1, 91)
+    before = joints(addon, obj, frames)
+    contacts = fl.detect_foot_contacts(before)
+    lock(use_range=True, frame_start=31, frame_end=70, blend=0.1)
+    after = joints(addon, obj, frames)
+    assert np.abs(after[:30] - before[:30]).max() < 1e-5 and np.abs(after[70:] - before[70:]).max() < 1e-5
+    inside = slice(30, 70)
+    assert fl.foot_skate_cm(after[inside], contacts[inside]) < 0.5 * fl.foot_skate_cm(before[inside], contacts[inside])
+
+
+def test_operator_is_undoable_and_searchable(addon):
+    cls = bpy.types.STRNN_OT_foot_lock  # undo itself needs a window; background Blender has none
+    assert {"REGISTER", "UNDO"} <= set(cls.bl_options)
+    assert bpy.ops.strnn.foot_lock.get_rna_type().description
+
+
+def swaying_model(fake_model, monkeypatch):
+    """A stand-in extend: the last pose swaying 6 cm on the ground (planted feet slide)."""
+    def extend(prefs, pos, fps, frames):
+        t = np.arange(1, frames + 1) / fps
+        sway = np.stack([np.sin(2 * np.pi * t), 0 * t, 0 * t], -1) * 0.06
+        return pos[-1] + sway[:, None]
+
+    monkeypatch.setattr(fake_model, "extend", extend)
+
+
+@pytest.mark.parametrize("foot_lock", [False, True])
+def test_extend_option(addon, tmp_path, fake_model, monkeypatch, foot_lock):
+    swaying_model(fake_model, monkeypatch)
+    obj = import_bvh(write_bvh(tmp_path / "walk.bvh", walking_skeleton(40, speed=0.3)))
+    assert bpy.ops.strnn.extend_clip(frames=60, foot_lock=foot_lock) == {"FINISHED"}
+    pos = joints(addon, obj, np.arange(1, 101))
+    contacts = fl.detect_foot_contacts(pos)[40:]  # on the whole clip: a raised foot is not on the ground
+    assert contacts.any()
+    skate = fl.foot_skate_cm(pos[40:], contacts)  # frames 41..100
+    seam = np.linalg.norm(pos[40] - pos[39], axis=-1).max()
+    print(f"foot lock {foot_lock}: skate {skate:.2f} cm/frame, seam step {100 * seam:.2f} cm")
+    assert (skate <= 0.5) if foot_lock else (skate > 0.6)
+    assert seam < 0.05
+
+
+def test_denoise_option(addon, tmp_path, fake_model):
+    obj = import_sliding(tmp_path, frames=60)
+    frames = np.arange(1, 61)
+    before = joints(addon, obj, frames)
+    contacts = fl.detect_foot_contacts(before)
+    assert bpy.ops.strnn.denoise_action(foot_lock=True) == {"FINISHED"}
+    after = joints(addon, obj, frames)
+    assert fl.foot_skate_cm(before, contacts) > 0.8 and fl.foot_skate_cm(after, contacts) <= 0.5
+
+
+def refused(match: str, **kw) -> None:
+    """Foot Lock must fail with ``match`` and leave the keys, the actions and the assignment as they were."""
+    obj = bpy.context.active_object
+    action, before, names = action_of(obj), key_snapshot(obj), sorted(a.name for a in bpy.data.actions)
+    with pytest.raises(RuntimeError, match=match):
+        bpy.ops.strnn.foot_lock(**kw)
+    assert action_of(obj) is action and same_keys(before, key_snapshot(obj))
+    assert sorted(a.name for a in bpy.data.actions) == names and not action.use_fake_user
+
+
+def test_too_short_range_is_refused(addon, tmp_path):
+    import_sliding(tmp_path, frames=40)
+    refused("needs at least 3", use_range=True, frame_start=10, frame_end=11)
+
+
+def test_clip_without_contacts_is_refused(addon, tmp_path):
+    import_bvh(write_bvh(tmp_path / "run.bvh", walking_skeleton(40, speed=4.0)))  # the feet never rest
+    refused("No foot touches the ground")
