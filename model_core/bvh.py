@@ -13,6 +13,8 @@ from pathlib import Path
 
 import numpy as np
 
+from .rotations import axis_matrix
+
 _AXES = {"X": 0, "Y": 1, "Z": 2}
 
 
@@ -190,19 +192,6 @@ def _is_float(s: str) -> bool:
         return False
 
 
-def _axis_rotation(axis: int, angle: np.ndarray) -> np.ndarray:
-    """Rotation matrices ``[frames, 3, 3]`` about one axis, angles in radians."""
-    c, s = np.cos(angle), np.sin(angle)
-    m = np.zeros(angle.shape + (3, 3))
-    a, b = [(1, 2), (2, 0), (0, 1)][axis]
-    m[..., axis, axis] = 1.0
-    m[..., a, a] = c
-    m[..., b, b] = c
-    m[..., a, b] = -s
-    m[..., b, a] = s
-    return m
-
-
 def local_transforms(bvh: Bvh) -> tuple[np.ndarray, np.ndarray]:
     """Local rotations ``[frames, joints, 3, 3]`` and translations ``[frames, joints, 3]``.
 
@@ -220,7 +209,7 @@ def local_transforms(bvh: Bvh) -> tuple[np.ndarray, np.ndarray]:
             if c[1:].lower() == "position":
                 trans[:, k, axis] = col
             else:
-                rot[:, k] = rot[:, k] @ _axis_rotation(axis, np.radians(col))
+                rot[:, k] = rot[:, k] @ axis_matrix(axis, np.radians(col))
     return rot, trans
 
 

@@ -6,12 +6,19 @@ core relatively (``from ..model_core import ...``). Tests, scripts, data and run
 
     python scripts/build_extension.py --out dist/
     python scripts/build_extension.py --out dist/ --model runs/default/release
+    python scripts/build_extension.py --out dist/ --split-platforms --wheel torch-....whl [--wheel ...]
+
+``--wheel`` bundles wheels (listed in the staged manifest's ``wheels``); ``--split-platforms``
+passes Blender's option of the same name: one zip per platform of the manifest's ``platforms``
+(``--platform`` sets them; default: those PyTorch publishes wheels for), each holding only the
+wheels for that platform, named ``strnn_motion-VERSION-PLATFORM.zip``.
 """
 
 from __future__ import annotations
 
 import argparse
 import importlib.util
+import re
 import shutil
 import subprocess
 import sys
@@ -22,6 +29,7 @@ REPO = Path(__file__).resolve().parent.parent
 PACKAGES = ("strnn_addon", "model_core")
 FILES = ("blender_manifest.toml", "__init__.py", "README.md", "LICENSE")
 IGNORE = shutil.ignore_patterns("__pycache__", "*.pyc", "*.tmp")
+DEFAULT_PLATFORMS = ("linux-x64", "macos-arm64", "windows-x64")
 
 
 def find_blender_ext() -> Path:
@@ -51,6 +59,39 @@ def stage(dest: Path, model: Path | None) -> None:
               file=sys.stderr)
 
 
+def toml_list(values) -> str:
+    return "[" + ", ".join(f'"{v}"' for v in values) + "]"
+
+
+def add_to_manifest(dest: Path, wheels: list[Path], platforms: list[str]) -> None:
+    """Copy ``wheels`` into ``dest/wheels/`` and list them (and ``platforms``) in the staged manifest."""
+    manifest = dest / "blender_manifest.toml"
+    text = manifest.read_text()
+    keys = []
+    if wheels:
+        (dest / "wheels").mkdir(exist_ok=True)
+        for wheel in wheels:
+            if not wheel.is_file() or wheel.suffix != ".whl":
+                raise SystemExit(f"--wheel {wheel}: not a .whl file")
+            shutil.copy2(wheel, dest / "wheels" / wheel.name)
+        keys.append(f"wheels = {toml_list(f'./wheels/{w.name}' for w in wheels)}")
+    if platforms:
+        keys.append(f"platforms = {toml_list(platforms)}")
+    for key in keys:  # top-level keys go before the first table
+        name = key.split(" ", 1)[0]
+        if re.search(rf"^{name}\s*=", text, re.M):
+            raise SystemExit(f"blender_manifest.toml already sets {name}; edit it there instead")
+        first_table = re.search(r"^\[", text, re.M)
+        at = first_table.start() if first_table else len(text)
+        text = text[:at] + key + "\n\n" + text[at:]
+    manifest.write_text(text)
+
+
+def manifest_field(text: str, name: str) -> str:
+    found = re.search(rf'^{name}\s*=\s*"([^"]*)"', text, re.M)
+    return found.group(1) if found else ""
+
+
 def run_tool(tool: Path, *args: str) -> None:
     result = subprocess.run([sys.executable, str(tool), *args], capture_output=True, text=True)
     print(result.stdout.strip())
@@ -65,20 +106,38 @@ def main(argv: list[str] | None = None) -> Path:
                         help="release folder to bundle as models/strnn_default (default: models/strnn_default)")
     parser.add_argument("--blender-ext", type=Path, default=None, help="path to Blender's blender_ext.py")
     parser.add_argument("--no-validate", action="store_true", help="skip validating the built zip")
+    parser.add_argument("--wheel", type=Path, action="append", default=[], metavar="PATH",
+                        help="a wheel to bundle (repeatable), e.g. the CPU torch wheel of each platform")
+    parser.add_argument("--split-platforms", action="store_true",
+                        help="one zip per platform, each with only its wheels (Blender's --split-platforms)")
+    parser.add_argument("--platform", action="append", default=[], metavar="NAME",
+                        help="a platform for the manifest (repeatable), e.g. linux-x64; with --split-platforms "
+                             f"the default is {', '.join(DEFAULT_PLATFORMS)}")
     args = parser.parse_args(argv)
     tool = args.blender_ext or find_blender_ext()
     args.out.mkdir(parents=True, exist_ok=True)
+    platforms = args.platform or (list(DEFAULT_PLATFORMS) if args.split_platforms else [])
     with tempfile.TemporaryDirectory() as tmp:
         src = Path(tmp) / "strnn_motion"
         src.mkdir()
         stage(src, args.model)
+        add_to_manifest(src, [w.resolve() for w in args.wheel], platforms)
+        text = (src / "blender_manifest.toml").read_text()
         run_tool(tool, "validate", str(src))
-        run_tool(tool, "build", "--source-dir", str(src), "--output-dir", str(args.out))
-    zips = sorted(args.out.glob("strnn_motion-*.zip"), key=lambda p: p.stat().st_mtime)
-    if not args.no_validate:
-        run_tool(tool, "validate", str(zips[-1]))
-    print(zips[-1])
-    return zips[-1]
+        split = ["--split-platforms"] if args.split_platforms else []
+        run_tool(tool, "build", "--source-dir", str(src), "--output-dir", str(args.out), *split)
+    stem = f"{manifest_field(text, 'id')}-{manifest_field(text, 'version')}"
+    if args.split_platforms:
+        zips = [args.out / f"{stem}-{p.replace('-', '_')}.zip" for p in platforms]
+    else:
+        zips = [args.out / f"{stem}.zip"]
+    for path in zips:
+        if not path.is_file():
+            raise SystemExit(f"blender_ext build did not write {path}")
+        if not args.no_validate:
+            run_tool(tool, "validate", str(path))
+        print(path)
+    return zips if args.split_platforms else zips[0]
 
 
 if __name__ == "__main__":

@@ -7,12 +7,13 @@ from __future__ import annotations
 
 import bpy
 
-from . import operators, props, ui
+from . import operators, props, torch_install, ui
 
-classes = (*props.classes, *operators.classes, *ui.classes)
+classes = (*props.classes, *operators.classes, *torch_install.classes, *ui.classes)
 
 
 def register():
+    torch_install.add_to_path()  # torch installed by Preferences > Install PyTorch
     for cls in classes:
         bpy.utils.register_class(cls)
     props.register_properties()
@@ -24,3 +25,4 @@ def unregister():
     props.unregister_properties()
     for cls in reversed(classes):
         bpy.utils.unregister_class(cls)
+    torch_install.remove_from_path()

@@ -88,7 +88,8 @@ def denoise(prefs, positions: np.ndarray, fps: float, strength: float) -> np.nda
 
 _FOLLOWERS: dict[str, object] = {}
 TORCH_MISSING = ("Follow Curve needs PyTorch, which this Blender's Python does not have (Extend, Denoise "
-                 "and Foot Lock work without it): install the CPU build of torch into Blender's Python, e.g. "
+                 "and Foot Lock work without it): use Preferences > Add-ons > STRNN Motion > Install PyTorch "
+                 "(needs online access), or install the CPU build of torch into Blender's Python, e.g. "
                  "'<blender python> -m pip install torch --index-url https://download.pytorch.org/whl/cpu'")
 
 

@@ -63,6 +63,9 @@ class STRNN_AP_preferences(bpy.types.AddonPreferences):
         col.prop(self, "model_folder")
         col.prop(self, "engine")
         col.prop(self, "threads")
+        from .torch_install import draw_preferences
+
+        draw_preferences(self.layout)
 
 
 def preferences(context):
