@@ -1,0 +1,504 @@
+"""Run the STRNN Motion extension headless over many BVH / .blend files, one Blender (bpy) per file.
+
+    python scripts/strnn_batch.py extend   --frames 120 data/clips/ --out out/batch
+    python scripts/strnn_batch.py denoise  --strength 0.8 a.bvh b.bvh --jobs 4
+    python scripts/strnn_batch.py footlock data/clips/ --out out/locked
+    python scripts/strnn_batch.py follow   --path figure_eight --frames 300 walk.bvh
+
+Each input file runs in its own worker process (``--jobs N`` at a time) that imports the ``bpy``
+module, resets to factory settings, installs and enables the built extension zip (built once
+here with scripts/build_extension.py into dist/ unless dist/ is up to date, or ``--extension``),
+imports the file with Blender's own BVH importer (a .blend is opened), runs the extension's real
+operator (strnn.extend_clip, strnn.denoise_action, strnn.foot_lock, strnn.follow_curve) on the
+armature, and writes the result with Blender's own BVH exporter (or saves a .blend) as
+``OUT/NAME.<command>.bvh``. Folders are searched recursively for *.bvh and *.blend; their
+sub-folders are kept under OUT. An input is never overwritten unless ``--in-place``.
+
+One progress line per finished file, then a summary table (file, status, seconds, reason).
+Exit status: 0 when every file was processed, 1 when any failed (each failure and its reason
+are listed at the end), 2 for bad arguments.
+"""
+
+from __future__ import annotations
+
+import argparse
+import concurrent.futures as cf
+import multiprocessing
+import os
+import shutil
+import sys
+import tempfile
+import time
+import traceback
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parent.parent
+EXTENSIONS = (".bvh", ".blend")
+PATHS = ("line", "circle", "s_curve", "figure_eight")
+REPO_MODULE = "strnn_batch"
+ADDON = f"bl_ext.{REPO_MODULE}.strnn_motion"
+SOURCES = ("strnn_addon", "model_core", "models", "blender_manifest.toml", "__init__.py")
+
+
+class BatchError(Exception):
+    """A per-file failure with a reason meant for the summary (no traceback)."""
+
+
+# --------------------------------------------------------------------------------------------
+# parent side: arguments, inputs, the extension zip, the pool, the report
+# --------------------------------------------------------------------------------------------
+
+def build_parser() -> argparse.ArgumentParser:
+    common = argparse.ArgumentParser(add_help=False)
+    io = common.add_argument_group("inputs and outputs")
+    io.add_argument("inputs", nargs="+", type=Path, metavar="PATH",
+                    help="BVH or .blend files, or folders searched recursively for them")
+    io.add_argument("--out", type=Path, default=Path("out"), metavar="DIR",
+                    help="output folder (default: ./out); results are named NAME.<command>.bvh (or .blend)")
+    io.add_argument("--format", choices=("auto", "bvh", "blend"), default="auto",
+                    help="what to write: a BVH (Blender's exporter) or a .blend; auto (default): "
+                         "the input's own format")
+    io.add_argument("--in-place", action="store_true",
+                    help="overwrite each input with its result instead of writing to --out "
+                         "(the output format is then the input's)")
+    run = common.add_argument_group("running")
+    run.add_argument("--jobs", "-j", type=int, default=1, metavar="N",
+                     help="files processed at the same time, each in its own process (default: 1)")
+    run.add_argument("--extension", type=Path, default=None, metavar="ZIP",
+                     help="the extension zip to install (default: dist/strnn_motion-*.zip, rebuilt with "
+                          "scripts/build_extension.py when older than the sources)")
+    run.add_argument("--model", type=Path, default=None, metavar="DIR",
+                     help="model release folder for the extension's Model Folder preference "
+                          "(default: the model bundled in the zip)")
+    run.add_argument("--verbose", "-v", action="store_true",
+                     help="let Blender's own output through (default: hidden; kept in the failure reason)")
+
+    parser = argparse.ArgumentParser(
+        prog="strnn_batch.py", description=__doc__.split("\n\n")[0],
+        epilog=__doc__.split("\n\n", 2)[2], formatter_class=argparse.RawDescriptionHelpFormatter)
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    p = sub.add_parser("extend", parents=[common], help="continue each clip (strnn.extend_clip)",
+                       description="Continue each clip by --frames frames with the motion model.")
+    p.add_argument("--frames", type=int, default=120, help="frames to add after the last frame (default: 120)")
+    p.add_argument("--context-frames", type=int, default=0,
+                   help="frames before the end the model reads; 0: just enough (default: 0)")
+    p.add_argument("--foot-lock", action="store_true", help="also lock the feet on the new frames")
+
+    p = sub.add_parser("denoise", parents=[common], help="clean each clip (strnn.denoise_action)",
+                       description="Clean each clip with the motion model.")
+    p.add_argument("--strength", type=float, default=1.0,
+                   help="blend between the original (0) and the model's output (1) (default: 1.0)")
+    p.add_argument("--foot-lock", action="store_true", help="also lock the feet")
+
+    p = sub.add_parser("footlock", parents=[common], help="pin the feet while they touch the ground "
+                       "(strnn.foot_lock)", description="Pin the feet on the ground while they touch it (leg IK).")
+    p.add_argument("--blend", type=float, default=0.15,
+                   help="seconds over which each lock fades in and out (default: 0.15)")
+
+    p = sub.add_parser("follow", parents=[common], help="walk each character along a path (strnn.follow_curve, "
+                       "needs PyTorch)", description="Make each character walk along a path with the motion "
+                       "model (needs PyTorch in the Python running this script).")
+    p.add_argument("--path", choices=PATHS, default="circle",
+                   help="built-in ground path starting at the world origin heading -Y: line (10 m), circle "
+                        "(radius 2 m), s_curve (8 m), figure_eight (two 2 m loops) (default: circle)")
+    p.add_argument("--curve", default="",
+                   help="for .blend inputs: name of a curve object in the file to follow instead of --path")
+    p.add_argument("--frames", type=int, default=0, help="frames to make; 0: until the path ends (default: 0)")
+    p.add_argument("--speed", type=float, default=0.0, help="walking speed in m/s; 0: the motion's own (default)")
+    p.add_argument("--steering", type=int, default=4, help="steering steps per 20-frame window (default: 4)")
+    p.add_argument("--no-foot-lock", action="store_true", help="do not lock the feet")
+    return parser
+
+
+def operator_call(args) -> tuple[str, dict]:
+    """The operator (``strnn.<name>``) and its keyword arguments for ``args``."""
+    if args.command == "extend":
+        return "extend_clip", {"frames": args.frames, "context_frames": args.context_frames,
+                               "foot_lock": args.foot_lock}
+    if args.command == "denoise":
+        return "denoise_action", {"strength": args.strength, "foot_lock": args.foot_lock}
+    if args.command == "footlock":
+        return "foot_lock", {"blend": args.blend}
+    return "follow_curve", {"frames": args.frames, "speed": args.speed, "steering": args.steering,
+                            "foot_lock": not args.no_foot_lock}
+
+
+def check_args(parser, args) -> None:
+    if args.jobs < 1:
+        parser.error("--jobs must be at least 1")
+    if args.command == "extend" and args.frames < 1:
+        parser.error("--frames must be at least 1")
+    if args.command == "denoise" and not 0.0 <= args.strength <= 1.0:
+        parser.error("--strength must be between 0 and 1")
+    if args.command == "footlock" and not 0.0 <= args.blend <= 2.0:
+        parser.error("--blend must be between 0 and 2 seconds")
+    if args.command == "follow" and (args.frames < 0 or args.speed < 0 or args.steering < 0):
+        parser.error("--frames, --speed and --steering must not be negative")
+    if args.extension is not None and not args.extension.is_file():
+        parser.error(f"--extension {args.extension}: no such file")
+    if args.model is not None and not (args.model / "model.json").is_file():
+        parser.error(f"--model {args.model}: no model.json in it")
+
+
+def collect(inputs: list[Path]) -> tuple[list[tuple[Path, Path]], list[tuple[str, str]]]:
+    """(file, path relative to the output folder) for each input file; problems as (name, reason)."""
+    found, problems, seen = [], [], set()
+    for item in inputs:
+        if item.is_dir():
+            files = sorted(p for p in item.rglob("*") if p.suffix.lower() in EXTENSIONS and p.is_file())
+            if not files:
+                problems.append((str(item), "folder holds no .bvh or .blend file"))
+            pairs = [(p, p.relative_to(item)) for p in files]
+        elif item.is_file():
+            if item.suffix.lower() not in EXTENSIONS:
+                problems.append((str(item), f"not a .bvh or .blend file ({item.suffix or 'no extension'})"))
+                continue
+            pairs = [(item, Path(item.name))]
+        else:
+            problems.append((str(item), "no such file or folder"))
+            continue
+        for path, rel in pairs:
+            if path.resolve() not in seen:
+                seen.add(path.resolve())
+                found.append((path, rel))
+    return found, problems
+
+
+def output_path(path: Path, rel: Path, args) -> Path:
+    if args.in_place:
+        return path
+    fmt = args.format if args.format != "auto" else path.suffix.lower().lstrip(".")
+    return args.out / rel.parent / f"{rel.stem}.{args.command}.{fmt}"
+
+
+def newest_source_time() -> float:
+    newest = 0.0
+    for name in SOURCES:
+        root = REPO / name
+        paths = [root] if root.is_file() else root.rglob("*") if root.is_dir() else []
+        for p in paths:
+            if p.is_file() and "__pycache__" not in p.parts:
+                newest = max(newest, p.stat().st_mtime)
+    return newest
+
+
+def extension_zip(given: Path | None) -> Path:
+    """``given``, or dist/'s zip when newer than every source file, else a fresh build into dist/."""
+    if given is not None:
+        return given.resolve()
+    dist = REPO / "dist"
+    zips = sorted(dist.glob("strnn_motion-*.zip"), key=lambda p: p.stat().st_mtime)
+    if zips and zips[-1].stat().st_mtime >= newest_source_time():
+        return zips[-1]
+    print("building the extension zip (scripts/build_extension.py) ...", flush=True)
+    sys.path.insert(0, str(REPO / "scripts"))
+    import build_extension
+
+    return Path(build_extension.main(["--out", str(dist)])).resolve()
+
+
+def progress_line(done: int, total: int, result: dict) -> str:
+    width = 20
+    filled = round(width * done / total)
+    bar = "#" * filled + "-" * (width - filled)
+    tail = f"-> {result['output']}" if result["status"] == "ok" else result["reason"]
+    return f"[{bar}] {done}/{total} {result['status']:6s} {result['seconds']:6.1f}s  {result['file']}  {tail}"
+
+
+def summary(results: list[dict]) -> str:
+    rows = [("file", "status", "seconds", "reason")]
+    rows += [(r["file"], r["status"], f"{r['seconds']:.1f}", r["reason"] or "-") for r in results]
+    widths = [max(len(row[i]) for row in rows) for i in range(3)]
+    lines = []
+    for n, row in enumerate(rows):
+        lines.append("  ".join([row[0].ljust(widths[0]), row[1].ljust(widths[1]), row[2].rjust(widths[2]), row[3]]))
+        if n == 0:
+            lines.append("  ".join("-" * w for w in widths) + "  ------")
+    return "\n".join(lines)
+
+
+def run_pool(jobs: list[dict], workers: int, report) -> list[dict]:
+    """Run ``jobs`` in fresh spawned processes (one per file); a job whose process died is retried alone once."""
+    results, retry = {}, []
+    ctx = multiprocessing.get_context("spawn")
+    with cf.ProcessPoolExecutor(max_workers=workers, mp_context=ctx, max_tasks_per_child=1) as pool:
+        futures = {pool.submit(process_file, job): job for job in jobs}
+        for future in cf.as_completed(futures):
+            job = futures[future]
+            try:
+                result = future.result()
+            except cf.process.BrokenProcessPool:
+                retry.append(job)
+                continue
+            results[job["index"]] = result
+            report(result)
+    for job in retry:  # the pool breaks for every pending job when one process dies: find the culprit alone
+        with cf.ProcessPoolExecutor(max_workers=1, mp_context=ctx, max_tasks_per_child=1) as pool:
+            start = time.perf_counter()
+            try:
+                result = pool.submit(process_file, job).result()
+            except cf.process.BrokenProcessPool:
+                result = {"file": job["display"], "status": "failed", "output": "",
+                          "seconds": time.perf_counter() - start,
+                          "reason": "the Blender worker process crashed on this file"}
+        results[job["index"]] = result
+        report(result)
+    return [results[i] for i in sorted(results)]
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    check_args(parser, args)
+    files, problems = collect(args.inputs)
+    op, kwargs = operator_call(args)
+    results: list[dict] = [{"file": name, "status": "failed", "seconds": 0.0, "reason": reason, "output": ""}
+                           for name, reason in problems]
+    jobs, claimed = [], {}
+    inputs = {p.resolve() for p, _ in files}
+    for path, rel in files:
+        out = output_path(path, rel, args)
+        display = str(path)
+        if not args.in_place and out.resolve() in inputs:
+            results.append({"file": display, "status": "failed", "seconds": 0.0, "output": "",
+                            "reason": f"output {out} is an input; pass --in-place to overwrite inputs"})
+            continue
+        if out.resolve() in claimed:
+            results.append({"file": display, "status": "failed", "seconds": 0.0, "output": "",
+                            "reason": f"output {out} would also be written for {claimed[out.resolve()]}"})
+            continue
+        claimed[out.resolve()] = display
+        jobs.append({"index": len(jobs), "input": str(path.resolve()), "display": display,
+                     "output": str(out.resolve()), "shown_output": str(out), "operator": op, "kwargs": kwargs,
+                     "path": getattr(args, "path", None), "curve": getattr(args, "curve", ""),
+                     "model": str(args.model.resolve()) if args.model else "", "verbose": args.verbose})
+    total = len(jobs) + len(results)
+    if not total:
+        parser.error("no input files")
+    for n, r in enumerate(results, 1):
+        print(progress_line(n, total, r), flush=True)
+    start = time.perf_counter()
+    if jobs:
+        try:
+            zip_path = extension_zip(args.extension)
+        except SystemExit as e:  # build_extension reports its failures this way
+            print(f"error: could not build the extension: {e}", file=sys.stderr)
+            return 1
+        for job in jobs:
+            job["zip"] = str(zip_path)
+        done = len(results)
+
+        def report(result):
+            nonlocal done
+            done += 1
+            print(progress_line(done, total, result), flush=True)
+
+        order = {job["display"]: job["index"] for job in jobs}
+        processed = run_pool(jobs, min(args.jobs, len(jobs)), report)
+        results += sorted(processed, key=lambda r: order.get(r["file"], 0))
+    wall = time.perf_counter() - start
+    failed = [r for r in results if r["status"] != "ok"]
+    print()
+    print(summary(results))
+    print(f"\n{len(results) - len(failed)} of {len(results)} files processed in {wall:.1f} s "
+          f"with --jobs {args.jobs}; {len(failed)} failed")
+    if failed:
+        print("\nfailures:", file=sys.stderr)
+        for r in failed:
+            print(f"  {r['file']}: {r['reason']}", file=sys.stderr)
+        return 1
+    return 0
+
+
+# --------------------------------------------------------------------------------------------
+# worker side: one file in a fresh process with its own bpy
+# --------------------------------------------------------------------------------------------
+
+def check_bvh_text(path: Path) -> None:
+    """Fail with a plain reason for files Blender's importer would choke on."""
+    try:
+        text = path.read_text(errors="strict")
+    except UnicodeDecodeError:
+        raise BatchError("not a BVH file: it is not text") from None
+    words = text.split()
+    if not words:
+        raise BatchError("not a BVH file: it is empty")
+    if words[0].upper() != "HIERARCHY":
+        raise BatchError(f"not a BVH file: it starts with {words[0][:30]!r}, not HIERARCHY")
+    if "MOTION" not in words:
+        raise BatchError("broken BVH: no MOTION section (the file is cut short?)")
+    motion = text[text.index("MOTION"):].splitlines()
+    try:
+        frames = int(next(line.split(":")[1] for line in motion if line.strip().startswith("Frames")))
+        float(next(line.split(":")[1] for line in motion if line.strip().startswith("Frame Time")))
+    except (StopIteration, IndexError, ValueError):
+        raise BatchError("broken BVH: the MOTION section lacks a valid 'Frames:' or 'Frame Time:' line") from None
+    rows = [line for line in motion[3:] if line.strip()]
+    if frames < 2:
+        raise BatchError(f"broken BVH: {frames} frame(s); the operators need at least 2")
+    if len(rows) < frames:
+        raise BatchError(f"broken BVH: header says {frames} frames but the file has {len(rows)} (cut short?)")
+    widths = {len(line.split()) for line in rows[:frames]}
+    if len(widths) != 1:
+        raise BatchError("broken BVH: frame lines have different numbers of values")
+    try:
+        [float(v) for line in rows[:frames] for v in line.split()]
+    except ValueError as e:
+        raise BatchError(f"broken BVH: a frame line holds a non-number ({e})") from None
+
+
+def blender_error(e: Exception) -> str:
+    """The last meaningful line of a bpy.ops RuntimeError (Blender packs tracebacks in the message)."""
+    lines = [line.strip() for line in str(e).splitlines() if line.strip() and not line.strip().startswith(
+        ("Location:", "File ", "Traceback", "^", "~"))]
+    msg = lines[-1] if lines else type(e).__name__
+    return msg.removeprefix("Error: ")
+
+
+def install_extension(bpy, zip_path: str, user_dir: Path):
+    prefs = bpy.context.preferences
+    directory = user_dir / "extensions"
+    directory.mkdir(parents=True, exist_ok=True)
+    if prefs.extensions.repos.get(REPO_MODULE) is None:
+        prefs.extensions.repos.new(name=REPO_MODULE, module=REPO_MODULE, custom_directory=str(directory),
+                                   source="USER")
+    result = bpy.ops.extensions.package_install_files(filepath=zip_path, repo=REPO_MODULE, enable_on_install=True)
+    if result != {"FINISHED"} or ADDON not in prefs.addons:
+        raise BatchError(f"could not install and enable the extension {zip_path}")
+
+
+def add_path_curve(bpy, name: str):
+    """A poly curve object of the built-in ground path ``name`` (model (x, z) -> Blender (x, -z, 0))."""
+    from model_core.paths import evaluation_paths
+
+    points, cyclic = evaluation_paths()[name]
+    data = bpy.data.curves.new(f"path_{name}", "CURVE")
+    spline = data.splines.new("POLY")
+    spline.points.add(len(points) - 1)
+    for p, (x, z) in zip(spline.points, points):
+        p.co = (float(x), float(-z), 0.0, 1.0)
+    spline.use_cyclic_u = bool(cyclic)
+    obj = bpy.data.objects.new(f"path_{name}", data)
+    bpy.context.scene.collection.objects.link(obj)
+    return obj
+
+
+def pick_armature(bpy):
+    active = bpy.context.view_layer.objects.active
+    if active is not None and active.type == "ARMATURE":
+        return active
+    arms = [o for o in bpy.context.scene.objects if o.type == "ARMATURE"]
+    animated = [o for o in arms if o.animation_data and o.animation_data.action]
+    if len(arms) == 1:
+        return arms[0]
+    if len(animated) == 1:
+        return animated[0]
+    if not arms:
+        raise BatchError("the file has no armature")
+    raise BatchError(f"{len(arms)} armatures and none active; make the one to process active and save")
+
+
+def run_file(bpy, job: dict) -> None:
+    src, dst = Path(job["input"]), Path(job["output"])
+    if src.suffix.lower() == ".bvh":
+        check_bvh_text(src)
+        try:
+            bpy.ops.import_anim.bvh(filepath=str(src), update_scene_fps=True, update_scene_duration=True)
+        except RuntimeError as e:
+            raise BatchError(f"Blender's BVH importer could not read it: {blender_error(e)}") from None
+    else:
+        try:
+            bpy.ops.wm.open_mainfile(filepath=str(src), load_ui=False)
+        except RuntimeError as e:
+            raise BatchError(f"Blender could not open it: {blender_error(e)}") from None
+    obj = pick_armature(bpy)
+    view_layer = bpy.context.view_layer
+    for other in view_layer.objects:
+        other.select_set(False)
+    view_layer.objects.active = obj
+    obj.select_set(True)
+    kwargs = dict(job["kwargs"])
+    if job["operator"] == "follow_curve":
+        if job["curve"]:
+            if bpy.data.objects.get(job["curve"]) is None:
+                raise BatchError(f"no object named {job['curve']!r} in the file for --curve")
+            kwargs["curve"] = job["curve"]
+        else:
+            kwargs["curve"] = add_path_curve(bpy, job["path"]).name
+        view_layer.objects.active = obj
+    try:
+        getattr(bpy.ops.strnn, job["operator"])(**kwargs)
+    except RuntimeError as e:
+        raise BatchError(f"strnn.{job['operator']} refused: {blender_error(e)}") from None
+    action = obj.animation_data.action if obj.animation_data else None
+    if action is None:
+        raise BatchError(f"strnn.{job['operator']} left the armature without an action")
+    start, end = (int(round(f)) for f in action.frame_range)
+    scene = bpy.context.scene
+    scene.frame_start, scene.frame_end = start, end
+    dst.parent.mkdir(parents=True, exist_ok=True)
+    tmp = dst.with_name(dst.stem + ".tmp" + dst.suffix)  # write beside, then replace: no half-written outputs
+    try:
+        if dst.suffix.lower() == ".bvh":
+            view_layer.objects.active = obj
+            bpy.ops.export_anim.bvh(filepath=str(tmp), frame_start=start, frame_end=end,
+                                    check_existing=False)
+        else:
+            bpy.ops.wm.save_as_mainfile(filepath=str(tmp), copy=True, compress=True)
+    except RuntimeError as e:
+        tmp.unlink(missing_ok=True)
+        raise BatchError(f"Blender could not write {dst.name}: {blender_error(e)}") from None
+    os.replace(tmp, dst)
+
+
+def process_file(job: dict) -> dict:
+    """Worker entry point: process one file in this (fresh) process; never raises."""
+    start = time.perf_counter()
+    result = {"file": job["display"], "status": "failed", "output": "", "reason": ""}
+    user_dir = Path(tempfile.mkdtemp(prefix="strnn_batch_"))
+    log = user_dir / "blender.log"
+    saved = None
+    if not job["verbose"]:  # Blender prints from C as well as Python: redirect the descriptors
+        sys.stdout.flush()
+        sys.stderr.flush()
+        saved = os.dup(1), os.dup(2)
+        fd = os.open(log, os.O_WRONLY | os.O_CREAT | os.O_TRUNC)
+        os.dup2(fd, 1)
+        os.dup2(fd, 2)
+        os.close(fd)
+    try:
+        os.environ["BLENDER_USER_RESOURCES"] = str(user_dir / "user")  # keep the user's own Blender untouched
+        # a parent that imported bpy passes on Blender's scripts/modules in sys.path, whose pure-Python
+        # bpy package would shadow the bpy module itself
+        sys.path[:] = [p for p in sys.path if not (Path(p or ".") / "bpy" / "__init__.py").is_file()]
+        sys.path.insert(0, str(REPO))
+        import bpy
+
+        bpy.ops.wm.read_factory_settings(use_empty=True)
+        install_extension(bpy, job["zip"], user_dir)
+        if job["model"]:
+            bpy.context.preferences.addons[ADDON].preferences.model_folder = job["model"]
+        bpy.ops.wm.read_homefile(use_empty=True)
+        run_file(bpy, job)
+        result.update(status="ok", output=job["shown_output"])
+    except BatchError as e:
+        result["reason"] = str(e)
+    except Exception as e:  # an unexpected failure: still one line, with where it happened
+        frame = traceback.extract_tb(e.__traceback__)[-1]
+        result["reason"] = f"{type(e).__name__}: {e} ({Path(frame.filename).name}:{frame.lineno})".replace("\n", " ")
+    finally:
+        if saved is not None:
+            sys.stdout.flush()
+            sys.stderr.flush()
+            os.dup2(saved[0], 1)
+            os.dup2(saved[1], 2)
+            os.close(saved[0])
+            os.close(saved[1])
+        shutil.rmtree(user_dir, ignore_errors=True)
+    result["seconds"] = time.perf_counter() - start
+    return result
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,101 @@
+"""scripts/strnn_batch.py: the real extension in spawned bpy workers over folders of BVH files."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import pytest
+
+from model_core.bvh_export import write_bvh
+from model_core.synthetic import walking_skeleton
+
+REPO = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(REPO / "scripts"))
+
+import strnn_batch  # noqa: E402
+
+
+def frames_of(path: Path) -> int:
+    return next(int(line.split(":")[1]) for line in path.read_text().splitlines() if line.startswith("Frames:"))
+
+
+def snapshot(folder: Path) -> dict[str, bytes]:
+    return {str(p.relative_to(folder)): p.read_bytes() for p in sorted(folder.rglob("*")) if p.is_file()}
+
+
+@pytest.fixture(scope="module")
+def extension(tmp_path_factory) -> Path:
+    pytest.importorskip("bpy")
+    import build_extension
+
+    return build_extension.main(["--out", str(tmp_path_factory.mktemp("dist"))])
+
+
+@pytest.fixture
+def clips(tmp_path) -> Path:
+    """A folder with one good BVH (60 frames) and one cut short in its hierarchy."""
+    folder = tmp_path / "clips"
+    folder.mkdir()
+    good = write_bvh(folder / "walk.bvh", walking_skeleton(60))
+    (folder / "broken.bvh").write_text(good.read_text()[:400])
+    return folder
+
+
+def test_help_documents_every_command(capsys):
+    with pytest.raises(SystemExit) as e:
+        strnn_batch.main(["--help"])
+    assert e.value.code == 0
+    text = capsys.readouterr().out
+    for word in ("extend", "denoise", "footlock", "follow", "--in-place", "--jobs", "Exit status"):
+        assert word in text
+    for command, option in [("extend", "--frames"), ("denoise", "--strength"), ("follow", "--path"),
+                            ("footlock", "--blend")]:
+        with pytest.raises(SystemExit):
+            strnn_batch.main([command, "--help"])
+        text = capsys.readouterr().out
+        assert option in text and "--out" in text and "--jobs" in text
+
+
+def test_good_file_processed_corrupt_one_reported(clips, tmp_path, extension, capsys):
+    before = snapshot(clips)
+    out = tmp_path / "out"
+    code = strnn_batch.main(["extend", "--frames", "20", str(clips), "--out", str(out), "--jobs", "2",
+                             "--extension", str(extension)])
+    captured = capsys.readouterr()
+    assert code == 1
+    result = out / "walk.extend.bvh"
+    assert result.is_file() and frames_of(result) == 60 + 20
+    assert sorted(p.name for p in out.iterdir()) == ["walk.extend.bvh"]  # nothing for the broken one
+    assert snapshot(clips) == before  # inputs untouched
+    failures = captured.err.split("failures:")[1]
+    assert "broken.bvh" in failures and "broken BVH" in failures and "walk.bvh" not in failures
+    assert "Traceback" not in captured.out + captured.err
+    table = captured.out.split("file ")[-1]
+    assert "ok" in table and "failed" in table and "1 of 2 files processed" in captured.out
+
+
+def test_importer_errors_and_missing_inputs_have_reasons(tmp_path, extension, capsys):
+    folder = tmp_path / "clips"
+    folder.mkdir()
+    good = write_bvh(folder / "walk.bvh", walking_skeleton(40))
+    text = good.read_text()
+    (folder / "offset.bvh").write_text(text.replace("OFFSET", "OFFSET abc", 1))  # passes the quick check
+    (folder / "empty.bvh").write_text("")
+    out = tmp_path / "out"
+    code = strnn_batch.main(["footlock", str(folder / "offset.bvh"), str(folder / "empty.bvh"), str(good),
+                             str(tmp_path / "missing.bvh"), "--out", str(out), "--extension", str(extension)])
+    err = capsys.readouterr().err
+    assert code == 1
+    assert frames_of(out / "walk.footlock.bvh") == 40
+    assert "offset.bvh: Blender's BVH importer could not read it: ValueError" in err
+    assert "empty.bvh: not a BVH file: it is empty" in err
+    assert "missing.bvh: no such file or folder" in err
+    assert good.read_text() == text
+
+
+def test_in_place_overwrites_only_when_asked(tmp_path, extension, capsys):
+    clip = write_bvh(tmp_path / "walk.bvh", walking_skeleton(40))
+    code = strnn_batch.main(["extend", "--frames", "5", "--in-place", str(clip), "--extension", str(extension)])
+    assert code == 0 and frames_of(clip) == 45
+    assert [p.name for p in tmp_path.iterdir()] == ["walk.bvh"]
