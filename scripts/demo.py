@@ -1,12 +1,19 @@
 #!/usr/bin/env python3
-"""Generate a long motion with the shipped STRNN model, no input file needed.
+"""The full demo on built-in data only: no input file needed.
 
-Takes a 20-frame seed window shipped with the model (models/strnn_default/seeds.npz),
-extrapolates it open-loop with the NumPy engine, and writes a BVH file (open it in
-Blender: File > Import > Motion Capture (.bvh)) and a PNG contact sheet into --out.
+1. Takes a 20-frame seed window shipped with the model (models/strnn_default/seeds.npz) and
+   continues it open-loop with the NumPy engine (--frames, default 600).
+2. Walks the evaluation figure-eight (two 2 m loops) from the last 20 frames, steered by the
+   torch path follower (the path is placed under the character, so there is no jump; skipped
+   with a note when torch is missing). --path-frames: frames of the walk (default: one lap).
+3. Foot-locks the result (contacts detected on the motion).
+4. Writes into --out: demo.bvh, demo.png (stick-figure contact sheet), demo_plots.png
+   (prediction error against horizon for STRNN and the baselines, from the model's
+   evaluation.json; foot skate before and after the lock) and demo.blend (the BVH imported
+   into a factory-reset scene with the bpy module; skipped with a note when bpy is missing).
 
-    python scripts/demo.py                     # 600 frames from seed 0 into out/
-    python scripts/demo.py --frames 3000 --seed 3 --out out/long
+    python scripts/demo.py                      # seed 0 into out/
+    python scripts/demo.py --frames 90 --path-frames 60 --out out/quick
 """
 
 from __future__ import annotations
@@ -23,37 +30,21 @@ import numpy as np
 from model_core.bvh_export import write_bvh
 from model_core.checkpoint import CheckpointError
 from model_core.conventions import MODEL_FPS
-from model_core.features import features_to_positions
+from model_core.demo_pipeline import build_motion, load_evaluation, plot_demo, write_blend
 from model_core.plots import contact_sheet
 
 
 def parse_args(argv=None) -> argparse.Namespace:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--frames", type=int, default=600, help="frames to generate after the seed (30 fps)")
+    p.add_argument("--frames", type=int, default=600, help="frames of open-loop continuation after the seed (30 fps)")
+    p.add_argument("--path-frames", type=int, default=None,
+                   help="frames of the figure-eight walk (default: one lap; 0: no walk)")
     p.add_argument("--seed", type=int, default=0, help="index of the shipped seed window to start from")
     p.add_argument("--model", default=None, help="model folder (default: models/strnn_default)")
-    p.add_argument("--out", default="out", help="output folder for demo.bvh and demo.png")
+    p.add_argument("--out", default="out", help="output folder for demo.bvh, demo.png, demo_plots.png, demo.blend")
     p.add_argument("--panels", type=int, default=12, help="stick figures on the contact sheet")
+    p.add_argument("--no-blend", action="store_true", help="do not write demo.blend")
     return p.parse_args(argv)
-
-
-def generate(model: str | None, seed_index: int, frames: int) -> tuple[np.ndarray, str]:
-    """Seed + generated motion as canonical positions ``float32 [m + frames, 21, 3]`` (metres, Y-up),
-    and the seed's name. Raises ``CheckpointError`` / ``ValueError`` with a readable message."""
-    from model_core.engine import Engine  # the inference engine needs only NumPy
-
-    eng = Engine.load(model)
-    seeds = eng.seeds
-    if len(seeds) == 0:
-        raise CheckpointError("the model folder ships no seed windows (seeds.npz)")
-    if not 0 <= seed_index < len(seeds):
-        raise ValueError(f"--seed {seed_index} is out of range: this model ships {len(seeds)} seeds, "
-                         f"0 to {len(seeds) - 1}")
-    seed = seeds[seed_index]
-    generated = eng.extrapolate(seed, frames)  # raw features [frames, C]
-    feats = np.concatenate([seed, generated], axis=0)
-    names = eng.ckpt.seed_names
-    return features_to_positions(feats), names[seed_index] if seed_index < len(names) else f"seed {seed_index}"
 
 
 def main(argv=None) -> int:
@@ -61,23 +52,39 @@ def main(argv=None) -> int:
     if args.frames < 1:
         print("error: --frames must be at least 1", file=sys.stderr)
         return 2
+    if args.path_frames is not None and args.path_frames < 0:
+        print("error: --path-frames must be 0 or more", file=sys.stderr)
+        return 2
     started = time.perf_counter()
     try:
-        positions, seed_name = generate(args.model, args.seed, args.frames)
+        motion = build_motion(args.model, args.seed, args.frames, args.path_frames)
     except (CheckpointError, ValueError, OSError) as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
     took = time.perf_counter() - started
-    if not np.all(np.isfinite(positions)):
+    if not np.all(np.isfinite(motion.locked)):
         print("error: the model produced non-finite values; nothing written", file=sys.stderr)
         return 1
+    walk = len(motion.walked) - len(motion.extended)
+    print(f"generated {args.frames} frames from {motion.seed_name}, then {walk} frames on the figure-eight, "
+          f"foot-locked, in {took:.2f} s")
+    print(f"foot skate: {motion.skate_before_cm:.2f} cm/frame before the lock, "
+          f"{motion.skate_after_cm:.2f} after")
     out = Path(args.out)
-    bvh = write_bvh(out / "demo.bvh", positions, fps=MODEL_FPS)
-    title = f"STRNN: {args.frames} frames generated from {seed_name} ({len(positions) / MODEL_FPS:.1f} s)"
-    png = contact_sheet(out / "demo.png", positions, count=args.panels, title=title)
-    print(f"generated {args.frames} frames from {seed_name} in {took:.2f} s")
+    bvh = write_bvh(out / "demo.bvh", motion.locked, fps=MODEL_FPS)
+    title = (f"STRNN: {motion.seed_name} + {args.frames} frames" + (f" + {walk} on a figure-eight" if walk else "")
+             + f", foot-locked ({len(motion.locked) / MODEL_FPS:.1f} s)")
+    png = contact_sheet(out / "demo.png", motion.locked, count=args.panels, title=title)
+    plots = plot_demo(out / "demo_plots.png", load_evaluation(args.model), motion.skate_before_cm,
+                      motion.skate_after_cm)
     print(f"BVH: {bvh}")
     print(f"PNG: {png}")
+    print(f"Plots: {plots}")
+    if args.no_blend:
+        print("Blend: skipped (--no-blend)")
+    else:
+        blend, note = write_blend(bvh, out / "demo.blend")
+        print(f"Blend: {blend}" if blend else f"note: {note}")
     return 0
 
 

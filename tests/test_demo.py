@@ -40,15 +40,38 @@ def _demo_module():
     return demo
 
 
-def test_demo_writes_bvh_and_png(tiny_model, tmp_path, capsys):
+def test_demo_writes_bvh_png_plots_and_blend(tiny_model, tmp_path, capsys):
     out = tmp_path / "out"
-    assert _demo_module().main(["--model", str(tiny_model), "--out", str(out), "--frames", "90"]) == 0
+    argv = ["--model", str(tiny_model), "--out", str(out), "--frames", "30", "--path-frames", "25"]
+    assert _demo_module().main(argv) == 0
     printed = capsys.readouterr().out
-    assert f"BVH: {out / 'demo.bvh'}" in printed and f"PNG: {out / 'demo.png'}" in printed
+    for label, name in (("BVH", "demo.bvh"), ("PNG", "demo.png"), ("Plots", "demo_plots.png")):
+        assert f"{label}: {out / name}" in printed
+    assert "foot skate:" in printed and "25 frames on the figure-eight" in printed
     bvh = read_bvh(out / "demo.bvh")
-    assert bvh.frames == 20 + 90  # the seed window, then the generated frames
+    assert bvh.frames == 20 + 30 + 25  # the seed window, the continuation, the walk
     assert np.all(np.isfinite(canonical_positions(bvh)))
-    assert (out / "demo.png").read_bytes().startswith(b"\x89PNG")
+    for name in ("demo.png", "demo_plots.png"):
+        assert (out / name).read_bytes().startswith(b"\x89PNG")
+    if importlib.util.find_spec("bpy") is None:
+        assert "note: the bpy module is not installed" in printed
+    else:
+        assert f"Blend: {out / 'demo.blend'}" in printed
+        head = (out / "demo.blend").read_bytes()[:7]
+        assert head == b"BLENDER" or head.startswith(b"\x28\xb5\x2f\xfd")  # plain, or zstd-compressed
+
+
+def test_demo_skips_the_walk_and_blend_without_torch_and_bpy(tiny_model, tmp_path, capsys, monkeypatch):
+    real = importlib.util.find_spec
+    monkeypatch.setattr(importlib.util, "find_spec",
+                        lambda name, *a: None if name in ("torch", "bpy") else real(name, *a))
+    out = tmp_path / "out"
+    assert _demo_module().main(["--model", str(tiny_model), "--out", str(out), "--frames", "30"]) == 0
+    printed = capsys.readouterr().out
+    assert "note: torch is not installed: figure-eight walk skipped" in printed
+    assert "note: the bpy module is not installed: .blend skipped" in printed
+    assert read_bvh(out / "demo.bvh").frames == 20 + 30
+    assert (out / "demo_plots.png").is_file() and not (out / "demo.blend").exists()
 
 
 def test_demo_rejects_a_seed_out_of_range(tiny_model, tmp_path, capsys):
