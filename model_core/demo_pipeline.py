@@ -9,16 +9,12 @@ from __future__ import annotations
 
 import importlib.util
 import json
-import subprocess
-import sys
-import textwrap
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from .checkpoint import CheckpointError
-from .conventions import MODEL_FPS
 from .features import features_to_positions, heading, yaw_matrix
 from .footlock import detect_foot_contacts, foot_lock, foot_skate_cm
 from .paths import Path as CurvePath, evaluation_paths
@@ -146,33 +142,3 @@ def load_evaluation(model: str | Path | None) -> dict | None:
         return json.loads((folder / "evaluation.json").read_text())
     except (OSError, ValueError):
         return None
-
-
-_BLEND_SCRIPT = textwrap.dedent("""
-    import sys
-    import bpy
-    bvh, blend, fps = sys.argv[1], sys.argv[2], int(sys.argv[3])
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    bpy.context.scene.render.fps = fps
-    bpy.ops.import_anim.bvh(filepath=bvh, update_scene_fps=True, update_scene_duration=True)
-    bpy.ops.wm.save_as_mainfile(filepath=blend)
-""")
-
-
-def write_blend(bvh: str | Path, blend: str | Path, timeout: float = 120.0) -> tuple[Path | None, str]:
-    """Import ``bvh`` into a factory-reset scene with the ``bpy`` module and save ``blend``.
-    Runs in a child Python so that bpy's state never touches this process. Returns
-    (path or None, note explaining a skip or failure)."""
-    if importlib.util.find_spec("bpy") is None:
-        return None, "the bpy module is not installed: .blend skipped (scripts/setup.sh installs it)"
-    shown, blend = Path(blend), Path(blend).resolve()
-    blend.parent.mkdir(parents=True, exist_ok=True)
-    try:
-        done = subprocess.run([sys.executable, "-c", _BLEND_SCRIPT, str(Path(bvh).resolve()), str(blend),
-                               str(int(MODEL_FPS))], capture_output=True, text=True, timeout=timeout)
-    except subprocess.TimeoutExpired:
-        return None, f"bpy did not finish within {timeout:.0f} s: .blend skipped"
-    if done.returncode != 0 or not blend.is_file():
-        tail = (done.stderr or done.stdout).strip().splitlines()[-3:]
-        return None, "writing the .blend failed: " + " | ".join(tail)
-    return shown, ""
