@@ -16,7 +16,7 @@ import numpy as np
 
 from .checkpoint import Checkpoint, load_release
 from .conventions import LAYOUT, PARENTS
-from .features import RootStart, features_to_positions, integrate_root, positions_to_features
+from .features import RootStart, features_to_positions, integrate_root, positions_to_features, yaw_matrix
 from .spatial_fold import fold_spatial
 
 
@@ -208,8 +208,6 @@ class Engine:
 
 
 def _yaw_offset(delta: np.ndarray) -> np.ndarray:
-    from .features import yaw_matrix
-
     return yaw_matrix(np.unwrap(delta))
 
 

@@ -76,10 +76,3 @@ def walking_skeleton(frames: int = 120, fps: float = MODEL_FPS, speed: float = 1
             grot[:, j] = grot[:, p] @ rot
             gpos[:, j] = gpos[:, p] + np.einsum("fij,j->fi", grot[:, p], _offset(name))
     return gpos.astype(np.float32)
-
-
-def bone_lengths(pos: np.ndarray) -> np.ndarray:
-    """Bone lengths ``[F, 20]`` (metres) of canonical positions ``[F, 21, 3]``, child order of JOINTS[1:]."""
-    child = np.arange(1, len(JOINTS))
-    return np.linalg.norm(pos[:, child] - pos[:, PARENTS[child]], axis=-1)
-

@@ -24,8 +24,9 @@ from model_core.control import (  # noqa: E402
 )
 from model_core.conventions import CONTACT_JOINTS, LAYOUT, PARENTS  # noqa: E402
 from model_core.features import features_to_positions, heading, positions_to_features  # noqa: E402
+from model_core.metrics import bone_lengths_of as bone_lengths  # noqa: E402
 from model_core.paths import Path, evaluation_paths, path_errors_cm  # noqa: E402
-from model_core.synthetic import bone_lengths, walking_skeleton  # noqa: E402
+from model_core.synthetic import walking_skeleton  # noqa: E402
 
 REPO = FilePath(__file__).resolve().parent.parent
 

@@ -9,8 +9,9 @@ from model_core.bvh import read_bvh
 from model_core.conventions import LAYOUT, MODEL_FPS, STANDARD_LEG_LENGTH, UP_AXIS
 from model_core.dataset import fps_override
 from model_core.features import features_to_positions, positions_to_features
+from model_core.metrics import bone_lengths_of as bone_lengths
 from model_core.rigs import detect_rig, leg_length, load_clip
-from model_core.synthetic import bone_lengths, walking_skeleton
+from model_core.synthetic import walking_skeleton
 
 # (folder under the mocap root, file pattern, expected rig family)
 REAL_FAMILIES = [

@@ -8,7 +8,8 @@ import pytest
 from model_core import footlock as fl
 from model_core.conventions import CONTACT_JOINTS, MODEL_FPS
 from model_core.features import positions_to_features
-from model_core.synthetic import bone_lengths, walking_skeleton
+from model_core.metrics import bone_lengths_of as bone_lengths
+from model_core.synthetic import walking_skeleton
 
 
 def sliding(pos: np.ndarray, amplitude: float = 0.05) -> np.ndarray:
