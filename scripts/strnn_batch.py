@@ -14,7 +14,8 @@ armature, and writes the result with Blender's own BVH exporter (or saves a .ble
 ``OUT/NAME.<command>.bvh``. Folders are searched recursively for *.bvh and *.blend; their
 sub-folders are kept under OUT. An input is never overwritten unless ``--in-place``.
 
-One progress line per finished file, then a summary table (file, status, seconds, reason).
+One progress line per finished file, then a summary table (file, status, seconds, reason). A
+file whose worker runs past ``--timeout`` seconds (default 900) is killed and reported as failed.
 Exit status: 0 when every file was processed, 1 when any failed (each failure and its reason
 are listed at the end), 2 for bad arguments.
 """
@@ -22,8 +23,8 @@ are listed at the end), 2 for bad arguments.
 from __future__ import annotations
 
 import argparse
-import concurrent.futures as cf
 import multiprocessing
+import multiprocessing.connection as mp_connection
 import os
 import shutil
 import sys
@@ -64,6 +65,9 @@ def build_parser() -> argparse.ArgumentParser:
     run = common.add_argument_group("running")
     run.add_argument("--jobs", "-j", type=int, default=1, metavar="N",
                      help="files processed at the same time, each in its own process (default: 1)")
+    run.add_argument("--timeout", type=float, default=900.0, metavar="SECONDS",
+                     help="give up on a file whose worker runs longer than this; it is killed, reported "
+                          "as failed and nothing is written for it (default: 900; 0: no limit)")
     run.add_argument("--extension", type=Path, default=None, metavar="ZIP",
                      help="the extension zip to install (default: dist/strnn_motion-*.zip, rebuilt with "
                           "scripts/build_extension.py when older than the sources)")
@@ -127,6 +131,8 @@ def operator_call(args) -> tuple[str, dict]:
 def check_args(parser, args) -> None:
     if args.jobs < 1:
         parser.error("--jobs must be at least 1")
+    if args.timeout < 0:
+        parser.error("--timeout must not be negative (0: no limit)")
     if args.command == "extend" and args.frames < 1:
         parser.error("--frames must be at least 1")
     if args.command == "denoise" and not 0.0 <= args.strength <= 1.0:
@@ -218,32 +224,63 @@ def summary(results: list[dict]) -> str:
     return "\n".join(lines)
 
 
-def run_pool(jobs: list[dict], workers: int, report) -> list[dict]:
-    """Run ``jobs`` in fresh spawned processes (one per file); a job whose process died is retried alone once."""
-    results, retry = {}, []
+def _worker(job: dict, conn) -> None:
+    """Spawned process: process one file and send its result back."""
+    conn.send(process_file(job))
+    conn.close()
+
+
+def _failed(job: dict, seconds: float, reason: str) -> dict:
+    return {"file": job["display"], "status": "failed", "output": "", "seconds": seconds, "reason": reason}
+
+
+def _discard_partial(job: dict) -> None:
+    """Remove what a killed worker may have left: its half-written output and its Blender user folder."""
+    dst = Path(job["output"])
+    dst.with_name(dst.stem + ".tmp" + dst.suffix).unlink(missing_ok=True)
+    shutil.rmtree(job["user_dir"], ignore_errors=True)
+
+
+def run_pool(jobs: list[dict], workers: int, report, timeout: float = 0.0) -> list[dict]:
+    """Run ``jobs`` with at most ``workers`` at a time, each in a fresh spawned process (its own bpy).
+
+    A worker that runs past ``timeout`` seconds (0: no limit) is killed and its file reported as
+    failed, as is one whose process dies; neither affects the other files."""
     ctx = multiprocessing.get_context("spawn")
-    with cf.ProcessPoolExecutor(max_workers=workers, mp_context=ctx, max_tasks_per_child=1) as pool:
-        futures = {pool.submit(process_file, job): job for job in jobs}
-        for future in cf.as_completed(futures):
-            job = futures[future]
-            try:
-                result = future.result()
-            except cf.process.BrokenProcessPool:
-                retry.append(job)
-                continue
-            results[job["index"]] = result
-            report(result)
-    for job in retry:  # the pool breaks for every pending job when one process dies: find the culprit alone
-        with cf.ProcessPoolExecutor(max_workers=1, mp_context=ctx, max_tasks_per_child=1) as pool:
-            start = time.perf_counter()
-            try:
-                result = pool.submit(process_file, job).result()
-            except cf.process.BrokenProcessPool:
-                result = {"file": job["display"], "status": "failed", "output": "",
-                          "seconds": time.perf_counter() - start,
-                          "reason": "the Blender worker process crashed on this file"}
+    pending, running, results = list(jobs), {}, {}
+
+    def finish(conn, result):
+        proc, job, _ = running.pop(conn)
+        proc.join()
+        conn.close()
+        _discard_partial(job)
         results[job["index"]] = result
         report(result)
+
+    while pending or running:
+        while pending and len(running) < workers:
+            job = pending.pop(0)
+            job["user_dir"] = tempfile.mkdtemp(prefix="strnn_batch_")
+            recv, send = ctx.Pipe(duplex=False)
+            proc = ctx.Process(target=_worker, args=(job, send), daemon=True)
+            proc.start()
+            send.close()
+            running[recv] = (proc, job, time.perf_counter())
+        for conn in mp_connection.wait(list(running), timeout=0.2):
+            proc, job, started = running[conn]
+            try:
+                result = conn.recv()
+            except EOFError:  # the process died without an answer
+                proc.join()
+                result = _failed(job, time.perf_counter() - started,
+                                 f"the Blender worker process crashed on this file (exit code {proc.exitcode})")
+            finish(conn, result)
+        now = time.perf_counter()
+        for conn, (proc, job, started) in list(running.items()):
+            if timeout and now - started > timeout:
+                proc.kill()
+                finish(conn, _failed(job, now - started, f"timed out after {timeout:g} s (--timeout); "
+                                                          "nothing written for it"))
     return [results[i] for i in sorted(results)]
 
 
@@ -295,7 +332,7 @@ def main(argv: list[str] | None = None) -> int:
             print(progress_line(done, total, result), flush=True)
 
         order = {job["display"]: job["index"] for job in jobs}
-        processed = run_pool(jobs, min(args.jobs, len(jobs)), report)
+        processed = run_pool(jobs, min(args.jobs, len(jobs)), report, args.timeout)
         results += sorted(processed, key=lambda r: order.get(r["file"], 0))
     wall = time.perf_counter() - start
     failed = [r for r in results if r["status"] != "ok"]
@@ -456,7 +493,7 @@ def process_file(job: dict) -> dict:
     """Worker entry point: process one file in this (fresh) process; never raises."""
     start = time.perf_counter()
     result = {"file": job["display"], "status": "failed", "output": "", "reason": ""}
-    user_dir = Path(tempfile.mkdtemp(prefix="strnn_batch_"))
+    user_dir = Path(job.get("user_dir") or tempfile.mkdtemp(prefix="strnn_batch_"))
     log = user_dir / "blender.log"
     saved = None
     if not job["verbose"]:  # Blender prints from C as well as Python: redirect the descriptors

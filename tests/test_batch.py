@@ -99,3 +99,72 @@ def test_in_place_overwrites_only_when_asked(tmp_path, extension, capsys):
     code = strnn_batch.main(["extend", "--frames", "5", "--in-place", str(clip), "--extension", str(extension)])
     assert code == 0 and frames_of(clip) == 45
     assert [p.name for p in tmp_path.iterdir()] == ["walk.bvh"]
+
+
+def test_timeout_kills_the_worker_and_writes_nothing(tmp_path, extension, capsys):
+    clip = write_bvh(tmp_path / "walk.bvh", walking_skeleton(40))
+    before = clip.read_bytes()
+    out = tmp_path / "out"
+    code = strnn_batch.main(["extend", "--frames", "5", str(clip), "--out", str(out), "--timeout", "0.5",
+                             "--extension", str(extension)])
+    err = capsys.readouterr().err
+    assert code == 1
+    assert "walk.bvh: timed out after 0.5 s (--timeout)" in err
+    assert not out.exists() or not any(out.iterdir())
+    assert clip.read_bytes() == before
+
+
+def run_bpy(code: str) -> dict:
+    """Run ``code`` in a fresh Python with the bpy module; it prints one JSON object, which is returned."""
+    import json
+    import subprocess
+
+    done = subprocess.run([sys.executable, "-c", "import bpy, json\n" + code], capture_output=True, text=True,
+                          timeout=120, cwd=REPO)
+    assert done.returncode == 0, done.stderr[-2000:]
+    return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+def test_follow_a_curve_in_a_blend_file_and_blend_to_bvh(tmp_path, extension, capsys):
+    pytest.importorskip("torch")  # follow fine-tunes the model with torch
+    clip = write_bvh(tmp_path / "walk.bvh", walking_skeleton(60))
+    scene = tmp_path / "scene.blend"
+    run_bpy(f"""
+bpy.ops.wm.read_factory_settings(use_empty=True)
+bpy.ops.import_anim.bvh(filepath={str(clip)!r})
+data = bpy.data.curves.new("Path", "CURVE")
+spline = data.splines.new("POLY")
+spline.points.add(1)
+spline.points[0].co = (0.0, 0.0, 0.0, 1.0)
+spline.points[1].co = (0.0, -6.0, 0.0, 1.0)
+bpy.context.scene.collection.objects.link(bpy.data.objects.new("Path", data))
+bpy.ops.wm.save_as_mainfile(filepath={str(scene)!r})
+print(json.dumps({{}}))
+""")
+    before = scene.read_bytes()
+    out = tmp_path / "out"
+    code = strnn_batch.main(["follow", "--curve", "Path", "--frames", "60", str(scene), "--out", str(out),
+                             "--extension", str(extension)])
+    assert code == 0, capsys.readouterr().err
+    result = out / "scene.follow.blend"
+    assert result.is_file() and scene.read_bytes() == before
+    got = run_bpy(f"""
+bpy.ops.wm.open_mainfile(filepath={str(result)!r})
+arm = next(o for o in bpy.data.objects if o.type == "ARMATURE")
+action = arm.animation_data.action
+scene = bpy.context.scene
+end = int(action.frame_range[1])
+scene.frame_set(end)
+hips = arm.matrix_world @ arm.pose.bones[0].head
+print(json.dumps({{"actions": sorted(a.name for a in bpy.data.actions), "active": action.name,
+                  "frames": end - int(action.frame_range[0]) + 1, "hips": list(hips)}}))
+""")
+    assert got["active"] != "walk" and "walk" in got["actions"]  # a new action; the original kept
+    assert got["frames"] >= 60
+    x, y, _ = got["hips"]
+    assert abs(x) < 0.3 and y < -1.0, got["hips"]  # walked down the curve (-Y), staying on it
+
+    code = strnn_batch.main(["denoise", "--format", "bvh", str(scene), "--out", str(out),
+                             "--extension", str(extension)])
+    assert code == 0, capsys.readouterr().err
+    assert frames_of(out / "scene.denoise.bvh") == 60 and scene.read_bytes() == before
