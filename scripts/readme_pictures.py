@@ -1,0 +1,343 @@
+#!/usr/bin/env python3
+"""Pictures of each operator for the README, made by the real extension inside Blender.
+
+Installs the built extension zip into the ``bpy`` module (a temporary user repository, as
+scripts/strnn_batch.py does), imports motion-capture clips with Blender's own BVH importer,
+runs the operators (strnn.extend_clip, strnn.denoise_action, strnn.foot_lock,
+strnn.follow_curve) on the armatures, reads the bones back in world space frame by frame and
+draws them (matplotlib) into --out:
+
+- extend.png: the clip (grey) and its continuation (blue), seen from the side and above;
+- denoise.png: a clip with 3 cm of Gaussian noise on every joint, denoised, against the clean
+  clip (a wrist's height over time and the error per frame, measured here);
+- footlock.png: a foot's ground speed and path before and after the lock;
+- follow.png: a walk along a figure-eight curve, from above and from the side.
+
+The clips come from the project's own test split (``--data``, default data/mocap, unpacked
+from ../shared/mocap); the printed figures are measured in the same run.
+
+    .venv/bin/python scripts/readme_pictures.py --out docs/images
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import tempfile
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(REPO))
+sys.path.insert(0, str(REPO / "scripts"))
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt
+import numpy as np
+
+from model_core.conventions import JOINTS, PARENTS
+from model_core.features import detect_contacts
+from model_core.footlock import foot_skate_cm
+
+EXTEND_CLIP = "bandai-namco/dataset-2/dataset-2_walk-turn-right_normal_004.bvh"
+DENOISE_CLIP = "bandai-namco/dataset-2/dataset-2_wave-left-hand_feminine_018.bvh"
+FOLLOW_CLIP = "bandai-namco/dataset-2/dataset-2_walk_active_011.bvh"
+BANDAI_SCALE = 0.01  # the Bandai-Namco files are in centimetres: import them in metres
+LEFT, RIGHT, CENTRE, NEW = "#d62728", "#1f77b4", "#333333", "#1f77b4"
+
+
+def parse_args(argv=None) -> argparse.Namespace:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], epilog=__doc__.split("\n\n", 1)[1],
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--data", type=Path, default=REPO / "data" / "mocap", help="unpacked motion-capture folder")
+    p.add_argument("--out", type=Path, default=REPO / "docs" / "images", help="folder for the PNG files")
+    p.add_argument("--extension", type=Path, default=None, help="extension zip (default: built into a temp folder)")
+    p.add_argument("--seed", type=int, default=0, help="noise seed of the denoise picture")
+    return p.parse_args(argv)
+
+
+# ------------------------------------------------------------------ Blender side
+def start_blender(zip_path: Path, user_dir: Path):
+    import bpy
+    import strnn_batch
+
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    strnn_batch.install_extension(bpy, str(zip_path), user_dir)
+    return bpy
+
+
+def import_bvh(bpy, path: Path, scale: float = 1.0):
+    bpy.ops.wm.read_homefile(use_empty=True)
+    bpy.ops.import_anim.bvh(filepath=str(path), global_scale=scale, update_scene_fps=True,
+                            update_scene_duration=True)
+    obj = bpy.context.view_layer.objects.active
+    obj.select_set(True)
+    return obj
+
+
+def action_range(obj) -> tuple[int, int]:
+    start, end = obj.animation_data.action.frame_range
+    return int(round(start)), int(round(end))
+
+
+def sample(bpy, obj, start: int, end: int) -> tuple[np.ndarray, list[str]]:
+    """World-space bone heads and tails ``[F, bones, 2, 3]`` (Blender Z-up metres) and the bone names."""
+    scene = bpy.context.scene
+    names = [b.name for b in obj.pose.bones]
+    out = np.empty((end - start + 1, len(names), 2, 3))
+    for i, frame in enumerate(range(start, end + 1)):
+        scene.frame_set(frame)
+        m = obj.matrix_world
+        for j, pb in enumerate(obj.pose.bones):
+            out[i, j, 0], out[i, j, 1] = m @ pb.head, m @ pb.tail
+    return out, names
+
+
+# ------------------------------------------------------------------ drawing
+COLOURS = [LEFT if j.startswith("l_") else RIGHT if j.startswith("r_") else CENTRE for j in JOINTS]
+
+
+def draw_pose(ax, joints: np.ndarray, axes=(0, 2), alpha=1.0, colour=None, lw=1.4):
+    """One skeleton ``[21, 3]`` (Z-up) projected on two world ``axes``, left side red, right side blue."""
+    for j, parent in enumerate(PARENTS):
+        if parent >= 0:
+            a, b = joints[parent], joints[j]
+            ax.plot([a[axes[0]], b[axes[0]]], [a[axes[1]], b[axes[1]]], color=colour or COLOURS[j], alpha=alpha,
+                    lw=lw, solid_capstyle="round")
+
+
+def ghosts(ax, joints: np.ndarray, every: int, axes, colour=None, alpha=(0.25, 1.0)):
+    idx = list(range(0, len(joints), every)) + [len(joints) - 1]
+    for k, i in enumerate(idx):
+        a = alpha[0] + (alpha[1] - alpha[0]) * k / max(len(idx) - 1, 1)
+        draw_pose(ax, joints[i], axes, a, colour)
+
+
+def filmstrip(ax, joints: np.ndarray, frames: list[int], spacing: float, colour=None, first_slot: int = 0):
+    """Skeletons ``[F, 21, 3]`` (Z-up) side by side, each seen from its own side (across its direction
+    of travel), hips at slot * ``spacing``."""
+    for slot, i in enumerate(frames, first_slot):
+        a, b = joints[max(i - 5, 0), 0, :2], joints[min(i + 5, len(joints) - 1), 0, :2]
+        d = b - a
+        d = d / np.linalg.norm(d) if np.linalg.norm(d) > 1e-6 else np.array([1.0, 0.0])
+        u = (joints[i, :, :2] - joints[i, 0, :2]) @ d + slot * spacing
+        draw_pose(ax, np.stack([u, np.zeros_like(u), joints[i, :, 2]], -1), (0, 2), 1.0, colour)
+
+
+def joints_z_up(obj, poses: np.ndarray, names: list[str]) -> np.ndarray:
+    """The 21 canonical joints ``[F, 21, 3]`` in Blender's axes (Z-up) through the extension's bone map."""
+    bone_map = obj.data.strnn_map
+    cols = [(names.index(getattr(bone_map, j)), int(getattr(bone_map, f"{j}_tail", False))) for j in JOINTS]
+    return np.stack([poses[:, b, end] for b, end in cols], 1)
+
+
+def canonical(obj, poses: np.ndarray, names: list[str]) -> np.ndarray:
+    """The 21 canonical joints ``[F, 21, 3]`` in the model's axes (Y-up metres)."""
+    z_up = joints_z_up(obj, poses, names)
+    return np.stack([z_up[..., 0], z_up[..., 2], -z_up[..., 1]], -1)
+
+
+def bone_of(obj, names: list[str], joint: str) -> int:
+    """Index in ``names`` of the bone the extension's bone map (filled by the operators) gives ``joint``."""
+    return names.index(getattr(obj.data.strnn_map, joint))
+
+
+def finish(fig, path: Path):
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110, bbox_inches="tight")
+    plt.close(fig)
+    print(f"wrote {path}")
+
+
+# ------------------------------------------------------------------ pictures
+def picture_extend(bpy, clip: Path, out: Path, frames: int = 150) -> dict:
+    obj = import_bvh(bpy, clip, BANDAI_SCALE)
+    start, end = action_range(obj)
+    bpy.ops.strnn.extend_clip(frames=frames)
+    poses, names = sample(bpy, obj, start, end + frames)
+    joints = joints_z_up(obj, poses, names)
+    old, new = joints[: end - start + 1], joints[end - start + 1:]
+    fig, (side, top) = plt.subplots(1, 2, figsize=(14, 3.4), gridspec_kw={"width_ratios": [3, 1]})
+    shown_old = list(range(len(old) - 1 - 4 * 10, len(old), 10))
+    shown_new = list(range(9, len(new), 10))
+    filmstrip(side, old, shown_old, 0.6, colour="#9a9a9a")
+    filmstrip(side, new, shown_new, 0.6, first_slot=len(shown_old))
+    side.axhline(0, color="k", lw=0.6)
+    side.set_aspect("equal")
+    side.axis("off")
+    side.set_title("every 10th frame, each seen from its side: the clip's last frames (grey), then the new ones",
+                   fontsize=9)
+    top.plot(old[:, 0, 0], old[:, 0, 1], color="#9a9a9a", lw=2, label=f"clip ({len(old)} frames)")
+    top.plot(new[:, 0, 0], new[:, 0, 1], color=NEW, lw=2, label=f"Extend Clip (+{len(new)} frames)")
+    top.set_aspect("equal")
+    top.grid(alpha=0.3)
+    top.set_title("hips path from above (m)", fontsize=9)
+    top.legend(loc="best", fontsize=8)
+    fig.suptitle(f"Extend Clip: {clip.name} (a test-split take) continued by {frames} frames")
+    finish(fig, out / "extend.png")
+    return {"clip": clip.name, "frames": frames}
+
+
+def fcurves(action):
+    """Every F-curve of ``action``: layered actions (Blender 4.4+) or the legacy list."""
+    if hasattr(action, "layers") and action.layers:
+        return [fc for layer in action.layers for strip in layer.strips for bag in strip.channelbags
+                for fc in bag.fcurves]
+    return list(action.fcurves)
+
+
+def add_jitter(action, degrees: float, seed: int) -> None:
+    """Gaussian jitter of ``degrees`` (std) on every keyed Euler rotation channel: noisy capture."""
+    rng = np.random.default_rng(seed)
+    for fc in fcurves(action):
+        if fc.data_path.endswith("rotation_euler"):
+            for key in fc.keyframe_points:
+                key.co[1] += float(rng.normal(0.0, np.radians(degrees)))
+                key.interpolation = "LINEAR"
+            fc.update()
+
+
+def picture_denoise(bpy, clip: Path, out: Path, seed: int, degrees: float = 1.5) -> dict:
+    obj = import_bvh(bpy, clip, BANDAI_SCALE)
+    start, end = action_range(obj)
+    clean, names = sample(bpy, obj, start, end)
+    add_jitter(obj.animation_data.action, degrees, seed)
+    before, _ = sample(bpy, obj, start, end)
+    bpy.ops.strnn.denoise_action()
+    after, _ = sample(bpy, obj, start, end)
+    ref = canonical(obj, clean, names)
+    err = {k: np.linalg.norm(canonical(obj, v, names) - ref, axis=-1).mean(-1) * 100
+           for k, v in (("noisy", before), ("denoised", after))}
+    wrist = bone_of(obj, names, "l_wrist")
+    t = np.arange(len(clean)) / 30.0
+    fig, (a, b) = plt.subplots(1, 2, figsize=(13, 3.8))
+    a.plot(t, before[:, wrist, 0, 2], color="#bbbbbb", lw=1,
+           label=f"noisy input ({degrees:g} degree jitter per channel)")
+    a.plot(t, clean[:, wrist, 0, 2], color="k", lw=1.6, label="clean capture")
+    a.plot(t, after[:, wrist, 0, 2], color=NEW, lw=1.6, label="Denoise Action")
+    a.set_xlabel("time (s)")
+    a.set_ylabel("left wrist height (m)")
+    a.legend(fontsize=8)
+    b.plot(t, err["noisy"], color="#bbbbbb", label=f"noisy: mean {err['noisy'].mean():.2f} cm")
+    b.plot(t, err["denoised"], color=NEW, label=f"denoised: mean {err['denoised'].mean():.2f} cm")
+    b.set_xlabel("time (s)")
+    b.set_ylabel("mean joint error vs clean (cm)")
+    b.legend(fontsize=8)
+    for ax in (a, b):
+        ax.grid(alpha=0.3)
+    fig.suptitle(f"Denoise Action on {clip.name} (a test-split take) with Gaussian jitter of {degrees:g} degrees "
+                 "on every rotation channel; error over the 21 model joints")
+    finish(fig, out / "denoise.png")
+    return {"clip": clip.name, "noisy_cm": float(err["noisy"].mean()), "denoised_cm": float(err["denoised"].mean())}
+
+
+def foot_speed(poses: np.ndarray, foot: int) -> np.ndarray:
+    return np.r_[0.0, np.linalg.norm(np.diff(poses[:, foot, 0, :2], axis=0), axis=1) * 100]
+
+
+def picture_footlock(bpy, clip: Path, out: Path, frames: int = 150) -> dict:
+    obj = import_bvh(bpy, clip, BANDAI_SCALE)
+    start, end = action_range(obj)
+    bpy.ops.strnn.extend_clip(frames=frames)
+    s, e = end + 1, end + frames
+    before, names = sample(bpy, obj, s, e)
+    bpy.ops.strnn.foot_lock(use_range=True, frame_start=s, frame_end=e)
+    after, _ = sample(bpy, obj, s, e)
+    foot = bone_of(obj, names, "r_foot")
+    pos0, pos1 = canonical(obj, before, names), canonical(obj, after, names)
+    contacts0, contacts1 = detect_contacts(pos0), detect_contacts(pos1)
+    skate = foot_skate_cm(pos0, contacts0), foot_skate_cm(pos1, contacts0)
+    v0, v1 = foot_speed(before, foot), foot_speed(after, foot)
+    planted = contacts0[:, 2] > 0.5  # right heel (ankle) contact, detected on the model's output
+    t = np.arange(len(v0)) / 30.0
+    fig, (a, b) = plt.subplots(1, 2, figsize=(13, 3.8), gridspec_kw={"width_ratios": [1.6, 1]})
+    a.fill_between(t, 0, max(v0.max(), 1) * planted, color="#2ca02c", alpha=0.12, step="mid", label="foot planted")
+    a.plot(t, v0, color="#bbbbbb", label="model output")
+    a.plot(t, v1, color=NEW, label="after Foot Lock")
+    a.set_xlabel("time (s)")
+    a.set_ylabel(f"{names[foot]} ground speed (cm/frame)")
+    a.legend(fontsize=8)
+    b.plot(before[:, foot, 0, 0], before[:, foot, 0, 1], ".", ms=3, color="#bbbbbb", label="before")
+    b.plot(after[:, foot, 0, 0], after[:, foot, 0, 1], ".", ms=3, color=NEW, label="after: still while planted")
+    b.set_aspect("equal")
+    b.set_title(f"{names[foot]} from above, one dot per frame", fontsize=9)
+    b.legend(fontsize=8)
+    for ax in (a, b):
+        ax.grid(alpha=0.3)
+    fig.suptitle(f"Foot Lock on {frames} frames that Extend Clip generated from {clip.name}: foot skate "
+                 f"{skate[0]:.2f} -> {skate[1]:.2f} cm/frame (both feet, contacts detected on the model's output)")
+    finish(fig, out / "footlock.png")
+    return {"clip": clip.name, "skate_before_cm": skate[0], "skate_after_cm": skate[1],
+            "contacts_after_lock": int(contacts1.sum())}
+
+
+def picture_follow(bpy, clip: Path, out: Path) -> dict:
+    import strnn_batch
+
+    obj = import_bvh(bpy, clip, BANDAI_SCALE)
+    start, end = action_range(obj)
+    poses, names = sample(bpy, obj, end - 10, end)
+    bpy.ops.strnn.auto_map()
+    hips = joints_z_up(obj, poses, names)[:, 0]
+    heading = np.arctan2(*(hips[-1, :2] - hips[0, :2])[::-1])
+    curve = strnn_batch.add_path_curve(bpy, "figure_eight")  # starts at the origin heading -Y
+    curve.location = (hips[-1, 0], hips[-1, 1], 0.0)  # drawn from where the character stands, as it walks
+    curve.rotation_euler.z = heading + np.pi / 2
+    bpy.context.view_layer.objects.active = obj
+    bpy.ops.strnn.follow_curve(curve=curve.name)
+    s, e = action_range(obj)
+    poses, names = sample(bpy, obj, end + 1, e)
+    joints = joints_z_up(obj, poses, names)
+    bpy.context.view_layer.update()
+    mw = curve.matrix_world
+    spline = curve.data.splines[0]
+    pts = np.array([list(mw @ p.co.xyz) for p in list(spline.points) + [spline.points[0]]])
+    fig, (top, side) = plt.subplots(1, 2, figsize=(14, 3.6), gridspec_kw={"width_ratios": [1, 2.2]})
+    top.plot(pts[:, 0], pts[:, 1], "--", color="k", lw=1, label="curve object")
+    top.plot(joints[:, 0, 0], joints[:, 0, 1], color=NEW, lw=2, alpha=0.5, label=f"hips ({len(joints)} new frames)")
+    ghosts(top, joints, 30, (0, 1), alpha=(0.8, 0.8))
+    top.set_aspect("equal")
+    top.grid(alpha=0.3)
+    top.legend(fontsize=8, loc="best")
+    top.set_title("from above (m), every 30th frame drawn", fontsize=9)
+    shown = list(range(0, min(len(joints), 240), 12))
+    filmstrip(side, joints, shown, 0.6)
+    side.axhline(0, color="k", lw=0.6)
+    side.set_aspect("equal")
+    side.axis("off")
+    side.set_title("the first 8 s, every 12th frame, each seen from its side", fontsize=9)
+    fig.suptitle(f"Follow Curve: {clip.name} walks a figure-eight curve (two 2 m loops), foot-locked")
+    finish(fig, out / "follow.png")
+    return {"clip": clip.name, "frames": len(joints)}
+
+
+def main(argv=None) -> int:
+    args = parse_args(argv)
+    clips = {k: args.data / v for k, v in (("extend", EXTEND_CLIP), ("denoise", DENOISE_CLIP), ("follow", FOLLOW_CLIP))}
+    missing = [str(p) for p in clips.values() if not p.is_file()]
+    if missing:
+        print(f"error: missing clips {missing}; unpack ../shared/mocap into {args.data} "
+              "(../shared/mocap/extract.sh) or pass --data", file=sys.stderr)
+        return 2
+    with tempfile.TemporaryDirectory(prefix="strnn_pictures_") as tmp:
+        tmp = Path(tmp)
+        zip_path = args.extension
+        if zip_path is None:
+            import build_extension
+
+            zip_path = Path(build_extension.main(["--out", str(tmp / "dist")]))
+        bpy = start_blender(zip_path, tmp / "user")
+        figures = {
+            "extend": picture_extend(bpy, clips["extend"], args.out),
+            "denoise": picture_denoise(bpy, clips["denoise"], args.out, args.seed),
+            "footlock": picture_footlock(bpy, clips["extend"], args.out),
+            "follow": picture_follow(bpy, clips["follow"], args.out),
+        }
+    for name, fig in figures.items():
+        print(name, {k: round(v, 2) if isinstance(v, float) else v for k, v in fig.items()})
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
