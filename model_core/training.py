@@ -19,7 +19,8 @@ import torch
 import torch.distributed as dist
 from torch.nn.parallel import DistributedDataParallel
 
-from .checkpoint import save_release
+from .checkpoint import load_release, save_release
+from .conventions import LAYOUT
 from .dataset import SPLITS, MotionData, Normaliser, load_folder, window_starts
 from .features import features_to_positions, positions_to_features
 from .model import STRNN, STRNNConfig, smoothness_cost
@@ -39,6 +40,11 @@ class TrainConfig:
     lr: float = 1e-3
     weight_decay: float = 1e-5  # L2 on weights
     smooth_weight: float = 1.0  # w_s of the long-horizon cost
+    # Recovery from the model's own output: contexts generated open loop for 1 to this many windows
+    # (0: off) in this share of the first phase's steps, followed by the supervised window.
+    rollout_windows: int = 0
+    rollout_fraction: float = 0.5
+    recon_weight: float = 1.0  # weight of the decoded (reconstructed) frames against the predicted ones in the MSE
     noise_start: float = 0.1  # input-noise std at step 0 (normalised units)
     noise_zero_at: float = 0.5  # fraction of the first phase at which the noise reaches 0
     residual_noise: float = 0.05  # input noise while pre-training the filter on ground truth
@@ -51,6 +57,7 @@ class TrainConfig:
     cache: str = "data/cache"  # cached arrays of the data folder
     max_minutes: float = 0.0  # stop (with a checkpoint) after this long; 0 = no limit
     command: str = ""  # the command line, recorded in the release metadata
+    init: str = ""  # start from the weights of this training state or release folder (fine-tuning)
 
 
 def phase_at(cfg: TrainConfig, step: int) -> str:
@@ -122,7 +129,34 @@ def window_loss(model: STRNN, window: torch.Tensor, cfg: TrainConfig, phase: str
             decoded, predicted = model.spatio_temporal(context)
         return (model.filter(torch.cat([decoded, predicted], 1)) - window).pow(2).mean()
     out = (net or model)(context, use_filter=False)
-    return (out - window).pow(2).mean() + cfg.smooth_weight * smoothness_cost(out)
+    err = (out - window).pow(2)
+    if cfg.recon_weight != 1.0:
+        w = torch.ones(err.shape[1], dtype=err.dtype)
+        w[:m] = cfg.recon_weight
+        mse = (err.mean((0, 2)) * w).sum() / w.sum()
+    else:
+        mse = err.mean()
+    return mse + cfg.smooth_weight * smoothness_cost(out)
+
+
+def rolled_context(model: STRNN, window: torch.Tensor, k: int, seam_frames: float = 10.0) -> torch.Tensor:
+    """The model's own context after ``k`` open-loop windows from the first m frames of ``window``
+    ``(B, m + k n + ..., C)``, generated as the engine does (eval mode, seam correction), without gradient."""
+    m, n = model.cfg.encode_len, model.cfg.predict_len
+    modes = [mod.training for mod in model.modules()]
+    model.eval()
+    ctx = window[:, :m]
+    pos = LAYOUT.positions
+    fade = torch.exp(-torch.arange(1, n + 1, dtype=window.dtype) / seam_frames)[None, :, None]
+    with torch.no_grad():
+        for _ in range(k):
+            out = model(ctx)
+            pred = out[:, m:].clone()
+            pred[..., pos] += fade * (ctx[:, -1:, pos] - out[:, m - 1:m, pos])
+            ctx = torch.cat([ctx, pred], 1)[:, -m:]
+    for mod, mode in zip(model.modules(), modes):
+        mod.training = mode
+    return ctx
 
 
 def phase_progress(cfg: TrainConfig, step: int) -> float:
@@ -137,6 +171,17 @@ def trainable(model: STRNN, phase: str) -> list[torch.nn.Parameter]:
     for p in model.parameters():
         p.requires_grad_((p in res) == (phase != PHASES[0]))
     return [p for p in model.parameters() if p.requires_grad]
+
+
+def initial_weights(path: str | Path) -> dict[str, torch.Tensor]:
+    """Model weights of a training state (``train_state.pt``) or a release folder, for ``--init``."""
+    path = Path(path)
+    if path.is_dir():
+        release = load_release(path)
+        fresh = STRNN(STRNNConfig(**release.config)).state_dict()
+        return {k: torch.from_numpy(np.asarray(release.weights[k])) if k in release.weights else v
+                for k, v in fresh.items()}
+    return torch.load(path, weights_only=True)["model"]
 
 
 def make_optimizer(cfg: TrainConfig, params):
@@ -196,6 +241,8 @@ def train(cfg: TrainConfig, resume: bool = False, progress: bool = True) -> Path
     norm = Normaliser.fit(np.concatenate([c.features for c in data.split("train")]))
     length = cfg.model.encode_len + cfg.model.predict_len
     train_w = Windows(data, "train", norm, length)
+    long_w = Windows(data, "train", norm, length + cfg.rollout_windows * cfg.model.predict_len) \
+        if cfg.rollout_windows else None
     val_w = Windows(data, "validation", norm, length, stride=10) if data.split("validation") else None
     model = STRNN(cfg.model)
     state_path = out / "train_state.pt"
@@ -209,6 +256,9 @@ def train(cfg: TrainConfig, resume: bool = False, progress: bool = True) -> Path
         log.info("resumed at step %d", step)
     elif resume:
         log.info("no state at %s; starting from scratch", state_path)
+    if saved is None and cfg.init:
+        model.load_state_dict(initial_weights(cfg.init))
+        log.info("initial weights from %s", cfg.init)
     if rank == 0:
         log.info("config %s", json.dumps(asdict(cfg)))
         log.info("data: %d clips (%s), %d training windows, %d unreadable files", len(data.clips),
@@ -230,10 +280,18 @@ def train(cfg: TrainConfig, resume: bool = False, progress: bool = True) -> Path
             if saved is not None and saved["phase"] == phase:
                 opt.load_state_dict(saved["optimizer"])
             log.info("phase %s from step %d (%d parameters trained)", phase, step, sum(p.numel() for p in params))
-        idx = rng.integers(0, len(train_w), per_rank)
-        window = train_w.batch(idx)
-        heavy = idx[: int(round(cfg.denoise_fraction * len(idx)))] if phase != PHASES[1] else idx[:0]
-        noisy = train_w.noisy_contexts(heavy, cfg.model.encode_len, cfg.denoise_max_cm, rng) if len(heavy) else None
+        k = int(rng.integers(1, cfg.rollout_windows + 1)) if (
+            long_w is not None and phase == PHASES[0] and rng.random() < cfg.rollout_fraction) else 0
+        if k:
+            idx = rng.integers(0, len(long_w), per_rank)
+            full = long_w.batch(idx)
+            window = full[:, k * cfg.model.predict_len:][:, :length]
+            noisy = rolled_context(model, full, k)
+        else:
+            idx = rng.integers(0, len(train_w), per_rank)
+            window = train_w.batch(idx)
+            heavy = idx[: int(round(cfg.denoise_fraction * len(idx)))] if phase != PHASES[1] else idx[:0]
+            noisy = train_w.noisy_contexts(heavy, cfg.model.encode_len, cfg.denoise_max_cm, rng) if len(heavy) else None
         loss = window_loss(model, window, cfg, phase, noise_std(cfg, step), net=net, noisy=noisy)
         scale = float(cfg.lr_final + (1 - cfg.lr_final) * 0.5 * (1 + np.cos(np.pi * phase_progress(cfg, step))))
         for group in opt.param_groups:

@@ -42,6 +42,14 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--optimizer", choices=("adam", "adadelta"), default="adam")
     p.add_argument("--lr", type=float, default=1e-3, help="learning rate (Adam)")
     p.add_argument("--smooth-weight", type=float, default=1.0, help="weight of the long-horizon cost")
+    p.add_argument("--recon-weight", type=float, default=1.0,
+                   help="weight of the reconstructed context frames against the predicted frames in the MSE")
+    p.add_argument("--rollout-windows", type=int, default=0,
+                   help="train on contexts the model generated itself, open loop for up to this many windows "
+                        "(0: off)")
+    p.add_argument("--rollout-fraction", type=float, default=0.5,
+                   help="share of the first phase's steps that use such contexts")
+    p.add_argument("--init", default="", help="start from the weights of a train_state.pt or release folder")
     p.add_argument("--noise-start", type=float, default=0.1, help="initial input-noise std")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--threads", type=int, default=0, help="torch CPU threads (0: torch's default)")
@@ -65,6 +73,8 @@ def main(argv=None) -> int:
                         residual_width=args.residual_width, dropout=args.dropout, **VARIANTS[args.variant])
     cfg = TrainConfig(data=args.data, out=args.out, model=model, steps=args.steps, batch=args.batch,
                       optimizer=args.optimizer, lr=args.lr, smooth_weight=args.smooth_weight,
+                      recon_weight=args.recon_weight, init=args.init,
+                      rollout_windows=args.rollout_windows, rollout_fraction=args.rollout_fraction,
                       noise_start=args.noise_start, seed=args.seed, cache=args.cache, max_minutes=args.max_minutes,
                       checkpoint_seconds=args.checkpoint_seconds,
                       command="python scripts/train.py " + " ".join(shlex.quote(a) for a in (argv or sys.argv[1:])))

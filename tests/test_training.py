@@ -16,7 +16,7 @@ from safetensors.numpy import load_file
 from model_core.bvh_export import write_bvh
 from model_core.model import STRNN, STRNNConfig, smoothness_cost
 from model_core.synthetic import walking_skeleton
-from model_core.training import TrainConfig, train
+from model_core.training import TrainConfig, rolled_context, train, window_loss
 
 REPO = Path(__file__).resolve().parent.parent
 
@@ -52,8 +52,8 @@ def test_overfits_one_batch():
 
 
 def _cfg(folder: Path, out: Path, **kw) -> TrainConfig:
-    return TrainConfig(data=str(folder), out=str(out), model=tiny(), steps=8, batch=8, cache="",
-                       val_every=4, checkpoint_seconds=1e9, **kw)
+    args = dict(model=tiny(), steps=8, batch=8, cache="", val_every=4, checkpoint_seconds=1e9) | kw
+    return TrainConfig(data=str(folder), out=str(out), **args)
 
 
 def test_resume_equals_uninterrupted_run(walk_folder, tmp_path):
@@ -79,6 +79,50 @@ def test_release_has_config_seeds_and_licence(walk_folder, tmp_path):
     assert "CC BY-NC 4.0" in doc["licence"]
     seeds = np.load(release / "seeds.npz", allow_pickle=False)
     assert seeds["features"].shape[1:] == (20, doc["layout"]["size"])
+
+
+def test_rolled_context_is_the_models_own_open_loop_output():
+    torch.manual_seed(0)
+    model = STRNN(tiny())
+    model.train()
+    x = torch.randn(3, 80, model.cfg.frame_size)
+    ctx = rolled_context(model, x, 2)
+    assert ctx.shape == (3, 20, model.cfg.frame_size) and model.training and not ctx.requires_grad
+    model.eval()
+    with torch.no_grad():
+        first = model(x[:, :20])[:, 20:]
+        again = rolled_context(model, x, 1, seam_frames=1e-6)  # no seam correction: the plain prediction
+    torch.testing.assert_close(again, first)
+    assert not torch.allclose(ctx, x[:, 40:60])  # generated, not the true frames
+
+
+def test_recon_weight_weights_the_decoded_frames():
+    torch.manual_seed(0)
+    model = STRNN(tiny(residual=False))
+    model.eval()
+    x = torch.randn(4, 40, model.cfg.frame_size)
+    base = _cfg(Path("."), Path("."), smooth_weight=0.0)
+    heavy = _cfg(Path("."), Path("."), smooth_weight=0.0, recon_weight=3.0)
+    with torch.no_grad():
+        out = model(x[:, :20])
+        dec, pred = (out[:, :20] - x[:, :20]).pow(2).mean(), (out[:, 20:] - x[:, 20:]).pow(2).mean()
+        torch.testing.assert_close(window_loss(model, x, base, "spatio_temporal", 0.0), (dec + pred) / 2)
+        torch.testing.assert_close(window_loss(model, x, heavy, "spatio_temporal", 0.0), (3 * dec + pred) / 4)
+
+
+def test_rollout_fine_tuning_from_init(walk_folder, tmp_path):
+    first = train(_cfg(walk_folder, tmp_path / "base"), progress=False)
+    tuned = train(_cfg(walk_folder, tmp_path / "tuned", init=str(first), rollout_windows=2, rollout_fraction=1.0),
+                  progress=False)
+    assert "initial weights from" in (tmp_path / "tuned" / "train.log").read_text()
+    a, b = load_file(str(first / "model.safetensors")), load_file(str(tuned / "model.safetensors"))
+    assert any(not np.allclose(a[k], b[k]) for k in a)  # trained on from there
+    state = torch.load(tmp_path / "base" / "train_state.pt", weights_only=True)["model"]
+    fresh = train(_cfg(walk_folder, tmp_path / "from_state", init=str(tmp_path / "base" / "train_state.pt"),
+                       steps=0), progress=False)
+    got = load_file(str(fresh / "model.safetensors"))
+    for k in got:
+        np.testing.assert_allclose(got[k], state[k].numpy(), err_msg=k)
 
 
 def test_torchrun_two_cpu_processes(walk_folder, tmp_path):
