@@ -32,9 +32,9 @@ def evaluate_prediction(engine, clips) -> dict:
     return {"horizons_ms": list(HORIZONS_MS), "mpjpe_cm": errors, "windows": windows}
 
 
-def data_speed(clips) -> float:
-    """Mean joint speed (m / frame) over the clips."""
-    return float(np.concatenate([joint_speed(c.positions) for c in clips]).mean())
+def data_speed(clips, statistic=np.mean) -> float:
+    """Mean (or another ``statistic`` of the) joint speed (m / frame) over the clips' frames."""
+    return float(statistic(np.concatenate([joint_speed(c.positions) for c in clips])))
 
 
 def pick_seed_windows(clips, count: int, length: int = 20) -> list[tuple[str, np.ndarray]]:
@@ -48,13 +48,13 @@ def pick_seed_windows(clips, count: int, length: int = 20) -> list[tuple[str, np
 
 def evaluate_long_horizon(engine, clips, frames: int, seeds: int, reference=None, log=print) -> dict:
     ref_clips = reference or clips
-    speed = data_speed(ref_clips)
+    speed, median = data_speed(ref_clips), data_speed(ref_clips, np.median)
     ref = np.concatenate([segments(pose_vectors(c.features)) for c in ref_clips if len(c.features) >= 40])
     chosen = pick_seed_windows(clips, seeds)
     seed_feats = np.stack([positions_to_features(p)[0] for _, p in chosen])
     log(f"long horizon: {seeds} seeds x {frames} frames open loop")
     rollouts = engine.extrapolate(seed_feats, frames)
-    reports = [rollout_report(r, p, speed, ref) for r, (_, p) in zip(rollouts, chosen)]
+    reports = [rollout_report(r, p, speed, ref, median_speed=median) for r, (_, p) in zip(rollouts, chosen)]
     return {
         "frames": frames, "seeds": seeds,
         "exploded": int(sum(r.exploded for r in reports)),

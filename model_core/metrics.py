@@ -119,14 +119,17 @@ def pose_vectors(feats: np.ndarray) -> np.ndarray:
 
 
 def rollout_report(feats: np.ndarray, seed_pos: np.ndarray, data_speed: float, ref_segments: np.ndarray,
-                   block: int = 1000) -> RolloutReport:
-    """Judge one open-loop rollout (raw features ``[N, C]``) against its seed positions ``[m, J, 3]``."""
+                   block: int = 1000, median_speed: float | None = None) -> RolloutReport:
+    """Judge one open-loop rollout (raw features ``[N, C]``) against its seed positions ``[m, J, 3]``.
+
+    ``data_speed``: the data's mean joint speed (m / frame), for the speed ratio; ``median_speed``
+    (default: ``data_speed``): its median, for the freeze test (below 10 % of it for 60 frames)."""
     pos = features_to_positions(feats)
     finite = bool(np.isfinite(pos).all())
     rest = np.median(bone_lengths_of(seed_pos), 0)
     exploded = not finite or bool((np.abs(bone_lengths_of(pos) / rest - 1.0) > 0.10).any())
     speed = joint_speed(pos) if finite else np.zeros(len(pos) - 1)
-    frozen = longest_run(speed < 0.1 * data_speed) >= 60
+    frozen = longest_run(speed < 0.1 * (data_speed if median_speed is None else median_speed)) >= 60
     ratio = float(speed[-block:].mean() / data_speed) if finite else float("nan")
     blocks = []
     for b in range(0, len(feats) - block + 1, block):
