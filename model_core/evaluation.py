@@ -51,6 +51,7 @@ def evaluate_long_horizon(engine, clips, frames: int, seeds: int, reference=None
     speed, median = data_speed(ref_clips), data_speed(ref_clips, np.median)
     ref = np.concatenate([segments(pose_vectors(c.features)) for c in ref_clips if len(c.features) >= 40])
     chosen = pick_seed_windows(clips, seeds)
+    by_name = {c.name: c.positions for c in clips}
     seed_feats = np.stack([positions_to_features(p)[0] for _, p in chosen])
     log(f"long horizon: {seeds} seeds x {frames} frames open loop")
     rollouts = engine.extrapolate(seed_feats, frames)
@@ -62,6 +63,8 @@ def evaluate_long_horizon(engine, clips, frames: int, seeds: int, reference=None
         "speed_ratio_last_1000": [r.speed_ratio_last_1000 for r in reports],
         "d1nn_per_block": [r.d1nn_per_block for r in reports],
         "seed_clips": [name for name, _ in chosen],
+        # each seed's own take: its mean joint speed against the same data mean
+        "seed_take_speed_ratio": [float(joint_speed(by_name[name]).mean() / speed) for name, _ in chosen],
     }
 
 

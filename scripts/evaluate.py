@@ -60,11 +60,12 @@ def print_table(result: dict, extra: dict):
         lh = result["long_horizon"]
         print(f"\nLong horizon: {lh['seeds']} seeds x {lh['frames']} frames: exploded {lh['exploded']}, "
               f"frozen {lh['frozen']}")
-        print("speed ratio of the last 1000 frames: " + " ".join(f"{r:.2f}" for r in lh["speed_ratio_last_1000"]))
+        print("speed ratio of the last 1000 frames to the data's mean, beside the seed's own take's ratio:")
+        for name, ratio, take in zip(extra["seed_clips"], lh["speed_ratio_last_1000"], extra["seed_take_speed_ratio"]):
+            print(f"  {ratio:6.2f}  (take {take:5.2f})  {name}")
         blocks = [sum(b[i] for b in lh["d1nn_per_block"]) / len(lh["d1nn_per_block"])
                   for i in range(len(lh["d1nn_per_block"][0]))]
         print("mean D_1nn per 1000-frame block: " + " ".join(f"{d:.4f}" for d in blocks))
-        print("seeds: " + ", ".join(extra["seed_clips"]))
     if "denoise" in result:
         dn = result["denoise"]
         print("\nDenoising MPJPE (cm)")
@@ -93,6 +94,7 @@ def run(args) -> dict:
         lh = evaluate_long_horizon(engine, clips, args.long_horizon, args.seeds, reference,
                                    log=lambda m: print(m, file=sys.stderr))
         extra["seed_clips"] = lh.pop("seed_clips")
+        extra["seed_take_speed_ratio"] = lh.pop("seed_take_speed_ratio")
         result["long_horizon"] = lh
     if args.denoise_std:
         dn = evaluate_denoise(engine, clips, args.denoise_std)
