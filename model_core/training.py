@@ -159,6 +159,15 @@ def rolled_context(model: STRNN, window: torch.Tensor, k: int, seam_frames: floa
     return ctx
 
 
+def rollout_batch(model: STRNN, full: torch.Tensor, k: int) -> tuple[torch.Tensor, torch.Tensor]:
+    """(target window ``(B, m + n, C)``, context ``(B, m, C)``) after ``k`` open-loop windows from the
+    start of the true windows ``full`` ``(B, m + (k + 1) n, C)``: the context is the model's own
+    output, which the decoder is to reconstruct, and the predictor is to continue it with the truth."""
+    m, n = model.cfg.encode_len, model.cfg.predict_len
+    context = rolled_context(model, full, k)
+    return torch.cat([context, full[:, k * n + m:k * n + m + n]], 1), context
+
+
 def phase_progress(cfg: TrainConfig, step: int) -> float:
     """Fraction (0..1) of the current phase done at ``step``."""
     bounds = np.cumsum([0.0, *cfg.phase_split]) * cfg.steps
@@ -283,10 +292,7 @@ def train(cfg: TrainConfig, resume: bool = False, progress: bool = True) -> Path
         k = int(rng.integers(1, cfg.rollout_windows + 1)) if (
             long_w is not None and phase == PHASES[0] and rng.random() < cfg.rollout_fraction) else 0
         if k:
-            idx = rng.integers(0, len(long_w), per_rank)
-            full = long_w.batch(idx)
-            window = full[:, k * cfg.model.predict_len:][:, :length]
-            noisy = rolled_context(model, full, k)
+            window, noisy = rollout_batch(model, long_w.batch(rng.integers(0, len(long_w), per_rank)), k)
         else:
             idx = rng.integers(0, len(train_w), per_rank)
             window = train_w.batch(idx)

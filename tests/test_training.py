@@ -16,7 +16,7 @@ from safetensors.numpy import load_file
 from model_core.bvh_export import write_bvh
 from model_core.model import STRNN, STRNNConfig, smoothness_cost
 from model_core.synthetic import walking_skeleton
-from model_core.training import TrainConfig, rolled_context, train, window_loss
+from model_core.training import TrainConfig, rolled_context, rollout_batch, train, window_loss
 
 REPO = Path(__file__).resolve().parent.parent
 
@@ -94,6 +94,16 @@ def test_rolled_context_is_the_models_own_open_loop_output():
         again = rolled_context(model, x, 1, seam_frames=1e-6)  # no seam correction: the plain prediction
     torch.testing.assert_close(again, first)
     assert not torch.allclose(ctx, x[:, 40:60])  # generated, not the true frames
+
+
+def test_rollout_batch_targets_the_own_context_then_the_truth():
+    torch.manual_seed(0)
+    model = STRNN(tiny())
+    full = torch.randn(2, 80, model.cfg.frame_size)
+    window, context = rollout_batch(model, full, 2)
+    assert window.shape == (2, 40, model.cfg.frame_size)
+    torch.testing.assert_close(window[:, :20], context)  # the decoder reconstructs what it was given
+    torch.testing.assert_close(window[:, 20:], full[:, 60:80])  # the predictor continues with the truth
 
 
 def test_recon_weight_weights_the_decoded_frames():
