@@ -9,8 +9,10 @@
 3. Foot-locks the result (contacts detected on the motion).
 4. Writes into --out: demo.bvh, demo.png (stick-figure contact sheet), demo_plots.png
    (prediction error against horizon for STRNN and the baselines, from the model's
-   evaluation.json; foot skate before and after the lock) and demo.blend (the BVH imported
-   into a factory-reset scene with the bpy module; skipped with a note when bpy is missing).
+   evaluation.json; foot skate before and after the lock), demo.blend (the BVH imported into a
+   fresh scene with the bpy module, with a simple body, a floor and a camera that follows the
+   character: press play) and demo_render.png (--renders frames of it rendered by Blender's
+   Workbench engine). The last two are skipped with a note when bpy is missing.
 
     python scripts/demo.py                      # seed 0 into out/
     python scripts/demo.py --frames 90 --path-frames 60 --out out/quick
@@ -22,7 +24,7 @@ import argparse
 import importlib.util
 import subprocess
 import sys
-import textwrap
+import tempfile
 import time
 from pathlib import Path
 
@@ -46,39 +48,60 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--model", default=None, help="model folder (default: models/strnn_default)")
     p.add_argument("--out", default="out", help="output folder for demo.bvh, demo.png, demo_plots.png, demo.blend")
     p.add_argument("--panels", type=int, default=12, help="stick figures on the contact sheet")
-    p.add_argument("--no-blend", action="store_true", help="do not write demo.blend")
+    p.add_argument("--no-blend", action="store_true", help="do not write demo.blend (nor render)")
+    p.add_argument("--renders", type=int, default=8,
+                   help="frames rendered with Blender (Workbench) into demo_render.png; 0: none")
     return p.parse_args(argv)
 
 
 
-_BLEND_SCRIPT = textwrap.dedent("""
-    import sys
-    import bpy
-    bvh, blend, fps = sys.argv[1], sys.argv[2], int(sys.argv[3])
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    bpy.context.scene.render.fps = fps
-    bpy.ops.import_anim.bvh(filepath=bvh, update_scene_fps=True, update_scene_duration=True)
-    bpy.ops.wm.save_as_mainfile(filepath=blend)
-""")
-
-
-def write_blend(bvh: str | Path, blend: str | Path, timeout: float = 120.0) -> tuple[Path | None, str]:
-    """Import ``bvh`` into a factory-reset scene with the ``bpy`` module and save ``blend``.
-    Runs in a child Python so that bpy's state never touches this process. Returns
-    (path or None, note explaining a skip or failure)."""
+def write_blend(bvh: str | Path, blend: str | Path, render_dir: Path | None = None, frames: int = 8,
+                timeout: float = 240.0) -> tuple[Path | None, list[tuple[int, Path]], str]:
+    """Import ``bvh`` into a fresh Blender scene with a simple body, floor and following camera
+    (scripts/demo_blend.py, in a child Python so that bpy's state never touches this process),
+    save ``blend`` and, with ``render_dir``, render ``frames`` frames with Workbench.
+    Returns (path or None, [(frame, png)], note explaining a skip or failure)."""
     if importlib.util.find_spec("bpy") is None:
-        return None, "the bpy module is not installed: .blend skipped (scripts/setup.sh installs it)"
+        return None, [], "the bpy module is not installed: .blend skipped (scripts/setup.sh installs it)"
     shown, blend = Path(blend), Path(blend).resolve()
     blend.parent.mkdir(parents=True, exist_ok=True)
+    cmd = [sys.executable, str(Path(__file__).with_name("demo_blend.py")), str(Path(bvh).resolve()), str(blend),
+           "--fps", str(int(MODEL_FPS))]
+    if render_dir is not None:
+        cmd += ["--render-dir", str(render_dir), "--frames", str(frames)]
     try:
-        done = subprocess.run([sys.executable, "-c", _BLEND_SCRIPT, str(Path(bvh).resolve()), str(blend),
-                               str(int(MODEL_FPS))], capture_output=True, text=True, timeout=timeout)
+        done = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout)
     except subprocess.TimeoutExpired:
-        return None, f"bpy did not finish within {timeout:.0f} s: .blend skipped"
+        return None, [], f"bpy did not finish within {timeout:.0f} s: .blend skipped"
     if done.returncode != 0 or not blend.is_file():
         tail = (done.stderr or done.stdout).strip().splitlines()[-3:]
-        return None, "writing the .blend failed: " + " | ".join(tail)
-    return shown, ""
+        return None, [], "writing the .blend failed: " + " | ".join(tail)
+    rendered = [(int(line.split()[1]), Path(line.split(maxsplit=2)[2])) for line in done.stdout.splitlines()
+                if line.startswith("frame ")]
+    return shown, rendered, ""
+
+
+def render_sheet(path: Path, frames: list[tuple[int, Path]], title: str, columns: int = 4) -> Path:
+    """A contact sheet of Blender renders: ``frames`` [(frame number, png)] in rows of ``columns``."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.image as mpimg
+    import matplotlib.pyplot as plt
+
+    rows = -(-len(frames) // columns)
+    fig, axes = plt.subplots(rows, columns, figsize=(3.2 * columns, 2.9 * rows), squeeze=False)
+    for ax in axes.flat:
+        ax.axis("off")
+    for ax, (frame, png) in zip(axes.flat, frames):
+        ax.imshow(mpimg.imread(png))
+        ax.set_title(f"frame {frame} ({(frame - 1) / MODEL_FPS:.1f} s)", fontsize=9)
+    fig.suptitle(title, fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return path
+
 
 def main(argv=None) -> int:
     args = parse_args(argv)
@@ -116,8 +139,12 @@ def main(argv=None) -> int:
     if args.no_blend:
         print("Blend: skipped (--no-blend)")
     else:
-        blend, note = write_blend(bvh, out / "demo.blend")
-        print(f"Blend: {blend}" if blend else f"note: {note}")
+        with tempfile.TemporaryDirectory(prefix="strnn_demo_") as tmp:
+            blend, rendered, note = write_blend(bvh, out / "demo.blend", Path(tmp) if args.renders else None,
+                                                args.renders)
+            print(f"Blend: {blend}" if blend else f"note: {note}")
+            if rendered:
+                print(f"Render: {render_sheet(out / 'demo_render.png', rendered, title)}")
     return 0
 
 

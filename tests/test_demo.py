@@ -42,7 +42,7 @@ def _demo_module():
 
 def test_demo_writes_bvh_png_plots_and_blend(tiny_model, tmp_path, capsys):
     out = tmp_path / "out"
-    argv = ["--model", str(tiny_model), "--out", str(out), "--frames", "30", "--path-frames", "25"]
+    argv = ["--model", str(tiny_model), "--out", str(out), "--frames", "30", "--path-frames", "25", "--renders", "2"]
     assert _demo_module().main(argv) == 0
     printed = capsys.readouterr().out
     for label, name in (("BVH", "demo.bvh"), ("PNG", "demo.png"), ("Plots", "demo_plots.png")):
@@ -59,6 +59,8 @@ def test_demo_writes_bvh_png_plots_and_blend(tiny_model, tmp_path, capsys):
         assert f"Blend: {out / 'demo.blend'}" in printed
         head = (out / "demo.blend").read_bytes()[:7]
         assert head == b"BLENDER" or head.startswith(b"\x28\xb5\x2f\xfd")  # plain, or zstd-compressed
+        assert f"Render: {out / 'demo_render.png'}" in printed
+        assert (out / "demo_render.png").read_bytes().startswith(b"\x89PNG")
 
 
 def test_demo_skips_the_walk_and_blend_without_torch_and_bpy(tiny_model, tmp_path, capsys, monkeypatch):
