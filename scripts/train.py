@@ -49,6 +49,8 @@ def parse_args(argv=None) -> argparse.Namespace:
                         "(0: off)")
     p.add_argument("--rollout-fraction", type=float, default=0.5,
                    help="share of the first phase's steps that use such contexts")
+    p.add_argument("--denoise-fraction", type=float, default=0.25,
+                   help="share of each batch whose context is re-derived from positions with noise (denoising)")
     p.add_argument("--init", default="", help="start from the weights of a train_state.pt or release folder")
     p.add_argument("--noise-start", type=float, default=0.1, help="initial input-noise std")
     p.add_argument("--seed", type=int, default=0)
@@ -75,6 +77,7 @@ def main(argv=None) -> int:
                       optimizer=args.optimizer, lr=args.lr, smooth_weight=args.smooth_weight,
                       recon_weight=args.recon_weight, init=args.init,
                       rollout_windows=args.rollout_windows, rollout_fraction=args.rollout_fraction,
+                      denoise_fraction=args.denoise_fraction,
                       noise_start=args.noise_start, seed=args.seed, cache=args.cache, max_minutes=args.max_minutes,
                       checkpoint_seconds=args.checkpoint_seconds,
                       command="python scripts/train.py " + " ".join(shlex.quote(a) for a in (argv or sys.argv[1:])))
