@@ -36,15 +36,23 @@ class DemoMotion:
     notes: list[str] = field(default_factory=list)
 
 
-def seed_continuation(model: str | Path | None, seed_index: int, frames: int):
-    """(positions ``[m + frames, 21, 3]`` of the seed and its continuation, seed name, m, engine).
-    Raises ``CheckpointError`` / ``ValueError`` with a readable message."""
+def default_seed(names: list[str]) -> int:
+    """The first shipped seed taken from a walk (the demo's default), else the first seed."""
+    return next((i for i, n in enumerate(names) if "_walk_" in Path(n).name.lower()), 0)
+
+
+def seed_continuation(model: str | Path | None, seed_index: int | None, frames: int):
+    """(positions ``[m + frames, 21, 3]`` of the seed and its continuation, seed name, m, engine);
+    ``seed_index`` None picks :func:`default_seed`. Raises ``CheckpointError`` / ``ValueError``
+    with a readable message."""
     from .engine import Engine
 
     eng = Engine.load(model)
     seeds = eng.seeds
     if len(seeds) == 0:
         raise CheckpointError("the model folder ships no seed windows (seeds.npz)")
+    if seed_index is None:
+        seed_index = default_seed(list(eng.ckpt.seed_names))
     if not 0 <= seed_index < len(seeds):
         raise ValueError(f"--seed {seed_index} is out of range: this model ships {len(seeds)} seeds, "
                          f"0 to {len(seeds) - 1}")
@@ -80,7 +88,7 @@ def figure_eight_walk(model: str | Path | None, context: np.ndarray, frames: int
     return walked, points
 
 
-def build_motion(model: str | Path | None, seed_index: int, frames: int, path_frames: int | None,
+def build_motion(model: str | Path | None, seed_index: int | None, frames: int, path_frames: int | None,
                  walk: bool = True, log=print) -> DemoMotion:
     """Run the motion stages. ``path_frames`` None: one lap of the figure-eight; 0 or ``walk``
     False: no walk."""

@@ -384,12 +384,24 @@ def pick_seeds(data: MotionData, length: int, count: int = 12) -> tuple[np.ndarr
     return np.stack(seeds), names
 
 
+def init_record(init: str | Path) -> dict:
+    """Where a fine-tuned model started: ``{"from": path, "training": the start's own training record}``
+    (read from its model.json, or the command in its train_state.pt), so a release names its whole recipe."""
+    path, record = Path(init), {"from": str(init)}
+    if (path / "model.json").is_file():
+        record["training"] = json.loads((path / "model.json").read_text()).get("training")
+    elif path.is_file():
+        record["training"] = {"command": json.loads(torch.load(path, weights_only=True)["config"]).get("command", "")}
+    return record
+
+
 def write_release(model: STRNN, cfg: TrainConfig, data: MotionData, norm: Normaliser, history: list, folder: Path):
     weights = {k: v.detach().cpu().numpy() for k, v in model.state_dict().items() if v.dtype.is_floating_point}
     seeds, names = pick_seeds(data, cfg.model.encode_len)
     meta = {
         "training": {"command": cfg.command, "steps": cfg.steps, "optimizer": cfg.optimizer, "batch": cfg.batch,
-                     "final": history[-1] if history else None},
+                     "final": history[-1] if history else None,
+                     **({"init": init_record(cfg.init)} if cfg.init else {})},
         "data": {"root": Path(data.root).name, "clips": {s: len(data.split(s)) for s in SPLITS},
                  "frames": {s: int(sum(len(c.features) for c in data.split(s))) for s in SPLITS},
                  "split_rule": "crc32(take key) % 20: 0-1 test, 2 validation, else train (model_core/dataset.py)"},

@@ -1,8 +1,9 @@
 #!/usr/bin/env python3
 """The full demo on built-in data only: no input file needed.
 
-1. Takes a 20-frame seed window shipped with the model (models/strnn_default/seeds.npz) and
-   continues it open-loop with the NumPy engine (--frames, default 600).
+1. Takes a 20-frame seed window shipped with the model (models/strnn_default/seeds.npz; by
+   default the first taken from a walk, --seed N for another) and continues it open-loop
+   with the NumPy engine (--frames, default 600).
 2. Walks the evaluation figure-eight (two 2 m loops) from the last 20 frames, steered by the
    torch path follower (the path is placed under the character, so there is no jump; skipped
    with a note when torch is missing). --path-frames: frames of the walk (default: one lap).
@@ -14,7 +15,7 @@
    character: press play) and demo_render.png (--renders frames of it rendered by Blender's
    Workbench engine). The last two are skipped with a note when bpy is missing.
 
-    python scripts/demo.py                      # seed 0 into out/
+    python scripts/demo.py                      # the first walking seed into out/
     python scripts/demo.py --frames 90 --path-frames 60 --out out/quick
 """
 
@@ -44,7 +45,8 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--frames", type=int, default=600, help="frames of open-loop continuation after the seed (30 fps)")
     p.add_argument("--path-frames", type=int, default=None,
                    help="frames of the figure-eight walk (default: one lap; 0: no walk)")
-    p.add_argument("--seed", type=int, default=0, help="index of the shipped seed window to start from")
+    p.add_argument("--seed", type=int, default=None,
+                   help="index of the shipped seed window to start from (default: the first walk)")
     p.add_argument("--model", default=None, help="model folder (default: models/strnn_default)")
     p.add_argument("--out", default="out", help="output folder for demo.bvh, demo.png, demo_plots.png, demo.blend")
     p.add_argument("--panels", type=int, default=12, help="stick figures on the contact sheet")

@@ -79,3 +79,11 @@ def test_demo_skips_the_walk_and_blend_without_torch_and_bpy(tiny_model, tmp_pat
 def test_demo_rejects_a_seed_out_of_range(tiny_model, tmp_path, capsys):
     assert _demo_module().main(["--model", str(tiny_model), "--out", str(tmp_path), "--seed", "5"]) == 2
     assert "out of range: this model ships 1 seeds" in capsys.readouterr().err
+
+
+def test_default_seed_is_the_first_walk():
+    from model_core.demo_pipeline import default_seed
+
+    assert default_seed(["a/x_raise-up_active_002.bvh@24", "a/x_run_active_016.bvh@30",
+                         "a/x_walk_active_008.bvh@30", "a/x_walk_normal_001.bvh@30"]) == 2
+    assert default_seed(["cmu/dance/04.bvh@30"]) == 0

@@ -125,6 +125,10 @@ def test_rollout_fine_tuning_from_init(walk_folder, tmp_path):
     tuned = train(_cfg(walk_folder, tmp_path / "tuned", init=str(first), rollout_windows=2, rollout_fraction=1.0),
                   progress=False)
     assert "initial weights from" in (tmp_path / "tuned" / "train.log").read_text()
+    import json
+
+    record = json.loads((tuned / "model.json").read_text())["training"]["init"]
+    assert record["from"] == str(first) and record["training"]["steps"] == 8  # the whole recipe is named
     a, b = load_file(str(first / "model.safetensors")), load_file(str(tuned / "model.safetensors"))
     assert any(not np.allclose(a[k], b[k]) for k in a)  # trained on from there
     state = torch.load(tmp_path / "base" / "train_state.pt", weights_only=True)["model"]
