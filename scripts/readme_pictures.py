@@ -22,6 +22,7 @@ from ../shared/mocap); the printed figures are measured in the same run.
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 import tempfile
 from pathlib import Path
@@ -334,8 +335,8 @@ def main(argv=None) -> int:
             "footlock": picture_footlock(bpy, clips["extend"], args.out),
             "follow": picture_follow(bpy, clips["follow"], args.out),
         }
-    for name, fig in figures.items():
-        print(name, {k: round(v, 2) if isinstance(v, float) else v for k, v in fig.items()})
+    print("figures: " + json.dumps({name: {k: round(v, 2) if isinstance(v, float) else v for k, v in fig.items()}
+                                    for name, fig in figures.items()}))
     return 0
 
 
