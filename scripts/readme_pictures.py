@@ -11,7 +11,8 @@ draws them (matplotlib) into --out:
 - denoise.png: a clip with 3 cm of Gaussian noise on every joint, denoised, against the clean
   clip (a wrist's height over time and the error per frame, measured here);
 - footlock.png: a foot's ground speed and path before and after the lock;
-- follow.png: a walk along a figure-eight curve, from above and from the side.
+- follow.png: a walk along a figure-eight curve, from above and from the side;
+- bonemap.png: what Auto-Map Bones finds on BVH imports of three rig families.
 
 The clips come from the project's own test split (``--data``, default data/mocap, unpacked
 from ../shared/mocap); the printed figures are measured in the same run.
@@ -41,10 +42,13 @@ from model_core.conventions import JOINTS, PARENTS
 from model_core.features import detect_contacts
 from model_core.footlock import foot_skate_cm
 
+BANDAI_SCALE = 0.01  # the Bandai-Namco files are in centimetres: import them in metres
 EXTEND_CLIP = "bandai-namco/dataset-2/dataset-2_walk-turn-right_normal_004.bvh"
 DENOISE_CLIP = "bandai-namco/dataset-2/dataset-2_wave-left-hand_feminine_018.bvh"
 FOLLOW_CLIP = "bandai-namco/dataset-2/dataset-2_walk_active_011.bvh"
-BANDAI_SCALE = 0.01  # the Bandai-Namco files are in centimetres: import them in metres
+BONE_MAP_CLIPS = (("Bandai-Namco", "bandai-namco/dataset-2/dataset-2_walk_active_011.bvh", BANDAI_SCALE),
+                  ("CMU, iClone CC_Base", "cmu/iclone/002_01.bvh", 1.0),
+                  ("CMU, acRNN 43 joints", "cmu/acrnn-dance/indian/04.bvh", 1.0))
 LEFT, RIGHT, CENTRE, NEW = "#d62728", "#1f77b4", "#333333", "#1f77b4"
 
 
@@ -313,10 +317,61 @@ def picture_follow(bpy, clip: Path, out: Path) -> dict:
     return {"clip": clip.name, "frames": len(joints)}
 
 
+def label_column(ax, items: list[tuple[float, float, str, str]], x: float, gap: float, align: str):
+    """Labels ``(x, z, text, colour)`` stacked in one column at ``x`` without overlaps, each with
+    a thin line to its point."""
+    last = np.inf
+    for px, pz, text, colour in sorted(items, key=lambda it: -it[1]):
+        y = min(pz, last - gap)
+        last = y
+        ax.annotate(text, (px, pz), (x, y), fontsize=7, ha=align, va="center", color=colour,
+                    arrowprops={"arrowstyle": "-", "color": colour, "lw": 0.5, "alpha": 0.6})
+
+
+def picture_bone_map(bpy, data: Path, out: Path) -> dict:
+    """Auto-Map Bones on BVH imports of three rig families: each rig's bones on the first frame (grey)
+    and the bone the map gives each of the 21 model joints (dots, labelled with the rig's own name)."""
+    fig, axes = plt.subplots(1, len(BONE_MAP_CLIPS), figsize=(15, 4.8))
+    counts = {}
+    for ax, (family, rel, scale) in zip(axes, BONE_MAP_CLIPS):
+        obj = import_bvh(bpy, data / rel, scale)
+        bpy.ops.strnn.auto_map()
+        start, _ = action_range(obj)
+        poses, names = sample(bpy, obj, start, start)
+        bones, joints = poses[0], joints_z_up(obj, poses, names)[0]
+        # seen from the front: x along the body's left, z up (the character's left on the picture's right)
+        lateral = (joints[JOINTS.index("l_arm")] - joints[JOINTS.index("r_arm")]
+                   + joints[JOINTS.index("l_upleg")] - joints[JOINTS.index("r_upleg")])[:2]
+        lateral /= np.linalg.norm(lateral)
+        bones, joints = (np.stack([(p[..., :2] - joints[0, :2]) @ lateral, p[..., 1] * 0, p[..., 2]], -1)
+                         for p in (bones, joints))
+        for head, tail in bones:
+            ax.plot([head[0], tail[0]], [head[2], tail[2]], color="#c8c8c8", lw=2, solid_capstyle="round")
+        bone_map = obj.data.strnn_map
+        left, right = [], []
+        for j, (joint, p) in enumerate(zip(JOINTS, joints)):
+            ax.plot(p[0], p[2], "o", ms=4.5, color=COLOURS[j])
+            text = f"{joint}: {getattr(bone_map, joint)}"
+            (left if joint.startswith("r_") else right).append((p[0], p[2], text, COLOURS[j]))
+        span = np.ptp(joints[:, 2])
+        xs = bones[..., 0]
+        label_column(ax, left, xs.min() - 0.15 * span, 0.065 * span, "right")
+        label_column(ax, right, xs.max() + 0.15 * span, 0.065 * span, "left")
+        ax.set_xlim(xs.min() - 0.85 * span, xs.max() + 0.85 * span)
+        counts[family] = sum(bool(getattr(bone_map, j)) for j in JOINTS)
+        ax.set_aspect("equal")
+        ax.axis("off")
+        ax.set_title(f"{family}: {len(names)} bones, {counts[family]} of 21 joints mapped\n({Path(rel).name})",
+                     fontsize=9)
+    fig.suptitle("Auto-Map Bones: the 21 model joints found by bone names on three rigs (first frame, from the front)")
+    finish(fig, out / "bonemap.png")
+    return counts
+
+
 def main(argv=None) -> int:
     args = parse_args(argv)
     clips = {k: args.data / v for k, v in (("extend", EXTEND_CLIP), ("denoise", DENOISE_CLIP), ("follow", FOLLOW_CLIP))}
-    missing = [str(p) for p in clips.values() if not p.is_file()]
+    missing = [str(p) for p in [*clips.values(), *(args.data / rel for _, rel, _ in BONE_MAP_CLIPS)] if not p.is_file()]
     if missing:
         print(f"error: missing clips {missing}; unpack ../shared/mocap into {args.data} "
               "(../shared/mocap/extract.sh) or pass --data", file=sys.stderr)
@@ -334,6 +389,7 @@ def main(argv=None) -> int:
             "denoise": picture_denoise(bpy, clips["denoise"], args.out, args.seed),
             "footlock": picture_footlock(bpy, clips["extend"], args.out),
             "follow": picture_follow(bpy, clips["follow"], args.out),
+            "bonemap": picture_bone_map(bpy, args.data, args.out),
         }
     print("figures: " + json.dumps({name: {k: round(v, 2) if isinstance(v, float) else v for k, v in fig.items()}
                                     for name, fig in figures.items()}))
