@@ -18,11 +18,12 @@ from .conventions import GROUND_AXES, JOINT_INDEX, JOINTS, MODEL_FPS, PARENTS, U
 from .features import heading, yaw_matrix
 
 _VIEW_ANGLE = np.radians(30.0)  # camera turned this far from the body's side, so left and right separate
-_COLOURS = {"l": "tab:blue", "r": "tab:red", "c": "0.2"}
+SIDE_COLOURS = {"l": "tab:blue", "r": "tab:red", "c": "0.2"}  # left, right, centre: every picture of a body
 
 
-def _side(joint: str) -> str:
-    return joint[0] if joint[:2] in ("l_", "r_") else "c"
+def joint_colour(joint: str) -> str:
+    """The colour of a canonical joint's bone (to its parent): by its side of the body."""
+    return SIDE_COLOURS[joint[0] if joint[:2] in ("l_", "r_") else "c"]
 
 
 def frame_indices(frames: int, count: int) -> np.ndarray:
@@ -48,7 +49,7 @@ def _draw_strip(ax, pos: np.ndarray, idx: np.ndarray, fps: float, spacing: float
         for j in range(1, len(JOINTS)):
             p = PARENTS[j]
             ax.plot([pose[p, 0] + x0, pose[j, 0] + x0], [pose[p, 1], pose[j, 1]],
-                    color=_COLOURS[_side(JOINTS[j])], lw=1.6, solid_capstyle="round")
+                    color=joint_colour(JOINTS[j]), lw=1.6, solid_capstyle="round")
         ax.text(x0, -0.12, f"{f / fps:.1f} s", ha="center", va="top", fontsize=7)
     ax.axhline(0.0, color="0.6", lw=0.8)
     ax.set_aspect("equal")

@@ -18,8 +18,12 @@ from pathlib import Path
 
 import bpy
 from mathutils import Matrix
+from matplotlib.colors import to_rgba
 
-COLOURS = {"left": (0.84, 0.15, 0.16, 1.0), "right": (0.12, 0.47, 0.71, 1.0), "centre": (0.75, 0.75, 0.72, 1.0)}
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+from model_core.bonemap import split_side  # noqa: E402
+from model_core.plots import SIDE_COLOURS  # noqa: E402
 
 
 def parse_args(argv=None) -> argparse.Namespace:
@@ -34,10 +38,8 @@ def parse_args(argv=None) -> argparse.Namespace:
 
 
 def side(name: str) -> str:
-    low = name.lower()
-    if low.startswith(("left", "l_")) or low.endswith(("_l", ".l")):
-        return "left"
-    return "right" if low.startswith(("right", "r_")) or low.endswith(("_r", ".r")) else "centre"
+    """``"l"``, ``"r"`` or ``"c"`` (centre) of a bone name, by the bone map's own parsing."""
+    return split_side(name)[0] or "c"
 
 
 def material(name: str, colour) -> bpy.types.Material:
@@ -76,10 +78,10 @@ def add_body(arm: bpy.types.Object) -> None:
     for bone in arm.data.bones:
         if bone.length < 1e-4 * height:
             continue
-        torso = side(bone.name) == "centre"
+        torso = side(bone.name) == "c"
         mesh = limb_mesh(f"body_{bone.name}", bone.length, (0.06 if torso else 0.032) * height / 1.7,
                          "head" in bone.name.lower())
-        mesh.materials.append(material(f"body_{side(bone.name)}", COLOURS[side(bone.name)]))
+        mesh.materials.append(material(f"body_{side(bone.name)}", to_rgba(SIDE_COLOURS[side(bone.name)])))
         obj = bpy.data.objects.new(f"body_{bone.name}", mesh)
         bpy.context.scene.collection.objects.link(obj)
         obj.parent, obj.parent_type, obj.parent_bone = arm, "BONE", bone.name

@@ -23,6 +23,7 @@ from ../shared/mocap); the printed figures are measured in the same run.
 from __future__ import annotations
 
 import argparse
+import importlib
 import json
 import sys
 import tempfile
@@ -41,6 +42,7 @@ import numpy as np
 from model_core.conventions import JOINTS, PARENTS
 from model_core.features import detect_contacts
 from model_core.footlock import foot_skate_cm
+from model_core.plots import body_view, joint_colour
 
 BANDAI_SCALE = 0.01  # the Bandai-Namco files are in centimetres: import them in metres
 EXTEND_CLIP = "bandai-namco/dataset-2/dataset-2_walk-turn-right_normal_004.bvh"
@@ -49,7 +51,7 @@ FOLLOW_CLIP = "bandai-namco/dataset-2/dataset-2_walk_active_011.bvh"
 BONE_MAP_CLIPS = (("Bandai-Namco", "bandai-namco/dataset-2/dataset-2_walk_active_011.bvh", BANDAI_SCALE),
                   ("CMU, iClone CC_Base", "cmu/iclone/002_01.bvh", 1.0),
                   ("CMU, acRNN 43 joints", "cmu/acrnn-dance/indian/04.bvh", 1.0))
-LEFT, RIGHT, CENTRE, NEW = "#d62728", "#1f77b4", "#333333", "#1f77b4"
+NEW = "#1f77b4"
 
 
 def parse_args(argv=None) -> argparse.Namespace:
@@ -100,7 +102,7 @@ def sample(bpy, obj, start: int, end: int) -> tuple[np.ndarray, list[str]]:
 
 
 # ------------------------------------------------------------------ drawing
-COLOURS = [LEFT if j.startswith("l_") else RIGHT if j.startswith("r_") else CENTRE for j in JOINTS]
+COLOURS = [joint_colour(j) for j in JOINTS]
 
 
 def draw_pose(ax, joints: np.ndarray, axes=(0, 2), alpha=1.0, colour=None, lw=1.4):
@@ -120,14 +122,12 @@ def ghosts(ax, joints: np.ndarray, every: int, axes, colour=None, alpha=(0.25, 1
 
 
 def filmstrip(ax, joints: np.ndarray, frames: list[int], spacing: float, colour=None, first_slot: int = 0):
-    """Skeletons ``[F, 21, 3]`` (Z-up) side by side, each seen from its own side (across its direction
-    of travel), hips at slot * ``spacing``."""
-    for slot, i in enumerate(frames, first_slot):
-        a, b = joints[max(i - 5, 0), 0, :2], joints[min(i + 5, len(joints) - 1), 0, :2]
-        d = b - a
-        d = d / np.linalg.norm(d) if np.linalg.norm(d) > 1e-6 else np.array([1.0, 0.0])
-        u = (joints[i, :, :2] - joints[i, 0, :2]) @ d + slot * spacing
-        draw_pose(ax, np.stack([u, np.zeros_like(u), joints[i, :, 2]], -1), (0, 2), 1.0, colour)
+    """Skeletons ``[F, 21, 3]`` (Z-up) side by side, each seen from its own side
+    (:func:`model_core.plots.body_view`), hips at slot * ``spacing``."""
+    flat = body_view(z_up_to_model(joints))[frames]  # (len(frames), 21, 2)
+    for slot, pose in enumerate(flat, first_slot):
+        draw_pose(ax, np.stack([pose[:, 0] + slot * spacing, np.zeros(len(pose)), pose[:, 1]], -1), (0, 2), 1.0,
+                  colour)
 
 
 def joints_z_up(obj, poses: np.ndarray, names: list[str]) -> np.ndarray:
@@ -137,10 +137,14 @@ def joints_z_up(obj, poses: np.ndarray, names: list[str]) -> np.ndarray:
     return np.stack([poses[:, b, end] for b, end in cols], 1)
 
 
+def z_up_to_model(z_up: np.ndarray) -> np.ndarray:
+    """Blender's axes (Z-up) -> the model's (Y-up): ``[..., 3]``."""
+    return np.stack([z_up[..., 0], z_up[..., 2], -z_up[..., 1]], -1)
+
+
 def canonical(obj, poses: np.ndarray, names: list[str]) -> np.ndarray:
     """The 21 canonical joints ``[F, 21, 3]`` in the model's axes (Y-up metres)."""
-    z_up = joints_z_up(obj, poses, names)
-    return np.stack([z_up[..., 0], z_up[..., 2], -z_up[..., 1]], -1)
+    return z_up_to_model(joints_z_up(obj, poses, names))
 
 
 def bone_of(obj, names: list[str], joint: str) -> int:
@@ -184,18 +188,14 @@ def picture_extend(bpy, clip: Path, out: Path, frames: int = 150) -> dict:
     return {"clip": clip.name, "frames": frames}
 
 
-def fcurves(action):
-    """Every F-curve of ``action``: layered actions (Blender 4.4+) or the legacy list."""
-    if hasattr(action, "layers") and action.layers:
-        return [fc for layer in action.layers for strip in layer.strips for bag in strip.channelbags
-                for fc in bag.fcurves]
-    return list(action.fcurves)
+def add_jitter(obj, degrees: float, seed: int) -> None:
+    """Gaussian jitter of ``degrees`` (std) on every keyed Euler rotation channel of ``obj``'s action:
+    noisy capture. The F-curves come from the installed extension's own reader (layered or legacy)."""
+    import strnn_batch
 
-
-def add_jitter(action, degrees: float, seed: int) -> None:
-    """Gaussian jitter of ``degrees`` (std) on every keyed Euler rotation channel: noisy capture."""
+    anim = importlib.import_module(f"{strnn_batch.ADDON}.strnn_addon.anim")
     rng = np.random.default_rng(seed)
-    for fc in fcurves(action):
+    for fc in anim.Channels(obj.animation_data.action, obj.animation_data).fcurves:
         if fc.data_path.endswith("rotation_euler"):
             for key in fc.keyframe_points:
                 key.co[1] += float(rng.normal(0.0, np.radians(degrees)))
@@ -207,7 +207,7 @@ def picture_denoise(bpy, clip: Path, out: Path, seed: int, degrees: float = 1.5)
     obj = import_bvh(bpy, clip, BANDAI_SCALE)
     start, end = action_range(obj)
     clean, names = sample(bpy, obj, start, end)
-    add_jitter(obj.animation_data.action, degrees, seed)
+    add_jitter(obj, degrees, seed)
     before, _ = sample(bpy, obj, start, end)
     bpy.ops.strnn.denoise_action()
     after, _ = sample(bpy, obj, start, end)
