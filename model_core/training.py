@@ -6,6 +6,7 @@ atomic resumable checkpoints and optional data-parallel training (torchrun).
 
 from __future__ import annotations
 
+import copy
 import json
 import logging
 import os
@@ -22,6 +23,7 @@ from torch.nn.parallel import DistributedDataParallel
 from .checkpoint import load_release, save_release
 from .conventions import LAYOUT
 from .dataset import SPLITS, MotionData, Normaliser, load_folder, window_starts
+from .engine import Engine
 from .features import features_to_positions, positions_to_features
 from .model import STRNN, STRNNConfig, smoothness_cost
 
@@ -84,12 +86,23 @@ class Windows:
         self.raw = np.concatenate([c.features for c in clips])
         self.feats = norm.encode(self.raw).astype(np.float32)
         self.norm = norm
-        offsets = np.concatenate([[0], np.cumsum([len(c.features) for c in clips])[:-1]])
-        starts = window_starts([len(c.features) for c in clips], length, stride)
+        self.root, self.split = data.root, split
+        self.lengths = [len(c.features) for c in clips]
+        self._index(length, stride)
+
+    def _index(self, length: int, stride: int) -> None:
+        offsets = np.concatenate([[0], np.cumsum(self.lengths)[:-1]])
+        starts = window_starts(self.lengths, length, stride)
         if len(starts) == 0:
-            raise ValueError(f"{data.root}: no {split!r} clip is {length} frames long")
+            raise ValueError(f"{self.root}: no {self.split!r} clip is {length} frames long")
         self.starts = offsets[starts[:, 0]] + starts[:, 1]
         self.span = np.arange(length)
+
+    def with_length(self, length: int, stride: int = 1) -> Windows:
+        """Windows of another length over the same (shared, not copied) frames."""
+        other = copy.copy(self)
+        other._index(length, stride)
+        return other
 
     def __len__(self):
         return len(self.starts)
@@ -129,17 +142,13 @@ def window_loss(model: STRNN, window: torch.Tensor, cfg: TrainConfig, phase: str
             decoded, predicted = model.spatio_temporal(context)
         return (model.filter(torch.cat([decoded, predicted], 1)) - window).pow(2).mean()
     out = (net or model)(context, use_filter=False)
-    err = (out - window).pow(2)
-    if cfg.recon_weight != 1.0:
-        w = torch.ones(err.shape[1], dtype=err.dtype)
-        w[:m] = cfg.recon_weight
-        mse = (err.mean((0, 2)) * w).sum() / w.sum()
-    else:
-        mse = err.mean()
+    w = torch.ones(out.shape[1], dtype=out.dtype)
+    w[:m] = cfg.recon_weight  # decoded frames against predicted ones
+    mse = ((out - window).pow(2).mean((0, 2)) * w).sum() / w.sum()
     return mse + cfg.smooth_weight * smoothness_cost(out)
 
 
-def rolled_context(model: STRNN, window: torch.Tensor, k: int, seam_frames: float = 10.0) -> torch.Tensor:
+def rolled_context(model: STRNN, window: torch.Tensor, k: int, seam_frames: float = Engine.seam_frames) -> torch.Tensor:
     """The model's own context after ``k`` open-loop windows from the first m frames of ``window``
     ``(B, m + k n + ..., C)``, generated as the engine does (eval mode, seam correction), without gradient."""
     m, n = model.cfg.encode_len, model.cfg.predict_len
@@ -250,8 +259,7 @@ def train(cfg: TrainConfig, resume: bool = False, progress: bool = True) -> Path
     norm = Normaliser.fit(np.concatenate([c.features for c in data.split("train")]))
     length = cfg.model.encode_len + cfg.model.predict_len
     train_w = Windows(data, "train", norm, length)
-    long_w = Windows(data, "train", norm, length + cfg.rollout_windows * cfg.model.predict_len) \
-        if cfg.rollout_windows else None
+    long_w = train_w.with_length(length + cfg.rollout_windows * cfg.model.predict_len) if cfg.rollout_windows else None
     val_w = Windows(data, "validation", norm, length, stride=10) if data.split("validation") else None
     model = STRNN(cfg.model)
     state_path = out / "train_state.pt"
