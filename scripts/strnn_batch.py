@@ -493,7 +493,7 @@ def process_file(job: dict) -> dict:
     """Worker entry point: process one file in this (fresh) process; never raises."""
     start = time.perf_counter()
     result = {"file": job["display"], "status": "failed", "output": "", "reason": ""}
-    user_dir = Path(job.get("user_dir") or tempfile.mkdtemp(prefix="strnn_batch_"))
+    user_dir = Path(job["user_dir"])  # made (and removed again) by run_pool
     log = user_dir / "blender.log"
     saved = None
     if not job["verbose"]:  # Blender prints from C as well as Python: redirect the descriptors
