@@ -21,6 +21,8 @@ from .conventions import CONTACTS, JOINTS, LAYOUT, MODEL_FPS, PARENT_NAMES, UP_A
 
 REPO = Path(__file__).resolve().parent.parent
 DEFAULT_MODEL = REPO / "models" / "strnn_default"
+DENOISE_MODEL = REPO / "models" / "strnn_denoise"  # the model Denoise uses unless told otherwise
+PURPOSES = ("generate", "denoise")  # what a release is trained for (model.json "purpose"; absent: generate)
 
 
 class CheckpointError(ValueError):
@@ -39,6 +41,17 @@ class Checkpoint:
     meta: dict
     seeds: np.ndarray
     seed_names: list[str]
+
+    @property
+    def purpose(self) -> str:
+        """``generate`` (predicts: extend, follow, denoise) or ``denoise`` (a reconstruction-only model)."""
+        return self.meta.get("purpose", "generate")
+
+    def require_generator(self, what: str) -> None:
+        """Raise :class:`CheckpointError` if this is a denoise-only model, which cannot do ``what``."""
+        if self.purpose == "denoise":
+            raise CheckpointError(f"this model was trained for Denoise alone (model.json purpose 'denoise'), so "
+                                  f"it cannot {what}: use a generating model such as models/strnn_default")
 
 
 _DTYPES = {"F32": "<f4", "F64": "<f8", "F16": "<f2", "I64": "<i8", "I32": "<i4", "U8": "u1", "BOOL": "?"}
@@ -118,6 +131,9 @@ def load_release(folder: str | Path | None = None) -> Checkpoint:
     if doc["layout"]["size"] != LAYOUT.size:
         raise CheckpointError(f"{folder}: feature size {doc['layout']['size']} does not match "
                               f"this code's {LAYOUT.size}")
+    if doc.get("purpose", "generate") not in PURPOSES:
+        raise CheckpointError(f"{folder / 'model.json'}: unknown purpose {doc['purpose']!r} "
+                              f"(one of {', '.join(PURPOSES)})")
     seeds, names = np.zeros((0, doc["config"]["encode_len"], LAYOUT.size), np.float32), []
     if (folder / "seeds.npz").exists():
         z = np.load(folder / "seeds.npz", allow_pickle=False)

@@ -120,6 +120,7 @@ class PathFollower:
     """Steers the torch STRNN along a :class:`paths.Path`. Build with :meth:`load`."""
 
     def __init__(self, ckpt: Checkpoint, settings: ControlSettings | None = None):
+        ckpt.require_generator("follow a path")
         self.ckpt, self.settings = ckpt, settings or ControlSettings()
         self.model = build_model(ckpt)
         self.m, self.n = ckpt.config["encode_len"], ckpt.config["predict_len"]

@@ -132,6 +132,7 @@ class Engine:
         Seam correction: the decoder's error on the last context frame (its offset from the
         true frame) is carried into the prediction and fades out over ``seam_frames`` frames,
         so the continuation starts where the context ends (0 turns it off)."""
+        self.ckpt.require_generator("predict motion")
         context = np.asarray(context, np.float32)
         window = self.forward(context)
         pred = window[:, self.m:]
@@ -193,36 +194,34 @@ class Engine:
         joined = np.concatenate([feats[-1:], new])
         return features_to_positions(joined, RootStart(root[-1], float(yaw[-1])))[1:]
 
-    def denoise_positions(self, positions: np.ndarray, root_weight: float = 1.0) -> np.ndarray:
-        """Denoise global positions ``[F, 21, 3]``: body from the model; the root path is the
-        least-squares blend of the noisy path and the model's velocities."""
+    def denoise_positions(self, positions: np.ndarray, root_weight: float = 30.0,
+                          yaw_weight: float = 100.0) -> np.ndarray:
+        """Denoise global positions ``[F, 21, 3]``: the body from the model; the heading and the
+        ground path each a least-squares blend of the noisy track (its slow part) and the
+        model's rates (the fast part), ``yaw_weight`` and ``root_weight`` setting the crossover
+        (chosen on the validation split)."""
         feats, start = positions_to_features(positions)
         clean = self.denoise(feats)
-        local = features_to_positions(clean, RootStart(np.zeros(3), 0.0))
-        root_model, yaw = integrate_root(clean, RootStart(np.zeros(3), 0.0))
+        origin = RootStart(np.zeros(3), 0.0)
+        local = features_to_positions(clean, origin)
+        root_model, yaw_model = integrate_root(clean, origin)
         noisy_root, noisy_yaw = integrate_root(feats, start)
-        root = blend_path(noisy_root, np.diff(root_model, axis=0), yaw, noisy_yaw, root_weight)
-        rot = _yaw_offset(noisy_yaw - yaw)
+        yaw = blend_track(noisy_yaw[:, None], np.diff(yaw_model)[:, None], yaw_weight)[:, 0]
+        rot = yaw_matrix(np.unwrap(yaw - yaw_model))  # the model's frame -> the blended heading
+        steps = np.einsum("fij,fj->fi", rot[:-1], np.diff(root_model, axis=0))
+        root = blend_track(noisy_root, steps, root_weight)
         body = np.einsum("fij,fkj->fki", rot, local - root_model[:, None])
         return (body + root[:, None]).astype(np.float32)
 
 
-def _yaw_offset(delta: np.ndarray) -> np.ndarray:
-    return yaw_matrix(np.unwrap(delta))
-
-
-def blend_path(noisy: np.ndarray, steps: np.ndarray, yaw_model: np.ndarray, yaw_noisy: np.ndarray,
-               weight: float) -> np.ndarray:
-    """Ground path ``[F, 3]`` minimising ``|p - noisy|^2 + weight * |diff(p) - steps'|^2`` where
-    ``steps'`` are the model's steps rotated into the noisy path's heading."""
-    rot = _yaw_offset(yaw_noisy - yaw_model)[:-1]
-    target = np.einsum("fij,fj->fi", rot, steps)
+def blend_track(noisy: np.ndarray, steps: np.ndarray, weight: float) -> np.ndarray:
+    """Track ``[F, K]`` minimising ``|p - noisy|^2 + weight * |diff(p) - steps|^2`` (``steps`` ``[F-1, K]``)."""
     f = len(noisy)
-    # Normal equations (I + w D^T D) p = noisy + w D^T target: tridiagonal, solved by elimination.
+    # Normal equations (I + w D^T D) p = noisy + w D^T steps: tridiagonal, solved by elimination.
     diag = 1.0 + weight * np.r_[1.0, np.full(f - 2, 2.0), 1.0] if f > 1 else np.ones(1)
     rhs = noisy.astype(np.float64).copy()
-    rhs[:-1] -= weight * target
-    rhs[1:] += weight * target
+    rhs[:-1] -= weight * steps
+    rhs[1:] += weight * steps
     return solve_tridiagonal(np.full(f - 1, -weight), diag, rhs)
 
 

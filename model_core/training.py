@@ -60,6 +60,7 @@ class TrainConfig:
     max_minutes: float = 0.0  # stop (with a checkpoint) after this long; 0 = no limit
     command: str = ""  # the command line, recorded in the release metadata
     init: str = ""  # start from the weights of this training state or release folder (fine-tuning)
+    purpose: str = "generate"  # recorded in the release: "denoise" marks a model whose predictions are not for use
 
 
 def phase_at(cfg: TrainConfig, step: int) -> str:
@@ -407,6 +408,7 @@ def write_release(model: STRNN, cfg: TrainConfig, data: MotionData, norm: Normal
     weights = {k: v.detach().cpu().numpy() for k, v in model.state_dict().items() if v.dtype.is_floating_point}
     seeds, names = pick_seeds(data, cfg.model.encode_len)
     meta = {
+        "purpose": cfg.purpose,
         "training": {"command": cfg.command, "steps": cfg.steps, "optimizer": cfg.optimizer, "batch": cfg.batch,
                      "final": history[-1] if history else None,
                      **({"init": init_record(cfg.init)} if cfg.init else {})},

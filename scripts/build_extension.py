@@ -44,8 +44,8 @@ def find_blender_ext() -> Path:
     return hits[-1]
 
 
-def stage(dest: Path, model: Path | None) -> None:
-    """Copy what the extension ships into ``dest``."""
+def stage(dest: Path, model: Path | None, denoiser: Path | None = None) -> None:
+    """Copy what the extension ships into ``dest``: the code, the model and the denoising model."""
     for name in FILES:
         if (REPO / name).exists():
             shutil.copy2(REPO / name, dest / name)
@@ -57,6 +57,11 @@ def stage(dest: Path, model: Path | None) -> None:
     else:
         print(f"warning: no model at {model}; the extension will need a Model Folder in its preferences",
               file=sys.stderr)
+    denoiser = denoiser or REPO / "models" / "strnn_denoise"
+    if (denoiser / "model.json").exists():
+        shutil.copytree(denoiser, dest / "models" / "strnn_denoise", ignore=IGNORE)
+    else:
+        print(f"warning: no denoising model at {denoiser}; Denoise will use the main model", file=sys.stderr)
 
 
 def toml_list(values) -> str:
@@ -104,6 +109,9 @@ def main(argv: list[str] | None = None) -> Path:
     parser.add_argument("--out", type=Path, default=REPO / "dist", help="output folder (default: dist/)")
     parser.add_argument("--model", type=Path, default=None,
                         help="release folder to bundle as models/strnn_default (default: models/strnn_default)")
+    parser.add_argument("--denoiser", type=Path, default=None,
+                        help="release folder to bundle as models/strnn_denoise, the model Denoise uses "
+                             "(default: models/strnn_denoise)")
     parser.add_argument("--blender-ext", type=Path, default=None, help="path to Blender's blender_ext.py")
     parser.add_argument("--no-validate", action="store_true", help="skip validating the built zip")
     parser.add_argument("--wheel", type=Path, action="append", default=[], metavar="PATH",
@@ -120,7 +128,7 @@ def main(argv: list[str] | None = None) -> Path:
     with tempfile.TemporaryDirectory() as tmp:
         src = Path(tmp) / "strnn_motion"
         src.mkdir()
-        stage(src, args.model)
+        stage(src, args.model, args.denoiser)
         add_to_manifest(src, [w.resolve() for w in args.wheel], platforms)
         text = (src / "blender_manifest.toml").read_text()
         run_tool(tool, "validate", str(src))

@@ -23,7 +23,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # small matmuls: BLAS thread
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from model_core.bvh import BvhError  # noqa: E402
-from model_core.checkpoint import DEFAULT_MODEL, CheckpointError  # noqa: E402
+from model_core.checkpoint import DEFAULT_MODEL, DENOISE_MODEL, CheckpointError  # noqa: E402
 from model_core.dataset import DataError, load_folder  # noqa: E402
 from model_core.engine import Engine  # noqa: E402
 from model_core.evaluation import evaluate_denoise, evaluate_long_horizon, evaluate_prediction, select_clips  # noqa: E402
@@ -41,6 +41,9 @@ def parse_args(argv=None):
     p.add_argument("--seeds", type=int, default=20, help="number of long-horizon seeds")
     p.add_argument("--reference", help="folder of BVH files for D_1nn and speed (default: --data's clips)")
     p.add_argument("--denoise-std", type=float, nargs="+", metavar="S", help="noise std in cm")
+    p.add_argument("--denoise-checkpoint", default=None, metavar="FOLDER",
+                   help="release folder that denoises (default: the bundled denoising model, which Denoise "
+                        "uses, if it exists, else --checkpoint)")
     p.add_argument("--cache", default="data/cache", help="folder for cached dataset arrays ('' = none)")
     p.add_argument("--paths", action="store_true",
                    help="path following (needs torch): line, circle, S-curve, figure-eight from walking seeds")
@@ -68,7 +71,7 @@ def print_table(result: dict, extra: dict):
         print("mean D_1nn per 1000-frame block: " + " ".join(f"{d:.4f}" for d in blocks))
     if "denoise" in result:
         dn = result["denoise"]
-        print("\nDenoising MPJPE (cm)")
+        print(f"\nDenoising MPJPE (cm), model {extra['denoise_checkpoint']}")
         print(f"{'noise std cm':<20}" + "".join(f"{s:>8.1f}" for s in dn["std_cm"]))
         for name, row in dn["mpjpe_cm"].items():
             print(f"{name:<20}" + "".join(f"{v:8.2f}" for v in row))
@@ -79,6 +82,10 @@ def print_table(result: dict, extra: dict):
 
 def run(args) -> dict:
     engine = Engine.load(args.checkpoint)
+    if engine.ckpt.purpose == "denoise":
+        raise CheckpointError(f"{args.checkpoint} is a denoise-only model, which cannot be scored on prediction: "
+                              f"pass it as --denoise-checkpoint (with --denoise-std) and leave --checkpoint "
+                              f"at a generating model")
     data = load_folder(args.data, cache_dir=args.cache or None)
     for failure in data.failures:
         print(f"skipped: {failure}", file=sys.stderr)
@@ -97,7 +104,10 @@ def run(args) -> dict:
         extra["seed_take_speed_ratio"] = lh.pop("seed_take_speed_ratio")
         result["long_horizon"] = lh
     if args.denoise_std:
-        dn = evaluate_denoise(engine, clips, args.denoise_std)
+        folder = args.denoise_checkpoint or (DENOISE_MODEL if (DENOISE_MODEL / "model.json").exists()
+                                             else args.checkpoint)
+        extra["denoise_checkpoint"] = str(folder)
+        dn = evaluate_denoise(Engine.load(folder), clips, args.denoise_std)
         extra["butterworth_cutoff_hz"] = dn.pop("butterworth_cutoff_hz")
         result["denoise"] = dn
     if args.paths:

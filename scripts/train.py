@@ -61,6 +61,9 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--resume", action="store_true", help="continue from OUT/train_state.pt")
     p.add_argument("--export", action="store_true",
                    help="only write OUT/release_stepN from OUT/train_state.pt (try a model mid-training)")
+    p.add_argument("--purpose", choices=("generate", "denoise"), default="generate",
+                   help="recorded in the release: 'denoise' marks a model trained for Denoise alone (its "
+                        "predictions are not for Extend or Follow Curve, which then refuse it)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     return p.parse_args(argv)
 
@@ -79,8 +82,9 @@ def main(argv=None) -> int:
                       rollout_windows=args.rollout_windows, rollout_fraction=args.rollout_fraction,
                       denoise_fraction=args.denoise_fraction,
                       noise_start=args.noise_start, seed=args.seed, cache=args.cache, max_minutes=args.max_minutes,
-                      checkpoint_seconds=args.checkpoint_seconds,
-                      command="python scripts/train.py " + " ".join(shlex.quote(a) for a in (argv or sys.argv[1:])))
+                      checkpoint_seconds=args.checkpoint_seconds, purpose=args.purpose,
+                      command="python scripts/train.py " + " ".join(
+                          shlex.quote(a) for a in (argv or sys.argv[1:]) if a != "--export"))
     try:
         release = export_state(cfg) if args.export else train(cfg, resume=args.resume, progress=not args.quiet)
     except (DataError, ValueError) as e:

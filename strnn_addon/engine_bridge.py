@@ -19,9 +19,19 @@ class EngineError(RuntimeError):
     """The model could not be loaded; the message says where it looked and what to do."""
 
 
-def bundled_model() -> Path:
-    """The model folder shipped inside the extension."""
-    return Path(__file__).resolve().parent.parent / "models" / "strnn_default"
+def bundled_model(name: str = "strnn_default") -> Path:
+    """A model folder shipped inside the extension (``strnn_default``, or ``strnn_denoise`` for Denoise)."""
+    return Path(__file__).resolve().parent.parent / "models" / name
+
+
+def denoiser_folder(prefs) -> str:
+    """The model Denoise uses: the Denoise Model Folder preference, else the bundled denoising
+    model, else the main model ('' = the bundled one)."""
+    if prefs is not None and prefs.denoise_model_folder:
+        return bpy_path(prefs.denoise_model_folder)
+    if (bundled_model("strnn_denoise") / "model.json").exists():
+        return str(bundled_model("strnn_denoise"))
+    return bpy_path(prefs.model_folder) if prefs is not None else ""
 
 
 def load_engine(folder: str = "", engine: str = "NUMPY", threads: int = 0):
@@ -38,7 +48,8 @@ def load_engine(folder: str = "", engine: str = "NUMPY", threads: int = 0):
                 from ..model_core.torch_engine import TorchEngine as Engine
             else:
                 from ..model_core.engine import Engine
-            _CACHE.clear()
+            if len(_CACHE) >= 2:  # the main model and the denoiser stay loaded; older choices go
+                _CACHE.pop(next(iter(_CACHE)))
             _CACHE[key] = Engine.load(path)
         except (ImportError, ValueError, OSError, KeyError) as e:
             raise EngineError(f"Could not load the model at {path}: {e}") from e
@@ -60,11 +71,24 @@ def _set_threads(engine: str, threads: int) -> None:
         pass  # NumPy's BLAS keeps its own thread count
 
 
-def engine_from_prefs(prefs):
-    """The engine the add-on preferences ask for (defaults when ``prefs`` is None)."""
+def engine_from_prefs(prefs, folder: str | None = None):
+    """The engine the add-on preferences ask for (defaults when ``prefs`` is None), for the
+    Model Folder or for ``folder``."""
+    if folder is None:
+        folder = bpy_path(prefs.model_folder) if prefs is not None else ""
     if prefs is None:
-        return load_engine()
-    return load_engine(bpy_path(prefs.model_folder), prefs.engine, prefs.threads)
+        return load_engine(folder)
+    return load_engine(folder, prefs.engine, prefs.threads)
+
+
+def generator_from_prefs(prefs):
+    """The main model's engine, refused with an :class:`EngineError` if it can only denoise."""
+    engine = engine_from_prefs(prefs)
+    try:
+        engine.ckpt.require_generator("extend a clip")
+    except ValueError as e:
+        raise EngineError(f"{e} (Preferences > Add-ons > STRNN Motion > Model Folder)") from e
+    return engine
 
 
 def bpy_path(path: str) -> str:
@@ -78,12 +102,13 @@ def bpy_path(path: str) -> str:
 
 def extend(prefs, positions: np.ndarray, fps: float, frames: int) -> np.ndarray:
     """Continue ``positions`` ``[F, 21, 3]`` (Y-up scene units at ``fps``) by ``frames`` -> ``[frames, 21, 3]``."""
-    return motion_ops.extend_positions(engine_from_prefs(prefs), positions, fps, frames)
+    return motion_ops.extend_positions(generator_from_prefs(prefs), positions, fps, frames)
 
 
 def denoise(prefs, positions: np.ndarray, fps: float, strength: float) -> np.ndarray:
     """Denoised ``positions`` ``[F, 21, 3]`` (same space and frames), blended by ``strength``."""
-    return motion_ops.denoise_positions(engine_from_prefs(prefs), positions, fps, strength)
+    return motion_ops.denoise_positions(engine_from_prefs(prefs, denoiser_folder(prefs)), positions, fps,
+                                        strength)
 
 
 _FOLLOWERS: dict[str, object] = {}
@@ -113,7 +138,7 @@ def load_follower(folder: str = "", threads: int = 0):
             _FOLLOWERS.clear()
             _FOLLOWERS[str(path)] = PathFollower.load(path)
         except (ValueError, OSError, KeyError) as e:
-            raise EngineError(f"Could not load the model at {path}: {e}") from e
+            raise EngineError(f"Could not use the model at {path}: {e}") from e
     return _FOLLOWERS[str(path)]
 
 

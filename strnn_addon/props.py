@@ -54,6 +54,10 @@ class STRNN_AP_preferences(bpy.types.AddonPreferences):
     model_folder: StringProperty(
         name="Model Folder", subtype="DIR_PATH", default="",
         description="Folder with model.safetensors and model.json; empty: the bundled model")
+    denoise_model_folder: StringProperty(
+        name="Denoise Model Folder", subtype="DIR_PATH", default="",
+        description="Model that Denoise uses; empty: the bundled denoising model (or the Model Folder's "
+                    "model when the extension ships none)")
     engine: EnumProperty(name="Engine", items=_engines, description="Which library runs the model")
     threads: IntProperty(name="Threads", default=0, min=0, max=256,
                          description="CPU threads for the model; 0: as many as Blender uses")
@@ -61,6 +65,7 @@ class STRNN_AP_preferences(bpy.types.AddonPreferences):
     def draw(self, context):
         col = self.layout.column()
         col.prop(self, "model_folder")
+        col.prop(self, "denoise_model_folder")
         col.prop(self, "engine")
         col.prop(self, "threads")
         from .torch_install import draw_preferences

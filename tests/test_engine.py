@@ -25,7 +25,7 @@ C = LAYOUT.size
 VARIANTS = [(s, r) for s in (True, False) for r in (True, False)]  # (spatial, residual)
 
 
-def random_release(folder, spatial=True, residual=True, m=10, n=10, seed=0):
+def random_release(folder, spatial=True, residual=True, m=10, n=10, seed=0, purpose=None):
     """Save a random STRNN as a release in ``folder``; return (eval-mode model, mean [C], std [C])."""
     torch.manual_seed(seed)
     rng = np.random.default_rng(seed)
@@ -48,7 +48,8 @@ def random_release(folder, spatial=True, residual=True, m=10, n=10, seed=0):
     mean = rng.normal(0.0, 0.2, C).astype(np.float32)
     std = rng.uniform(0.5, 1.5, C).astype(np.float32)
     seeds = (mean + std * rng.normal(size=(3, m, C))).astype(np.float32)
-    save_release(folder, weights, cfg.to_dict(), mean, std, {"licence": "test"}, seeds, ["a", "b", "c"])
+    meta = {"licence": "test", **({"purpose": purpose} if purpose else {})}
+    save_release(folder, weights, cfg.to_dict(), mean, std, meta, seeds, ["a", "b", "c"])
     return model, mean, std
 
 
@@ -122,6 +123,25 @@ def test_denoise_shape(release):
     assert TorchEngine.load(release).denoise(feats).shape == feats.shape
     with pytest.raises(ValueError, match="at least"):
         engine.denoise(feats[: engine.m - 1])
+
+
+def test_a_denoise_only_model_denoises_and_refuses_to_predict(tmp_path):
+    random_release(tmp_path, purpose="denoise")
+    for engine in (Engine.load(tmp_path), TorchEngine.load(tmp_path)):
+        assert engine.ckpt.purpose == "denoise"
+        assert engine.denoise(np.repeat(engine.seeds[0], 3, 0)).shape == (3 * engine.m, C)
+        with pytest.raises(CheckpointError, match="trained for Denoise alone.*strnn_default"):
+            engine.extrapolate(engine.seeds[0], 5)
+    from model_core.control import PathFollower
+
+    with pytest.raises(CheckpointError, match="cannot follow a path"):
+        PathFollower.load(tmp_path)
+
+
+def test_an_unknown_purpose_is_a_clear_error(tmp_path):
+    random_release(tmp_path, purpose="dance")
+    with pytest.raises(CheckpointError, match="unknown purpose 'dance'"):
+        Engine.load(tmp_path)
 
 
 def test_loading_never_unpickles(release, monkeypatch):
@@ -200,3 +220,18 @@ def test_seam_correction_carries_the_context_offset_into_the_prediction(tmp_path
     np.testing.assert_allclose(pred[:, :, LAYOUT.positions] - window[:, 10:, LAYOUT.positions],
                                np.exp(-np.arange(1, 11) / 4.0)[None, :, None] * offset[:, None], atol=1e-4)
     np.testing.assert_allclose(pred[:, :, LAYOUT.velocity], window[:, 10:, LAYOUT.velocity], atol=1e-6)
+
+
+def test_blend_track_keeps_consistent_data_and_takes_the_rates_when_weighted():
+    from model_core.engine import blend_track
+
+    rng = np.random.default_rng(0)
+    track = np.cumsum(rng.normal(size=(50, 2)), 0)
+    steps = np.diff(track, axis=0)
+    for weight in (0.0, 1.0, 1e4):  # data that agree with the rates are kept as they are
+        np.testing.assert_allclose(blend_track(track, steps, weight), track, atol=1e-8)
+    noisy = track + rng.normal(0, 0.5, track.shape)
+    np.testing.assert_allclose(blend_track(noisy, steps, 0.0), noisy)  # weight 0: the noisy track
+    stiff = blend_track(noisy, steps, 1e8)  # a large weight: the rates, placed at the noisy track's mean
+    np.testing.assert_allclose(stiff - stiff.mean(0), track - track.mean(0), atol=1e-4)
+    np.testing.assert_allclose(stiff.mean(0), noisy.mean(0), atol=1e-4)

@@ -55,3 +55,16 @@ def test_without_options_only_prediction(walks, tmp_path):
     out = tmp_path / "eval.json"
     evaluate.main(["--data", str(walks), "--cache", "", "--json", str(out)])
     assert set(json.loads(out.read_text())) == {"checkpoint", "data", "clips", "windows", "prediction"}
+
+
+def test_a_denoise_only_checkpoint_is_pointed_to_denoise_checkpoint(walks, tmp_path, capsys):
+    from test_engine import random_release
+
+    random_release(tmp_path / "dn", m=20, n=1, purpose="denoise")
+    assert evaluate.main(["--data", str(walks), "--cache", "", "--checkpoint", str(tmp_path / "dn")]) == 2
+    assert "pass it as --denoise-checkpoint" in capsys.readouterr().err
+    out = tmp_path / "eval.json"
+    assert evaluate.main(["--data", str(walks), "--cache", "", "--denoise-std", "3", "--denoise-checkpoint",
+                          str(tmp_path / "dn"), "--json", str(out)]) == 0
+    assert f"model {tmp_path / 'dn'}" in capsys.readouterr().out
+    assert set(json.loads(out.read_text())["denoise"]["mpjpe_cm"]) == {"strnn", "butterworth_best", "noisy"}

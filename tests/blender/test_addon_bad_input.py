@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import bpy
 import pytest
 from scenes import action_of, build_armature, import_bvh, key_snapshot, same_keys, walk_bvh
@@ -88,3 +90,16 @@ def test_linked_armature(addon, tmp_path, op):
     bpy.context.view_layer.objects.active = linked
     assert linked.library is not None
     refuse(op, "linked from")
+
+
+def test_extend_refuses_a_denoise_only_model(addon, tmp_path):
+    denoiser = Path(addon.__file__).parent / "models" / "strnn_denoise"
+    if not (denoiser / "model.json").exists():
+        pytest.skip("the extension ships no denoising model")
+    import_bvh(walk_bvh(tmp_path, frames=40))
+    prefs = bpy.context.preferences.addons[addon.__name__].preferences
+    prefs.model_folder = str(denoiser)
+    try:
+        refuse("extend_clip", "trained for Denoise alone.*Model Folder")
+    finally:
+        prefs.model_folder = ""

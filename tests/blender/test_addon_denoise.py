@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import importlib
+from pathlib import Path
+
 import bpy
 import numpy as np
 from scenes import (
@@ -85,3 +88,25 @@ def test_denoise_noisy_clip_with_model(real_model, addon, tmp_path):
     err_out = np.linalg.norm(out - clean, axis=-1).mean()
     print(f"noisy {err_noisy:.4f}, denoised {err_out:.4f} (scene units)")
     assert 0 < err_noisy and err_out < 3 * err_noisy
+
+
+def test_denoise_model_folder_preference_picks_the_denoiser(real_model, addon, tmp_path):
+    """Empty: the bundled denoising model (the main model if the extension ships none); set: that folder."""
+    bridge = importlib.import_module(addon.__name__ + ".strnn_addon.engine_bridge")
+    prefs = bpy.context.preferences.addons[addon.__name__].preferences
+    shipped = Path(addon.__file__).parent / "models" / "strnn_denoise"
+    expected = shipped if (shipped / "model.json").exists() else Path(real_model)
+    assert Path(bridge.denoiser_folder(prefs)) == expected
+    path, frames, outputs = walk_bvh(tmp_path, frames=60), np.arange(1, 61), []
+    for folder in ("", str(real_model)):
+        obj = import_bvh(path)  # the same clip each time
+        prefs.denoise_model_folder = folder
+        try:
+            denoise()
+        finally:
+            prefs.denoise_model_folder = ""
+        outputs.append(evaluated_joints(addon, obj, frames))
+    assert Path(bridge.denoiser_folder(prefs)) == expected
+    assert np.isfinite(outputs[1]).all()
+    if expected != Path(real_model):
+        assert np.abs(outputs[0] - outputs[1]).max() > 1e-3  # a different model gave a different result
