@@ -194,24 +194,40 @@ class Engine:
         joined = np.concatenate([feats[-1:], new])
         return features_to_positions(joined, RootStart(root[-1], float(yaw[-1])))[1:]
 
-    def denoise_positions(self, positions: np.ndarray, root_weight: float = 30.0,
-                          yaw_weight: float = 100.0) -> np.ndarray:
-        """Denoise global positions ``[F, 21, 3]``: the body from the model; the heading and the
-        ground path each a least-squares blend of the noisy track (its slow part) and the
-        model's rates (the fast part), ``yaw_weight`` and ``root_weight`` setting the crossover
-        (chosen on the validation split)."""
-        feats, start = positions_to_features(positions)
+    def denoise_positions(self, positions: np.ndarray, root_weight: float = 3.0,
+                          yaw_weight: float = 10.0) -> np.ndarray:
+        """Denoise global positions ``[F, 21, 3]``.
+
+        The body comes from the model. It is placed on the input frame by frame by the heading
+        and shift that fit it best to all 21 input joints (least squares, so the noise of the
+        joints averages out); then the heading track is smoothed and the shift track blended
+        with the model's own root steps (its slow part from the fit, its fast part from the
+        model), ``yaw_weight`` and ``root_weight`` setting how smooth (chosen on the validation
+        split)."""
+        positions = np.asarray(positions, dtype=np.float64)
+        feats, _ = positions_to_features(positions)
         clean = self.denoise(feats)
         origin = RootStart(np.zeros(3), 0.0)
-        local = features_to_positions(clean, origin)
-        root_model, yaw_model = integrate_root(clean, origin)
-        noisy_root, noisy_yaw = integrate_root(feats, start)
-        yaw = blend_track(noisy_yaw[:, None], np.diff(yaw_model)[:, None], yaw_weight)[:, 0]
-        rot = yaw_matrix(np.unwrap(yaw - yaw_model))  # the model's frame -> the blended heading
+        root_model, _ = integrate_root(clean, origin)
+        body = features_to_positions(clean, origin) - root_model[:, None]  # root at the origin
+        yaw, shift = fit_yaw_shift(body, positions)
+        yaw = blend_track(yaw[:, None], np.zeros((len(yaw) - 1, 1)), yaw_weight)[:, 0]
+        rot = yaw_matrix(yaw)
         steps = np.einsum("fij,fj->fi", rot[:-1], np.diff(root_model, axis=0))
-        root = blend_track(noisy_root, steps, root_weight)
-        body = np.einsum("fij,fkj->fki", rot, local - root_model[:, None])
-        return (body + root[:, None]).astype(np.float32)
+        root = blend_track(shift, steps, root_weight)
+        return (np.einsum("fij,fkj->fki", rot, body) + root[:, None]).astype(np.float32)
+
+
+def fit_yaw_shift(body: np.ndarray, target: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per frame, the turn about the up axis ``[F]`` (unwrapped radians) and shift ``[F, 3]``
+    that put ``body`` ``[F, J, 3]`` closest to ``target`` ``[F, J, 3]`` in the least-squares
+    sense: ``yaw_matrix(yaw) @ body + shift ~ target``."""
+    bc, tc = body.mean(1), target.mean(1)
+    b, t = body - bc[:, None], target - tc[:, None]
+    sin = (t[..., 0] * b[..., 2] - t[..., 2] * b[..., 0]).sum(1)
+    cos = (t[..., 0] * b[..., 0] + t[..., 2] * b[..., 2]).sum(1)
+    yaw = np.unwrap(np.arctan2(sin, cos))
+    return yaw, tc - np.einsum("fij,fj->fi", yaw_matrix(yaw), bc)
 
 
 def blend_track(noisy: np.ndarray, steps: np.ndarray, weight: float) -> np.ndarray:

@@ -235,3 +235,17 @@ def test_blend_track_keeps_consistent_data_and_takes_the_rates_when_weighted():
     stiff = blend_track(noisy, steps, 1e8)  # a large weight: the rates, placed at the noisy track's mean
     np.testing.assert_allclose(stiff - stiff.mean(0), track - track.mean(0), atol=1e-4)
     np.testing.assert_allclose(stiff.mean(0), noisy.mean(0), atol=1e-4)
+
+
+def test_fit_yaw_shift_recovers_a_known_placement():
+    from model_core.engine import fit_yaw_shift
+    from model_core.features import yaw_matrix
+
+    rng = np.random.default_rng(0)
+    body = rng.normal(0, 0.4, (30, 21, 3))
+    yaw = np.linspace(-3.0, 9.0, 30)  # more than a full turn: the fit comes back unwrapped
+    shift = rng.normal(0, 2.0, (30, 3))
+    target = np.einsum("fij,fkj->fki", yaw_matrix(yaw), body) + shift[:, None]
+    got_yaw, got_shift = fit_yaw_shift(body, target)
+    np.testing.assert_allclose(got_yaw - got_yaw[0] + yaw[0], yaw, atol=1e-9)
+    np.testing.assert_allclose(got_shift, shift, atol=1e-9)
