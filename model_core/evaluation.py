@@ -3,6 +3,8 @@ each beside its baselines, as the JSON document ``scripts/evaluate.py`` writes."
 
 from __future__ import annotations
 
+import time
+
 import numpy as np
 
 from .dataset import MotionData
@@ -71,11 +73,14 @@ def evaluate_long_horizon(engine, clips, frames: int, seeds: int, reference=None
 def evaluate_denoise(engine, clips, stds_cm, seed: int = 0) -> dict:
     usable = [c.positions for c in clips if len(c.positions) >= 2 * engine.m]
     out = {"std_cm": list(stds_cm), "mpjpe_cm": {"strnn": [], "butterworth_best": [], "noisy": []},
-           "butterworth_cutoff_hz": []}
+           "butterworth_cutoff_hz": [], "strnn_frames_per_s": []}
     for std in stds_cm:
         rng = np.random.default_rng(seed)
         noisy = [add_noise(p, std, rng) for p in usable]
-        strnn = np.concatenate([mpjpe_cm(engine.denoise_positions(n), c) for c, n in zip(usable, noisy)]).mean()
+        started = time.perf_counter()
+        denoised = [engine.denoise_positions(n) for n in noisy]
+        out["strnn_frames_per_s"].append(sum(map(len, noisy)) / (time.perf_counter() - started))
+        strnn = np.concatenate([mpjpe_cm(d, c) for c, d in zip(usable, denoised)]).mean()
         bw, fc = best_butterworth(usable, noisy)
         raw = np.concatenate([mpjpe_cm(n, c) for c, n in zip(usable, noisy)]).mean()
         out["mpjpe_cm"]["strnn"].append(float(strnn))

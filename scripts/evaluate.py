@@ -76,6 +76,7 @@ def print_table(result: dict, extra: dict):
         for name, row in dn["mpjpe_cm"].items():
             print(f"{name:<20}" + "".join(f"{v:8.2f}" for v in row))
         print(f"{'best cutoff Hz':<20}" + "".join(f"{v:8.1f}" for v in extra["butterworth_cutoff_hz"]))
+        print(f"{'strnn frames/s':<20}" + "".join(f"{v:8.0f}" for v in extra["denoise_fps"]))
     if "paths" in result:
         print_paths(result["paths"])
 
@@ -109,6 +110,7 @@ def run(args) -> dict:
         extra["denoise_checkpoint"] = str(folder)
         dn = evaluate_denoise(Engine.load(folder), clips, args.denoise_std)
         extra["butterworth_cutoff_hz"] = dn.pop("butterworth_cutoff_hz")
+        extra["denoise_fps"] = dn.pop("strnn_frames_per_s")
         result["denoise"] = dn
     if args.paths:
         result["paths"] = run_paths(args, clips)
