@@ -93,6 +93,9 @@ def build_parser() -> argparse.ArgumentParser:
                        description="Clean each clip with the motion model.")
     p.add_argument("--strength", type=float, default=1.0,
                    help="blend between the original (0) and the model's output (1) (default: 1.0)")
+    p.add_argument("--denoise-model", type=Path, default=None, metavar="DIR",
+                   help="model release folder for the Denoise Model Folder preference (default: the "
+                        "denoising model bundled in the zip)")
     p.add_argument("--foot-lock", action="store_true", help="also lock the feet")
 
     p = sub.add_parser("footlock", parents=[common], help="pin the feet while they touch the ground "
@@ -143,8 +146,10 @@ def check_args(parser, args) -> None:
         parser.error("--frames, --speed and --steering must not be negative")
     if args.extension is not None and not args.extension.is_file():
         parser.error(f"--extension {args.extension}: no such file")
-    if args.model is not None and not (args.model / "model.json").is_file():
-        parser.error(f"--model {args.model}: no model.json in it")
+    for option in ("model", "denoise_model"):
+        folder = getattr(args, option, None)
+        if folder is not None and not (folder / "model.json").is_file():
+            parser.error(f"--{option.replace('_', '-')} {folder}: no model.json in it")
 
 
 def collect(inputs: list[Path]) -> tuple[list[tuple[Path, Path]], list[tuple[str, str]]]:
@@ -309,7 +314,9 @@ def main(argv: list[str] | None = None) -> int:
         jobs.append({"index": len(jobs), "input": str(path.resolve()), "display": display,
                      "output": str(out.resolve()), "shown_output": str(out), "operator": op, "kwargs": kwargs,
                      "path": getattr(args, "path", None), "curve": getattr(args, "curve", ""),
-                     "model": str(args.model.resolve()) if args.model else "", "verbose": args.verbose})
+                     "model": str(args.model.resolve()) if args.model else "",
+                     "denoise_model": str(args.denoise_model.resolve()) if getattr(args, "denoise_model", None)
+                     else "", "verbose": args.verbose})
     total = len(jobs) + len(results)
     if not total:
         parser.error("no input files")
@@ -514,8 +521,8 @@ def process_file(job: dict) -> dict:
 
         bpy.ops.wm.read_factory_settings(use_empty=True)
         install_extension(bpy, job["zip"], user_dir)
-        if job["model"]:
-            bpy.context.preferences.addons[ADDON].preferences.model_folder = job["model"]
+        prefs = bpy.context.preferences.addons[ADDON].preferences
+        prefs.model_folder, prefs.denoise_model_folder = job["model"], job["denoise_model"]
         bpy.ops.wm.read_homefile(use_empty=True)
         run_file(bpy, job)
         result.update(status="ok", output=job["shown_output"])

@@ -168,3 +168,16 @@ print(json.dumps({{"actions": sorted(a.name for a in bpy.data.actions), "active"
                              "--extension", str(extension)])
     assert code == 0, capsys.readouterr().err
     assert frames_of(out / "scene.denoise.bvh") == 60 and scene.read_bytes() == before
+
+    # --denoise-model picks the model Denoise uses: the main model here gives another result
+    code = strnn_batch.main(["denoise", "--format", "bvh", str(scene), "--out", str(out / "main"),
+                             "--denoise-model", str(REPO / "models" / "strnn_default"), "--extension", str(extension)])
+    assert code == 0, capsys.readouterr().err
+    if (REPO / "models" / "strnn_denoise" / "model.json").exists():
+        assert (out / "main" / "scene.denoise.bvh").read_bytes() != (out / "scene.denoise.bvh").read_bytes()
+
+
+def test_a_denoise_model_folder_without_a_model_is_refused(tmp_path, capsys):
+    with pytest.raises(SystemExit) as stop:
+        strnn_batch.main(["denoise", "--denoise-model", str(tmp_path), str(tmp_path / "a.bvh")])
+    assert stop.value.code == 2 and f"--denoise-model {tmp_path}: no model.json" in capsys.readouterr().err
