@@ -34,14 +34,15 @@ def denoiser_folder(prefs) -> str:
     return bpy_path(prefs.model_folder) if prefs is not None else ""
 
 
-def load_engine(folder: str = "", engine: str = "NUMPY", threads: int = 0):
-    """The inference engine for ``folder`` ('' = bundled), cached across calls."""
+def load_engine(folder: str = "", engine: str = "NUMPY", threads: int = 0, setting: str = "Model Folder"):
+    """The inference engine for ``folder`` ('' = bundled), cached across calls; errors name the
+    preference ``setting`` that picks the folder."""
     path = Path(folder) if folder else bundled_model()
     key = (str(path), engine, threads)
     if key not in _CACHE:
         if not (path / "model.json").exists():
             raise EngineError(f"No model at {path}: set a folder holding model.json and model.safetensors "
-                              "in Preferences > Add-ons > STRNN Motion > Model Folder")
+                              f"in Preferences > Add-ons > STRNN Motion > {setting}")
         _set_threads(engine, threads)
         try:
             if engine == "TORCH":
@@ -52,7 +53,7 @@ def load_engine(folder: str = "", engine: str = "NUMPY", threads: int = 0):
                 _CACHE.pop(next(iter(_CACHE)))
             _CACHE[key] = Engine.load(path)
         except (ImportError, ValueError, OSError, KeyError) as e:
-            raise EngineError(f"Could not load the model at {path}: {e}") from e
+            raise EngineError(f"Could not load the model at {path} ({setting}): {e}") from e
     return _CACHE[key]
 
 
@@ -71,14 +72,14 @@ def _set_threads(engine: str, threads: int) -> None:
         pass  # NumPy's BLAS keeps its own thread count
 
 
-def engine_from_prefs(prefs, folder: str | None = None):
+def engine_from_prefs(prefs, folder: str | None = None, setting: str = "Model Folder"):
     """The engine the add-on preferences ask for (defaults when ``prefs`` is None), for the
-    Model Folder or for ``folder``."""
+    Model Folder or for ``folder`` (picked by the preference ``setting``)."""
     if folder is None:
         folder = bpy_path(prefs.model_folder) if prefs is not None else ""
     if prefs is None:
-        return load_engine(folder)
-    return load_engine(folder, prefs.engine, prefs.threads)
+        return load_engine(folder, setting=setting)
+    return load_engine(folder, prefs.engine, prefs.threads, setting)
 
 
 def generator_from_prefs(prefs):
@@ -107,8 +108,8 @@ def extend(prefs, positions: np.ndarray, fps: float, frames: int) -> np.ndarray:
 
 def denoise(prefs, positions: np.ndarray, fps: float, strength: float) -> np.ndarray:
     """Denoised ``positions`` ``[F, 21, 3]`` (same space and frames), blended by ``strength``."""
-    return motion_ops.denoise_positions(engine_from_prefs(prefs, denoiser_folder(prefs)), positions, fps,
-                                        strength)
+    engine = engine_from_prefs(prefs, denoiser_folder(prefs), "Denoise Model Folder")
+    return motion_ops.denoise_positions(engine, positions, fps, strength)
 
 
 _FOLLOWERS: dict[str, object] = {}

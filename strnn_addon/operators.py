@@ -113,7 +113,7 @@ class STRNN_OT_extend_clip(_Staged, bpy.types.Operator):
 
 
 class STRNN_OT_denoise_action(_Staged, bpy.types.Operator):
-    """Clean the active armature's action with the motion model; writes a new action"""
+    """Clean the active armature's action with the denoising model; writes a new action"""
 
     bl_idname = "strnn.denoise_action"
     bl_label = "Denoise Action"

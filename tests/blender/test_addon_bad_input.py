@@ -103,3 +103,15 @@ def test_extend_refuses_a_denoise_only_model(addon, tmp_path):
         refuse("extend_clip", "trained for Denoise alone.*Model Folder")
     finally:
         prefs.model_folder = ""
+
+
+@pytest.mark.parametrize(("op", "setting"), [("extend_clip", "model_folder"), ("denoise_action", "denoise_model_folder")])
+def test_a_model_folder_without_a_model_names_its_preference(addon, tmp_path, op, setting):
+    import_bvh(walk_bvh(tmp_path, frames=40))
+    prefs = bpy.context.preferences.addons[addon.__name__].preferences
+    setattr(prefs, setting, str(tmp_path / "empty"))
+    label = {"model_folder": "Model Folder", "denoise_model_folder": "Denoise Model Folder"}[setting]
+    try:
+        refuse(op, f"No model at .*empty.*STRNN Motion > {label}$")
+    finally:
+        setattr(prefs, setting, "")
