@@ -105,7 +105,8 @@ def test_extend_refuses_a_denoise_only_model(addon, tmp_path):
         prefs.model_folder = ""
 
 
-@pytest.mark.parametrize(("op", "setting"), [("extend_clip", "model_folder"), ("denoise_action", "denoise_model_folder")])
+@pytest.mark.parametrize(("op", "setting"),
+                         [("extend_clip", "model_folder"), ("denoise_action", "denoise_model_folder")])
 def test_a_model_folder_without_a_model_names_its_preference(addon, tmp_path, op, setting):
     import_bvh(walk_bvh(tmp_path, frames=40))
     prefs = bpy.context.preferences.addons[addon.__name__].preferences
