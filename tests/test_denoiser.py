@@ -1,6 +1,6 @@
 """The bundled denoising model (``models/strnn_denoise``): the NumPy engine matches torch, it
 refuses to predict, and on real test-split takes it removes more noise than the best
-low-pass filter."""
+low-pass filter (at most 0.7 x its error at 3 cm noise)."""
 
 from __future__ import annotations
 
@@ -45,4 +45,4 @@ def test_beats_the_best_low_pass_filter_on_test_takes(denoiser, mocap_root):
     raw = np.concatenate([mpjpe_cm(n, c) for n, c in zip(noisy, clean)]).mean()
     print(f"3 cm noise on {len(takes)} takes: noisy {raw:.2f} cm, Butterworth {filtered:.2f} ({cutoff} Hz), "
           f"denoiser {ours:.2f}")
-    assert ours < filtered < raw
+    assert filtered < raw and ours < 0.7 * filtered  # the model card's criterion, on a few takes

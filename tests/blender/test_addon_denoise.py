@@ -87,7 +87,8 @@ def test_denoise_noisy_clip_with_model(real_model, addon, tmp_path):
     err_noisy = np.linalg.norm(noisy - clean, axis=-1).mean()
     err_out = np.linalg.norm(out - clean, axis=-1).mean()
     print(f"noisy {err_noisy:.4f}, denoised {err_out:.4f} (scene units)")
-    assert 0 < err_noisy and err_out < 3 * err_noisy
+    shipped = (Path(addon.__file__).parent / "models" / "strnn_denoise" / "model.json").exists()
+    assert 0 < err_noisy and err_out < (0.5 if shipped else 1.0) * err_noisy  # the denoising model: under half
 
 
 def test_denoise_model_folder_preference_picks_the_denoiser(real_model, addon, tmp_path):
