@@ -1,11 +1,13 @@
-"""Benchmark Extend Clip in Blender: a 1,000-frame clip on a 60-bone rig extended by 1,000 frames.
+"""Benchmark Extend Clip (or Denoise Action) in Blender on a 60-bone rig: a 1,000-frame clip
+extended by 1,000 frames (or denoised whole).
 
 Builds the extension, installs it into the bpy module (a temporary user repository, as the
-tests do), builds a 60-bone armature with a 1,000-frame keyed action, runs the Extend worker
-and prints the time of each stage (read, model, solve, write) beside the floor: reading and
-writing the same keys with bulk ``foreach_get`` / ``foreach_set`` and nothing else.
+tests do), builds a 60-bone armature with a 1,000-frame keyed action, runs the operator's
+worker and prints the time of each stage (read, model, solve, write) beside the floor:
+reading and writing the same keys with bulk ``foreach_get`` / ``foreach_set`` and nothing else.
 
     python scripts/benchmark_blender.py
+    python scripts/benchmark_blender.py --operator denoise   # with the bundled denoising model
     python scripts/benchmark_blender.py --model runs/default/release --frames 1000 --repeat 3
     python scripts/benchmark_blender.py --untrained   # timing only: a randomly initialised model
 """
@@ -196,6 +198,8 @@ def main(argv: list[str] | None = None) -> dict:
     parser.add_argument("--model", type=Path, default=None, help="release folder (default: bundled or runs/*)")
     parser.add_argument("--untrained", action="store_true", help="use a random model when none is trained")
     parser.add_argument("--repeat", type=int, default=3, help="runs; the fastest is reported (default 3)")
+    parser.add_argument("--operator", choices=("extend", "denoise"), default="extend",
+                        help="Extend Clip (default) or Denoise Action (the extension's denoising model)")
     args = parser.parse_args(argv)
     model = find_model(args)
     package = install(Path(tempfile.mkdtemp()))
@@ -207,12 +211,19 @@ def main(argv: list[str] | None = None) -> dict:
         read_floor, write_floor = floor_time(obj, args.frames)
         timings: dict = {}
         start = time.perf_counter()
-        workers.extend_clip(bpy.context, obj, frames=args.frames, timings=timings)
+        if args.operator == "extend":
+            workers.extend_clip(bpy.context, obj, frames=args.frames, timings=timings)
+        else:
+            workers.denoise_action(bpy.context, obj, timings=timings)
         timings["total"] = time.perf_counter() - start
         timings.update(floor_read=read_floor, floor_write=write_floor)
         if not best or timings["total"] < best["total"]:
             best = timings
-    print(f"model: {model}\nrig: {len(obj.data.bones)} bones, clip {args.frames} frames + {args.frames} new")
+    done = f"+ {args.frames} new" if args.operator == "extend" else "denoised"
+    if args.operator == "denoise":
+        bridge = importlib.import_module(package + ".strnn_addon.engine_bridge")
+        model = bridge.denoiser_folder(bpy.context.preferences.addons[package].preferences)
+    print(f"{args.operator}, model: {model}\nrig: {len(obj.data.bones)} bones, clip {args.frames} frames {done}")
     for stage in ("read", "model", "solve", "write", "total"):
         print(f"  {stage:6s} {best[stage]:7.3f} s")
     print(f"  floor: read keys {best['floor_read']:.3f} s, write keys {best['floor_write']:.3f} s")

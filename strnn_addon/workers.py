@@ -107,10 +107,12 @@ def extend_steps(context, obj, *, frames: int = 120, context_frames: int = 0, fo
 
 
 def denoise_steps(context, obj, *, frame_start: int | None = None, frame_end: int | None = None,
-                  strength: float = 1.0, foot_lock: bool = False):
+                  strength: float = 1.0, foot_lock: bool = False, timings: dict | None = None):
     """Denoise ``obj``'s action over [frame_start, frame_end] (default: the whole action),
     blending the model's output by ``strength``, then lock the feet when ``foot_lock``.
-    A generator like :func:`extend_steps`."""
+    A generator like :func:`extend_steps` (``timings`` gets each stage's seconds)."""
+    timings = {} if timings is None else timings
+    t0 = time.perf_counter()
     clip = pipeline.prepare(context, obj)
     a = clip.first if frame_start is None else max(int(frame_start), clip.first)
     b = clip.last if frame_end is None else min(int(frame_end), clip.last)
@@ -123,14 +125,19 @@ def denoise_steps(context, obj, *, frame_start: int | None = None, frame_end: in
     pos = pipeline.joint_positions(context, clip, frames)
     ref_loc, ref_rot, _ = rig_io.read_local_pose(clip.obj, clip.rig, clip.channels.fcurves, frames)
     previous = pipeline.raw_rotations(clip, a)
+    t1 = time.perf_counter()
     yield "model"
     clean = _model_call(engine_bridge.denoise, _prefs(context), pos, clip.fps, float(strength))
     if foot_lock:
         clean = _lock(clean, clip.fps)
+    t2 = time.perf_counter()
     yield "solve"
     loc, rot = solve(clip.rig, clip.anchors, pipeline.to_armature(clip, clean), ref_loc, ref_rot)
+    t3 = time.perf_counter()
     yield "write"
-    return _write_new(context, clip, "denoised", frames, loc, rot, previous, (a, b))
+    action = _write_new(context, clip, "denoised", frames, loc, rot, previous, (a, b))
+    timings.update(read=t1 - t0, model=t2 - t1, solve=t3 - t2, write=time.perf_counter() - t3)
+    return action
 
 
 def foot_lock_steps(context, obj, *, frame_start: int | None = None, frame_end: int | None = None,

@@ -59,3 +59,18 @@ def test_benchmark_script_smoke(tmp_path, monkeypatch):
     assert all(r["fps_best"] > 0 and r["pct_of_roofline"] > 0 for r in res["results"])
     assert res["machine"]["sgemm_gflops"] > 0 and res["costs"]["flops_per_frame"] > 0
     assert res["config"]["frame_size"] == LAYOUT.size
+
+
+@pytest.mark.parametrize("operator", ["extend", "denoise"])
+def test_blender_benchmark_smoke(operator):
+    """scripts/benchmark_blender.py in its own process (it installs the extension into bpy)."""
+    pytest.importorskip("bpy")
+    import subprocess
+
+    done = subprocess.run([sys.executable, str(REPO / "scripts" / "benchmark_blender.py"), "--operator", operator,
+                           "--frames", "60", "--repeat", "1"], capture_output=True, text=True, timeout=300, cwd=REPO)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert f"{operator}, model:" in done.stdout and "60 bones" in done.stdout
+    stages = {line.split()[0]: float(line.split()[1]) for line in done.stdout.splitlines()
+              if line.strip().split(" ")[0] in ("read", "model", "solve", "write", "total")}
+    assert set(stages) == {"read", "model", "solve", "write", "total"} and stages["total"] > 0
