@@ -2,7 +2,8 @@
 
 seed -> open-loop continuation (NumPy engine) -> figure-eight walk (torch path follower; skipped
 without torch) -> foot lock (detected contacts) -> BVH, contact sheet, plots, and a .blend
-(the ``bpy`` module; skipped without it).
+(the ``bpy`` module; skipped without it). Beside them, :func:`denoise_check` jitters the
+result and denoises it with the denoising model.
 """
 
 from __future__ import annotations
@@ -14,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .checkpoint import CheckpointError
+from .checkpoint import DENOISE_MODEL, CheckpointError
 from .features import features_to_positions, heading, yaw_matrix
 from .footlock import detect_foot_contacts, foot_lock, foot_skate_cm
 from .paths import Path as CurvePath, evaluation_paths
@@ -105,6 +106,24 @@ def build_motion(model: str | Path | None, seed_index: int | None, frames: int, 
     locked = foot_lock(walked, contacts=contacts)
     return DemoMotion(name, m, extended, walked, locked, foot_skate_cm(walked, contacts),
                       foot_skate_cm(locked, contacts), notes)
+
+
+def denoise_check(positions: np.ndarray, std_cm: float = 3.0, model: str | Path | None = None,
+                  seed: int = 0) -> tuple[float, float, str]:
+    """Gaussian jitter of ``std_cm`` on every joint of ``positions`` ``[F, 21, 3]`` (metres, 30 fps),
+    then the call Denoise makes on it (scale normalised to the model's, as for a user's rig):
+    (mean joint error of the jittered, of the denoised motion, in cm; the model folder).
+    ``model`` None: the bundled denoising model, else the default model."""
+    from .conventions import MODEL_FPS
+    from .engine import Engine
+    from .metrics import add_noise, mpjpe_cm
+    from .motion_ops import denoise_positions
+
+    folder = model or (DENOISE_MODEL if (DENOISE_MODEL / "model.json").exists() else None)
+    engine = Engine.load(folder)
+    noisy = add_noise(positions, std_cm, np.random.default_rng(seed))
+    clean = denoise_positions(engine, noisy, MODEL_FPS)
+    return float(mpjpe_cm(noisy, positions).mean()), float(mpjpe_cm(clean, positions).mean()), str(folder or "")
 
 
 def plot_demo(path: str | Path, evaluation: dict | None, skate_before: float, skate_after: float) -> Path:

@@ -48,6 +48,7 @@ def test_demo_writes_bvh_png_plots_and_blend(tiny_model, tmp_path, capsys):
     for label, name in (("BVH", "demo.bvh"), ("PNG", "demo.png"), ("Plots", "demo_plots.png")):
         assert f"{label}: {out / name}" in printed
     assert "foot skate:" in printed and "25 frames on the figure-eight" in printed
+    assert "denoise: 3 cm of jitter on every joint" in printed
     bvh = read_bvh(out / "demo.bvh")
     assert bvh.frames == 20 + 30 + 25  # the seed window, the continuation, the walk
     assert np.all(np.isfinite(canonical_positions(bvh)))
@@ -87,3 +88,17 @@ def test_default_seed_is_the_first_walk():
     assert default_seed(["a/x_raise-up_active_002.bvh@24", "a/x_run_active_016.bvh@30",
                          "a/x_walk_active_008.bvh@30", "a/x_walk_normal_001.bvh@30"]) == 2
     assert default_seed(["cmu/dance/04.bvh@30"]) == 0
+
+
+def test_denoise_check_halves_the_jitter_on_generated_motion():
+    """On motion like the demo's (the shipped model continuing a shipped walking seed)."""
+    from model_core.checkpoint import DEFAULT_MODEL, DENOISE_MODEL
+    from model_core.demo_pipeline import denoise_check, seed_continuation
+
+    if not (DEFAULT_MODEL / "model.json").exists() or not (DENOISE_MODEL / "model.json").exists():
+        pytest.skip("needs the shipped models")
+    motion = seed_continuation(None, None, 200)[0]
+    noisy, clean, folder = denoise_check(motion)
+    assert folder == str(DENOISE_MODEL)
+    assert 4.0 < noisy < 5.6  # |N(0, 3 cm I3)| has mean 4.8 cm
+    assert clean < 0.6 * noisy
