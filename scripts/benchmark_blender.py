@@ -192,6 +192,19 @@ def floor_time(obj, frames: int) -> tuple[float, float]:
     return t1 - t0, t2 - t1
 
 
+def stage_times(worker, *args, **kwargs) -> dict:
+    """Seconds of each stage of ``worker(*args, progress=..., **kwargs)`` (a workers.py runner, which
+    calls ``progress(stage)`` as each stage starts): a stage lasts until the next starts (the first
+    also covers the checks before it), plus the ``total``."""
+    marks: list[tuple[str, float]] = []
+    start = time.perf_counter()
+    worker(*args, progress=lambda stage: marks.append((stage, time.perf_counter())), **kwargs)
+    end = time.perf_counter()
+    bounds = [start] + [t for _, t in marks[1:]] + [end]
+    times = {stage: b - a for (stage, _), a, b in zip(marks, bounds, bounds[1:])}
+    return {**times, "total": end - start}
+
+
 def main(argv: list[str] | None = None) -> dict:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--frames", type=int, default=1000, help="clip length and frames to add (default 1000)")
@@ -209,13 +222,10 @@ def main(argv: list[str] | None = None) -> dict:
     for _ in range(args.repeat):
         obj = build_scene(args.frames)
         read_floor, write_floor = floor_time(obj, args.frames)
-        timings: dict = {}
-        start = time.perf_counter()
         if args.operator == "extend":
-            workers.extend_clip(bpy.context, obj, frames=args.frames, timings=timings)
+            timings = stage_times(workers.extend_clip, bpy.context, obj, frames=args.frames)
         else:
-            workers.denoise_action(bpy.context, obj, timings=timings)
-        timings["total"] = time.perf_counter() - start
+            timings = stage_times(workers.denoise_action, bpy.context, obj)
         timings.update(floor_read=read_floor, floor_write=write_floor)
         if not best or timings["total"] < best["total"]:
             best = timings

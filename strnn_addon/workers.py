@@ -8,8 +8,6 @@ before the new action is created, so a failure or a cancel leaves the file uncha
 
 from __future__ import annotations
 
-import time
-
 import numpy as np
 
 from ..model_core import footlock
@@ -74,45 +72,35 @@ def _context_range(clip, context_frames: int, frames: int) -> np.ndarray:
     return np.arange(clip.last - n_ctx + 1, clip.last + 1, dtype=np.float64)
 
 
-def extend_steps(context, obj, *, frames: int = 120, context_frames: int = 0, foot_lock: bool = False,
-                 timings: dict | None = None):
+def extend_steps(context, obj, *, frames: int = 120, context_frames: int = 0, foot_lock: bool = False):
     """Continue ``obj``'s action by ``frames`` scene frames from its last ``context_frames``
     (0: just enough for the model's 20-frame context), feet locked on the new frames when
     ``foot_lock``. A generator: yields each stage's name before running it (so a caller can
     report progress or stop), returns the new action."""
-    timings = {} if timings is None else timings
-    t0 = time.perf_counter()
     clip = pipeline.prepare(context, obj)
     ctx_frames = _context_range(clip, context_frames, frames)
     yield "read"
     pos = pipeline.joint_positions(context, clip, ctx_frames)
     held_loc, held_rot, _ = rig_io.read_local_pose(clip.obj, clip.rig, clip.channels.fcurves, ctx_frames[-1:])
     previous = pipeline.raw_rotations(clip, clip.last)
-    t1 = time.perf_counter()
     yield "model"
     new_pos = _model_call(engine_bridge.extend, _prefs(context), pos, clip.fps, frames)
     if foot_lock:
         new_pos = _lock(np.concatenate([pos, new_pos]), clip.fps, fixed=np.arange(len(pos) + frames) < len(pos))
         new_pos = new_pos[len(pos):]
-    t2 = time.perf_counter()
     yield "solve"
     targets = pipeline.to_armature(clip, new_pos)
     loc, rot = solve(clip.rig, clip.anchors, targets, np.repeat(held_loc, frames, 0), np.repeat(held_rot, frames, 0))
-    t3 = time.perf_counter()
     yield "write"
     new_frames = clip.last + 1 + np.arange(frames, dtype=np.float64)
-    action = _write_new(context, clip, "extended", new_frames, loc, rot, previous, None)
-    timings.update(read=t1 - t0, model=t2 - t1, solve=t3 - t2, write=time.perf_counter() - t3)
-    return action
+    return _write_new(context, clip, "extended", new_frames, loc, rot, previous, None)
 
 
 def denoise_steps(context, obj, *, frame_start: int | None = None, frame_end: int | None = None,
-                  strength: float = 1.0, foot_lock: bool = False, timings: dict | None = None):
+                  strength: float = 1.0, foot_lock: bool = False):
     """Denoise ``obj``'s action over [frame_start, frame_end] (default: the whole action),
     blending the model's output by ``strength``, then lock the feet when ``foot_lock``.
-    A generator like :func:`extend_steps` (``timings`` gets each stage's seconds)."""
-    timings = {} if timings is None else timings
-    t0 = time.perf_counter()
+    A generator like :func:`extend_steps`."""
     clip = pipeline.prepare(context, obj)
     a = clip.first if frame_start is None else max(int(frame_start), clip.first)
     b = clip.last if frame_end is None else min(int(frame_end), clip.last)
@@ -125,19 +113,14 @@ def denoise_steps(context, obj, *, frame_start: int | None = None, frame_end: in
     pos = pipeline.joint_positions(context, clip, frames)
     ref_loc, ref_rot, _ = rig_io.read_local_pose(clip.obj, clip.rig, clip.channels.fcurves, frames)
     previous = pipeline.raw_rotations(clip, a)
-    t1 = time.perf_counter()
     yield "model"
     clean = _model_call(engine_bridge.denoise, _prefs(context), pos, clip.fps, float(strength))
     if foot_lock:
         clean = _lock(clean, clip.fps)
-    t2 = time.perf_counter()
     yield "solve"
     loc, rot = solve(clip.rig, clip.anchors, pipeline.to_armature(clip, clean), ref_loc, ref_rot)
-    t3 = time.perf_counter()
     yield "write"
-    action = _write_new(context, clip, "denoised", frames, loc, rot, previous, (a, b))
-    timings.update(read=t1 - t0, model=t2 - t1, solve=t3 - t2, write=time.perf_counter() - t3)
-    return action
+    return _write_new(context, clip, "denoised", frames, loc, rot, previous, (a, b))
 
 
 def foot_lock_steps(context, obj, *, frame_start: int | None = None, frame_end: int | None = None,
