@@ -72,7 +72,8 @@ def limb_mesh(name: str, length: float, radius: float, head: bool) -> bpy.types.
 
 
 def add_body(arm: bpy.types.Object) -> None:
-    """One mesh object per bone, parented to it, coloured by side (left red, right blue)."""
+    """One mesh object per bone, parented to it, coloured by side (``plots.SIDE_COLOURS``: left blue,
+    right red)."""
     zs = [(arm.matrix_world @ p).z for b in arm.data.bones for p in (b.head_local, b.tail_local)]
     height = (max(zs) - min(zs)) or 1.7  # of the rest pose: the body's thickness scales with it
     for bone in arm.data.bones:

@@ -8,8 +8,8 @@ strnn.follow_curve) on the armatures, reads the bones back in world space frame 
 draws them (matplotlib) into --out:
 
 - extend.png: the clip (grey) and its continuation (blue), seen from the side and above;
-- denoise.png: a clip with 3 cm of Gaussian noise on every joint, denoised, against the clean
-  clip (a wrist's height over time and the error per frame, measured here);
+- denoise.png: a clip with Gaussian jitter of 1.5 degrees on every rotation channel, denoised,
+  against the clean clip (a wrist's height over time and the error per frame, measured here);
 - footlock.png: a foot's ground speed and path before and after the lock;
 - follow.png: a walk along a figure-eight curve, from above and from the side;
 - bonemap.png: what Auto-Map Bones finds on BVH imports of three rig families.
@@ -106,7 +106,7 @@ COLOURS = [joint_colour(j) for j in JOINTS]
 
 
 def draw_pose(ax, joints: np.ndarray, axes=(0, 2), alpha=1.0, colour=None, lw=1.4):
-    """One skeleton ``[21, 3]`` (Z-up) projected on two world ``axes``, left side red, right side blue."""
+    """One skeleton ``[21, 3]`` (Z-up) projected on two world ``axes``, coloured by side (left blue, right red)."""
     for j, parent in enumerate(PARENTS):
         if parent >= 0:
             a, b = joints[parent], joints[j]
