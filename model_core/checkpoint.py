@@ -22,7 +22,7 @@ from .conventions import CONTACTS, JOINTS, LAYOUT, MODEL_FPS, PARENT_NAMES, UP_A
 REPO = Path(__file__).resolve().parent.parent
 DEFAULT_MODEL = REPO / "models" / "strnn_default"
 DENOISE_MODEL = REPO / "models" / "strnn_denoise"  # the model Denoise uses unless told otherwise
-PURPOSES = ("generate", "denoise")  # what a release is trained for (model.json "purpose"; absent: generate)
+PURPOSES = ("generate", "denoise")  # what a release is trained for (model.json "purpose"; absent: the first)
 
 
 class CheckpointError(ValueError):
@@ -45,7 +45,7 @@ class Checkpoint:
     @property
     def purpose(self) -> str:
         """``generate`` (predicts: extend, follow, denoise) or ``denoise`` (a reconstruction-only model)."""
-        return self.meta.get("purpose", "generate")
+        return self.meta.get("purpose", PURPOSES[0])
 
     def require_generator(self, what: str) -> None:
         """Raise :class:`CheckpointError` if this is a denoise-only model, which cannot do ``what``."""
@@ -131,9 +131,6 @@ def load_release(folder: str | Path | None = None) -> Checkpoint:
     if doc["layout"]["size"] != LAYOUT.size:
         raise CheckpointError(f"{folder}: feature size {doc['layout']['size']} does not match "
                               f"this code's {LAYOUT.size}")
-    if doc.get("purpose", "generate") not in PURPOSES:
-        raise CheckpointError(f"{folder / 'model.json'}: unknown purpose {doc['purpose']!r} "
-                              f"(one of {', '.join(PURPOSES)})")
     seeds, names = np.zeros((0, doc["config"]["encode_len"], LAYOUT.size), np.float32), []
     if (folder / "seeds.npz").exists():
         z = np.load(folder / "seeds.npz", allow_pickle=False)
@@ -141,5 +138,9 @@ def load_release(folder: str | Path | None = None) -> Checkpoint:
     norm = doc["normalisation"]
     meta = {k: v for k, v in doc.items() if k not in ("config", "normalisation")}
     reader = load_file if load_file is not None else read_safetensors
-    return Checkpoint(reader(str(folder / "model.safetensors")), doc["config"],
+    ckpt = Checkpoint(reader(str(folder / "model.safetensors")), doc["config"],
                       np.array(norm["mean"], np.float32), np.array(norm["std"], np.float32), meta, seeds, names)
+    if ckpt.purpose not in PURPOSES:
+        raise CheckpointError(f"{folder / 'model.json'}: unknown purpose {ckpt.purpose!r} "
+                              f"(one of {', '.join(PURPOSES)})")
+    return ckpt

@@ -20,7 +20,7 @@ import torch
 import torch.distributed as dist
 from torch.nn.parallel import DistributedDataParallel
 
-from .checkpoint import load_release, save_release
+from .checkpoint import PURPOSES, load_release, save_release
 from .conventions import LAYOUT
 from .dataset import SPLITS, MotionData, Normaliser, load_folder, window_starts
 from .engine import Engine
@@ -60,7 +60,7 @@ class TrainConfig:
     max_minutes: float = 0.0  # stop (with a checkpoint) after this long; 0 = no limit
     command: str = ""  # the command line, recorded in the release metadata
     init: str = ""  # start from the weights of this training state or release folder (fine-tuning)
-    purpose: str = "generate"  # recorded in the release: "denoise" marks a model whose predictions are not for use
+    purpose: str = PURPOSES[0]  # recorded in the release: "denoise" marks a model whose predictions are not for use
 
 
 def phase_at(cfg: TrainConfig, step: int) -> str:

@@ -16,6 +16,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
+from model_core.checkpoint import PURPOSES  # noqa: E402
 from model_core.dataset import DataError  # noqa: E402
 from model_core.model import STRNNConfig  # noqa: E402
 from model_core.training import TrainConfig, export_state, train  # noqa: E402
@@ -61,7 +62,7 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--resume", action="store_true", help="continue from OUT/train_state.pt")
     p.add_argument("--export", action="store_true",
                    help="only write OUT/release_stepN from OUT/train_state.pt (try a model mid-training)")
-    p.add_argument("--purpose", choices=("generate", "denoise"), default="generate",
+    p.add_argument("--purpose", choices=PURPOSES, default=PURPOSES[0],
                    help="recorded in the release: 'denoise' marks a model trained for Denoise alone (its "
                         "predictions are not for Extend or Follow Curve, which then refuse it)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
