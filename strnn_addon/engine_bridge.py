@@ -34,15 +34,22 @@ def denoiser_folder(prefs) -> str:
     return bpy_path(prefs.model_folder) if prefs is not None else ""
 
 
+def model_path(folder: str, setting: str = "Model Folder") -> Path:
+    """The model folder ``folder`` ('' = the bundled model); :class:`EngineError` naming the preference
+    ``setting`` that picks it when it holds no model."""
+    path = Path(folder) if folder else bundled_model()
+    if not (path / "model.json").exists():
+        raise EngineError(f"No model at {path}: set a folder holding model.json and model.safetensors "
+                          f"in Preferences > Add-ons > STRNN Motion > {setting}")
+    return path
+
+
 def load_engine(folder: str = "", engine: str = "NUMPY", threads: int = 0, setting: str = "Model Folder"):
     """The inference engine for ``folder`` ('' = bundled), cached across calls; errors name the
     preference ``setting`` that picks the folder."""
-    path = Path(folder) if folder else bundled_model()
+    path = model_path(folder, setting)
     key = (str(path), engine, threads)
     if key not in _CACHE:
-        if not (path / "model.json").exists():
-            raise EngineError(f"No model at {path}: set a folder holding model.json and model.safetensors "
-                              f"in Preferences > Add-ons > STRNN Motion > {setting}")
         _set_threads(engine, threads)
         try:
             if engine == "TORCH":
@@ -127,11 +134,8 @@ def load_follower(folder: str = "", threads: int = 0):
         importlib.import_module("torch")
     except ImportError as e:
         raise EngineError(TORCH_MISSING) from e
-    path = Path(folder) if folder else bundled_model()
+    path = model_path(folder)
     if str(path) not in _FOLLOWERS:
-        if not (path / "model.json").exists():
-            raise EngineError(f"No model at {path}: set a folder holding model.json and model.safetensors "
-                              "in Preferences > Add-ons > STRNN Motion > Model Folder")
         _set_threads("TORCH", threads)
         from ..model_core.control import PathFollower
 
