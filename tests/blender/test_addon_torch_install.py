@@ -1,17 +1,22 @@
-"""Preferences > Install PyTorch: refused offline, the pip command it runs, the folder on sys.path.
+"""Preferences > Install PyTorch: refused offline, the pip command it runs, pip in the background
+(status, cancel), only a finished install reaching the user folder, the folder on sys.path.
 
-Nothing is downloaded: pip is replaced by a stand-in wherever the operator would run it.
+Nothing is downloaded: pip is replaced by ``fake_pip.py``, a real process that prints pip-like
+lines and writes a small package into its ``--target``.
 """
 
 from __future__ import annotations
 
 import importlib
 import os
-import subprocess
 import sys
+import time
+from pathlib import Path
 
 import bpy
 import pytest
+
+FAKE_PIP = str(Path(__file__).with_name("fake_pip.py"))
 
 
 @pytest.fixture
@@ -20,15 +25,34 @@ def inst(addon):
 
 
 @pytest.fixture
-def pip_calls(inst, monkeypatch):
-    calls = []
+def fake_pip(inst, monkeypatch):
+    """``fake_pip(*flags)`` makes the add-on run the stand-in with ``flags``; returns the targets pip got."""
+    targets = []
 
-    def run(cmd):
-        calls.append(cmd)
-        return subprocess.CompletedProcess(cmd, 0, "Successfully installed torch-2.13.0\n", "")
+    def use(*flags):
+        def command(target, python=None):
+            targets.append(target)
+            return [sys.executable, FAKE_PIP, "--target", str(target), *flags]
 
-    monkeypatch.setattr(inst, "_run", run)
-    return calls
+        monkeypatch.setattr(inst, "install_command", command)
+        return targets
+
+    return use
+
+
+@pytest.fixture
+def user_folder(inst, monkeypatch, tmp_path):
+    """An online Blender whose extension user folder is ``tmp_path/site-packages``."""
+    target = tmp_path / "site-packages"
+    target.mkdir()
+    monkeypatch.setattr(inst, "online_access", lambda: True)
+    monkeypatch.setattr(inst, "site_packages", lambda create=False: str(target))
+    yield target
+    inst.remove_from_path()
+
+
+def leftovers(target: Path) -> list[str]:
+    return [p.name for p in target.parent.iterdir() if p.name.startswith(".installing-")]
 
 
 class Recorder:
@@ -57,37 +81,80 @@ def test_install_command(inst):
     assert folder.endswith(os.path.join(".user", "strnn_test", "strnn_motion", "site-packages"))
 
 
-def test_refused_offline(inst, pip_calls, monkeypatch):
+def test_refused_offline(inst, fake_pip):
+    targets = fake_pip()
     assert bpy.app.online_access is False  # the bpy module runs offline
     folder = inst.site_packages()
     existed, path = os.path.exists(folder), list(sys.path)
     with pytest.raises(RuntimeError, match=r"Online access is off: allow it in Preferences > System"):
         bpy.ops.strnn.install_torch()
-    assert pip_calls == [] and sys.path == path and os.path.exists(folder) == existed
+    assert targets == [] and sys.path == path and os.path.exists(folder) == existed
 
 
-def test_install_runs_pip_into_user_folder(inst, pip_calls, monkeypatch, tmp_path):
-    target = tmp_path / "site-packages"
-    monkeypatch.setattr(inst, "online_access", lambda: True)
-    monkeypatch.setattr(inst, "site_packages", lambda create=False: (target.mkdir(exist_ok=True), str(target))[1])
-    try:
-        assert bpy.ops.strnn.install_torch() == {"FINISHED"}
-        assert pip_calls == [inst.install_command(str(target))]
-        assert str(target) in sys.path
-    finally:
-        inst.remove_from_path()
-    assert str(target) not in sys.path
+def test_install_runs_pip_into_user_folder(inst, fake_pip, user_folder):
+    targets = fake_pip()
+    (user_folder / "strnn_fake_pkg").mkdir()
+    (user_folder / "strnn_fake_pkg" / "old_module.py").write_text("# from an older install\n")
+    assert bpy.ops.strnn.install_torch() == {"FINISHED"}
+    # pip wrote into a scratch folder beside the user folder, which was moved in and removed
+    assert len(targets) == 1 and Path(targets[0]).parent == user_folder.parent
+    assert sorted(p.name for p in (user_folder / "strnn_fake_pkg").iterdir()) == ["__init__.py"]
+    assert leftovers(user_folder) == []
+    assert str(user_folder) in sys.path
+    inst.remove_from_path()
+    assert str(user_folder) not in sys.path
 
 
-def test_install_failure_reported(inst, monkeypatch, tmp_path):
-    monkeypatch.setattr(inst, "online_access", lambda: True)
-    monkeypatch.setattr(inst, "site_packages", lambda create=False: str(tmp_path))
-    monkeypatch.setattr(inst, "_run", lambda cmd: subprocess.CompletedProcess(
-        cmd, 1, "", "Collecting torch==2.13.0\nERROR: No matching distribution found for torch==2.13.0\n"))
+def test_install_failure_reported_and_nothing_installed(inst, fake_pip, user_folder):
+    fake_pip("--fail")
     path = list(sys.path)
     with pytest.raises(RuntimeError, match="Installing PyTorch failed: ERROR: No matching distribution"):
         bpy.ops.strnn.install_torch()
-    assert sys.path == path
+    assert sys.path == path and list(user_folder.iterdir()) == [] and leftovers(user_folder) == []
+
+
+def test_pip_missing_reported(inst, user_folder, monkeypatch):
+    monkeypatch.setattr(inst, "install_command", lambda target, python=None: ["/no/such/python", "-m", "pip"])
+    with pytest.raises(RuntimeError, match=r"Could not run pip .* run '/no/such/python -m pip' in a terminal"):
+        bpy.ops.strnn.install_torch()
+    assert leftovers(user_folder) == []
+
+
+def test_background_install_reports_status_and_cancels(inst, fake_pip, user_folder, monkeypatch):
+    fake_pip("--sleep", "30")
+    job = inst.PipInstall(str(user_folder))
+    try:
+        assert job.poll()
+        deadline = time.monotonic() + 20
+        while "Downloading torch" not in job.status and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert job.status.startswith("Downloading torch-2.13.0")
+        # while it runs: the preferences show its status and a Cancel button, and a second install is refused
+        monkeypatch.setattr(inst, "_running", job)
+        calls = drawn(inst)
+        assert [c[1][0] for c in calls if c[0] == "operator"] == ["strnn.cancel_torch_install"]
+        assert any("Installing torch==2.13.0: Downloading" in c[2].get("text", "") for c in calls if c[0] == "label")
+        with pytest.raises(RuntimeError, match="already being installed"):
+            bpy.ops.strnn.install_torch()
+        assert bpy.ops.strnn.cancel_torch_install() == {"FINISHED"}
+        assert not job.poll() and job.cancelled
+    finally:
+        job.cancel()
+    assert list(user_folder.iterdir()) == [] and leftovers(user_folder) == []
+
+
+def test_background_install_finishes(inst, fake_pip, user_folder):
+    fake_pip("--sleep", "0.2")
+    job = inst.PipInstall(str(user_folder))
+    job.wait()
+    assert job.status == "Successfully installed strnn_fake_pkg"
+    job.finish()
+    assert (user_folder / "strnn_fake_pkg" / "__init__.py").read_text() == "VERSION = 2\n"
+    assert leftovers(user_folder) == []
+
+
+def test_cancel_without_install(inst):
+    assert bpy.ops.strnn.cancel_torch_install() == {"CANCELLED"}
 
 
 def test_folder_on_path_at_register(inst, monkeypatch, tmp_path):
