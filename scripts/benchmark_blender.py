@@ -64,16 +64,13 @@ def find_model(args) -> Path:
 
 
 def install(out: Path) -> str:
-    """Build and install the extension; returns its package name."""
+    """Build the extension and install it the way the batch CLI does; returns its package name."""
     import build_extension
+    import strnn_batch
 
     zip_path = build_extension.main(["--out", str(out), "--no-validate"])
-    prefs = bpy.context.preferences
-    if prefs.extensions.repos.get("strnn_bench") is None:
-        prefs.extensions.repos.new(name="strnn_bench", module="strnn_bench", custom_directory=str(out / "repo"),
-                                   source="USER")
-    bpy.ops.extensions.package_install_files(filepath=str(zip_path), repo="strnn_bench", enable_on_install=True)
-    return "bl_ext.strnn_bench.strnn_motion"
+    strnn_batch.install_extension(bpy, str(zip_path), out)
+    return strnn_batch.ADDON
 
 
 def rig_bones() -> list[tuple]:

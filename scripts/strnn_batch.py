@@ -235,8 +235,9 @@ def _worker(job: dict, conn) -> None:
     conn.close()
 
 
-def _failed(job: dict, seconds: float, reason: str) -> dict:
-    return {"file": job["display"], "status": "failed", "output": "", "seconds": seconds, "reason": reason}
+def _failed(file: str, reason: str, seconds: float = 0.0) -> dict:
+    """The result row of a file that was not processed."""
+    return {"file": file, "status": "failed", "output": "", "seconds": seconds, "reason": reason}
 
 
 def _discard_partial(job: dict) -> None:
@@ -277,15 +278,15 @@ def run_pool(jobs: list[dict], workers: int, report, timeout: float = 0.0) -> li
                 result = conn.recv()
             except EOFError:  # the process died without an answer
                 proc.join()
-                result = _failed(job, time.perf_counter() - started,
-                                 f"the Blender worker process crashed on this file (exit code {proc.exitcode})")
+                result = _failed(job["display"], f"the Blender worker process crashed on this file (exit code "
+                                                 f"{proc.exitcode})", time.perf_counter() - started)
             finish(conn, result)
         now = time.perf_counter()
         for conn, (proc, job, started) in list(running.items()):
             if timeout and now - started > timeout:
                 proc.kill()
-                finish(conn, _failed(job, now - started, f"timed out after {timeout:g} s (--timeout); "
-                                                          "nothing written for it"))
+                finish(conn, _failed(job["display"], f"timed out after {timeout:g} s (--timeout); nothing "
+                                                     "written for it", now - started))
     return [results[i] for i in sorted(results)]
 
 
@@ -295,20 +296,17 @@ def main(argv: list[str] | None = None) -> int:
     check_args(parser, args)
     files, problems = collect(args.inputs)
     op, kwargs = operator_call(args)
-    results: list[dict] = [{"file": name, "status": "failed", "seconds": 0.0, "reason": reason, "output": ""}
-                           for name, reason in problems]
+    results: list[dict] = [_failed(name, reason) for name, reason in problems]
     jobs, claimed = [], {}
     inputs = {p.resolve() for p, _ in files}
     for path, rel in files:
         out = output_path(path, rel, args)
         display = str(path)
         if not args.in_place and out.resolve() in inputs:
-            results.append({"file": display, "status": "failed", "seconds": 0.0, "output": "",
-                            "reason": f"output {out} is an input; pass --in-place to overwrite inputs"})
+            results.append(_failed(display, f"output {out} is an input; pass --in-place to overwrite inputs"))
             continue
         if out.resolve() in claimed:
-            results.append({"file": display, "status": "failed", "seconds": 0.0, "output": "",
-                            "reason": f"output {out} would also be written for {claimed[out.resolve()]}"})
+            results.append(_failed(display, f"output {out} would also be written for {claimed[out.resolve()]}"))
             continue
         claimed[out.resolve()] = display
         jobs.append({"index": len(jobs), "input": str(path.resolve()), "display": display,
