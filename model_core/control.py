@@ -25,6 +25,7 @@ Y-up, :data:`conventions.MODEL_FPS`, the standard skeleton (see :mod:`motion_ops
 
 from __future__ import annotations
 
+import contextlib
 import math
 from dataclasses import dataclass, replace
 from pathlib import Path as FilePath
@@ -38,6 +39,7 @@ from .engine import bone_lengths, project_to_skeleton
 from .features import RootStart, features_to_positions, heading, integrate_root, positions_to_features, yaw_matrix
 from .paths import Path, Steering, control_signal
 from .spatial_fold import fold_spatial
+from .steps import drive
 from .torch_engine import build_model
 
 WALK_SPEED = 1.3  # m/s used when the seed barely moves (its own speed cannot steer anything)
@@ -225,15 +227,25 @@ class PathFollower:
     def follow(self, seed: np.ndarray, start: RootStart, path: Path, frames: int | None = None) -> np.ndarray:
         """Raw features ``[frames, C]`` continuing the raw seed ``[T >= m, C]`` (whose first frame's
         root is ``start``) along ``path``; ``frames`` None: until the path ends (one lap if cyclic)."""
-        threads = torch.get_num_threads()
-        if self.settings.threads > 0:
-            torch.set_num_threads(self.settings.threads)
-        try:
-            return self._follow(seed, start, path, frames)
-        finally:
-            torch.set_num_threads(threads)
+        return drive(self.follow_steps(seed, start, path, frames))
 
-    def _follow(self, seed: np.ndarray, start: RootStart, path: Path, frames: int | None) -> np.ndarray:
+    @contextlib.contextmanager
+    def _threads(self):
+        """torch's CPU threads as :attr:`ControlSettings.threads` asks, restored after."""
+        before = torch.get_num_threads()
+        wanted = self.settings.threads
+        if wanted > 0 and wanted != before:
+            torch.set_num_threads(wanted)
+        try:
+            yield
+        finally:
+            if torch.get_num_threads() != before:
+                torch.set_num_threads(before)
+
+    def follow_steps(self, seed: np.ndarray, start: RootStart, path: Path, frames: int | None = None):
+        """:meth:`follow` as a step generator (:mod:`steps`): yields the fraction done after each
+        window, returns the features. The weights are the pre-trained ones between windows, so
+        closing it part way leaves the follower as it was."""
         cfg = self.settings
         torch.manual_seed(cfg.seed)
         seed = np.asarray(seed, np.float32)
@@ -251,7 +263,8 @@ class PathFollower:
                                           Steering(cfg.return_frames))
             control = control[1:]  # the context's last frame already holds the step into the window
             aim = _rotate_np(-theta, aim[1:-1] - p[[0, 2]])  # new frames' roots, in the last root's frame
-            new = self.window(ctx, control, lengths[0, 1:], aim)
+            with self._threads():
+                new = self.window(ctx, control, lengths[0, 1:], aim)
             new = project_to_skeleton(smooth_seam(ctx, new, cfg.seam_frames)[None], lengths)[0]
             r, y = integrate_root(np.concatenate([ctx[-1:], new]), RootStart(p, theta))
             p, theta = r[-1], float(y[-1])
@@ -259,6 +272,7 @@ class PathFollower:
             out.append(new)
             total += len(new)
             ctx = np.concatenate([ctx, new])[-self.m:]
+            yield min(total / frames, 1.0)
         return np.concatenate(out)[:frames]
 
 
@@ -281,9 +295,15 @@ def follow_path(follower: PathFollower, seed: np.ndarray, path: Path, frames: in
     """Positions ``[frames, 21, 3]`` walking ``path`` after seed positions ``[T >= m, 21, 3]``
     (metres, Y-up, 30 fps, the standard skeleton), and their raw features ``[frames, C]``.
     ``align`` first puts the seed on the path's start (else it walks from where it is)."""
+    return drive(follow_path_steps(follower, seed, path, frames, align))
+
+
+def follow_path_steps(follower: PathFollower, seed: np.ndarray, path: Path, frames: int | None = None,
+                      align: bool = True):
+    """:func:`follow_path` as a step generator: yields the fraction done after each window."""
     seed = align_to_path(seed, path) if align else np.asarray(seed, np.float32)
     feats, start = positions_to_features(seed)
-    new = follower.follow(feats, start, path, frames)
+    new = yield from follower.follow_steps(feats, start, path, frames)
     root, yaw = integrate_root(feats, start)
     joined = np.concatenate([feats[-1:], new])
     return features_to_positions(joined, RootStart(root[-1], float(yaw[-1])))[1:], new
@@ -307,6 +327,14 @@ def follow_curve_positions(follower: PathFollower, points: np.ndarray, cyclic: b
     the clip to continue (its last frames at ``fps``), or None to start on the curve from a
     shipped seed sized like ``rest`` ``[21, 3]`` (the rig's rest joints). ``frames`` None: until the
     curve ends; ``speed`` in scene units per second, None: the motion's own."""
+    return drive(follow_curve_steps(follower, points, cyclic, fps, frames, speed, context, rest))
+
+
+def follow_curve_steps(follower: PathFollower, points: np.ndarray, cyclic: bool, fps: float,
+                       frames: int | None = None, speed: float | None = None, context: np.ndarray | None = None,
+                       rest: np.ndarray | None = None):
+    """:func:`follow_curve_positions` as a step generator: yields the fraction done after each
+    window; the follower's settings are restored however it ends."""
     from .motion_ops import blend_seam, fit_normalisation, model_frames_available, sample_at
 
     if context is not None:
@@ -322,7 +350,8 @@ def follow_curve_positions(follower: PathFollower, points: np.ndarray, cyclic: b
     saved = follower.settings
     follower.settings = replace(saved, speed=speed * norm.scale if speed else None)
     try:
-        new = norm.to_user(follow_path(follower, seed, path, n_model, align=context is None)[0])
+        walked, _ = yield from follow_path_steps(follower, seed, path, n_model, align=context is None)
+        new = norm.to_user(walked)
     finally:
         follower.settings = saved
     if context is None:

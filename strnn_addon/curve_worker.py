@@ -14,7 +14,7 @@ from ..model_core.conventions import zup_to_yup
 from ..model_core.solve import anchor_positions, fk, solve
 from . import anim, curves, engine_bridge, mapping, pipeline, rig_io
 from .pipeline import UserError
-from .workers import _lock, _model_call, _prefs, _write_new
+from .workers import _lock, _model_steps, _prefs, _write_new
 
 
 def follow_curve_steps(context, obj, *, curve: str = "", frames: int = 0, speed: float = 0.0, foot_lock: bool = True,
@@ -22,7 +22,8 @@ def follow_curve_steps(context, obj, *, curve: str = "", frames: int = 0, speed:
     """Walk ``obj`` along a curve object (``curve``: its name; '' = the selected curve) for ``frames``
     scene frames (0: until the curve ends) at ``speed`` scene units per second (0: the motion's
     own), feet locked when ``foot_lock``; ``steps`` fine-tuning steps per model window.
-    A generator: yields each stage's name before running it, returns the new action."""
+    A generator: yields each stage's name before running it, and the fraction of the model
+    stage done after each model window; returns the new action."""
     clip = _prepare(context, obj)
     curve_obj = curves.find_curve(context, curve)
     points, cyclic = curves.curve_points(context, curve_obj)
@@ -44,8 +45,8 @@ def follow_curve_steps(context, obj, *, curve: str = "", frames: int = 0, speed:
         held_loc, held_rot, _ = rig_io.read_local_pose(clip.obj, clip.rig, [], np.zeros(1))
         context_pos, rest, previous = None, _rest_joints(clip, held_loc, held_rot), {}
     yield "model"
-    new_pos = _model_call(engine_bridge.follow_curve, _prefs(context), points, cyclic, clip.fps, frames or None,
-                          speed or None, steps, context_pos, rest)
+    new_pos = yield from _model_steps(engine_bridge.follow_curve_steps(
+        _prefs(context), points, cyclic, clip.fps, frames or None, speed or None, steps, context_pos, rest))
     if foot_lock:
         known = 0 if context_pos is None else len(context_pos)
         joined = new_pos if context_pos is None else np.concatenate([context_pos, new_pos])

@@ -147,18 +147,20 @@ def load_follower(folder: str = "", threads: int = 0):
     return _FOLLOWERS[str(path)]
 
 
-def follow_curve(prefs, points: np.ndarray, cyclic: bool, fps: float, frames: int | None, speed: float | None,
-                 steps: int, context: np.ndarray | None = None, rest: np.ndarray | None = None) -> np.ndarray:
+def follow_curve_steps(prefs, points: np.ndarray, cyclic: bool, fps: float, frames: int | None,
+                       speed: float | None, steps: int, context: np.ndarray | None = None,
+                       rest: np.ndarray | None = None):
     """Positions ``[frames, 21, 3]`` (Y-up scene units at ``fps``) walking the curve ``points`` ``[P, 3]``
-    (Y-up) after ``context`` ``[F, 21, 3]``, or from a shipped seed sized like ``rest`` ``[21, 3]``."""
+    (Y-up) after ``context`` ``[F, 21, 3]``, or from a shipped seed sized like ``rest`` ``[21, 3]``.
+    A step generator (``model_core.steps``): yields the fraction done after each model window."""
     from dataclasses import replace
 
     follower = load_follower(bpy_path(prefs.model_folder) if prefs else "", prefs.threads if prefs else 0)
-    from ..model_core.control import follow_curve_positions  # after the check: it needs torch
+    from ..model_core.control import follow_curve_steps as model_steps  # after the check: it needs torch
 
     saved = follower.settings
     follower.settings = replace(saved, steps=int(steps))
     try:
-        return follow_curve_positions(follower, points, cyclic, fps, frames, speed, context, rest)
+        return (yield from model_steps(follower, points, cyclic, fps, frames, speed, context, rest))
     finally:
         follower.settings = saved

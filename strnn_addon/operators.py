@@ -13,7 +13,8 @@ from .props import FOOT_LOCK_TIP, joint_label
 class _Staged:
     """Runs a worker generator (see workers.py): all at once in ``execute`` (scripts, redo panel),
     stage by stage from a timer in ``modal`` when invoked from the UI, with progress in the status
-    bar and Esc to cancel between stages (nothing is written before the last stage)."""
+    bar and Esc to cancel between stages, or between the steps of a stage that yields its fraction
+    done as it goes (Follow Curve's model windows). Nothing is written before the last stage."""
 
     def steps(self, context):
         raise NotImplementedError
@@ -39,7 +40,7 @@ class _Staged:
     def invoke(self, context, event):
         if context.window is None:
             return self.execute(context)
-        self._steps = self.steps(context)
+        self._steps, self._stage = self.steps(context), "read"
         return self._advance(context) or self._start(context)
 
     def _start(self, context):
@@ -71,11 +72,15 @@ class _Staged:
             self._stop(context)
             self.report({"ERROR"}, str(e))
             return {"CANCELLED"}
+        if isinstance(stage, str):
+            self._stage, done = stage, ""
+        else:  # the fraction of the current stage done so far
+            done = f" {stage:.0%}"
         wm = context.window_manager
         wm.progress_begin(0, len(STAGES))
-        wm.progress_update(STAGES.index(stage))
+        wm.progress_update(STAGES.index(self._stage) + (0.0 if isinstance(stage, str) else float(stage)))
         if context.workspace:
-            context.workspace.status_text_set(f"STRNN {self.bl_label}: {stage}... (Esc to cancel)")
+            context.workspace.status_text_set(f"STRNN {self.bl_label}: {self._stage}{done}... (Esc to cancel)")
         return None
 
     def _stop(self, context):

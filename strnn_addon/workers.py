@@ -1,17 +1,21 @@
 """Extend Clip, Denoise Action and Foot Lock, as keyword-only workers the operators call.
 
-Each worker is a generator that yields the name of each stage (read, model, solve,
-write) before running it, so the operators can show progress and stop on Esc between
-stages; :func:`run` drives one to the end. Every check and all the computing happen
+Each worker is a step generator (``model_core.steps``) that yields the name of each
+stage (read, model, solve, write) before running it, and may yield the fraction of a stage
+done as it goes (Follow Curve, window by window), so the operators can show progress and
+stop on Esc in between; :func:`run` drives one to the end. Every check and all the computing happen
 before the new action is created, so a failure or a cancel leaves the file unchanged.
 """
 
 from __future__ import annotations
 
+import contextlib
+
 import numpy as np
 
 from ..model_core import footlock
 from ..model_core.solve import solve
+from ..model_core.steps import drive
 from . import engine_bridge, pipeline, rig_io
 from .pipeline import UserError
 from .props import preferences
@@ -24,23 +28,33 @@ def _noop(stage: str) -> None:
     pass
 
 
-def _model_call(fn, *args):
-    """Run one model call, turning model and engine errors into a :class:`UserError`."""
+@contextlib.contextmanager
+def _model_errors():
+    """Model and engine errors raised inside as a :class:`UserError`."""
     try:
-        return fn(*args)
+        yield
     except engine_bridge.EngineError as e:
         raise UserError(str(e)) from e
     except ValueError as e:
         raise UserError(f"The model could not run on this clip: {e}") from e
 
 
+def _model_call(fn, *args):
+    """Run one model call, turning model and engine errors into a :class:`UserError`."""
+    with _model_errors():
+        return fn(*args)
+
+
+def _model_steps(steps):
+    """``yield from`` a model's step generator (fractions done), turning its errors into a :class:`UserError`."""
+    with _model_errors():
+        return (yield from steps)
+
+
 def run(steps, progress=_noop):
-    """Drive a worker generator to the end, calling ``progress(stage)`` at each stage; returns its result."""
-    while True:
-        try:
-            progress(next(steps))
-        except StopIteration as stop:
-            return stop.value
+    """Drive a worker generator to the end, calling ``progress(stage)`` at each stage (not at the
+    fractions a stage may yield as it goes); returns its result."""
+    return drive(steps, lambda value: progress(value) if isinstance(value, str) else None)
 
 
 def extend_clip(context, obj, *, progress=_noop, **options):

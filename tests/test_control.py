@@ -19,7 +19,9 @@ from model_core.control import (  # noqa: E402
     PathFollower,
     align_to_path,
     follow_curve_positions,
+    follow_curve_steps,
     follow_path,
+    follow_path_steps,
     foot_speed_cm,
 )
 from model_core.conventions import CONTACT_JOINTS, LAYOUT, PARENTS  # noqa: E402
@@ -89,6 +91,32 @@ def test_follow_is_deterministic_and_has_the_asked_length(follower):
     assert a.shape == (45, 21, 3) and fa.shape == (45, LAYOUT.size)
     np.testing.assert_array_equal(a, b)
     assert np.isfinite(a).all()
+
+
+def test_steps_report_each_window_and_give_the_same_walk(follower):
+    seed, f = walking_skeleton(40), follower(steps=2)
+    steps = follow_path_steps(f, seed, straight(), frames=45)
+    fractions = []
+    while True:
+        try:
+            fractions.append(next(steps))
+        except StopIteration as stop:
+            stepped = stop.value
+            break
+    windows = -(-45 // f.n)
+    assert fractions == [min(k * f.n / 45, 1.0) for k in range(1, windows + 1)]  # after each n-frame window
+    np.testing.assert_array_equal(stepped[0], follow_path(follower(steps=2), seed, straight(), frames=45)[0])
+
+
+def test_closing_the_steps_part_way_leaves_the_follower_as_it_was(follower):
+    f = follower(steps=3, lr=1e-2, threads=1)
+    settings, weights = f.settings, [p.detach().clone() for p in f.model.parameters()]
+    curve = np.stack([np.linspace(0, 6, 50), np.zeros(50), np.zeros(50)], -1)
+    steps = follow_curve_steps(f, curve, False, 24.0, speed=1.5, rest=walking_skeleton(1)[0])
+    assert next(steps) > 0 and f.settings is not settings  # running with the asked speed
+    steps.close()
+    assert f.settings is settings
+    assert all(torch.equal(a, b) for a, b in zip(weights, f.model.parameters()))
 
 
 def test_frames_default_to_the_end_of_the_path(follower):

@@ -116,6 +116,26 @@ def test_nurbs_path_starts_an_armature_without_action(addon, torch_model):
     assert joints[-1, 0, 0] > joints[0, 0, 0] + 2.0, "walks along the path (+X)"
 
 
+def test_steps_report_model_progress_and_stop_without_changes(addon, torch_model, tmp_path):
+    """What the operator's modal runs: stage names, then the model stage's fraction after each
+    window; closing it there (Esc) leaves the file as it was, and a later run still works."""
+    obj = import_bvh(write_bvh(tmp_path / "walk.bvh", walking_skeleton(40)), update_scene_fps=True)
+    curve = add_curve("poly", points=[(0, 0, 0), (0, -6, 0)])
+    bpy.context.view_layer.objects.active = obj
+    worker = addon_module(addon, "strnn_addon.curve_worker")
+    action, names = action_of(obj), sorted(a.name for a in bpy.data.actions)
+    steps = worker.follow_curve_steps(bpy.context, obj, curve=curve.name, frames=120)
+    assert [next(steps), next(steps)] == ["read", "model"]
+    fractions = [next(steps) for _ in range(3)]
+    assert all(isinstance(f, float) for f in fractions) and 0 < fractions[0] < fractions[1] < fractions[2] < 1
+    steps.close()
+    assert action_of(obj) is action and sorted(a.name for a in bpy.data.actions) == names
+    seen = []
+    new = addon_module(addon, "strnn_addon.workers").run(
+        worker.follow_curve_steps(bpy.context, obj, curve=curve.name, frames=120), seen.append)
+    assert seen == ["read", "model", "solve", "write"] and new is action_of(obj) and new is not action
+
+
 def refused(match: str, **kw) -> None:
     """Follow Curve must fail with ``match`` and change no action or assignment."""
     obj = bpy.context.active_object
