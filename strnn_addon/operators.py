@@ -3,11 +3,11 @@
 from __future__ import annotations
 
 import bpy
-from bpy.props import BoolProperty, FloatProperty, IntProperty, StringProperty
+from bpy.props import IntProperty, StringProperty
 
-from . import mapping
+from . import mapping, props as options
 from .pipeline import UserError, check_object
-from .props import FOOT_LOCK_TIP, joint_label
+from .props import joint_label
 
 
 class _Staged:
@@ -101,11 +101,9 @@ class STRNN_OT_extend_clip(_Staged, bpy.types.Operator):
     bl_label = "Extend Clip"
     bl_options = {"REGISTER", "UNDO"}
 
-    frames: IntProperty(name="Frames", default=120, min=1, soft_max=2000,
-                        description="How many frames to add after the action's last frame")
-    context_frames: IntProperty(name="Context", default=0, min=0, soft_max=600,
-                                description="Frames before the end the model reads; 0: just enough (20 at 30 fps)")
-    foot_lock: BoolProperty(name="Foot Lock", default=False, description=FOOT_LOCK_TIP)
+    frames: options.frames_to_add()
+    context_frames: options.context_frames()
+    foot_lock: options.foot_lock(False)
 
     def steps(self, context):
         from .workers import extend_steps
@@ -124,13 +122,11 @@ class STRNN_OT_denoise_action(_Staged, bpy.types.Operator):
     bl_label = "Denoise Action"
     bl_options = {"REGISTER", "UNDO"}
 
-    strength: FloatProperty(name="Strength", default=1.0, min=0.0, max=1.0, subtype="FACTOR",
-                            description="Blend between the original (0) and the model's output (1)")
-    use_range: BoolProperty(name="Frame Range", default=False,
-                            description="Denoise only Start to End instead of the whole action")
-    frame_start: IntProperty(name="Start", default=1, description="First frame to denoise")
-    frame_end: IntProperty(name="End", default=250, description="Last frame to denoise")
-    foot_lock: BoolProperty(name="Foot Lock", default=False, description=FOOT_LOCK_TIP)
+    strength: options.strength()
+    use_range: options.use_range("Denoise")
+    frame_start: options.range_start("Denoise")
+    frame_end: options.range_end("Denoise")
+    foot_lock: options.foot_lock(False)
 
     def steps(self, context):
         from .workers import denoise_steps
@@ -150,12 +146,10 @@ class STRNN_OT_foot_lock(_Staged, bpy.types.Operator):
     bl_label = "Foot Lock"
     bl_options = {"REGISTER", "UNDO"}
 
-    blend: FloatProperty(name="Blend", default=0.15, min=0.0, soft_max=0.5, max=2.0, unit="TIME_ABSOLUTE",
-                         description="Seconds over which each lock fades in before a contact and out after it")
-    use_range: BoolProperty(name="Frame Range", default=False,
-                            description="Lock only Start to End instead of the whole action")
-    frame_start: IntProperty(name="Start", default=1, description="First frame to lock")
-    frame_end: IntProperty(name="End", default=250, description="Last frame to lock")
+    blend: options.lock_blend()
+    use_range: options.use_range("Lock")
+    frame_start: options.range_start("Lock")
+    frame_end: options.range_end("Lock")
 
     def steps(self, context):
         from .workers import foot_lock_steps
@@ -176,11 +170,9 @@ class STRNN_OT_follow_curve(_Staged, bpy.types.Operator):
 
     curve: StringProperty(name="Curve", default="",
                           description="Name of the curve object to follow; empty: the selected curve")
-    frames: IntProperty(name="Frames", default=0, min=0, soft_max=5000,
-                        description="How many frames to make; 0: until the curve ends (one lap if cyclic)")
-    speed: FloatProperty(name="Speed", default=0.0, min=0.0, soft_max=5.0, unit="VELOCITY",
-                         description="Walking speed along the curve; 0: the motion's own speed")
-    foot_lock: BoolProperty(name="Foot Lock", default=True, description=FOOT_LOCK_TIP)
+    frames: options.curve_frames()
+    speed: options.curve_speed()
+    foot_lock: options.foot_lock(True)
     steering: IntProperty(name="Steering Steps", default=4, min=0, soft_max=20,
                           description="Fine-tuning steps per 20-frame window that pull the motion onto the curve")
 

@@ -12,6 +12,58 @@ TAIL_JOINTS = ("l_toe", "r_toe", "l_fingertip", "r_fingertip")
 FOOT_LOCK_TIP = "Then pin the feet on the ground while they touch it (leg IK against foot sliding)"
 
 
+# ------------------------------------------------------------------ options
+# Each option is defined once, here: the operators and the sidebar settings (per scene) that
+# are handed to them both call these, so names, defaults, limits and tooltips always agree.
+
+def frames_to_add():
+    return IntProperty(name="Frames", default=120, min=1, soft_max=2000,
+                       description="How many frames to add after the action's last frame")
+
+
+def context_frames():
+    return IntProperty(name="Context", default=0, min=0, soft_max=600,
+                       description="Frames before the end the model reads; 0: just enough (20 at 30 fps)")
+
+
+def foot_lock(default: bool):
+    return BoolProperty(name="Foot Lock", default=default, description=FOOT_LOCK_TIP)
+
+
+def strength():
+    return FloatProperty(name="Strength", default=1.0, min=0.0, max=1.0, subtype="FACTOR",
+                         description="Blend between the original (0) and the model's output (1)")
+
+
+def use_range(verb: str):
+    """``verb``: what the operator does to the frames, e.g. "Denoise"."""
+    return BoolProperty(name="Frame Range", default=False,
+                        description=f"{verb} only Start to End instead of the whole action")
+
+
+def range_start(verb: str):
+    return IntProperty(name="Start", default=1, description=f"First frame to {verb.lower()}")
+
+
+def range_end(verb: str):
+    return IntProperty(name="End", default=250, description=f"Last frame to {verb.lower()}")
+
+
+def lock_blend():
+    return FloatProperty(name="Blend", default=0.15, min=0.0, soft_max=0.5, max=2.0, unit="TIME_ABSOLUTE",
+                         description="Seconds over which each lock fades in before a contact and out after it")
+
+
+def curve_frames():
+    return IntProperty(name="Frames", default=0, min=0, soft_max=5000,
+                       description="How many frames to make; 0: until the curve ends (one lap if cyclic)")
+
+
+def curve_speed():
+    return FloatProperty(name="Speed", default=0.0, min=0.0, soft_max=5.0, unit="VELOCITY",
+                         description="Walking speed along the curve; 0: the motion's own speed")
+
+
 def joint_label(joint: str) -> str:
     """``"l_upleg"`` -> ``"Left Upleg"``."""
     side = {"l": "Left ", "r": "Right "}.get(joint[:1], "") if joint[1:2] == "_" else ""
@@ -82,31 +134,23 @@ def preferences(context):
 class STRNN_PG_settings(bpy.types.PropertyGroup):
     """Sidebar options (per scene) handed to the operators."""
 
-    extend_frames: IntProperty(name="Frames", default=120, min=1, soft_max=2000,
-                               description="How many frames to add after the action's last frame")
-    context_frames: IntProperty(name="Context", default=0, min=0, soft_max=600,
-                                description="Frames before the end the model reads; 0: just enough (20 at 30 fps)")
-    denoise_strength: FloatProperty(name="Strength", default=1.0, min=0.0, max=1.0, subtype="FACTOR",
-                                    description="Blend between the original (0) and the model's output (1)")
-    denoise_use_range: BoolProperty(name="Frame Range", default=False,
-                                    description="Denoise only a range of frames instead of the whole action")
-    denoise_start: IntProperty(name="Start", default=1, description="First frame to denoise")
-    denoise_end: IntProperty(name="End", default=250, description="Last frame to denoise")
-    extend_foot_lock: BoolProperty(name="Foot Lock", default=False, description=FOOT_LOCK_TIP)
-    denoise_foot_lock: BoolProperty(name="Foot Lock", default=False, description=FOOT_LOCK_TIP)
-    lock_blend: FloatProperty(name="Blend", default=0.15, min=0.0, soft_max=0.5, max=2.0, unit="TIME_ABSOLUTE",
-                              description="Seconds over which each lock fades in before a contact and out after it")
-    lock_use_range: BoolProperty(name="Frame Range", default=False,
-                                 description="Lock the feet only in a range of frames instead of the whole action")
-    lock_start: IntProperty(name="Start", default=1, description="First frame to lock")
-    lock_end: IntProperty(name="End", default=250, description="Last frame to lock")
+    extend_frames: frames_to_add()
+    context_frames: context_frames()
+    extend_foot_lock: foot_lock(False)
+    denoise_strength: strength()
+    denoise_use_range: use_range("Denoise")
+    denoise_start: range_start("Denoise")
+    denoise_end: range_end("Denoise")
+    denoise_foot_lock: foot_lock(False)
+    lock_blend: lock_blend()
+    lock_use_range: use_range("Lock")
+    lock_start: range_start("Lock")
+    lock_end: range_end("Lock")
     curve: PointerProperty(name="Curve", type=bpy.types.Object, poll=lambda self, obj: obj.type == "CURVE",
                            description="The curve to walk along (Bezier, NURBS or poly; its centre line)")
-    curve_frames: IntProperty(name="Frames", default=0, min=0, soft_max=5000,
-                              description="How many frames to make; 0: until the curve ends (one lap if cyclic)")
-    curve_speed: FloatProperty(name="Speed", default=0.0, min=0.0, soft_max=5.0, unit="VELOCITY",
-                               description="Walking speed along the curve; 0: the motion's own speed")
-    curve_foot_lock: BoolProperty(name="Foot Lock", default=True, description=FOOT_LOCK_TIP)
+    curve_frames: curve_frames()
+    curve_speed: curve_speed()
+    curve_foot_lock: foot_lock(True)
 
 
 classes = (STRNN_PG_bone_map, STRNN_PG_settings, STRNN_AP_preferences)

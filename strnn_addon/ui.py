@@ -19,6 +19,21 @@ class _Sidebar:
         return context.mode in {"OBJECT", "POSE"}
 
 
+def _frame_range(col, settings, prefix: str) -> None:
+    """The Frame Range toggle and its Start / End (greyed out while off) of the ``prefix`` settings."""
+    col.prop(settings, f"{prefix}_use_range")
+    row = col.row(align=True)
+    row.active = getattr(settings, f"{prefix}_use_range")
+    row.prop(settings, f"{prefix}_start")
+    row.prop(settings, f"{prefix}_end")
+
+
+def _pass_range(op, settings, prefix: str) -> None:
+    """Hand the ``prefix`` frame range settings to the operator ``op``."""
+    op.use_range = getattr(settings, f"{prefix}_use_range")
+    op.frame_start, op.frame_end = getattr(settings, f"{prefix}_start"), getattr(settings, f"{prefix}_end")
+
+
 class STRNN_PT_main(_Sidebar, bpy.types.Panel):
     bl_label = "STRNN Motion"
 
@@ -55,16 +70,11 @@ class STRNN_PT_denoise(_Sidebar, bpy.types.Panel):
         settings = context.scene.strnn
         col = self.layout.column(align=True)
         col.prop(settings, "denoise_strength", slider=True)
-        col.prop(settings, "denoise_use_range")
-        row = col.row(align=True)
-        row.active = settings.denoise_use_range
-        row.prop(settings, "denoise_start")
-        row.prop(settings, "denoise_end")
+        _frame_range(col, settings, "denoise")
         col.prop(settings, "denoise_foot_lock")
         op = self.layout.operator("strnn.denoise_action", icon="MOD_SMOOTH")
-        op.strength, op.use_range = settings.denoise_strength, settings.denoise_use_range
-        op.frame_start, op.frame_end = settings.denoise_start, settings.denoise_end
-        op.foot_lock = settings.denoise_foot_lock
+        _pass_range(op, settings, "denoise")
+        op.strength, op.foot_lock = settings.denoise_strength, settings.denoise_foot_lock
 
 
 class STRNN_PT_foot_lock(_Sidebar, bpy.types.Panel):
@@ -75,14 +85,10 @@ class STRNN_PT_foot_lock(_Sidebar, bpy.types.Panel):
         settings = context.scene.strnn
         col = self.layout.column(align=True)
         col.prop(settings, "lock_blend")
-        col.prop(settings, "lock_use_range")
-        row = col.row(align=True)
-        row.active = settings.lock_use_range
-        row.prop(settings, "lock_start")
-        row.prop(settings, "lock_end")
+        _frame_range(col, settings, "lock")
         op = self.layout.operator("strnn.foot_lock", icon="SNAP_ON")
-        op.blend, op.use_range = settings.lock_blend, settings.lock_use_range
-        op.frame_start, op.frame_end = settings.lock_start, settings.lock_end
+        _pass_range(op, settings, "lock")
+        op.blend = settings.lock_blend
 
 
 class STRNN_PT_follow_curve(_Sidebar, bpy.types.Panel):

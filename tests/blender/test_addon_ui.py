@@ -24,14 +24,32 @@ class Layout:
             if name == "operator":
                 assert hasattr(bpy.ops.strnn, args[0].split(".")[1])
             self.calls.append(name)
-            return OperatorProps() if name == "operator" else Layout(self.calls)
+            return OperatorProps(args[0]) if name == "operator" else Layout(self.calls)
 
         return call
 
 
 class OperatorProps:
+    """What a panel hands to an operator button: only properties the operator has."""
+
+    def __init__(self, idname: str):
+        object.__setattr__(self, "rna", getattr(bpy.ops.strnn, idname.split(".")[1]).get_rna_type())
+
     def __setattr__(self, name, value):
-        object.__setattr__(self, name, value)
+        assert name in self.rna.properties, f"{self.rna.identifier} has no property {name!r}"
+
+
+# sidebar setting (per scene) -> the operator property it is handed to
+HANDED = {
+    "extend_frames": ("extend_clip", "frames"), "context_frames": ("extend_clip", "context_frames"),
+    "extend_foot_lock": ("extend_clip", "foot_lock"), "denoise_strength": ("denoise_action", "strength"),
+    "denoise_use_range": ("denoise_action", "use_range"), "denoise_start": ("denoise_action", "frame_start"),
+    "denoise_end": ("denoise_action", "frame_end"), "denoise_foot_lock": ("denoise_action", "foot_lock"),
+    "lock_blend": ("foot_lock", "blend"), "lock_use_range": ("foot_lock", "use_range"),
+    "lock_start": ("foot_lock", "frame_start"), "lock_end": ("foot_lock", "frame_end"),
+    "curve_frames": ("follow_curve", "frames"), "curve_speed": ("follow_curve", "speed"),
+    "curve_foot_lock": ("follow_curve", "foot_lock"),
+}
 
 
 def draw_all(context) -> list[str]:
@@ -66,3 +84,14 @@ def test_panels_draw(addon, tmp_path, scene):
     assert "label" in calls
     if scene == "animated":
         assert calls.count("prop_search") == 21 and "operator" in calls
+
+
+def test_sidebar_settings_agree_with_their_operators(addon):
+    """A setting and the operator option it feeds have one name, default, range and tooltip."""
+    settings = bpy.context.scene.strnn.bl_rna.properties
+    assert set(HANDED) == {p.identifier for p in settings} - {"rna_type", "name", "curve"}
+    for setting, (op, option) in HANDED.items():
+        a, b = settings[setting], getattr(bpy.ops.strnn, op).get_rna_type().properties[option]
+        for attr in ("type", "name", "description", "default", "subtype", "unit", "hard_min", "hard_max",
+                     "soft_min", "soft_max"):
+            assert getattr(a, attr, None) == getattr(b, attr, None), f"{setting} / {op}.{option}: {attr}"
