@@ -60,6 +60,9 @@ def check_object(obj, need_action: bool = True) -> None:
         if data.library is not None:
             raise UserError(f"The {what} {data.name!r} is linked from {data.library.filepath!r} and cannot be "
                             "changed: make it local (Object > Relations > Make Local) or add a library override")
+    if obj.animation_data and obj.animation_data.use_tweak_mode:
+        raise UserError(f"{obj.name!r} is in NLA tweak mode, so its action cannot be swapped for a new one: "
+                        "leave it (NLA Editor > Edit > Stop Tweaking Strip Actions, or Tab there) and try again")
     action = obj.animation_data.action if obj.animation_data else None
     if action is None and need_action:
         raise UserError(f"{obj.name!r} has no action: assign one in the Action Editor, or import a BVH")

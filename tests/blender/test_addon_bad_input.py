@@ -77,6 +77,23 @@ def test_zero_or_negative_scale(addon, tmp_path, op, scale):
 
 
 @pytest.mark.parametrize("op", OPS)
+def test_nla_tweak_mode(addon, tmp_path, op):
+    """Editing a strip's action in the NLA: the action cannot be reassigned, so nothing may start."""
+    obj = import_bvh(walk_bvh(tmp_path, frames=40))
+    bpy.ops.curve.primitive_nurbs_path_add()
+    bpy.context.view_layer.objects.active = obj
+    ad = obj.animation_data
+    track = ad.nla_tracks.new()
+    strip = track.strips.new("walk", 1, ad.action)
+    ad.action = None
+    ad.nla_tracks.active, track.select, strip.select = track, True, True
+    ad.use_tweak_mode = True
+    assert ad.action is strip.action
+    refuse(op, r"NLA tweak mode.*Stop Tweaking Strip Actions")
+    assert ad.use_tweak_mode
+
+
+@pytest.mark.parametrize("op", OPS)
 def test_linked_armature(addon, tmp_path, op):
     obj = import_bvh(walk_bvh(tmp_path, frames=40))
     name = obj.name
