@@ -10,6 +10,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import bpy
 import numpy as np
 
 from ..model_core import rotations
@@ -148,7 +149,7 @@ def _key_property(clip: Clip, channels: anim.Channels, pb, prop: str, frames: np
                   replace: tuple[float, float] | None) -> None:
     """Key ``values`` ``[F, n]`` on each array index of a pose bone property. A channel the action did
     not animate gets its static value keyed just outside ``frames`` first, so other frames keep it."""
-    path = f'pose.bones["{_escape(pb.name)}"].{prop}'
+    path = f'pose.bones["{bpy.utils.escape_identifier(pb.name)}"].{prop}'
     static = np.asarray(getattr(pb, prop), dtype=np.float64)
     edges = np.array([f for f in (frames[0] - 1, frames[-1] + 1) if clip.first <= f <= clip.last])
     for i in range(values.shape[1]):
@@ -158,10 +159,6 @@ def _key_property(clip: Clip, channels: anim.Channels, pb, prop: str, frames: np
             if len(edges):
                 anim.write_keys(fc, edges, np.full(len(edges), static[i]))
         anim.write_keys(fc, frames, values[:, i], replace)
-
-
-def _escape(name: str) -> str:
-    return name.replace("\\", "\\\\").replace('"', '\\"')
 
 
 def encode_rotation(mode: str, m: np.ndarray, previous: np.ndarray | None) -> tuple[str, np.ndarray]:

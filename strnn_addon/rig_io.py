@@ -7,6 +7,9 @@ are the scene's; world space is Blender's Z-up in scene units.
 
 from __future__ import annotations
 
+import re
+
+import bpy
 import numpy as np
 
 from ..model_core import rotations
@@ -59,15 +62,19 @@ def sample_fcurve(fc, frames: np.ndarray) -> np.ndarray:
     return np.array([fc.evaluate(float(f)) for f in frames])
 
 
+_BONE_PATH = re.compile(r'pose\.bones\["((?:[^"\\]|\\.)*)"\]\.(\w+)')  # pose.bones["name"].prop
+
+
 def bone_channels(fcurves) -> dict[tuple[str, str], dict[int, object]]:
     """{(bone, property): {array index: fcurve}} for pose bone channels of an action."""
     out: dict[tuple[str, str], dict[int, object]] = {}
     for fc in fcurves:
-        path = fc.data_path
-        if path.startswith('pose.bones["') and '"].' in path:
-            bone, prop = path[12:].split('"].', 1)
-            out.setdefault((bone.replace('\\"', '"'), prop), {})[fc.array_index] = fc
+        found = _BONE_PATH.fullmatch(fc.data_path)
+        if found:
+            bone = bpy.utils.unescape_identifier(found[1])  # Blender escapes " and \ in names
+            out.setdefault((bone, found[2]), {})[fc.array_index] = fc
     return out
+
 
 
 def read_local_pose(obj, rig: Rig, fcurves, frames: np.ndarray):

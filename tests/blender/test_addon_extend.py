@@ -84,6 +84,22 @@ def test_extend_built_armatures_follows_the_model(fake_model, addon, make):
             assert fc.keyframe_points[-1].co[0] <= 60
 
 
+def test_bone_names_with_quotes_and_backslashes(fake_model, addon):
+    """Blender escapes " and \\ in F-curve paths; such bones must be read and written like any other."""
+    obj = mixamo_walk(60)
+    assert bpy.ops.strnn.auto_map() == {"FINISHED"}
+    bone = obj.data.bones[obj.data.strnn_map.l_knee]  # a keyed bone
+    bone.name = 'Sh"in\\L'  # Blender renames the action's F-curve paths with it
+    obj.data.strnn_map.l_knee = bone.name
+    assert any('Sh\\"in\\\\L' in fc.data_path for fc in fcurves_of(obj))
+    bpy.context.scene.frame_set(1)  # a bone whose keys were missed would be read in its frame-1 pose
+    old, new, before = extend(30)
+    check_new_action(obj, old, new, before, 30)
+    pos = evaluated_joints(addon, obj, np.arange(59, 91))
+    err = np.linalg.norm(pos[2:] - expected_constant_velocity(pos[:2], 30), axis=-1)
+    assert err.max() < 1e-3, err.max()
+
+
 def seam_and_speed(pos: np.ndarray, n_ctx: int) -> tuple[float, float]:
     """(seam step / largest context step, new mean speed / context mean speed) of joints ``[F, 21, 3]``."""
     step = np.linalg.norm(np.diff(pos, axis=0), axis=-1).mean(-1)  # mean joint displacement per frame
