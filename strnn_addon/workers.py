@@ -72,6 +72,23 @@ def lock_feet(context, obj, *, progress=_noop, **options):
     return run(foot_lock_steps(context, obj, **options), progress)
 
 
+def _frame_range(clip, frame_start: int | None, frame_end: int | None, need: int, why: str) -> tuple[int, int]:
+    """The asked frames (None: the action's first / last) clipped to the action; a :class:`UserError`
+    when they are reversed, miss the action or are fewer than ``need`` (``why`` says who needs them)."""
+    name = clip.action.name
+    if frame_start is not None and frame_end is not None:
+        if frame_start > frame_end:
+            raise UserError(f"Start {frame_start} is after End {frame_end}: swap them")
+        if frame_end < clip.first or frame_start > clip.last:
+            raise UserError(f"Frames {frame_start}-{frame_end} lie outside the action {name!r} (frames "
+                            f"{clip.first}-{clip.last}): pick a range inside it")
+    a = clip.first if frame_start is None else max(int(frame_start), clip.first)
+    b = clip.last if frame_end is None else min(int(frame_end), clip.last)
+    if b - a + 1 < need:
+        raise UserError(f"The frame range {a}-{b} of {name!r} has {max(b - a + 1, 0)} frames; {why}: widen the range")
+    return a, b
+
+
 def _context_range(clip, context_frames: int, frames: int) -> np.ndarray:
     """Scene frames ``[C]`` the model reads: the action's last ``context_frames`` (0: just enough)."""
     need = pipeline.min_scene_frames(clip.fps)
@@ -116,12 +133,8 @@ def denoise_steps(context, obj, *, frame_start: int | None = None, frame_end: in
     blending the model's output by ``strength``, then lock the feet when ``foot_lock``.
     A generator like :func:`extend_steps`."""
     clip = pipeline.prepare(context, obj)
-    a = clip.first if frame_start is None else max(int(frame_start), clip.first)
-    b = clip.last if frame_end is None else min(int(frame_end), clip.last)
     need = pipeline.min_scene_frames(clip.fps)
-    if b - a + 1 < need:
-        raise UserError(f"The frame range {a}-{b} of {clip.action.name!r} has {max(b - a + 1, 0)} frames; "
-                        f"denoising needs at least {need} at {clip.fps:g} fps: widen the range")
+    a, b = _frame_range(clip, frame_start, frame_end, need, f"denoising needs at least {need} at {clip.fps:g} fps")
     frames = np.arange(a, b + 1, dtype=np.float64)
     yield "read"
     pos = pipeline.joint_positions(context, clip, frames)
@@ -143,11 +156,7 @@ def foot_lock_steps(context, obj, *, frame_start: int | None = None, frame_end: 
     frame_end] (default: the whole action), fading locks in and out over ``blend`` seconds.
     Only the leg bones get new keys. A generator like :func:`extend_steps`."""
     clip = pipeline.prepare(context, obj)
-    a = clip.first if frame_start is None else max(int(frame_start), clip.first)
-    b = clip.last if frame_end is None else min(int(frame_end), clip.last)
-    if b - a + 1 < MIN_LOCK_FRAMES:
-        raise UserError(f"The frame range {a}-{b} of {clip.action.name!r} has {max(b - a + 1, 0)} frames; "
-                        f"foot lock needs at least {MIN_LOCK_FRAMES}: widen the range")
+    a, b = _frame_range(clip, frame_start, frame_end, MIN_LOCK_FRAMES, f"foot lock needs at least {MIN_LOCK_FRAMES}")
     frames = np.arange(max(a - 1, clip.first), min(b + 1, clip.last) + 1, dtype=np.float64)
     inside = (frames >= a) & (frames <= b)  # plus one untouched frame either side to continue from
     yield "read"

@@ -76,6 +76,20 @@ def test_zero_or_negative_scale(addon, tmp_path, op, scale):
     refuse(op, "zero or negative scale")
 
 
+@pytest.mark.parametrize("op", ["denoise_action", "foot_lock"])
+@pytest.mark.parametrize("start, end, match", [
+    (50, 10, r"Start 50 is after End 10: swap them"),
+    (500, 600, r"Frames 500-600 lie outside the action 'walk' \(frames 1-40\): pick a range inside it"),
+    (38, 39, r"The frame range 38-39 of 'walk' has 2 frames; .* needs at least .*: widen the range"),
+], ids=["reversed", "outside", "too_short"])
+def test_bad_frame_range(addon, tmp_path, op, start, end, match):
+    import_bvh(walk_bvh(tmp_path, frames=40))
+    before = state()
+    with pytest.raises(RuntimeError, match=match):
+        getattr(bpy.ops.strnn, op)(use_range=True, frame_start=start, frame_end=end)
+    assert state()[1:] == before[1:] and state()[0].keys() == before[0].keys()
+
+
 @pytest.mark.parametrize("op", OPS)
 def test_nla_tweak_mode(addon, tmp_path, op):
     """Editing a strip's action in the NLA: the action cannot be reassigned, so nothing may start."""
