@@ -137,6 +137,8 @@ class PipInstall:
         try:
             if self._proc.returncode != 0:
                 detail = self.lines[-1] if self.lines else f"exit status {self._proc.returncode}"
+                if "No module named pip" in detail:
+                    detail += f" (this Python has no pip: run '{self.command[0]} -m ensurepip' once, then try again)"
                 raise RuntimeError(f"Installing PyTorch failed: {detail}")
             for name in sorted(os.listdir(self.scratch)):
                 dest = os.path.join(self.target, name)

@@ -113,6 +113,16 @@ def test_install_failure_reported_and_nothing_installed(inst, fake_pip, user_fol
     assert sys.path == path and list(user_folder.iterdir()) == [] and leftovers(user_folder) == []
 
 
+def test_python_without_pip(inst, user_folder, monkeypatch):
+    """Blender's Python may come without pip: the message says how to add it."""
+    monkeypatch.setattr(inst, "install_command", lambda target, python=None: [
+        sys.executable, "-c", "import sys; sys.exit(sys.executable + ': No module named pip')"])
+    with pytest.raises(RuntimeError, match=r"No module named pip \(this Python has no pip: run '.*python.* -m "
+                                           r"ensurepip' once, then try again\)"):
+        bpy.ops.strnn.install_torch()
+    assert list(user_folder.iterdir()) == [] and leftovers(user_folder) == []
+
+
 def test_pip_missing_reported(inst, user_folder, monkeypatch):
     monkeypatch.setattr(inst, "install_command", lambda target, python=None: ["/no/such/python", "-m", "pip"])
     with pytest.raises(RuntimeError, match=r"Could not run pip .* run '/no/such/python -m pip' in a terminal"):
