@@ -22,7 +22,6 @@ Joint names follow the Mixamo convention (``Hips``, ``LeftUpLeg``, ...), so
 
 from __future__ import annotations
 
-import os
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -30,6 +29,7 @@ import numpy as np
 
 from .conventions import JOINT_INDEX, MODEL_FPS
 from .features import heading, yaw_matrix
+from .files import write_text
 
 _SIDE = {"l": "Left", "r": "Right"}
 _LIMB_NAMES = {"upleg": "UpLeg", "knee": "Leg", "foot": "Foot", "toe": "ToeBase",
@@ -233,9 +233,4 @@ def write_bvh(path: str | Path, positions: np.ndarray, fps: float = MODEL_FPS) -
     values = motion_channels(joints, pos)
     lines = _hierarchy_lines(joints) + ["MOTION", f"Frames: {len(pos)}", f"Frame Time: {1.0 / fps:.10f}"]
     lines += [" ".join(f"{v:.6f}" for v in row) for row in values]
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp")
-    tmp.write_text("\n".join(lines) + "\n")
-    os.replace(tmp, path)
-    return path
+    return write_text(path, "\n".join(lines) + "\n")

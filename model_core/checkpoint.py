@@ -6,7 +6,6 @@
 from __future__ import annotations
 
 import json
-import os
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -18,6 +17,7 @@ except ImportError:  # pragma: no cover - exercised in Blender
     load_file = save_file = None
 
 from .conventions import CONTACTS, JOINTS, LAYOUT, MODEL_FPS, PARENT_NAMES, UP_AXIS
+from .files import write_atomic, write_json
 
 REPO = Path(__file__).resolve().parent.parent
 DEFAULT_MODEL = REPO / "models" / "strnn_default"
@@ -80,12 +80,6 @@ def read_safetensors(path: str | Path) -> dict[str, np.ndarray]:
     return out
 
 
-def _atomic(path: Path, write):
-    tmp = path.with_name(path.name + ".tmp")
-    write(tmp)
-    os.replace(tmp, path)
-
-
 def save_release(folder: str | Path, weights: dict[str, np.ndarray], config: dict, mean, std,
                  meta: dict, seeds: np.ndarray, seed_names: list[str]) -> Path:
     """Write a release checkpoint folder atomically, file by file."""
@@ -106,13 +100,13 @@ def save_release(folder: str | Path, weights: dict[str, np.ndarray], config: dic
         **meta,
     }
     contiguous = {k: np.ascontiguousarray(v, dtype=np.float32) for k, v in weights.items()}
-    _atomic(folder / "model.safetensors", lambda p: save_file(contiguous, str(p)))
-    _atomic(folder / "model.json", lambda p: p.write_text(json.dumps(doc, indent=1)))
+    write_atomic(folder / "model.safetensors", lambda p: save_file(contiguous, str(p)))
+    write_json(folder / "model.json", doc)
     def write_seeds(p: Path):
         with open(p, "wb") as f:  # a file object keeps np.savez from renaming the temporary file
             np.savez(f, features=np.asarray(seeds, np.float32), names=np.array(seed_names, dtype=str))
 
-    _atomic(folder / "seeds.npz", write_seeds)
+    write_atomic(folder / "seeds.npz", write_seeds)
     return folder
 
 

@@ -22,6 +22,7 @@ import numpy as np
 from .bvh import BvhError
 from .conventions import LAYOUT
 from .features import positions_to_features
+from .files import write_atomic
 from .rigs import RigError, load_clip
 
 REPO = Path(__file__).resolve().parent.parent
@@ -161,13 +162,15 @@ def load_folder(root: str | Path, cache_dir: str | Path | None = None, workers: 
         raise DataError(f"{root}: none of the {len(files)} BVH files could be read:\n  " + "\n  ".join(failures[:10]))
     data = MotionData(str(root), clips, failures)
     if cache:
-        cache.parent.mkdir(parents=True, exist_ok=True)
-        tmp = cache.with_suffix(".tmp.npz")
-        np.savez(tmp, names=np.array([c.name for c in clips]), splits=np.array([c.split for c in clips]),
-                 lengths=np.array([len(c.features) for c in clips]),
-                 positions=np.concatenate([c.positions for c in clips]),
-                 features=np.concatenate([c.features for c in clips]), failures=np.array(failures, dtype=str))
-        os.replace(tmp, cache)
+        def write(tmp: Path):
+            with open(tmp, "wb") as f:  # a file object keeps np.savez from adding ".npz" to the name
+                np.savez(f, names=np.array([c.name for c in clips]), splits=np.array([c.split for c in clips]),
+                         lengths=np.array([len(c.features) for c in clips]),
+                         positions=np.concatenate([c.positions for c in clips]),
+                         features=np.concatenate([c.features for c in clips]),
+                         failures=np.array(failures, dtype=str))
+
+        write_atomic(cache, write)
     return data
 
 

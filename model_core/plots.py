@@ -7,7 +7,6 @@ positions ``[frames, 21, 3]`` in metres, Y-up.
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import numpy as np
@@ -16,6 +15,7 @@ from matplotlib.figure import Figure
 
 from .conventions import GROUND_AXES, JOINT_INDEX, JOINTS, MODEL_FPS, PARENTS, UP_AXIS
 from .features import heading, yaw_matrix
+from .files import write_atomic
 
 _VIEW_ANGLE = np.radians(30.0)  # camera turned this far from the body's side, so left and right separate
 SIDE_COLOURS = {"l": "tab:blue", "r": "tab:red", "c": "0.2"}  # left, right, centre: every picture of a body
@@ -91,9 +91,4 @@ def contact_sheet(path: str | Path, positions: np.ndarray, count: int = 10, fps:
     _draw_strip(fig.add_subplot(grid[0]), pos, idx, fps)
     _draw_trajectory(fig.add_subplot(grid[1]), pos, idx)
     fig.suptitle(title or f"{len(pos)} frames at {fps:g} fps ({len(pos) / fps:.1f} s)", fontsize=10)
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp")
-    fig.savefig(tmp, format="png", bbox_inches="tight")
-    os.replace(tmp, path)
-    return path
+    return write_atomic(path, lambda tmp: fig.savefig(tmp, format="png", bbox_inches="tight"))

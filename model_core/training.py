@@ -25,6 +25,7 @@ from .conventions import LAYOUT
 from .dataset import SPLITS, MotionData, Normaliser, load_folder, window_starts
 from .engine import Engine
 from .features import features_to_positions, positions_to_features
+from .files import write_atomic
 from .model import STRNN, STRNNConfig, smoothness_cost
 
 PHASES = ("spatio_temporal", "residual_pretrain", "residual_finetune")
@@ -225,9 +226,7 @@ def validate(model: STRNN, val: Windows, cfg: TrainConfig, limit: int = 1024) ->
 
 
 def _atomic_save(obj, path: Path):
-    tmp = path.with_name(path.name + ".tmp")
-    torch.save(obj, tmp)
-    os.replace(tmp, path)
+    write_atomic(path, lambda tmp: torch.save(obj, tmp))
 
 
 def _setup_logging(out: Path, rank: int) -> logging.Logger:

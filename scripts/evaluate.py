@@ -14,7 +14,6 @@ Example (the model card's figures):
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import sys
 from pathlib import Path
@@ -27,6 +26,7 @@ from model_core.checkpoint import DEFAULT_MODEL, DENOISE_MODEL, CheckpointError 
 from model_core.dataset import DataError, load_folder  # noqa: E402
 from model_core.engine import Engine  # noqa: E402
 from model_core.evaluation import evaluate_denoise, evaluate_long_horizon, evaluate_prediction, select_clips  # noqa: E402
+from model_core.files import write_json  # noqa: E402
 from model_core.rigs import RigError  # noqa: E402
 
 
@@ -150,12 +150,7 @@ def main(argv=None) -> int:
         print(f"error: {e}", file=sys.stderr)
         return 2
     if args.json:
-        out = Path(args.json)
-        out.parent.mkdir(parents=True, exist_ok=True)
-        tmp = out.with_name(out.name + ".tmp")
-        tmp.write_text(json.dumps(result, indent=1))
-        os.replace(tmp, out)
-        print(f"\nwrote {out}")
+        print(f"\nwrote {write_json(args.json, result)}")
     return 0
 
 

@@ -34,6 +34,10 @@ import traceback
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(REPO))
+
+from model_core.files import write_json  # noqa: E402  (model_core never imports bpy)
+
 EXTENSIONS = (".bvh", ".blend")
 PATHS = ("line", "circle", "s_curve", "figure_eight")
 REPO_MODULE = "strnn_batch"
@@ -74,6 +78,9 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--model", type=Path, default=None, metavar="DIR",
                      help="model release folder for the extension's Model Folder preference "
                           "(default: the model bundled in the zip)")
+    run.add_argument("--report", type=Path, default=None, metavar="FILE",
+                     help="also write the results as JSON for pipelines: the command, and per file its "
+                          "status (ok / failed), seconds, output and reason")
     run.add_argument("--verbose", "-v", action="store_true",
                      help="let Blender's own output through (default: hidden; kept in the failure reason)")
 
@@ -341,6 +348,9 @@ def main(argv: list[str] | None = None) -> int:
         results += sorted(processed, key=lambda r: order.get(r["file"], 0))
     wall = time.perf_counter() - start
     failed = [r for r in results if r["status"] != "ok"]
+    if args.report:
+        write_json(args.report, {"command": args.command, "seconds": wall, "processed": len(results) - len(failed),
+                                 "failed": len(failed), "files": results})
     print()
     print(summary(results))
     print(f"\n{len(results) - len(failed)} of {len(results)} files processed in {wall:.1f} s "

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import sys
 from pathlib import Path
 
@@ -61,7 +62,7 @@ def test_good_file_processed_corrupt_one_reported(clips, tmp_path, extension, ca
     before = snapshot(clips)
     out = tmp_path / "out"
     code = strnn_batch.main(["extend", "--frames", "20", str(clips), "--out", str(out), "--jobs", "2",
-                             "--extension", str(extension)])
+                             "--extension", str(extension), "--report", str(tmp_path / "report.json")])
     captured = capsys.readouterr()
     assert code == 1
     result = out / "walk.extend.bvh"
@@ -73,6 +74,11 @@ def test_good_file_processed_corrupt_one_reported(clips, tmp_path, extension, ca
     assert "Traceback" not in captured.out + captured.err
     table = captured.out.split("file ")[-1]
     assert "ok" in table and "failed" in table and "1 of 2 files processed" in captured.out
+    report = json.loads((tmp_path / "report.json").read_text())
+    assert report["command"] == "extend" and (report["processed"], report["failed"]) == (1, 1)
+    rows = {Path(r["file"]).name: r for r in report["files"]}
+    assert rows["walk.bvh"]["status"] == "ok" and Path(rows["walk.bvh"]["output"]) == result.resolve()
+    assert rows["broken.bvh"]["status"] == "failed" and "broken BVH" in rows["broken.bvh"]["reason"]
 
 
 def test_importer_errors_and_missing_inputs_have_reasons(tmp_path, extension, capsys):

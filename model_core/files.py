@@ -1,0 +1,38 @@
+"""Writing files so that nobody ever sees half of one.
+
+Every file the project writes (releases, caches, checkpoints, BVH, pictures, reports) goes
+through :func:`write_atomic`: the content is written under a temporary name beside the
+target and renamed over it, so a reader sees the old file or the new one, and a crash or
+an error part way leaves the old file as it was.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from collections.abc import Callable
+from pathlib import Path
+
+
+def write_atomic(path: str | Path, write: Callable[[Path], object]) -> Path:
+    """Make ``path`` by ``write(temporary path)`` then a rename; returns ``path``. The folder is
+    created if missing; the temporary file is removed when ``write`` fails."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.tmp")
+    try:
+        write(tmp)
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+    return path
+
+
+def write_text(path: str | Path, text: str) -> Path:
+    return write_atomic(path, lambda p: p.write_text(text))
+
+
+def write_json(path: str | Path, doc) -> Path:
+    """``doc`` as indented JSON."""
+    return write_text(path, json.dumps(doc, indent=1))
