@@ -183,7 +183,12 @@ class STRNN_OT_follow_curve(_Staged, bpy.types.Operator):
                                   speed=self.speed, foot_lock=self.foot_lock, steps=self.steering)
 
     def done(self, action) -> str:
-        return f"Walked the curve into new action {action.name!r}"
+        from .curves import find_curve
+
+        curve = find_curve(bpy.context, self.curve)
+        others = len(curve.data.splines) - 1
+        note = f" (it followed the first of the curve's {others + 1} splines)" if others else ""
+        return f"Walked the curve {curve.name!r} into new action {action.name!r}{note}"
 
 
 class STRNN_OT_auto_map(bpy.types.Operator):

@@ -136,6 +136,17 @@ def test_steps_report_model_progress_and_stop_without_changes(addon, torch_model
     assert seen == ["read", "model", "solve", "write"] and new is action_of(obj) and new is not action
 
 
+def test_curve_of_several_splines_follows_the_first_and_says_so(addon, torch_model, tmp_path, capfd):
+    obj = import_bvh(write_bvh(tmp_path / "walk.bvh", walking_skeleton(40)), update_scene_fps=True)
+    curve = add_curve("poly", points=[(0, 0, 0), (0, -2, 0)])
+    extra = curve.data.splines.new("POLY")
+    extra.points.add(1)
+    extra.points[0].co, extra.points[1].co = (5, 5, 0, 1), (8, 5, 0, 1)
+    bpy.context.view_layer.objects.active = obj
+    follow(curve=curve.name, frames=30)
+    assert "it followed the first of the curve's 2 splines" in capfd.readouterr().out
+
+
 def refused(match: str, **kw) -> None:
     """Follow Curve must fail with ``match`` and change no action or assignment."""
     obj = bpy.context.active_object
