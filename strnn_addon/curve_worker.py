@@ -14,7 +14,7 @@ from ..model_core.conventions import zup_to_yup
 from ..model_core.solve import anchor_positions, fk, solve
 from . import anim, curves, engine_bridge, mapping, pipeline, rig_io
 from .pipeline import UserError
-from .workers import _lock, _model_steps, _prefs, _write_new
+from .workers import RECORD, _lock, _model_steps, _prefs, _write_new, made_by
 
 
 def follow_curve_steps(context, obj, *, curve: str = "", frames: int = 0, speed: float = 0.0, foot_lock: bool = True,
@@ -58,9 +58,11 @@ def follow_curve_steps(context, obj, *, curve: str = "", frames: int = 0, speed:
     yield "write"
     start = clip.last + 1 if clip.action is not None else context.scene.frame_start
     new_frames = start + np.arange(n, dtype=np.float64)
+    record = made_by("Follow Curve", clip, engine_bridge.model_used(_prefs(context)), curve=curve_obj.name,
+                     frames=n, speed=float(speed), foot_lock=foot_lock, steering_steps=steps)
     if clip.action is not None:
-        return _write_new(context, clip, "curve", new_frames, loc, rot, previous, None)
-    return _write_fresh(context, clip, new_frames, loc, rot)
+        return _write_new(context, clip, "curve", new_frames, loc, rot, previous, None, record)
+    return _write_fresh(context, clip, new_frames, loc, rot, record)
 
 
 def _prepare(context, obj) -> pipeline.Clip:
@@ -84,13 +86,14 @@ def _rest_joints(clip: pipeline.Clip, loc: np.ndarray, rot: np.ndarray) -> np.nd
     return zup_to_yup(local @ clip.world[:3, :3].T + clip.world[:3, 3])
 
 
-def _write_fresh(context, clip, frames, loc, rot):
+def _write_fresh(context, clip, frames, loc, rot, record: dict):
     """A new action for an armature that had none: keyed, assigned, the scene's range widened."""
     import bpy
 
     action = bpy.data.actions.new(f"{clip.obj.name}.curve")
     clip.first, clip.last = int(frames[0]), int(frames[-1])  # no static keys outside the new frames
     try:
+        action[RECORD] = record
         pipeline.write_pose(clip, action, frames, loc, rot, {}, None)
         anim.assign_action(clip.obj, action, None)
         ad = clip.obj.animation_data

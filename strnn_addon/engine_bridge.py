@@ -44,6 +44,17 @@ def model_path(folder: str, setting: str = "Model Folder") -> Path:
     return path
 
 
+def model_used(prefs, purpose: str = "generate") -> str:
+    """The folder of the model an operation uses: the Model Folder's (``generate``) or the one
+    Denoise uses (``denoise``); '' when there is none."""
+    if purpose == "denoise":
+        folder = denoiser_folder(prefs)
+    else:
+        folder = bpy_path(prefs.model_folder) if prefs is not None else ""
+    path = Path(folder) if folder else bundled_model()
+    return str(path) if (path / "model.json").exists() else ""
+
+
 def load_engine(folder: str = "", engine: str = "NUMPY", threads: int = 0, setting: str = "Model Folder"):
     """The inference engine for ``folder`` ('' = bundled), cached across calls; errors name the
     preference ``setting`` that picks the folder."""

@@ -10,6 +10,8 @@ before the new action is created, so a failure or a cancel leaves the file uncha
 from __future__ import annotations
 
 import contextlib
+import tomllib
+from pathlib import Path
 
 import numpy as np
 
@@ -21,6 +23,8 @@ from .pipeline import UserError
 from .props import preferences
 
 STAGES = ("read", "model", "solve", "write")
+VERSION = tomllib.loads((Path(__file__).resolve().parent.parent / "blender_manifest.toml").read_text())["version"]
+RECORD = "strnn"  # the custom property of a new action that says how it was made
 MIN_LOCK_FRAMES = 3
 
 
@@ -124,7 +128,9 @@ def extend_steps(context, obj, *, frames: int = 120, context_frames: int = 0, fo
     loc, rot = solve(clip.rig, clip.anchors, targets, np.repeat(held_loc, frames, 0), np.repeat(held_rot, frames, 0))
     yield "write"
     new_frames = clip.last + 1 + np.arange(frames, dtype=np.float64)
-    return _write_new(context, clip, "extended", new_frames, loc, rot, previous, None)
+    record = made_by("Extend Clip", clip, engine_bridge.model_used(_prefs(context)), frames=frames,
+                     context_frames=len(ctx_frames), foot_lock=foot_lock)
+    return _write_new(context, clip, "extended", new_frames, loc, rot, previous, None, record)
 
 
 def denoise_steps(context, obj, *, frame_start: int | None = None, frame_end: int | None = None,
@@ -147,7 +153,9 @@ def denoise_steps(context, obj, *, frame_start: int | None = None, frame_end: in
     yield "solve"
     loc, rot = solve(clip.rig, clip.anchors, pipeline.to_armature(clip, clean), ref_loc, ref_rot)
     yield "write"
-    return _write_new(context, clip, "denoised", frames, loc, rot, previous, (a, b))
+    record = made_by("Denoise Action", clip, engine_bridge.model_used(_prefs(context), "denoise"), frame_start=a,
+                     frame_end=b, strength=float(strength), foot_lock=foot_lock)
+    return _write_new(context, clip, "denoised", frames, loc, rot, previous, (a, b), record)
 
 
 def foot_lock_steps(context, obj, *, frame_start: int | None = None, frame_end: int | None = None,
@@ -172,8 +180,9 @@ def foot_lock_steps(context, obj, *, frame_start: int | None = None, frame_end: 
     yield "solve"
     loc, rot = solve(clip.rig, clip.anchors, pipeline.to_armature(clip, locked), ref_loc, ref_rot)
     yield "write"
+    record = made_by("Foot Lock", clip, frame_start=a, frame_end=b, blend=float(blend))
     return _write_new(context, clip, "footlocked", frames[inside], loc[inside], rot[inside], previous, (a, b),
-                      bones=pipeline.leg_bones(clip))
+                      record, bones=pipeline.leg_bones(clip))
 
 
 def _lock(pos, fps, *, blend: float | None = None, detect_only: bool = False, **kw):
@@ -194,10 +203,23 @@ def _prefs(context):
     return preferences(context)
 
 
-def _write_new(context, clip, suffix, frames, loc, rot, previous, replace, bones=None):
-    """Create the new action, key it (``bones``: only these) and assign it; on failure remove it again."""
+def made_by(operation: str, clip, model: str = "", **settings) -> dict:
+    """The :data:`RECORD` a new action carries: the operation and extension version that made it,
+    the action it was made from, the model folder it used (if any) and its settings."""
+    record = {"operation": operation, "version": VERSION,
+              "source_action": clip.action.name if clip.action is not None else ""}
+    if model:
+        record["model"] = model
+    record["settings"] = {k: v for k, v in settings.items() if v is not None}
+    return record
+
+
+def _write_new(context, clip, suffix, frames, loc, rot, previous, replace, record: dict, bones=None):
+    """Create the new action, key it (``bones``: only these), label it with ``record`` and assign
+    it; on failure remove it again."""
     action = pipeline.new_action_from(clip, suffix)
     try:
+        action[RECORD] = record
         pipeline.write_pose(clip, action, frames, loc, rot, previous, replace, bones)
         pipeline.finish(context, clip, action)
     except Exception:

@@ -106,6 +106,9 @@ def test_nurbs_path_starts_an_armature_without_action(addon, torch_model):
     path = add_curve("nurbs_path", location=(1.0, 2.0, 0.0))  # 4 m along +X
     bpy.context.view_layer.objects.active = obj
     _, new = follow(curve=path.name)
+    made = new["strnn"].to_dict()
+    assert made["operation"] == "Follow Curve" and made["source_action"] == "" and made["model"]
+    assert made["settings"]["curve"] == path.name and made["settings"]["steering_steps"] == 4
     first, last = (int(f) for f in new.frame_range)
     assert first == bpy.context.scene.frame_start and last - first > 30
     joints = evaluated_joints(addon, obj, np.arange(first, last + 1))
