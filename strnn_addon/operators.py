@@ -234,10 +234,11 @@ class STRNN_OT_clear_map(bpy.types.Operator):
         return {"FINISHED"}
 
 
-def check_message(obj) -> str:
-    """Why the operators would refuse ``obj`` ('' when they would run)."""
+def check_message(obj, need_action: bool = True) -> str:
+    """Why the operators would refuse ``obj`` ('' when they would run); without ``need_action``,
+    why Follow Curve would, which also starts an armature that has no action."""
     try:
-        check_object(obj)
+        check_object(obj, need_action)
     except UserError as e:
         return str(e)
     return ""

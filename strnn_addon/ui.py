@@ -41,6 +41,10 @@ class STRNN_PT_main(_Sidebar, bpy.types.Panel):
         obj = context.active_object
         problem = check_message(obj)
         col = self.layout.column()
+        if problem and not check_message(obj, need_action=False):  # an armature without an action
+            col.label(text=f"{obj.name}: no action", icon="INFO")
+            col.label(text="Follow Curve can start one; the others need an action")
+            return
         if problem:
             col.label(text=problem.split(":")[0], icon="ERROR")
             return

@@ -95,3 +95,30 @@ def test_sidebar_settings_agree_with_their_operators(addon):
         for attr in ("type", "name", "description", "default", "subtype", "unit", "hard_min", "hard_max",
                      "soft_min", "soft_max"):
             assert getattr(a, attr, None) == getattr(b, attr, None), f"{setting} / {op}.{option}: {attr}"
+
+
+def main_panel_labels(context) -> list[tuple[str, str]]:
+    """(text, icon) of each label the main panel draws."""
+    labels = []
+
+    class Labels:
+        def __getattr__(self, name):
+            def call(*args, **kw):
+                if name == "label":
+                    labels.append((kw.get("text", ""), kw.get("icon", "NONE")))
+                return self
+
+            return call
+
+    bpy.types.STRNN_PT_main.draw(type("Fake", (), {"layout": Labels()})(), context)
+    return labels
+
+
+def test_main_panel_says_what_each_object_allows(addon, tmp_path):
+    bpy.ops.mesh.primitive_cube_add()
+    assert main_panel_labels(bpy.context) == [("'Cube' is a mesh, not an armature", "ERROR")]
+    build_armature("Bare", [("a", None, (0, 0, 0), (0, 0, 1))])
+    assert main_panel_labels(bpy.context) == [("Bare: no action", "INFO"),
+                                              ("Follow Curve can start one; the others need an action", "NONE")]
+    import_bvh(walk_bvh(tmp_path, frames=30))
+    assert main_panel_labels(bpy.context) == [("walk: walk", "ACTION")]
