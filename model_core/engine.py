@@ -18,6 +18,7 @@ from .checkpoint import Checkpoint, load_release
 from .conventions import LAYOUT, PARENTS
 from .features import RootStart, features_to_positions, integrate_root, positions_to_features, yaw_matrix
 from .spatial_fold import fold_spatial
+from .steps import drive
 
 
 def _lstm(w: dict, prefix: str, suffix: str = "") -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -168,6 +169,11 @@ class Engine:
     def denoise(self, feats: np.ndarray, stride: int | None = None) -> np.ndarray:
         """Project raw features ``[F, C]`` (F >= m) onto the manifold: overlapping m-frame
         windows through encoder and decoder, blended with a Hann weight."""
+        return drive(self.denoise_steps(feats, stride))
+
+    def denoise_steps(self, feats: np.ndarray, stride: int | None = None, batch: int = 256):
+        """:meth:`denoise` as a step generator (:mod:`steps`): yields the fraction of the windows
+        done after each ``batch`` of them, returns the features."""
         feats = np.asarray(feats, np.float32)
         f = len(feats)
         if f < self.m:
@@ -175,7 +181,11 @@ class Engine:
         stride = stride or max(1, self.m // 4)
         starts = sorted(set(range(0, f - self.m + 1, stride)) | {f - self.m})
         windows = np.stack([feats[s:s + self.m] for s in starts])
-        decoded = self.forward(windows)[:, : self.m]
+        parts = []
+        for i in range(0, len(windows), batch):
+            parts.append(self.forward(windows[i:i + batch])[:, : self.m])
+            yield min(i + batch, len(windows)) / len(windows)
+        decoded = np.concatenate(parts)
         weight = np.hanning(self.m + 2)[1:-1].astype(np.float32)[:, None]
         acc = np.zeros_like(feats)
         norm = np.zeros((f, 1), np.float32)
@@ -196,7 +206,11 @@ class Engine:
 
     def denoise_positions(self, positions: np.ndarray, root_weight: float = 3.0,
                           yaw_weight: float = 10.0) -> np.ndarray:
-        """Denoise global positions ``[F, 21, 3]``.
+        """Denoise global positions ``[F, 21, 3]``: :meth:`denoise_positions_steps` run to the end."""
+        return drive(self.denoise_positions_steps(positions, root_weight, yaw_weight))
+
+    def denoise_positions_steps(self, positions: np.ndarray, root_weight: float = 3.0, yaw_weight: float = 10.0):
+        """Denoise global positions ``[F, 21, 3]``; a step generator like :meth:`denoise_steps`.
 
         The body comes from the model. It is placed on the input frame by frame by the heading
         and shift that fit it best to all 21 input joints (least squares, so the noise of the
@@ -206,7 +220,7 @@ class Engine:
         split)."""
         positions = np.asarray(positions, dtype=np.float64)
         feats, _ = positions_to_features(positions)
-        clean = self.denoise(feats)
+        clean = yield from self.denoise_steps(feats)
         origin = RootStart(np.zeros(3), 0.0)
         root_model, _ = integrate_root(clean, origin)
         body = features_to_positions(clean, origin) - root_model[:, None]  # root at the origin

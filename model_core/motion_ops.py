@@ -16,6 +16,7 @@ import numpy as np
 
 from .conventions import JOINT_INDEX, MODEL_FPS, STANDARD_LEG_LENGTH, UP_AXIS
 from .rigs import leg_length
+from .steps import drive
 
 FEET = [JOINT_INDEX[j] for j in ("l_foot", "l_toe", "r_foot", "r_toe")]
 SEAM_FRAMES = 10  # model frames over which a jump at the start of an extension is faded out
@@ -95,6 +96,11 @@ def blend_seam(ctx: np.ndarray, new: np.ndarray, frames: int = SEAM_FRAMES) -> n
 def denoise_positions(engine, pos: np.ndarray, fps: float, strength: float = 1.0) -> np.ndarray:
     """Denoised clip ``[F, 21, 3]`` (same space and frames as ``pos``), blended with the input by
     ``strength`` in [0, 1] (0: unchanged, 1: the model's output)."""
+    return drive(denoise_positions_steps(engine, pos, fps, strength))
+
+
+def denoise_positions_steps(engine, pos: np.ndarray, fps: float, strength: float = 1.0):
+    """:func:`denoise_positions` as a step generator (:mod:`steps`): yields the fraction done."""
     duration = (len(pos) - 1) / fps
     n_model = model_frames_available(len(pos), fps)
     model_times = np.arange(n_model) / MODEL_FPS
@@ -102,7 +108,7 @@ def denoise_positions(engine, pos: np.ndarray, fps: float, strength: float = 1.0
         model_times = np.append(model_times, duration)
     clip = sample_at(pos, fps, model_times)
     norm = fit_normalisation(clip)
-    clean = norm.to_user(_engine_denoise(engine, norm.to_model(clip)))
+    clean = norm.to_user((yield from engine.denoise_positions_steps(norm.to_model(clip))))
     delta = clean - clip  # resample the correction, not the motion: untouched input stays exact
     delta_scene = _sample_times(delta, model_times, np.arange(len(pos)) / fps)
     return np.asarray(pos, dtype=np.float64) + strength * delta_scene
@@ -115,7 +121,3 @@ def _sample_times(x: np.ndarray, src_times: np.ndarray, times: np.ndarray) -> np
     return out.reshape((len(times),) + x.shape[1:])
 
 
-def _engine_denoise(engine, pos: np.ndarray) -> np.ndarray:
-    """The engine's position-level denoiser ``[F, 21, 3]`` -> ``[F, 21, 3]``."""
-    fn = getattr(engine, "denoise_positions", None) or engine.denoise
-    return np.asarray(fn(pos), dtype=np.float64)

@@ -74,5 +74,7 @@ class TorchEngine:
     predict = Engine.predict
     extrapolate = Engine.extrapolate
     denoise = Engine.denoise
+    denoise_steps = Engine.denoise_steps
     extend = Engine.extend
     denoise_positions = Engine.denoise_positions
+    denoise_positions_steps = Engine.denoise_positions_steps

@@ -124,10 +124,11 @@ def extend(prefs, positions: np.ndarray, fps: float, frames: int) -> np.ndarray:
     return motion_ops.extend_positions(generator_from_prefs(prefs), positions, fps, frames)
 
 
-def denoise(prefs, positions: np.ndarray, fps: float, strength: float) -> np.ndarray:
-    """Denoised ``positions`` ``[F, 21, 3]`` (same space and frames), blended by ``strength``."""
+def denoise_steps(prefs, positions: np.ndarray, fps: float, strength: float):
+    """Denoised ``positions`` ``[F, 21, 3]`` (same space and frames), blended by ``strength``.
+    A step generator (``model_core.steps``): yields the fraction of the clip done as it goes."""
     engine = engine_from_prefs(prefs, denoiser_folder(prefs), "Denoise Model Folder")
-    return motion_ops.denoise_positions(engine, positions, fps, strength)
+    return (yield from motion_ops.denoise_positions_steps(engine, positions, fps, strength))
 
 
 _FOLLOWERS: dict[str, object] = {}

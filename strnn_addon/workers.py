@@ -147,7 +147,7 @@ def denoise_steps(context, obj, *, frame_start: int | None = None, frame_end: in
     ref_loc, ref_rot, _ = rig_io.read_local_pose(clip.obj, clip.rig, clip.channels.fcurves, frames)
     previous = pipeline.raw_rotations(clip, a)
     yield "model"
-    clean = _model_call(engine_bridge.denoise, _prefs(context), pos, clip.fps, float(strength))
+    clean = yield from _model_steps(engine_bridge.denoise_steps(_prefs(context), pos, clip.fps, float(strength)))
     if foot_lock:
         clean = _lock(clean, clip.fps)
     yield "solve"

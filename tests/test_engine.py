@@ -125,6 +125,22 @@ def test_denoise_shape(release):
         engine.denoise(feats[: engine.m - 1])
 
 
+def test_denoise_steps_report_batches_and_give_the_same_result(release):
+    engine = Engine.load(release)
+    rng = np.random.default_rng(2)
+    feats = (engine.mean + engine.std * rng.normal(size=(engine.m * 6, C))).astype(np.float32)
+    steps, fractions = engine.denoise_steps(feats, batch=4), []
+    while True:
+        try:
+            fractions.append(next(steps))
+        except StopIteration as stop:
+            out = stop.value
+            break
+    windows = len(range(0, len(feats) - engine.m + 1, max(1, engine.m // 4)))
+    assert fractions == [min(4 * (k + 1), windows) / windows for k in range(-(-windows // 4))]
+    np.testing.assert_allclose(out, engine.denoise(feats), atol=1e-5)
+
+
 def test_a_denoise_only_model_denoises_and_refuses_to_predict(tmp_path):
     random_release(tmp_path, purpose="denoise")
     for engine in (Engine.load(tmp_path), TorchEngine.load(tmp_path)):

@@ -18,9 +18,10 @@ class GlideEngine:
         step = pos[-1, 0] - pos[-2, 0]
         return pos[-1] + step * np.arange(1, frames + 1)[:, None, None]
 
-    def denoise_positions(self, pos):
+    def denoise_positions_steps(self, pos):
         self.seen = pos
         return pos
+        yield  # a step generator, like Engine.denoise_positions_steps
 
 
 def test_normalisation_round_trip():

@@ -67,11 +67,12 @@ def fake_model(addon, monkeypatch):
         step = pos[-1, 0] - pos[-2, 0]  # hips
         return pos[-1] + step * np.arange(1, frames + 1)[:, None, None]
 
-    def denoise(prefs, pos, fps, strength):
+    def denoise_steps(prefs, pos, fps, strength):
         return np.array(pos, dtype=np.float64)
+        yield  # a step generator, like the real one
 
     monkeypatch.setattr(bridge, "extend", extend)
-    monkeypatch.setattr(bridge, "denoise", denoise)
+    monkeypatch.setattr(bridge, "denoise_steps", denoise_steps)
     return bridge
 
 

@@ -9,6 +9,7 @@ import bpy
 import numpy as np
 from scenes import (
     action_of,
+    addon_module,
     evaluated_joints,
     fcurves_of,
     find_mocap,
@@ -40,12 +41,22 @@ def test_identity_model_keeps_the_motion(tmp_path, fake_model, addon):
     assert np.abs(after - before).max() < 1e-4
 
 
+def stand_in(fn):
+    """A denoiser step generator returning ``fn(positions, strength)``."""
+
+    def steps(prefs, pos, fps, strength):
+        return fn(pos, strength)
+        yield
+
+    return steps
+
+
 def test_range_and_unmapped_bones(fake_model, addon, monkeypatch):
     obj = mixamo_walk(60)
     frames = np.arange(1, 61)
     before = evaluated_joints(addon, obj, frames)
     shift = np.array([0.0, 0.05, 0.0])  # a stand-in "denoiser" that lifts the body by 5 cm (Y-up)
-    monkeypatch.setattr(fake_model, "denoise", lambda prefs, pos, fps, strength: pos + strength * shift)
+    monkeypatch.setattr(fake_model, "denoise_steps", stand_in(lambda pos, strength: pos + strength * shift))
     old, new = denoise(use_range=True, frame_start=21, frame_end=40, strength=0.5)
     after = evaluated_joints(addon, obj, frames)
     lift = (after - before)[..., 2]  # Blender Z
@@ -61,9 +72,25 @@ def test_strength_zero_changes_no_motion(fake_model, addon, monkeypatch):
     obj = mixamo_walk(40)
     frames = np.arange(1, 41)
     before = evaluated_joints(addon, obj, frames)
-    monkeypatch.setattr(fake_model, "denoise", lambda prefs, pos, fps, strength: pos + strength * 0.1)
+    monkeypatch.setattr(fake_model, "denoise_steps", stand_in(lambda pos, strength: pos + strength * 0.1))
     denoise(strength=0.0)
     assert np.abs(evaluated_joints(addon, obj, frames) - before).max() < 1e-4
+
+
+def test_steps_report_model_progress_and_stop_without_changes(real_model, addon, tmp_path):
+    """What the operator's modal runs; closing it in the model stage (Esc) changes nothing."""
+    obj = import_bvh(walk_bvh(tmp_path, frames=400))
+    workers = addon_module(addon, "strnn_addon.workers")
+    action, names = action_of(obj), sorted(a.name for a in bpy.data.actions)
+    steps = workers.denoise_steps(bpy.context, obj)
+    assert [next(steps), next(steps)] == ["read", "model"]
+    fraction = next(steps)
+    assert isinstance(fraction, float) and 0 < fraction <= 1
+    steps.close()
+    assert action_of(obj) is action and sorted(a.name for a in bpy.data.actions) == names
+    seen = []
+    new = workers.run(workers.denoise_steps(bpy.context, obj), seen.append)
+    assert seen == ["read", "model", "solve", "write"] and new is action_of(obj) and new is not action
 
 
 def test_denoise_noisy_clip_with_model(real_model, addon, tmp_path):
