@@ -28,6 +28,7 @@ from model_core.conventions import CONTACT_JOINTS, LAYOUT, PARENTS  # noqa: E402
 from model_core.features import features_to_positions, heading, positions_to_features  # noqa: E402
 from model_core.metrics import bone_lengths_of as bone_lengths  # noqa: E402
 from model_core.paths import Path, evaluation_paths, path_errors_cm  # noqa: E402
+from model_core.steps import drive  # noqa: E402
 from model_core.synthetic import walking_skeleton  # noqa: E402
 
 REPO = FilePath(__file__).resolve().parent.parent
@@ -95,14 +96,8 @@ def test_follow_is_deterministic_and_has_the_asked_length(follower):
 
 def test_steps_report_each_window_and_give_the_same_walk(follower):
     seed, f = walking_skeleton(40), follower(steps=2)
-    steps = follow_path_steps(f, seed, straight(), frames=45)
     fractions = []
-    while True:
-        try:
-            fractions.append(next(steps))
-        except StopIteration as stop:
-            stepped = stop.value
-            break
+    stepped = drive(follow_path_steps(f, seed, straight(), frames=45), fractions.append)
     windows = -(-45 // f.n)
     assert fractions == [min(k * f.n / 45, 1.0) for k in range(1, windows + 1)]  # after each n-frame window
     np.testing.assert_array_equal(stepped[0], follow_path(follower(steps=2), seed, straight(), frames=45)[0])

@@ -19,6 +19,7 @@ from model_core.checkpoint import DEFAULT_MODEL, REPO, CheckpointError, load_rel
 from model_core.conventions import LAYOUT  # noqa: E402
 from model_core.engine import Engine, bone_lengths  # noqa: E402
 from model_core.model import STRNN, STRNNConfig  # noqa: E402
+from model_core.steps import drive  # noqa: E402
 from model_core.torch_engine import TorchEngine  # noqa: E402
 
 C = LAYOUT.size
@@ -129,13 +130,8 @@ def test_denoise_steps_report_batches_and_give_the_same_result(release):
     engine = Engine.load(release)
     rng = np.random.default_rng(2)
     feats = (engine.mean + engine.std * rng.normal(size=(engine.m * 6, C))).astype(np.float32)
-    steps, fractions = engine.denoise_steps(feats, batch=4), []
-    while True:
-        try:
-            fractions.append(next(steps))
-        except StopIteration as stop:
-            out = stop.value
-            break
+    fractions = []
+    out = drive(engine.denoise_steps(feats, batch=4), fractions.append)
     windows = len(range(0, len(feats) - engine.m + 1, max(1, engine.m // 4)))
     assert fractions == [min(4 * (k + 1), windows) / windows for k in range(-(-windows // 4))]
     np.testing.assert_allclose(out, engine.denoise(feats), atol=1e-5)
