@@ -28,6 +28,7 @@ import bpy
 from .props import ADDON_ID
 
 TORCH_PIN = "torch==2.13.0"
+CPU_INDEX = "https://download.pytorch.org/whl/cpu"  # PyPI's Linux and Windows wheels bring CUDA (gigabytes)
 OFFLINE = ("Online access is off: allow it in Preferences > System > Network > Allow Online Access "
            "to install PyTorch from here")
 NO_FOLDER = ("No user folder for this extension: install STRNN Motion as an extension "
@@ -43,10 +44,12 @@ def site_packages(create: bool = False) -> str:
         return ""
 
 
-def install_command(target: str, python: str | None = None) -> list[str]:
-    """The pip command that installs the pinned torch into ``target`` with ``python``
-    (default: the running interpreter, Blender's own Python)."""
-    return [python or sys.executable, "-m", "pip", "install", "--target", str(target), TORCH_PIN]
+def install_command(target: str, python: str | None = None, platform: str = sys.platform) -> list[str]:
+    """The pip command that installs the pinned CPU build of torch into ``target`` with ``python``
+    (default: the running interpreter, Blender's own Python). On Linux and Windows the CPU build
+    comes from PyTorch's own index; macOS wheels on PyPI are CPU builds already."""
+    cmd = [python or sys.executable, "-m", "pip", "install", "--target", str(target), TORCH_PIN]
+    return cmd if platform == "darwin" else [*cmd, "--index-url", CPU_INDEX]
 
 
 def online_access() -> bool:

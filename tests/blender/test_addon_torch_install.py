@@ -74,8 +74,11 @@ def drawn(inst) -> list:
 
 
 def test_install_command(inst):
-    assert inst.install_command("/some/dir") == [sys.executable, "-m", "pip", "install", "--target", "/some/dir",
-                                                 "torch==2.13.0"]
+    plain = [sys.executable, "-m", "pip", "install", "--target", "/some/dir", "torch==2.13.0"]
+    cpu = plain + ["--index-url", "https://download.pytorch.org/whl/cpu"]  # not PyPI's CUDA build
+    assert inst.install_command("/some/dir", platform="linux") == cpu
+    assert inst.install_command("/some/dir", platform="win32") == cpu
+    assert inst.install_command("/some/dir", platform="darwin") == plain
     assert inst.install_command("/d", python="/blender/python")[0] == "/blender/python"
     folder = inst.site_packages()
     assert folder.endswith(os.path.join(".user", "strnn_test", "strnn_motion", "site-packages"))
