@@ -94,6 +94,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--frames", type=int, default=120, help="frames to add after the last frame (default: 120)")
     p.add_argument("--context-frames", type=int, default=0,
                    help="frames before the end the model reads; 0: just enough (default: 0)")
+    p.add_argument("--from-frame", type=int, default=None, metavar="FRAME",
+                   help="continue after this frame instead of the clip's last, replacing the motion after it")
     p.add_argument("--foot-lock", action="store_true", help="also lock the feet on the new frames")
 
     p = sub.add_parser("denoise", parents=[common], help="clean each clip (strnn.denoise_action)",
@@ -129,7 +131,7 @@ def operator_call(args) -> tuple[str, dict]:
     """The operator (``strnn.<name>``) and its keyword arguments for ``args``."""
     if args.command == "extend":
         return "extend_clip", {"frames": args.frames, "context_frames": args.context_frames,
-                               "foot_lock": args.foot_lock}
+                               "foot_lock": args.foot_lock, "from_current": args.from_frame is not None}
     if args.command == "denoise":
         return "denoise_action", {"strength": args.strength, "foot_lock": args.foot_lock}
     if args.command == "footlock":
@@ -319,6 +321,7 @@ def main(argv: list[str] | None = None) -> int:
         jobs.append({"index": len(jobs), "input": str(path.resolve()), "display": display,
                      "output": str(out.resolve()), "shown_output": str(out), "operator": op, "kwargs": kwargs,
                      "path": getattr(args, "path", None), "curve": getattr(args, "curve", ""),
+                     "from_frame": getattr(args, "from_frame", None),
                      "model": str(args.model.resolve()) if args.model else "",
                      "denoise_model": str(args.denoise_model.resolve()) if getattr(args, "denoise_model", None)
                      else "", "verbose": args.verbose})
@@ -471,6 +474,8 @@ def run_file(bpy, job: dict) -> None:
     view_layer.objects.active = obj
     obj.select_set(True)
     kwargs = dict(job["kwargs"])
+    if kwargs.get("from_current"):
+        bpy.context.scene.frame_set(job["from_frame"])
     if job["operator"] == "follow_curve":
         if job["curve"]:
             if bpy.data.objects.get(job["curve"]) is None:

@@ -103,15 +103,20 @@ class STRNN_OT_extend_clip(_Staged, bpy.types.Operator):
 
     frames: options.frames_to_add()
     context_frames: options.context_frames()
+    from_current: options.from_current()
     foot_lock: options.foot_lock(False)
 
     def steps(self, context):
         from .workers import extend_steps
 
+        start = context.scene.frame_current if self.from_current else None
         return extend_steps(context, context.active_object, frames=self.frames, context_frames=self.context_frames,
-                            foot_lock=self.foot_lock)
+                            foot_lock=self.foot_lock, from_frame=start)
 
     def done(self, action) -> str:
+        if self.from_current:
+            return (f"Continued after frame {bpy.context.scene.frame_current} with {self.frames} new frames in new "
+                    f"action {action.name!r}")
         return f"Added {self.frames} frames in new action {action.name!r}"
 
 

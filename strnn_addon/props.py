@@ -26,6 +26,12 @@ def context_frames():
                        description="Frames before the end the model reads; 0: just enough (20 at 30 fps)")
 
 
+def from_current():
+    return BoolProperty(name="From Current Frame", default=False,
+                        description="Continue after the current frame instead of the action's last, replacing "
+                                    "the mapped bones' keys after it")
+
+
 def foot_lock(default: bool):
     return BoolProperty(name="Foot Lock", default=default, description=FOOT_LOCK_TIP)
 
@@ -137,6 +143,7 @@ class STRNN_PG_settings(bpy.types.PropertyGroup):
     extend_frames: frames_to_add()
     context_frames: context_frames()
     extend_foot_lock: foot_lock(False)
+    extend_from_current: from_current()
     denoise_strength: strength()
     denoise_use_range: use_range("Denoise")
     denoise_start: range_start("Denoise")

@@ -60,10 +60,11 @@ class STRNN_PT_extend(_Sidebar, bpy.types.Panel):
         col = self.layout.column(align=True)
         col.prop(settings, "extend_frames")
         col.prop(settings, "context_frames")
+        col.prop(settings, "extend_from_current")
         col.prop(settings, "extend_foot_lock")
         op = self.layout.operator("strnn.extend_clip", icon="TRACKING_FORWARDS")
         op.frames, op.context_frames = settings.extend_frames, settings.context_frames
-        op.foot_lock = settings.extend_foot_lock
+        op.from_current, op.foot_lock = settings.extend_from_current, settings.extend_foot_lock
 
 
 class STRNN_PT_denoise(_Sidebar, bpy.types.Panel):

@@ -93,31 +93,38 @@ def _frame_range(clip, frame_start: int | None, frame_end: int | None, need: int
     return a, b
 
 
-def _context_range(clip, context_frames: int, frames: int) -> np.ndarray:
-    """Scene frames ``[C]`` the model reads: the action's last ``context_frames`` (0: just enough)."""
+def _context_range(clip, context_frames: int, frames: int, end: int) -> np.ndarray:
+    """Scene frames ``[C]`` the model reads: the ``context_frames`` (0: just enough) up to ``end``."""
     need = pipeline.min_scene_frames(clip.fps)
-    span = clip.last - clip.first + 1
     n_ctx = max(context_frames, need)
+    if not clip.first <= end <= clip.last:
+        raise UserError(f"Frame {end} lies outside the action {clip.action.name!r} (frames {clip.first}-"
+                        f"{clip.last}): move the current frame into it to continue from there")
+    span = end - clip.first + 1
     if n_ctx > span:
-        raise UserError(f"The action {clip.action.name!r} has {span} frames; extending needs at least "
+        before = f"up to frame {end}" if end < clip.last else "frames"
+        raise UserError(f"The action {clip.action.name!r} has {span} {before}; extending needs at least "
                         f"{n_ctx} at {clip.fps:g} fps (the model reads {pipeline.MIN_MODEL_FRAMES} "
-                        "frames at 30 fps): use a longer action or a smaller context")
+                        "frames at 30 fps): use a longer action, a later frame or a smaller context")
     if frames < 1:
         raise UserError("Frames to add must be at least 1")
-    return np.arange(clip.last - n_ctx + 1, clip.last + 1, dtype=np.float64)
+    return np.arange(end - n_ctx + 1, end + 1, dtype=np.float64)
 
 
-def extend_steps(context, obj, *, frames: int = 120, context_frames: int = 0, foot_lock: bool = False):
+def extend_steps(context, obj, *, frames: int = 120, context_frames: int = 0, foot_lock: bool = False,
+                 from_frame: int | None = None):
     """Continue ``obj``'s action by ``frames`` scene frames from its last ``context_frames``
     (0: just enough for the model's 20-frame context), feet locked on the new frames when
-    ``foot_lock``. A generator: yields each stage's name before running it (so a caller can
-    report progress or stop), returns the new action."""
+    ``foot_lock``. ``from_frame``: continue after this frame instead of the action's last, the
+    written bones' keys after it replaced. A generator: yields each stage's name before running
+    it (so a caller can report progress or stop), returns the new action."""
     clip = pipeline.prepare(context, obj)
-    ctx_frames = _context_range(clip, context_frames, frames)
+    end = clip.last if from_frame is None else int(from_frame)
+    ctx_frames = _context_range(clip, context_frames, frames, end)
     yield "read"
     pos = pipeline.joint_positions(context, clip, ctx_frames)
     held_loc, held_rot, _ = rig_io.read_local_pose(clip.obj, clip.rig, clip.channels.fcurves, ctx_frames[-1:])
-    previous = pipeline.raw_rotations(clip, clip.last)
+    previous = pipeline.raw_rotations(clip, end)
     yield "model"
     new_pos = _model_call(engine_bridge.extend, _prefs(context), pos, clip.fps, frames)
     if foot_lock:
@@ -127,10 +134,11 @@ def extend_steps(context, obj, *, frames: int = 120, context_frames: int = 0, fo
     targets = pipeline.to_armature(clip, new_pos)
     loc, rot = solve(clip.rig, clip.anchors, targets, np.repeat(held_loc, frames, 0), np.repeat(held_rot, frames, 0))
     yield "write"
-    new_frames = clip.last + 1 + np.arange(frames, dtype=np.float64)
+    new_frames = end + 1 + np.arange(frames, dtype=np.float64)
     record = made_by("Extend Clip", clip, engine_bridge.model_used(_prefs(context)), frames=frames,
-                     context_frames=len(ctx_frames), foot_lock=foot_lock)
-    return _write_new(context, clip, "extended", new_frames, loc, rot, previous, None, record)
+                     context_frames=len(ctx_frames), foot_lock=foot_lock, from_frame=from_frame)
+    replace = None if end == clip.last else (end + 0.5, float("inf"))  # the old tail goes
+    return _write_new(context, clip, "extended", new_frames, loc, rot, previous, replace, record)
 
 
 def denoise_steps(context, obj, *, frame_start: int | None = None, frame_end: int | None = None,

@@ -107,6 +107,14 @@ def test_in_place_overwrites_only_when_asked(tmp_path, extension, capsys):
     assert [p.name for p in tmp_path.iterdir()] == ["walk.bvh"]
 
 
+def test_extend_from_a_frame_replaces_the_tail(tmp_path, extension, capsys):
+    clip = write_bvh(tmp_path / "walk.bvh", walking_skeleton(60))
+    out = tmp_path / "out"
+    code = strnn_batch.main(["extend", "--frames", "10", "--from-frame", "40", str(clip), "--out", str(out),
+                             "--extension", str(extension)])
+    assert code == 0 and frames_of(out / "walk.extend.bvh") == 50  # frames 1-40 kept, 41-50 new, 51-60 gone
+
+
 def test_timeout_kills_the_worker_and_writes_nothing(tmp_path, extension, capsys):
     clip = write_bvh(tmp_path / "walk.bvh", walking_skeleton(40))
     before = clip.read_bytes()

@@ -149,3 +149,46 @@ def test_extend_real_clip_with_model(real_model, addon, family):
 @pytest.mark.parametrize("make", [mixamo_walk, rigify_walk], ids=["mixamo", "rigify"])
 def test_extend_built_armature_with_model(real_model, addon, make):
     check_real_extension(addon, make(60), 60)
+
+
+def test_from_current_frame_replaces_the_tail(fake_model, addon):
+    """Continue after the playhead: frames up to it stay, the mapped bones' later keys are replaced
+    by the continuation, unmapped bones keep theirs, the original action is kept."""
+    obj = mixamo_walk(90)
+    finger = obj.pose.bones["mixamorig:LeftHandMiddle2"]  # not written by the solve
+    for frame in (1, 90):
+        finger.keyframe_insert("rotation_quaternion", frame=frame)
+    frames = np.arange(1, 91)
+    before = evaluated_joints(addon, obj, frames)
+    bpy.context.scene.frame_set(60)
+    old = action_of(obj)
+    snapshot = key_snapshot(obj)
+    assert bpy.ops.strnn.extend_clip(frames=20, from_current=True) == {"FINISHED"}
+    new = action_of(obj)
+    assert new is not old and old.use_fake_user and same_keys(snapshot, key_snapshot(obj, old))
+    assert np.abs(evaluated_joints(addon, obj, np.arange(1, 61)) - before[:60]).max() < 1e-5
+    pos = evaluated_joints(addon, obj, np.arange(59, 81))
+    err = np.linalg.norm(pos[2:] - expected_constant_velocity(pos[:2], 20), axis=-1)
+    assert err.max() < 1e-3, err.max()
+    hips = obj.data.strnn_map.hips
+    assert any(finger.name in fc.data_path for fc in fcurves_of(obj))
+    for fc in fcurves_of(obj):
+        last = fc.keyframe_points[-1].co[0]
+        if fc.data_path.startswith(f'pose.bones["{hips}"]'):
+            assert last == 80  # the old tail (61-90) is gone
+        elif finger.name in fc.data_path:
+            assert last == 90  # a bone the solve does not write keeps its keys
+    assert new["strnn"]["settings"]["from_frame"] == 60
+
+
+@pytest.mark.parametrize("frame, match", [
+    (200, r"Frame 200 lies outside the action 'MixamoAction' \(frames 1-90\): move the current frame into it"),
+    (10, r"has 10 up to frame 10; extending needs at least 20"),
+], ids=["outside", "too_early"])
+def test_from_current_frame_refused(fake_model, addon, frame, match):
+    obj = mixamo_walk(90)
+    bpy.context.scene.frame_set(frame)
+    old, snapshot = action_of(obj), key_snapshot(obj)
+    with pytest.raises(RuntimeError, match=match):
+        bpy.ops.strnn.extend_clip(frames=20, from_current=True)
+    assert action_of(obj) is old and same_keys(snapshot, key_snapshot(obj))

@@ -42,7 +42,8 @@ class OperatorProps:
 # sidebar setting (per scene) -> the operator property it is handed to
 HANDED = {
     "extend_frames": ("extend_clip", "frames"), "context_frames": ("extend_clip", "context_frames"),
-    "extend_foot_lock": ("extend_clip", "foot_lock"), "denoise_strength": ("denoise_action", "strength"),
+    "extend_foot_lock": ("extend_clip", "foot_lock"), "extend_from_current": ("extend_clip", "from_current"),
+    "denoise_strength": ("denoise_action", "strength"),
     "denoise_use_range": ("denoise_action", "use_range"), "denoise_start": ("denoise_action", "frame_start"),
     "denoise_end": ("denoise_action", "frame_end"), "denoise_foot_lock": ("denoise_action", "foot_lock"),
     "lock_blend": ("foot_lock", "blend"), "lock_use_range": ("foot_lock", "use_range"),
