@@ -23,6 +23,7 @@ from .pipeline import UserError
 from .props import preferences
 
 STAGES = ("read", "model", "solve", "write")
+EDGE_FADE_S = 0.2  # a partial Denoise range fades in and out over this long where it meets untouched frames
 VERSION = tomllib.loads((Path(__file__).resolve().parent.parent / "blender_manifest.toml").read_text())["version"]
 RECORD = "strnn"  # the custom property of a new action that says how it was made
 MIN_LOCK_FRAMES = 3
@@ -156,6 +157,7 @@ def denoise_steps(context, obj, *, frame_start: int | None = None, frame_end: in
     previous = pipeline.raw_rotations(clip, a)
     yield "model"
     clean = yield from _model_steps(engine_bridge.denoise_steps(_prefs(context), pos, clip.fps, float(strength)))
+    clean = _fade_edges(pos, clean, clip.fps, a > clip.first, b < clip.last)
     if foot_lock:
         clean = _lock(clean, clip.fps)
     yield "solve"
@@ -191,6 +193,20 @@ def foot_lock_steps(context, obj, *, frame_start: int | None = None, frame_end: 
     record = made_by("Foot Lock", clip, frame_start=a, frame_end=b, blend=float(blend))
     return _write_new(context, clip, "footlocked", frames[inside], loc[inside], rot[inside], previous, (a, b),
                       record, bones=pipeline.leg_bones(clip))
+
+
+def _fade_edges(before: np.ndarray, after: np.ndarray, fps: float, fade_in: bool, fade_out: bool) -> np.ndarray:
+    """``after`` ``[F, 21, 3]`` blended from ``before`` over :data:`EDGE_FADE_S` at the start
+    (``fade_in``) and end (``fade_out``) of a range, so it meets the frames around it without a pop."""
+    n = len(after)
+    k = min(int(round(EDGE_FADE_S * fps)), n // 4)
+    weight = np.ones(n)
+    ramp = np.arange(1, k + 1) / (k + 1)
+    if k and fade_in:
+        weight[:k] = np.minimum(weight[:k], ramp)
+    if k and fade_out:
+        weight[n - k:] = np.minimum(weight[n - k:], ramp[::-1])
+    return before + weight[:, None, None] * (after - before)
 
 
 def _lock(pos, fps, *, blend: float | None = None, detect_only: bool = False, **kw):
