@@ -6,6 +6,7 @@ test can swap them for a stand-in.
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -53,6 +54,18 @@ def model_used(prefs, purpose: str = "generate") -> str:
         folder = bpy_path(prefs.model_folder) if prefs is not None else ""
     path = Path(folder) if folder else bundled_model()
     return str(path) if (path / "model.json").exists() else ""
+
+
+def model_card(folder: str) -> dict:
+    """What the preferences show of the model in ``folder``: its ``name`` and ``licence`` (from
+    model.json), and whether that licence allows only ``non_commercial`` use."""
+    path = Path(folder)
+    try:
+        doc = json.loads((path / "model.json").read_text())
+    except (OSError, ValueError):
+        return {"name": path.name, "licence": "unknown (model.json unreadable)", "non_commercial": False}
+    licence = str(doc.get("licence") or "not stated in model.json")
+    return {"name": path.name, "licence": licence, "non_commercial": "-NC" in licence or "NonCommercial" in licence}
 
 
 def load_engine(folder: str = "", engine: str = "NUMPY", threads: int = 0, setting: str = "Model Folder"):

@@ -126,9 +126,32 @@ class STRNN_AP_preferences(bpy.types.AddonPreferences):
         col.prop(self, "denoise_model_folder")
         col.prop(self, "engine")
         col.prop(self, "threads")
+        draw_models(self.layout, self)
         from .torch_install import draw_preferences
 
         draw_preferences(self.layout)
+
+
+def draw_models(layout, prefs) -> None:
+    """Which model each operation uses, and its licence (the bundled ones are non-commercial)."""
+    import textwrap
+
+    from .engine_bridge import model_card, model_used
+
+    box = layout.box()
+    for ops, purpose, setting in (("Extend, Follow Curve", "generate", "Model Folder"),
+                                  ("Denoise", "denoise", "Denoise Model Folder")):
+        folder = model_used(prefs, purpose)
+        if not folder:
+            box.label(text=f"{ops}: no model in the {setting}", icon="ERROR")
+            continue
+        card = model_card(folder)
+        box.label(text=f"{ops}: {card['name']}", icon="OUTLINER_DATA_ARMATURE")
+        col = box.column(align=True)
+        if card["non_commercial"]:
+            col.label(text="Non-commercial use only (its training data's licence)", icon="ERROR")
+        for line in textwrap.wrap(f"Licence: {card['licence']}", 90):
+            col.label(text=line)
 
 
 def preferences(context):
