@@ -101,7 +101,12 @@ class STRNN_PT_follow_curve(_Sidebar, bpy.types.Panel):
     bl_parent_id = "STRNN_PT_main"
 
     def draw(self, context):
+        from .torch_install import torch_available
+
         settings = context.scene.strnn
+        if not torch_available():
+            self.layout.label(text="Needs PyTorch: Preferences > Add-ons > STRNN Motion > Install PyTorch",
+                              icon="INFO")
         col = self.layout.column(align=True)
         col.prop(settings, "curve")
         col.prop(settings, "curve_frames")

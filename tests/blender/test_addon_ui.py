@@ -98,8 +98,8 @@ def test_sidebar_settings_agree_with_their_operators(addon):
             assert getattr(a, attr, None) == getattr(b, attr, None), f"{setting} / {op}.{option}: {attr}"
 
 
-def main_panel_labels(context) -> list[tuple[str, str]]:
-    """(text, icon) of each label the main panel draws."""
+def panel_labels(panel: str, context) -> list[tuple[str, str]]:
+    """(text, icon) of each label the panel draws."""
     labels = []
 
     class Labels:
@@ -111,15 +111,25 @@ def main_panel_labels(context) -> list[tuple[str, str]]:
 
             return call
 
-    bpy.types.STRNN_PT_main.draw(type("Fake", (), {"layout": Labels()})(), context)
+    getattr(bpy.types, panel).draw(type("Fake", (), {"layout": Labels()})(), context)
     return labels
 
 
 def test_main_panel_says_what_each_object_allows(addon, tmp_path):
     bpy.ops.mesh.primitive_cube_add()
-    assert main_panel_labels(bpy.context) == [("'Cube' is a mesh, not an armature", "ERROR")]
+    assert panel_labels("STRNN_PT_main", bpy.context) == [("'Cube' is a mesh, not an armature", "ERROR")]
     build_armature("Bare", [("a", None, (0, 0, 0), (0, 0, 1))])
-    assert main_panel_labels(bpy.context) == [("Bare: no action", "INFO"),
+    assert panel_labels("STRNN_PT_main", bpy.context) == [("Bare: no action", "INFO"),
                                               ("Follow Curve can start one; the others need an action", "NONE")]
     import_bvh(walk_bvh(tmp_path, frames=30))
-    assert main_panel_labels(bpy.context) == [("walk: walk", "ACTION")]
+    assert panel_labels("STRNN_PT_main", bpy.context) == [("walk: walk", "ACTION")]
+
+
+def test_follow_curve_panel_says_when_pytorch_is_missing(addon, monkeypatch):
+    import importlib
+
+    inst = importlib.import_module(addon.__name__ + ".strnn_addon.torch_install")
+    for available in (True, False):
+        monkeypatch.setattr(inst, "torch_available", lambda available=available: available)
+        texts = [text for text, _ in panel_labels("STRNN_PT_follow_curve", bpy.context)]
+        assert any(t.startswith("Needs PyTorch: Preferences > Add-ons") for t in texts) is not available
