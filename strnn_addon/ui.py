@@ -48,7 +48,9 @@ class STRNN_PT_main(_Sidebar, bpy.types.Panel):
         if problem:
             col.label(text=problem.split(":")[0], icon="ERROR")
             return
-        col.label(text=f"{obj.name}: {obj.animation_data.action.name}", icon="ACTION")
+        action = obj.animation_data.action
+        first, last = (int(round(f)) for f in action.frame_range)
+        col.label(text=f"{obj.name}: {action.name} (frames {first}-{last})", icon="ACTION")
 
 
 class STRNN_PT_extend(_Sidebar, bpy.types.Panel):

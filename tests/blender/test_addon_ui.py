@@ -122,7 +122,7 @@ def test_main_panel_says_what_each_object_allows(addon, tmp_path):
     assert panel_labels("STRNN_PT_main", bpy.context) == [("Bare: no action", "INFO"),
                                               ("Follow Curve can start one; the others need an action", "NONE")]
     import_bvh(walk_bvh(tmp_path, frames=30))
-    assert panel_labels("STRNN_PT_main", bpy.context) == [("walk: walk", "ACTION")]
+    assert panel_labels("STRNN_PT_main", bpy.context) == [("walk: walk (frames 1-30)", "ACTION")]
 
 
 def test_follow_curve_panel_says_when_pytorch_is_missing(addon, monkeypatch):
