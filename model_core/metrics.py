@@ -53,7 +53,11 @@ def extend_batch(engine, contexts: np.ndarray, frames: int) -> np.ndarray:
 
 
 def prediction_errors(engine, clips: list[np.ndarray], horizons_ms=HORIZONS_MS) -> tuple[dict, int]:
-    """MPJPE (cm) at each horizon for STRNN, zero- and constant-velocity; and the window count."""
+    """MPJPE (cm) at each horizon for STRNN, zero- and constant-velocity, and for STRNN with the
+    seam blend Extend applies (``strnn_seam_blend``, :func:`motion_ops.blend_seam`); and the
+    window count."""
+    from .motion_ops import blend_seam
+
     steps = horizon_frames(horizons_ms)
     ctx, fut = prediction_windows(clips, max(steps))
     last, prev = ctx[:, -1:], ctx[:, -2:-1]
@@ -62,6 +66,7 @@ def prediction_errors(engine, clips: list[np.ndarray], horizons_ms=HORIZONS_MS) 
         "zero_velocity": np.repeat(last, max(steps), 1),
         "constant_velocity": last + (last - prev) * np.arange(1, max(steps) + 1)[None, :, None, None],
     }
+    preds["strnn_seam_blend"] = np.stack([blend_seam(c, p) for c, p in zip(ctx, preds["strnn"])])
     idx = [s - 1 for s in steps]
     out = {name: [float(v) for v in mpjpe_cm(p[:, idx], fut[:, idx]).mean(0)] for name, p in preds.items()}
     return out, len(ctx)

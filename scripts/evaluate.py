@@ -59,6 +59,10 @@ def print_table(result: dict, extra: dict):
         print(f"{name:<20}" + "".join(f"{v:8.2f}" for v in row))
     best = [min(z, c) for z, c in zip(pred["mpjpe_cm"]["zero_velocity"], pred["mpjpe_cm"]["constant_velocity"])]
     print(f"{'strnn / best base':<20}" + "".join(f"{s / b:8.2f}" for s, b in zip(pred["mpjpe_cm"]["strnn"], best)))
+    if "strnn_seam_blend" in extra:  # what Extend Clip delivers: the same with its seam blend
+        seam = extra["strnn_seam_blend"]
+        print(f"{'as Extend (seam)':<20}" + "".join(f"{v:8.2f}" for v in seam))
+        print(f"{'  / best base':<20}" + "".join(f"{s / b:8.2f}" for s, b in zip(seam, best)))
     if "long_horizon" in result:
         lh = result["long_horizon"]
         print(f"\nLong horizon: {lh['seeds']} seeds x {lh['frames']} frames: exploded {lh['exploded']}, "
@@ -95,7 +99,7 @@ def run(args) -> dict:
     pred = evaluate_prediction(engine, clips)
     result = {"checkpoint": str(args.checkpoint), "data": str(args.data), "clips": len(clips),
               "windows": pred.pop("windows"), "prediction": pred}
-    extra = {}
+    extra = {"strnn_seam_blend": pred.pop("strnn_seam_blend")}
     if args.long_horizon:
         reference = select_clips(load_folder(args.reference, cache_dir=args.cache or None), "all") \
             if args.reference else None

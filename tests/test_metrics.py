@@ -59,3 +59,18 @@ def features_slowed(feats: np.ndarray, factor: float) -> np.ndarray:
     out = feats[i] * (1 - w) + feats[np.minimum(i + 1, len(feats) - 1)] * w
     out[:, 63:66] = feats[i, 63:66] * factor  # root steps scale with the playback speed
     return out.astype(np.float32)
+
+
+def test_prediction_errors_also_score_the_extend_seam_blend():
+    """Extend's seam blend starts the continuation where the context's last velocity leads: for a
+    stand-in that freezes the last pose (gliding on at the root's speed) it brings the first
+    frames of a walk closer to the truth."""
+    from model_core.metrics import prediction_errors
+
+    class Freeze:
+        def extrapolate(self, feats, frames):
+            return np.repeat(np.asarray(feats)[:, -1:], frames, 1)
+
+    errors, windows = prediction_errors(Freeze(), [walking_skeleton(120, speed=1.2)])
+    assert windows > 0 and set(errors) == {"strnn", "zero_velocity", "constant_velocity", "strnn_seam_blend"}
+    assert errors["strnn_seam_blend"][0] < errors["strnn"][0]
