@@ -64,3 +64,14 @@ def test_bad_wheel(tmp_path):
     with pytest.raises(SystemExit, match="not a .whl"):
         build_extension.main(["--out", str(tmp_path / "dist"), "--model", str(tmp_path / "none"),
                               "--wheel", str(tmp_path / "missing.whl")])
+
+
+def test_manifest_declares_what_the_extension_reaches():
+    """Blender shows these before install: model folders are read from disk, and Install PyTorch
+    downloads with pip (strnn_addon/torch_install.py)."""
+    import tomllib
+
+    permissions = tomllib.loads((REPO / "blender_manifest.toml").read_text())["permissions"]
+    assert set(permissions) == {"files", "network"}
+    assert "pip" in (REPO / "strnn_addon" / "torch_install.py").read_text()
+    assert all(len(text) <= 64 and not text.endswith(".") for text in permissions.values())
