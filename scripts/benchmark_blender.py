@@ -65,12 +65,12 @@ def find_model(args) -> Path:
 
 def install(out: Path) -> str:
     """Build the extension and install it the way the batch CLI does; returns its package name."""
+    import batch_worker
     import build_extension
-    import strnn_batch
 
     zip_path = build_extension.main(["--out", str(out), "--no-validate"])
-    strnn_batch.install_extension(bpy, str(zip_path), out)
-    return strnn_batch.ADDON
+    batch_worker.install_extension(bpy, str(zip_path), out)
+    return batch_worker.ADDON
 
 
 def rig_bones() -> list[tuple]:

@@ -66,11 +66,11 @@ def parse_args(argv=None) -> argparse.Namespace:
 
 # ------------------------------------------------------------------ Blender side
 def start_blender(zip_path: Path, user_dir: Path):
+    import batch_worker
     import bpy
-    import strnn_batch
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
-    strnn_batch.install_extension(bpy, str(zip_path), user_dir)
+    batch_worker.install_extension(bpy, str(zip_path), user_dir)
     return bpy
 
 
@@ -191,9 +191,9 @@ def picture_extend(bpy, clip: Path, out: Path, frames: int = 150) -> dict:
 def add_jitter(obj, degrees: float, seed: int) -> None:
     """Gaussian jitter of ``degrees`` (std) on every keyed Euler rotation channel of ``obj``'s action:
     noisy capture. The F-curves come from the installed extension's own reader (layered or legacy)."""
-    import strnn_batch
+    import batch_worker
 
-    anim = importlib.import_module(f"{strnn_batch.ADDON}.strnn_addon.anim")
+    anim = importlib.import_module(f"{batch_worker.ADDON}.strnn_addon.anim")
     rng = np.random.default_rng(seed)
     for fc in anim.Channels(obj.animation_data.action, obj.animation_data).fcurves:
         if fc.data_path.endswith("rotation_euler"):
@@ -278,7 +278,7 @@ def picture_footlock(bpy, clip: Path, out: Path, frames: int = 150) -> dict:
 
 
 def picture_follow(bpy, clip: Path, out: Path) -> dict:
-    import strnn_batch
+    import batch_worker
 
     obj = import_bvh(bpy, clip, BANDAI_SCALE)
     start, end = action_range(obj)
@@ -286,7 +286,7 @@ def picture_follow(bpy, clip: Path, out: Path) -> dict:
     bpy.ops.strnn.auto_map()
     hips = joints_z_up(obj, poses, names)[:, 0]
     heading = np.arctan2(*(hips[-1, :2] - hips[0, :2])[::-1])
-    curve = strnn_batch.add_path_curve(bpy, "figure_eight")  # starts at the origin heading -Y
+    curve = batch_worker.add_path_curve(bpy, "figure_eight")  # starts at the origin heading -Y
     curve.location = (hips[-1, 0], hips[-1, 1], 0.0)  # drawn from where the character stands, as it walks
     curve.rotation_euler.z = heading + np.pi / 2
     bpy.context.view_layer.objects.active = obj

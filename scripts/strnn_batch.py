@@ -25,28 +25,22 @@ from __future__ import annotations
 import argparse
 import multiprocessing
 import multiprocessing.connection as mp_connection
-import os
 import shutil
 import sys
 import tempfile
 import time
-import traceback
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
+from batch_worker import process_file  # noqa: E402
+
 from model_core.files import write_json  # noqa: E402  (model_core never imports bpy)
 
 EXTENSIONS = (".bvh", ".blend")
 PATHS = ("line", "circle", "s_curve", "figure_eight")
-REPO_MODULE = "strnn_batch"
-ADDON = f"bl_ext.{REPO_MODULE}.strnn_motion"
 SOURCES = ("strnn_addon", "model_core", "models", "blender_manifest.toml", "__init__.py")
-
-
-class BatchError(Exception):
-    """A per-file failure with a reason meant for the summary (no traceback)."""
 
 
 # --------------------------------------------------------------------------------------------
@@ -364,197 +358,6 @@ def main(argv: list[str] | None = None) -> int:
             print(f"  {r['file']}: {r['reason']}", file=sys.stderr)
         return 1
     return 0
-
-
-# --------------------------------------------------------------------------------------------
-# worker side: one file in a fresh process with its own bpy
-# --------------------------------------------------------------------------------------------
-
-def check_bvh_text(path: Path) -> None:
-    """Fail with a plain reason for files Blender's importer would choke on."""
-    try:
-        text = path.read_text(errors="strict")
-    except UnicodeDecodeError:
-        raise BatchError("not a BVH file: it is not text") from None
-    words = text.split()
-    if not words:
-        raise BatchError("not a BVH file: it is empty")
-    if words[0].upper() != "HIERARCHY":
-        raise BatchError(f"not a BVH file: it starts with {words[0][:30]!r}, not HIERARCHY")
-    if "MOTION" not in words:
-        raise BatchError("broken BVH: no MOTION section (the file is cut short?)")
-    motion = text[text.index("MOTION"):].splitlines()
-    try:
-        frames = int(next(line.split(":")[1] for line in motion if line.strip().startswith("Frames")))
-        float(next(line.split(":")[1] for line in motion if line.strip().startswith("Frame Time")))
-    except (StopIteration, IndexError, ValueError):
-        raise BatchError("broken BVH: the MOTION section lacks a valid 'Frames:' or 'Frame Time:' line") from None
-    rows = [line for line in motion[3:] if line.strip()]
-    if frames < 2:
-        raise BatchError(f"broken BVH: {frames} frame(s); the operators need at least 2")
-    if len(rows) < frames:
-        raise BatchError(f"broken BVH: header says {frames} frames but the file has {len(rows)} (cut short?)")
-    widths = {len(line.split()) for line in rows[:frames]}
-    if len(widths) != 1:
-        raise BatchError("broken BVH: frame lines have different numbers of values")
-    try:
-        [float(v) for line in rows[:frames] for v in line.split()]
-    except ValueError as e:
-        raise BatchError(f"broken BVH: a frame line holds a non-number ({e})") from None
-
-
-def blender_error(e: Exception) -> str:
-    """The last meaningful line of a bpy.ops RuntimeError (Blender packs tracebacks in the message)."""
-    lines = [line.strip() for line in str(e).splitlines() if line.strip() and not line.strip().startswith(
-        ("Location:", "File ", "Traceback", "^", "~"))]
-    msg = lines[-1] if lines else type(e).__name__
-    return msg.removeprefix("Error: ")
-
-
-def install_extension(bpy, zip_path: str, user_dir: Path):
-    prefs = bpy.context.preferences
-    directory = user_dir / "extensions"
-    directory.mkdir(parents=True, exist_ok=True)
-    if prefs.extensions.repos.get(REPO_MODULE) is None:
-        prefs.extensions.repos.new(name=REPO_MODULE, module=REPO_MODULE, custom_directory=str(directory),
-                                   source="USER")
-    result = bpy.ops.extensions.package_install_files(filepath=zip_path, repo=REPO_MODULE, enable_on_install=True)
-    if result != {"FINISHED"} or ADDON not in prefs.addons:
-        raise BatchError(f"could not install and enable the extension {zip_path}")
-
-
-def add_path_curve(bpy, name: str):
-    """A poly curve object of the built-in ground path ``name`` (model (x, z) -> Blender (x, -z, 0))."""
-    from model_core.paths import evaluation_paths
-
-    points, cyclic = evaluation_paths()[name]
-    data = bpy.data.curves.new(f"path_{name}", "CURVE")
-    spline = data.splines.new("POLY")
-    spline.points.add(len(points) - 1)
-    for p, (x, z) in zip(spline.points, points):
-        p.co = (float(x), float(-z), 0.0, 1.0)
-    spline.use_cyclic_u = bool(cyclic)
-    obj = bpy.data.objects.new(f"path_{name}", data)
-    bpy.context.scene.collection.objects.link(obj)
-    return obj
-
-
-def pick_armature(bpy):
-    active = bpy.context.view_layer.objects.active
-    if active is not None and active.type == "ARMATURE":
-        return active
-    arms = [o for o in bpy.context.scene.objects if o.type == "ARMATURE"]
-    animated = [o for o in arms if o.animation_data and o.animation_data.action]
-    if len(arms) == 1:
-        return arms[0]
-    if len(animated) == 1:
-        return animated[0]
-    if not arms:
-        raise BatchError("the file has no armature")
-    raise BatchError(f"{len(arms)} armatures and none active; make the one to process active and save")
-
-
-def run_file(bpy, job: dict) -> None:
-    src, dst = Path(job["input"]), Path(job["output"])
-    if src.suffix.lower() == ".bvh":
-        check_bvh_text(src)
-        try:
-            bpy.ops.import_anim.bvh(filepath=str(src), update_scene_fps=True, update_scene_duration=True)
-        except RuntimeError as e:
-            raise BatchError(f"Blender's BVH importer could not read it: {blender_error(e)}") from None
-    else:
-        try:
-            bpy.ops.wm.open_mainfile(filepath=str(src), load_ui=False)
-        except RuntimeError as e:
-            raise BatchError(f"Blender could not open it: {blender_error(e)}") from None
-    obj = pick_armature(bpy)
-    view_layer = bpy.context.view_layer
-    for other in view_layer.objects:
-        other.select_set(False)
-    view_layer.objects.active = obj
-    obj.select_set(True)
-    kwargs = dict(job["kwargs"])
-    if kwargs.get("from_current"):
-        bpy.context.scene.frame_set(job["from_frame"])
-    if job["operator"] == "follow_curve":
-        if job["curve"]:
-            if bpy.data.objects.get(job["curve"]) is None:
-                raise BatchError(f"no object named {job['curve']!r} in the file for --curve")
-            kwargs["curve"] = job["curve"]
-        else:
-            kwargs["curve"] = add_path_curve(bpy, job["path"]).name
-        view_layer.objects.active = obj
-    try:
-        getattr(bpy.ops.strnn, job["operator"])(**kwargs)
-    except RuntimeError as e:
-        raise BatchError(f"strnn.{job['operator']} refused: {blender_error(e)}") from None
-    action = obj.animation_data.action if obj.animation_data else None
-    if action is None:
-        raise BatchError(f"strnn.{job['operator']} left the armature without an action")
-    start, end = (int(round(f)) for f in action.frame_range)
-    scene = bpy.context.scene
-    scene.frame_start, scene.frame_end = start, end
-    dst.parent.mkdir(parents=True, exist_ok=True)
-    tmp = dst.with_name(dst.stem + ".tmp" + dst.suffix)  # write beside, then replace: no half-written outputs
-    try:
-        if dst.suffix.lower() == ".bvh":
-            view_layer.objects.active = obj
-            bpy.ops.export_anim.bvh(filepath=str(tmp), frame_start=start, frame_end=end,
-                                    check_existing=False)
-        else:
-            bpy.ops.wm.save_as_mainfile(filepath=str(tmp), copy=True, compress=True)
-    except RuntimeError as e:
-        tmp.unlink(missing_ok=True)
-        raise BatchError(f"Blender could not write {dst.name}: {blender_error(e)}") from None
-    os.replace(tmp, dst)
-
-
-def process_file(job: dict) -> dict:
-    """Worker entry point: process one file in this (fresh) process; never raises."""
-    start = time.perf_counter()
-    result = {"file": job["display"], "status": "failed", "output": "", "reason": ""}
-    user_dir = Path(job["user_dir"])  # made (and removed again) by run_pool
-    log = user_dir / "blender.log"
-    saved = None
-    if not job["verbose"]:  # Blender prints from C as well as Python: redirect the descriptors
-        sys.stdout.flush()
-        sys.stderr.flush()
-        saved = os.dup(1), os.dup(2)
-        fd = os.open(log, os.O_WRONLY | os.O_CREAT | os.O_TRUNC)
-        os.dup2(fd, 1)
-        os.dup2(fd, 2)
-        os.close(fd)
-    try:
-        os.environ["BLENDER_USER_RESOURCES"] = str(user_dir / "user")  # keep the user's own Blender untouched
-        # a parent that imported bpy passes on Blender's scripts/modules in sys.path, whose pure-Python
-        # bpy package would shadow the bpy module itself
-        sys.path[:] = [p for p in sys.path if not (Path(p or ".") / "bpy" / "__init__.py").is_file()]
-        sys.path.insert(0, str(REPO))
-        import bpy
-
-        bpy.ops.wm.read_factory_settings(use_empty=True)
-        install_extension(bpy, job["zip"], user_dir)
-        prefs = bpy.context.preferences.addons[ADDON].preferences
-        prefs.model_folder, prefs.denoise_model_folder = job["model"], job["denoise_model"]
-        bpy.ops.wm.read_homefile(use_empty=True)
-        run_file(bpy, job)
-        result.update(status="ok", output=job["shown_output"])
-    except BatchError as e:
-        result["reason"] = str(e)
-    except Exception as e:  # an unexpected failure: still one line, with where it happened
-        frame = traceback.extract_tb(e.__traceback__)[-1]
-        result["reason"] = f"{type(e).__name__}: {e} ({Path(frame.filename).name}:{frame.lineno})".replace("\n", " ")
-    finally:
-        if saved is not None:
-            sys.stdout.flush()
-            sys.stderr.flush()
-            os.dup2(saved[0], 1)
-            os.dup2(saved[1], 2)
-            os.close(saved[0])
-            os.close(saved[1])
-        shutil.rmtree(user_dir, ignore_errors=True)
-    result["seconds"] = time.perf_counter() - start
-    return result
 
 
 if __name__ == "__main__":
