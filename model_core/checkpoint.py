@@ -25,6 +25,18 @@ DENOISE_MODEL = REPO / "models" / "strnn_denoise"  # the model Denoise uses unle
 PURPOSES = ("generate", "denoise")  # what a release is trained for (model.json "purpose"; absent: the first)
 
 
+def default_denoiser(fallback=None):
+    """The bundled denoising model's folder if it is there, else ``fallback`` (the model that
+    Denoise uses when none is named)."""
+    return DENOISE_MODEL if (DENOISE_MODEL / "model.json").exists() else fallback
+
+
+def walk_seed_index(names: list[str]) -> int:
+    """Index of the first shipped seed taken from a walk (by its clip name), else 0."""
+    low = [n.lower() for n in names]
+    return next((i for key in ("walk_", "walk") for i, n in enumerate(low) if key in n), 0)
+
+
 class CheckpointError(ValueError):
     """A model folder is missing files or holds an unsupported format."""
 

@@ -33,7 +33,7 @@ from pathlib import Path as FilePath
 import numpy as np
 import torch
 
-from .checkpoint import Checkpoint, load_release
+from .checkpoint import Checkpoint, load_release, walk_seed_index
 from .conventions import CONTACT_JOINTS, LAYOUT, MODEL_FPS, PARENTS, UP_AXIS
 from .engine import bone_lengths, project_to_skeleton
 from .features import RootStart, features_to_positions, heading, integrate_root, positions_to_features, yaw_matrix
@@ -311,11 +311,9 @@ def follow_path_steps(follower: PathFollower, seed: np.ndarray, path: Path, fram
 
 def walk_seed(ckpt: Checkpoint) -> np.ndarray:
     """Positions ``[m, 21, 3]`` of the shipped seed that walks (by its clip name; else the first seed)."""
-    names = [n.lower() for n in ckpt.seed_names]
-    pick = next((i for key in ("walk_", "walk") for i, n in enumerate(names) if key in n), 0)
     if not len(ckpt.seeds):
         raise ValueError("the model ships no seed motion: give the armature an action to start from")
-    return features_to_positions(ckpt.seeds[pick])
+    return features_to_positions(ckpt.seeds[walk_seed_index(ckpt.seed_names)])
 
 
 def follow_curve_positions(follower: PathFollower, points: np.ndarray, cyclic: bool, fps: float,

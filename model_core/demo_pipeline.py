@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .checkpoint import DENOISE_MODEL, CheckpointError
+from .checkpoint import CheckpointError, default_denoiser, walk_seed_index
 from .features import features_to_positions, heading, yaw_matrix
 from .footlock import detect_foot_contacts, foot_lock, foot_skate_cm
 from .paths import Path as CurvePath, evaluation_paths
@@ -37,15 +37,10 @@ class DemoMotion:
     notes: list[str] = field(default_factory=list)
 
 
-def default_seed(names: list[str]) -> int:
-    """The first shipped seed taken from a walk (the demo's default), else the first seed."""
-    return next((i for i, n in enumerate(names) if "_walk_" in Path(n).name.lower()), 0)
-
-
 def seed_continuation(model: str | Path | None, seed_index: int | None, frames: int):
     """(positions ``[m + frames, 21, 3]`` of the seed and its continuation, seed name, m, engine);
-    ``seed_index`` None picks :func:`default_seed`. Raises ``CheckpointError`` / ``ValueError``
-    with a readable message."""
+    ``seed_index`` None picks the first walk (:func:`checkpoint.walk_seed_index`). Raises
+    ``CheckpointError`` / ``ValueError`` with a readable message."""
     from .engine import Engine
 
     eng = Engine.load(model)
@@ -53,7 +48,7 @@ def seed_continuation(model: str | Path | None, seed_index: int | None, frames: 
     if len(seeds) == 0:
         raise CheckpointError("the model folder ships no seed windows (seeds.npz)")
     if seed_index is None:
-        seed_index = default_seed(list(eng.ckpt.seed_names))
+        seed_index = walk_seed_index(list(eng.ckpt.seed_names))
     if not 0 <= seed_index < len(seeds):
         raise ValueError(f"--seed {seed_index} is out of range: this model ships {len(seeds)} seeds, "
                          f"0 to {len(seeds) - 1}")
@@ -119,7 +114,7 @@ def denoise_check(positions: np.ndarray, std_cm: float = 3.0, model: str | Path 
     from .metrics import add_noise, mpjpe_cm
     from .motion_ops import denoise_positions
 
-    folder = model or (DENOISE_MODEL if (DENOISE_MODEL / "model.json").exists() else None)
+    folder = model or default_denoiser()
     engine = Engine.load(folder)
     noisy = add_noise(positions, std_cm, np.random.default_rng(seed))
     clean = denoise_positions(engine, noisy, MODEL_FPS)

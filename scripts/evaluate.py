@@ -22,7 +22,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # small matmuls: BLAS thread
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from model_core.bvh import BvhError  # noqa: E402
-from model_core.checkpoint import DEFAULT_MODEL, DENOISE_MODEL, CheckpointError  # noqa: E402
+from model_core.checkpoint import DEFAULT_MODEL, CheckpointError, default_denoiser  # noqa: E402
 from model_core.dataset import DataError, load_folder  # noqa: E402
 from model_core.engine import Engine  # noqa: E402
 from model_core.evaluation import evaluate_denoise, evaluate_long_horizon, evaluate_prediction, select_clips  # noqa: E402
@@ -109,8 +109,7 @@ def run(args) -> dict:
         extra["seed_take_speed_ratio"] = lh.pop("seed_take_speed_ratio")
         result["long_horizon"] = lh
     if args.denoise_std:
-        folder = args.denoise_checkpoint or (DENOISE_MODEL if (DENOISE_MODEL / "model.json").exists()
-                                             else args.checkpoint)
+        folder = args.denoise_checkpoint or default_denoiser(args.checkpoint)
         extra["denoise_checkpoint"] = str(folder)
         dn = evaluate_denoise(Engine.load(folder), clips, args.denoise_std)
         extra["butterworth_cutoff_hz"] = dn.pop("butterworth_cutoff_hz")

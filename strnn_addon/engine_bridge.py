@@ -1,7 +1,7 @@
 """The one place the add-on calls the model: load (cached) and run it on a clip.
 
-:func:`extend` and :func:`denoise` are the only model calls the operators make, so a
-test can swap them for a stand-in.
+:func:`extend`, :func:`denoise_steps` and :func:`follow_curve_steps` are the only model calls
+the operators make, so a test can swap them for a stand-in.
 """
 
 from __future__ import annotations
@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from ..model_core import motion_ops
+from ..model_core.checkpoint import DEFAULT_MODEL, default_denoiser
 
 _CACHE: dict[tuple, object] = {}
 
@@ -20,9 +21,9 @@ class EngineError(RuntimeError):
     """The model could not be loaded; the message says where it looked and what to do."""
 
 
-def bundled_model(name: str = "strnn_default") -> Path:
-    """A model folder shipped inside the extension (``strnn_default``, or ``strnn_denoise`` for Denoise)."""
-    return Path(__file__).resolve().parent.parent / "models" / name
+def main_folder(prefs) -> str:
+    """The Model Folder preference as a path ('' = the bundled model; also without preferences)."""
+    return bpy_path(prefs.model_folder) if prefs is not None else ""
 
 
 def denoiser_folder(prefs) -> str:
@@ -30,15 +31,13 @@ def denoiser_folder(prefs) -> str:
     model, else the main model ('' = the bundled one)."""
     if prefs is not None and prefs.denoise_model_folder:
         return bpy_path(prefs.denoise_model_folder)
-    if (bundled_model("strnn_denoise") / "model.json").exists():
-        return str(bundled_model("strnn_denoise"))
-    return bpy_path(prefs.model_folder) if prefs is not None else ""
+    return str(default_denoiser(main_folder(prefs)))
 
 
 def model_path(folder: str, setting: str = "Model Folder") -> Path:
     """The model folder ``folder`` ('' = the bundled model); :class:`EngineError` naming the preference
     ``setting`` that picks it when it holds no model."""
-    path = Path(folder) if folder else bundled_model()
+    path = Path(folder) if folder else DEFAULT_MODEL
     if not (path / "model.json").exists():
         raise EngineError(f"No model at {path}: set a folder holding model.json and model.safetensors "
                           f"in Preferences > Add-ons > STRNN Motion > {setting}")
@@ -48,12 +47,10 @@ def model_path(folder: str, setting: str = "Model Folder") -> Path:
 def model_used(prefs, purpose: str = "generate") -> str:
     """The folder of the model an operation uses: the Model Folder's (``generate``) or the one
     Denoise uses (``denoise``); '' when there is none."""
-    if purpose == "denoise":
-        folder = denoiser_folder(prefs)
-    else:
-        folder = bpy_path(prefs.model_folder) if prefs is not None else ""
-    path = Path(folder) if folder else bundled_model()
-    return str(path) if (path / "model.json").exists() else ""
+    try:
+        return str(model_path(denoiser_folder(prefs) if purpose == "denoise" else main_folder(prefs)))
+    except EngineError:
+        return ""
 
 
 def model_card(folder: str) -> dict:
@@ -107,7 +104,7 @@ def engine_from_prefs(prefs, folder: str | None = None, setting: str = "Model Fo
     """The engine the add-on preferences ask for (defaults when ``prefs`` is None), for the
     Model Folder or for ``folder`` (picked by the preference ``setting``)."""
     if folder is None:
-        folder = bpy_path(prefs.model_folder) if prefs is not None else ""
+        folder = main_folder(prefs)
     if prefs is None:
         return load_engine(folder, setting=setting)
     return load_engine(folder, prefs.engine, prefs.threads, setting)
@@ -180,7 +177,7 @@ def follow_curve_steps(prefs, points: np.ndarray, cyclic: bool, fps: float, fram
     A step generator (``model_core.steps``): yields the fraction done after each model window."""
     from dataclasses import replace
 
-    follower = load_follower(bpy_path(prefs.model_folder) if prefs else "", prefs.threads if prefs else 0)
+    follower = load_follower(main_folder(prefs), prefs.threads if prefs else 0)
     from ..model_core.control import follow_curve_steps as model_steps  # after the check: it needs torch
 
     saved = follower.settings

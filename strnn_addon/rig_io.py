@@ -76,7 +76,6 @@ def bone_channels(fcurves) -> dict[tuple[str, str], dict[int, object]]:
     return out
 
 
-
 def read_local_pose(obj, rig: Rig, fcurves, frames: np.ndarray):
     """Local pose channels of every bone at scene ``frames`` ``[F]`` from the action's F-curves.
 

@@ -83,7 +83,7 @@ def test_demo_rejects_a_seed_out_of_range(tiny_model, tmp_path, capsys):
 
 
 def test_default_seed_is_the_first_walk():
-    from model_core.demo_pipeline import default_seed
+    from model_core.checkpoint import walk_seed_index as default_seed
 
     assert default_seed(["a/x_raise-up_active_002.bvh@24", "a/x_run_active_016.bvh@30",
                          "a/x_walk_active_008.bvh@30", "a/x_walk_normal_001.bvh@30"]) == 2
