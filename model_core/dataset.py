@@ -8,6 +8,7 @@ share the key of the lower-numbered file.
 
 from __future__ import annotations
 
+import fnmatch
 import hashlib
 import os
 import sys
@@ -37,12 +38,21 @@ class DataError(ValueError):
 
 def load_data_config(path: Path = DATA_CONFIG) -> dict:
     if not path.exists():
-        return {"fps_overrides": {}, "paired_takes": {}}
+        return {"fps_overrides": {}, "paired_takes": {}, "held_out": {}}
     with open(path, "rb") as f:
         cfg = tomllib.load(f)
-    cfg.setdefault("fps_overrides", {})
-    cfg.setdefault("paired_takes", {})
+    for key in ("fps_overrides", "paired_takes", "held_out"):
+        cfg.setdefault(key, {})
     return cfg
+
+
+def held_out_group(name: str, config: dict | None = None) -> str | None:
+    """The held-out group (``configs/data.toml`` ``[held_out]``) a clip belongs to, or None.
+    ``name`` is the clip's path relative to the data root (or ending in it)."""
+    for group, patterns in (config or load_data_config())["held_out"].items():
+        if any(fnmatch.fnmatch(name, p) or fnmatch.fnmatch(name, "*/" + p) for p in patterns):
+            return group
+    return None
 
 
 def _folder_rule(rules: dict, path: Path):
@@ -105,6 +115,18 @@ class MotionData:
 
     def split(self, name: str) -> list[Clip]:
         return [c for c in self.clips if c.split == name]
+
+    def without_held_out(self, config: dict | None = None) -> MotionData:
+        """The same data less the clips of every held-out group (for training)."""
+        config = config or load_data_config()
+        return MotionData(self.root, [c for c in self.clips if held_out_group(c.name, config) is None], self.failures)
+
+    def group(self, name: str, config: dict | None = None) -> list[Clip]:
+        """Every clip (any split) of one held-out group."""
+        config = config or load_data_config()
+        if name not in config["held_out"]:
+            raise DataError(f"no held-out group {name!r}; configs/data.toml has {sorted(config['held_out'])}")
+        return [c for c in self.clips if held_out_group(c.name, config) == name]
 
 
 def _load_one(args):

@@ -63,6 +63,7 @@ class Engine:
         cfg = ckpt.config
         self.ckpt = ckpt
         self.m, self.n, self.width = cfg["encode_len"], cfg["predict_len"], cfg["width"]
+        self.offsets = bool(cfg.get("offsets", False))
         self.mean, self.std = ckpt.mean, ckpt.std
         w = {k: v.astype(np.float32) for k, v in ckpt.weights.items()}
         self.enc_frame, self.dec_frame, out_bn = fold_spatial(w, cfg)
@@ -105,9 +106,12 @@ class Engine:
                         first @ self.step_wih[1]]) + self.step_b
         steps = max(self.m, self.n)
         out = np.empty((2, steps, b, c), np.float32)
+        base = np.concatenate([x[:, -1], x[:, -1]]) if self.offsets else None  # (2B, C)
         for t in range(steps):
             hs, cs = _cell(gin + np.matmul(hs, self.step_whh), cs)
             frames = self.dec_frame(hs.reshape(2 * b, -1))  # (2B, C)
+            if base is not None:
+                frames += base
             out[:, t] = frames.reshape(2, b, c)
             if t + 1 < steps:
                 gin = np.matmul(self.enc_frame(frames).reshape(2, b, -1), self.step_wih) + self.step_b

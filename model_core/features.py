@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .conventions import CONTACT_JOINTS, JOINT_INDEX, LAYOUT, MODEL_FPS, UP_AXIS
+from .conventions import CONTACT_JOINTS, CONTACTS, JOINT_INDEX, JOINTS, LAYOUT, MODEL_FPS, UP_AXIS
 
 # Contact thresholds: a foot joint is in contact when it is within this height
 # of its own lowest level in the clip and moves slower than this ground speed.
@@ -116,3 +116,29 @@ def features_to_positions(feats: np.ndarray, start: RootStart | None = None) -> 
     root, yaw = integrate_root(feats, start)
     local = np.asarray(feats, dtype=np.float64)[:, LAYOUT.positions].reshape(len(feats), -1, 3)
     return (np.einsum("fij,fkj->fki", yaw_matrix(yaw), local) + root[:, None]).astype(np.float32)
+
+
+def _mirror_map() -> tuple[np.ndarray, np.ndarray]:
+    """(source channel ``[C]``, sign ``[C]``) of the left-right mirror of a feature frame."""
+    swap = {"l_": "r_", "r_": "l_"}
+    src, sign = np.arange(LAYOUT.size), np.ones(LAYOUT.size, np.float32)
+    for j, name in enumerate(JOINTS):
+        other = JOINT_INDEX[swap.get(name[:2], name[:2]) + name[2:]] if name[:2] in swap else j
+        src[3 * j:3 * j + 3] = np.arange(3 * other, 3 * other + 3)
+        sign[3 * j] = -1.0  # the lateral axis (root-local X) flips
+    sign[LAYOUT.velocity.start] = -1.0
+    sign[LAYOUT.yaw_rate] = -1.0
+    names = [c for c, _ in CONTACTS]
+    for k, name in enumerate(names):
+        src[LAYOUT.contacts.start + k] = LAYOUT.contacts.start + names.index(swap[name[:2]] + name[2:])
+    return src, sign
+
+
+MIRROR_SOURCE, MIRROR_SIGN = _mirror_map()
+
+
+def mirror_features(feats: np.ndarray) -> np.ndarray:
+    """Raw features ``[..., C]`` of the same motion mirrored left to right (the body's left side
+    becomes its right, turns to the left become turns to the right): exact, as the features of the
+    mirrored positions."""
+    return feats[..., MIRROR_SOURCE] * MIRROR_SIGN

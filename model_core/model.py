@@ -23,6 +23,9 @@ class STRNNConfig:
     residual: bool = True  # residual filter over decoded + predicted frames
     residual_width: int = 512  # hidden units of the residual filter
     dropout: float = 0.0  # after each spatial layer (paper: 0.1; 0 trains better at width 128, see the model card)
+    # The frame decoder outputs offsets from the last context frame (a residual connection over
+    # time) instead of whole frames, so the first predicted frames start where the context ends.
+    offsets: bool = False
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -130,16 +133,17 @@ class STRNN(nn.Module):
         dec_in = self.start.expand_as(h)
         pred_in = self.encode_frames(x[:, -1:])[:, 0]
         (hd, cd), (hp, cp) = (h, c), (h, c)
+        base = x[:, -1] if cfg.offsets else 0.0
         decoded, predicted = [], []
         for i in range(max(cfg.encode_len, cfg.predict_len)):
             if i < cfg.encode_len:
                 hd, cd = self.decoder(dec_in, (hd, cd))
-                frame = self.decode_frame(hd)
+                frame = base + self.decode_frame(hd)
                 decoded.append(frame)
                 dec_in = self.encode_frame(frame)
             if i < cfg.predict_len:
                 hp, cp = self.predictor(pred_in, (hp, cp))
-                frame = self.decode_frame(hp)
+                frame = base + self.decode_frame(hp)
                 predicted.append(frame)
                 pred_in = self.encode_frame(frame)
         return torch.stack(decoded[::-1], 1), torch.stack(predicted, 1)

@@ -24,7 +24,7 @@ from .checkpoint import PURPOSES, load_release, save_release
 from .conventions import LAYOUT
 from .dataset import SPLITS, MotionData, Normaliser, load_folder, window_starts
 from .engine import Engine
-from .features import features_to_positions, positions_to_features
+from .features import MIRROR_SIGN, MIRROR_SOURCE, features_to_positions, positions_to_features
 from .files import write_atomic
 from .model import STRNN, STRNNConfig, smoothness_cost
 
@@ -62,6 +62,8 @@ class TrainConfig:
     command: str = ""  # the command line, recorded in the release metadata
     init: str = ""  # start from the weights of this training state or release folder (fine-tuning)
     purpose: str = PURPOSES[0]  # recorded in the release: "denoise" marks a model whose predictions are not for use
+    mirror: float = 0.0  # share of training windows mirrored left to right (augmentation)
+    hold_out: bool = False  # keep the held-out groups of configs/data.toml out of training and validation
 
 
 def phase_at(cfg: TrainConfig, step: int) -> str:
@@ -121,6 +123,23 @@ class Windows:
             pos = pos + rng.normal(0.0, rng.uniform(0, max_cm) / 100.0, pos.shape)
             out.append(positions_to_features(pos)[0])
         return torch.from_numpy(self.norm.encode(np.stack(out)).astype(np.float32))
+
+
+class Mirror:
+    """Left-right mirroring of normalised windows ``(B, T, C)``, row by row (augmentation)."""
+
+    def __init__(self, norm: Normaliser):
+        self.mean, self.std = torch.from_numpy(norm.mean), torch.from_numpy(norm.std)
+        self.src, self.sign = torch.from_numpy(MIRROR_SOURCE), torch.from_numpy(MIRROR_SIGN)
+
+    def __call__(self, x: torch.Tensor, rows: np.ndarray) -> torch.Tensor:
+        if x is None or not rows.any():
+            return x
+        rows = torch.from_numpy(rows[: len(x)])
+        raw = x[rows] * self.std + self.mean
+        x = x.clone()
+        x[rows] = (raw[..., self.src] * self.sign - self.mean) / self.std
+        return x
 
 
 def window_loss(model: STRNN, window: torch.Tensor, cfg: TrainConfig, phase: str, noise: float, net=None,
@@ -256,6 +275,8 @@ def train(cfg: TrainConfig, resume: bool = False, progress: bool = True) -> Path
     torch.manual_seed(cfg.seed + rank)
     rng = np.random.default_rng(cfg.seed + rank)
     data = load_folder(cfg.data, cache_dir=cfg.cache, progress=rank == 0 and progress)
+    if cfg.hold_out:
+        data = data.without_held_out()
     norm = Normaliser.fit(np.concatenate([c.features for c in data.split("train")]))
     length = cfg.model.encode_len + cfg.model.predict_len
     train_w = Windows(data, "train", norm, length)
@@ -281,6 +302,7 @@ def train(cfg: TrainConfig, resume: bool = False, progress: bool = True) -> Path
         log.info("data: %d clips (%s), %d training windows, %d unreadable files", len(data.clips),
                  {s: len(data.split(s)) for s in ("train", "validation", "test")}, len(train_w), len(data.failures))
     per_rank = max(1, cfg.batch // world)
+    mirror = Mirror(norm)
     started, last_ckpt = time.time(), time.time()
     bar = _progress(cfg.steps, step, enabled=rank == 0 and progress)
     net = model
@@ -299,13 +321,15 @@ def train(cfg: TrainConfig, resume: bool = False, progress: bool = True) -> Path
             log.info("phase %s from step %d (%d parameters trained)", phase, step, sum(p.numel() for p in params))
         k = int(rng.integers(1, cfg.rollout_windows + 1)) if (
             long_w is not None and phase == PHASES[0] and rng.random() < cfg.rollout_fraction) else 0
+        flip = rng.random(per_rank) < cfg.mirror
         if k:
-            window, noisy = rollout_batch(model, long_w.batch(rng.integers(0, len(long_w), per_rank)), k)
+            window, noisy = rollout_batch(model, mirror(long_w.batch(rng.integers(0, len(long_w), per_rank)), flip), k)
         else:
             idx = rng.integers(0, len(train_w), per_rank)
-            window = train_w.batch(idx)
+            window = mirror(train_w.batch(idx), flip)
             heavy = idx[: int(round(cfg.denoise_fraction * len(idx)))] if phase != PHASES[1] else idx[:0]
             noisy = train_w.noisy_contexts(heavy, cfg.model.encode_len, cfg.denoise_max_cm, rng) if len(heavy) else None
+            noisy = mirror(noisy, flip)
         loss = window_loss(model, window, cfg, phase, noise_std(cfg, step), net=net, noisy=noisy)
         scale = float(cfg.lr_final + (1 - cfg.lr_final) * 0.5 * (1 + np.cos(np.pi * phase_progress(cfg, step))))
         for group in opt.param_groups:
@@ -428,6 +452,8 @@ def export_state(cfg: TrainConfig, folder: Path | None = None) -> Path:
         raise ValueError(f"{state_path}: no training state to export")
     saved = torch.load(state_path, weights_only=True)
     data = load_folder(cfg.data, cache_dir=cfg.cache, progress=False)
+    if cfg.hold_out:
+        data = data.without_held_out()
     norm = Normaliser.fit(np.concatenate([c.features for c in data.split("train")]))
     model = STRNN(cfg.model)
     model.load_state_dict(saved["model"])

@@ -65,6 +65,11 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--purpose", choices=PURPOSES, default=PURPOSES[0],
                    help="recorded in the release: 'denoise' marks a model trained for Denoise alone (its "
                         "predictions are not for Extend or Follow Curve, which then refuse it)")
+    p.add_argument("--offsets", action="store_true",
+                   help="the frame decoder outputs offsets from the last context frame (a residual connection)")
+    p.add_argument("--mirror", type=float, default=0.0, help="share of training windows mirrored left to right")
+    p.add_argument("--hold-out", action="store_true",
+                   help="keep the held-out groups of configs/data.toml out of training and validation")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     return p.parse_args(argv)
 
@@ -76,7 +81,8 @@ def main(argv=None) -> int:
 
         torch.set_num_threads(args.threads)
     model = STRNNConfig(width=args.width, encode_len=args.encode_len, predict_len=args.predict_len,
-                        residual_width=args.residual_width, dropout=args.dropout, **VARIANTS[args.variant])
+                        residual_width=args.residual_width, dropout=args.dropout, offsets=args.offsets,
+                        **VARIANTS[args.variant])
     cfg = TrainConfig(data=args.data, out=args.out, model=model, steps=args.steps, batch=args.batch,
                       optimizer=args.optimizer, lr=args.lr, smooth_weight=args.smooth_weight,
                       recon_weight=args.recon_weight, init=args.init,
@@ -84,6 +90,7 @@ def main(argv=None) -> int:
                       denoise_fraction=args.denoise_fraction,
                       noise_start=args.noise_start, seed=args.seed, cache=args.cache, max_minutes=args.max_minutes,
                       checkpoint_seconds=args.checkpoint_seconds, purpose=args.purpose,
+                      mirror=args.mirror, hold_out=args.hold_out,
                       command="python scripts/train.py " + " ".join(
                           shlex.quote(a) for a in (argv or sys.argv[1:]) if a != "--export"))
     try:

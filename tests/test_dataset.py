@@ -12,8 +12,12 @@ from model_core.bvh_export import write_bvh
 from model_core.conventions import LAYOUT
 from model_core.dataset import (
     DATA_CONFIG,
+    Clip,
+    DataError,
+    MotionData,
     Normaliser,
     fps_override,
+    held_out_group,
     load_data_config,
     load_folder,
     split_of,
@@ -110,3 +114,17 @@ def test_normaliser_round_trip_and_contacts_untouched():
     np.testing.assert_allclose(enc[:, own].std(0), 1.0, atol=1e-3)
     assert enc[:, LAYOUT.positions].std() == pytest.approx(1.0, abs=0.05)
     np.testing.assert_allclose(norm.decode(enc), feats, atol=1e-5)
+
+
+def test_held_out_groups_come_from_configs_data_toml():
+    config = load_data_config()
+    assert held_out_group("bandai-namco/dataset-2/dataset-2_walk_exhausted_001.bvh", config) == "style"
+    assert held_out_group("cmu/acrnn-dance/martial/03.bvh", config) == "actions"
+    assert held_out_group("bandai-namco/dataset-2/dataset-2_walk_normal_001.bvh", config) is None
+    clips = [Clip(name, "train", np.zeros((1, 21, 3)), np.zeros((1, 70)))
+             for name in ("cmu/acrnn-dance/martial/03.bvh", "cmu/acrnn-dance/salsa/01.bvh")]
+    data = MotionData("root", clips)
+    assert [c.name for c in data.without_held_out(config).clips] == ["cmu/acrnn-dance/salsa/01.bvh"]
+    assert [c.name for c in data.group("actions", config)] == ["cmu/acrnn-dance/martial/03.bvh"]
+    with pytest.raises(DataError, match="no held-out group"):
+        data.group("nothing", config)

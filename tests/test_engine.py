@@ -26,12 +26,12 @@ C = LAYOUT.size
 VARIANTS = [(s, r) for s in (True, False) for r in (True, False)]  # (spatial, residual)
 
 
-def random_release(folder, spatial=True, residual=True, m=10, n=10, seed=0, purpose=None):
+def random_release(folder, spatial=True, residual=True, m=10, n=10, seed=0, purpose=None, offsets=False):
     """Save a random STRNN as a release in ``folder``; return (eval-mode model, mean [C], std [C])."""
     torch.manual_seed(seed)
     rng = np.random.default_rng(seed)
     cfg = STRNNConfig(width=64, encode_len=m, predict_len=n, spatial=spatial, residual=residual,
-                      residual_width=32)
+                      residual_width=32, offsets=offsets)
     model = STRNN(cfg)
     with torch.no_grad():
         for mod in model.modules():
@@ -80,6 +80,26 @@ def test_numpy_forward_matches_torch(tmp_path, spatial, residual, m, n):
     engine.seam_frames = 0  # the raw prediction, without the seam correction
     np.testing.assert_allclose(engine.predict(raw), want[:, m:], atol=1e-4, rtol=0)
     np.testing.assert_allclose(TorchEngine.load(tmp_path).forward(raw), want, atol=1e-5, rtol=0)
+
+
+@pytest.mark.parametrize("spatial", [True, False])
+def test_offset_decoder_matches_torch_and_starts_at_the_context(tmp_path, spatial):
+    """With ``offsets`` the frame decoder adds the last context frame: NumPy equals torch, and a
+    decoder that outputs nothing reproduces the last context frame everywhere."""
+    model, mean, std = random_release(tmp_path, spatial, spatial, offsets=True)
+    engine = Engine.load(tmp_path)
+    raw = engine.seeds
+    np.testing.assert_allclose(engine.forward(raw), torch_forward(model, raw, mean, std), atol=1e-4, rtol=0)
+    out = "decode_frame.out" if spatial else "decode_frame"
+    with torch.no_grad():
+        for name, p in model.named_parameters():
+            if name.startswith(out) or name.startswith("decode_frame.root") or name.startswith(
+                    "decode_frame.contacts") or name.startswith("decode_frame.torso"):
+                p.zero_()
+        model.filter = None
+        model.cfg.residual = False
+    window = torch_forward(model, raw, mean, std)
+    np.testing.assert_allclose(window, np.repeat(raw[:, -1:], window.shape[1], 1), atol=1e-5)
 
 
 def test_extrapolate_shapes_and_batch_matches_single(release):

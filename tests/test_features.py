@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 
 from model_core.bvh import read_bvh
-from model_core.conventions import LAYOUT, MODEL_FPS, STANDARD_LEG_LENGTH, UP_AXIS
+from model_core.conventions import JOINT_INDEX, JOINTS, LAYOUT, MODEL_FPS, STANDARD_LEG_LENGTH, UP_AXIS
 from model_core.dataset import fps_override
-from model_core.features import features_to_positions, positions_to_features
+from model_core.features import features_to_positions, mirror_features, positions_to_features
 from model_core.metrics import bone_lengths_of as bone_lengths
 from model_core.rigs import detect_rig, leg_length, load_clip
 from model_core.synthetic import walking_skeleton
@@ -27,6 +27,17 @@ REAL_FAMILIES = [
 def test_synthetic_walker_keeps_bone_lengths():
     lengths = bone_lengths(walking_skeleton(200))
     assert np.ptp(lengths, axis=0).max() < 1e-5
+
+
+def test_mirrored_features_are_the_features_of_the_mirrored_motion():
+    pos = walking_skeleton(120, radius=4.0)  # a walk that turns, so the yaw rate is not zero
+    other = {n: ("r_" + n[2:] if n.startswith("l_") else "l_" + n[2:] if n.startswith("r_") else n) for n in JOINTS}
+    mirrored = pos[:, [JOINT_INDEX[other[n]] for n in JOINTS]] * np.array([-1.0, 1.0, 1.0])
+    feats, _ = positions_to_features(pos)
+    want, _ = positions_to_features(mirrored)
+    np.testing.assert_allclose(mirror_features(feats), want, atol=1e-5)
+    assert np.abs(feats[:, LAYOUT.yaw_rate]).max() > 1e-3
+    np.testing.assert_allclose(mirror_features(mirror_features(feats)), feats)
 
 
 def test_feature_layout_and_round_trip_on_synthetic_walk():

@@ -3,6 +3,7 @@ data-parallel training runs under torchrun with two CPU processes."""
 
 from __future__ import annotations
 
+import json
 import os
 import subprocess
 import sys
@@ -14,9 +15,11 @@ import torch
 from safetensors.numpy import load_file
 
 from model_core.bvh_export import write_bvh
+from model_core.dataset import Normaliser
+from model_core.features import mirror_features
 from model_core.model import STRNN, STRNNConfig, smoothness_cost
 from model_core.synthetic import walking_skeleton
-from model_core.training import TrainConfig, rolled_context, rollout_batch, train, window_loss
+from model_core.training import Mirror, TrainConfig, rolled_context, rollout_batch, train, window_loss
 
 REPO = Path(__file__).resolve().parent.parent
 
@@ -79,6 +82,24 @@ def test_release_has_config_seeds_and_licence(walk_folder, tmp_path):
     assert "CC BY-NC 4.0" in doc["licence"]
     seeds = np.load(release / "seeds.npz", allow_pickle=False)
     assert seeds["features"].shape[1:] == (20, doc["layout"]["size"])
+
+
+def test_mirror_flips_only_the_chosen_rows_exactly():
+    rng = np.random.default_rng(0)
+    raw = rng.normal(size=(4, 6, 70)).astype(np.float32)
+    norm = Normaliser(rng.normal(size=70).astype(np.float32), rng.uniform(0.5, 2, 70).astype(np.float32))
+    x = torch.from_numpy(norm.encode(raw).astype(np.float32))
+    rows = np.array([True, False, True, False])
+    out = Mirror(norm)(x, rows).numpy()
+    np.testing.assert_allclose(norm.decode(out[rows]), mirror_features(raw[rows]), atol=1e-5)
+    np.testing.assert_array_equal(out[~rows], x.numpy()[~rows])
+
+
+def test_offsets_model_learns_and_hold_out_trains(walk_folder, tmp_path):
+    cfg = TrainConfig(data=str(walk_folder), out=str(tmp_path / "run"), model=tiny(offsets=True), steps=30,
+                      batch=8, cache=str(tmp_path / "cache"), val_every=1000, mirror=0.5, hold_out=True)
+    release = train(cfg, progress=False)
+    assert json.loads((release / "model.json").read_text())["config"]["offsets"] is True
 
 
 def test_rolled_context_is_the_models_own_open_loop_output():
