@@ -13,6 +13,7 @@ from .metrics import (
     HORIZONS_MS,
     add_noise,
     best_butterworth,
+    floor_height,
     joint_speed,
     mpjpe_cm,
     pose_vectors,
@@ -58,7 +59,10 @@ def evaluate_long_horizon(engine, clips, frames: int, seeds: int, reference=None
     seed_feats = np.stack([positions_to_features(p)[0] for _, p in chosen])
     log(f"long horizon: {seeds} seeds x {frames} frames open loop")
     rollouts = engine.extrapolate(seed_feats, frames)
-    reports = [rollout_report(r, p, speed, ref, median_speed=median) for r, (_, p) in zip(rollouts, chosen)]
+    block = min(1000, frames)
+    reports = [rollout_report(r, p, speed, ref, block=block, median_speed=median, floor=floor_height(by_name[name]))
+               for r, (name, p) in zip(rollouts, chosen)]
+    take_speed = [float(joint_speed(by_name[name]).mean()) for name, _ in chosen]
     return {
         "frames": frames, "seeds": seeds,
         "exploded": int(sum(r.exploded for r in reports)),
@@ -66,9 +70,17 @@ def evaluate_long_horizon(engine, clips, frames: int, seeds: int, reference=None
         "speed_ratio_last_1000": [r.speed_ratio_last_1000 for r in reports],
         "d1nn_per_block": [r.d1nn_per_block for r in reports],
         "seed_clips": [name for name, _ in chosen],
-        # each seed's own take: its mean joint speed against the same data mean
-        "seed_take_speed_ratio": [float(joint_speed(by_name[name]).mean() / speed) for name, _ in chosen],
+        # each rollout's last-block speed against its seed's own take's mean joint speed
+        "seed_take_speed_ratio": [r.speed_ratio_last_1000 * speed / t for r, t in zip(reports, take_speed)],
+        "d1nn_drift": [_drift(r.d1nn_per_block) for r in reports],
+        "feet": {key: [getattr(r.feet, key) if r.feet else float("nan") for r in reports]
+                 for key in ("touch_fraction", "floor_offset_cm", "sink_cm")},
     }
+
+
+def _drift(blocks: list[float]) -> float:
+    """D_1nn of the last block over the first (nan with one block)."""
+    return float(blocks[-1] / blocks[0]) if len(blocks) > 1 and blocks[0] > 0 else float("nan")
 
 
 def evaluate_denoise(engine, clips, stds_cm, seed: int = 0) -> dict:

@@ -8,7 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.signal import butter, filtfilt
 
-from .conventions import LAYOUT, MODEL_FPS, PARENTS
+from .conventions import CONTACT_JOINTS, LAYOUT, MODEL_FPS, PARENTS, ROOT, UP_AXIS
 from .features import RootStart, features_to_positions, integrate_root, positions_to_features
 
 HORIZONS_MS = (80, 160, 320, 400, 560, 1000)
@@ -97,6 +97,44 @@ class RolloutReport:
     frozen: bool
     speed_ratio_last_1000: float
     d1nn_per_block: list[float]
+    feet: FeetReport | None = None
+
+
+# Grounding of generated motion: in locomotion (the root faster than this) the lowest foot joint
+# should come within FOOT_TOUCH_M of the floor at least once a second.
+LOCOMOTION_SPEED = 0.3  # m / s
+FOOT_TOUCH_M = 0.03
+
+
+@dataclass
+class FeetReport:
+    """How generated feet meet the floor (centimetres, relative to the floor of the seed's take)."""
+
+    touch_fraction: float  # of the 1-second spans in locomotion, those where a foot touches the floor (nan: none)
+    floor_offset_cm: float  # median height of the lowest foot joint over the floor: hovering > 0, sinking < 0
+    sink_cm: float  # how far the lowest foot goes below the floor (99th percentile over frames, >= 0)
+
+
+def lowest_foot(pos: np.ndarray) -> np.ndarray:
+    """Height ``[F]`` of the lowest heel or toe joint of positions ``[F, J, 3]``."""
+    return pos[:, CONTACT_JOINTS, UP_AXIS].min(1)
+
+
+def floor_height(pos: np.ndarray) -> float:
+    """The floor a take stands on: the 5th percentile of its lowest foot joint's height."""
+    return float(np.percentile(lowest_foot(pos), 5))
+
+
+def feet_report(pos: np.ndarray, floor: float, fps: float = MODEL_FPS) -> FeetReport:
+    """Grounding of positions ``[F, J, 3]`` against a ``floor`` height (metres)."""
+    height = lowest_foot(pos) - floor
+    root = pos[:, ROOT][:, [0, 2]]
+    speed = np.r_[np.linalg.norm(np.diff(root, axis=0), axis=-1) * fps, 0.0]
+    second = int(round(fps))
+    spans = [slice(a, a + second) for a in range(0, len(pos) - second + 1, second)]
+    moving = [s for s in spans if speed[s].mean() > LOCOMOTION_SPEED]
+    touch = float(np.mean([height[s].min() < FOOT_TOUCH_M for s in moving])) if moving else float("nan")
+    return FeetReport(touch, float(100 * np.median(height)), float(100 * max(0.0, np.percentile(-height, 99))))
 
 
 def segments(local: np.ndarray, length: int = 40, stride: int = 10) -> np.ndarray:
@@ -124,11 +162,12 @@ def pose_vectors(feats: np.ndarray) -> np.ndarray:
 
 
 def rollout_report(feats: np.ndarray, seed_pos: np.ndarray, data_speed: float, ref_segments: np.ndarray,
-                   block: int = 1000, median_speed: float | None = None) -> RolloutReport:
+                   block: int = 1000, median_speed: float | None = None, floor: float | None = None) -> RolloutReport:
     """Judge one open-loop rollout (raw features ``[N, C]``) against its seed positions ``[m, J, 3]``.
 
     ``data_speed``: the data's mean joint speed (m / frame), for the speed ratio; ``median_speed``
-    (default: ``data_speed``): its median, for the freeze test (below 10 % of it for 60 frames)."""
+    (default: ``data_speed``): its median, for the freeze test (below 10 % of it for 60 frames);
+    ``floor``: the floor height of the seed's take, for the grounding of the last ``block`` frames."""
     pos = features_to_positions(feats)
     finite = bool(np.isfinite(pos).all())
     rest = np.median(bone_lengths_of(seed_pos), 0)
@@ -140,7 +179,8 @@ def rollout_report(feats: np.ndarray, seed_pos: np.ndarray, data_speed: float, r
     for b in range(0, len(feats) - block + 1, block):
         seg = segments(pose_vectors(feats[b:b + block]))
         blocks.append(float(d1nn(seg, ref_segments).mean()) if finite and len(seg) else float("nan"))
-    return RolloutReport(exploded, frozen, ratio, blocks)
+    feet = feet_report(pos[-block:], floor) if finite and floor is not None else None
+    return RolloutReport(exploded, frozen, ratio, blocks, feet)
 
 
 # ------------------------------------------------------------------ denoising

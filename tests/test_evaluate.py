@@ -40,14 +40,17 @@ def test_one_run_writes_exactly_the_metric_keys(walks, tmp_path, capsys):
     zero, const = doc["prediction"]["mpjpe_cm"]["zero_velocity"], doc["prediction"]["mpjpe_cm"]["constant_velocity"]
     assert zero[-1] > zero[0] and const[-1] > const[0]  # errors grow with the horizon
     lh = doc["long_horizon"]
-    assert set(lh) == {"frames", "seeds", "exploded", "frozen", "speed_ratio_last_1000", "d1nn_per_block"}
+    assert set(lh) == {"frames", "seeds", "exploded", "frozen", "speed_ratio_last_1000", "d1nn_per_block",
+                       "seed_clips", "seed_take_speed_ratio", "d1nn_drift", "feet"}
     assert lh["frames"] == 1000 and lh["seeds"] == 2 and len(lh["speed_ratio_last_1000"]) == 2
+    assert len(lh["seed_clips"]) == len(lh["seed_take_speed_ratio"]) == 2
+    assert set(lh["feet"]) == {"touch_fraction", "floor_offset_cm", "sink_cm"}
     assert [len(b) for b in lh["d1nn_per_block"]] == [1, 1]
     dn = doc["denoise"]
     assert set(dn) == {"std_cm", "mpjpe_cm"} and set(dn["mpjpe_cm"]) == {"strnn", "butterworth_best", "noisy"}
     assert dn["mpjpe_cm"]["butterworth_best"][0] < dn["mpjpe_cm"]["noisy"][0]  # the filter removes noise
     assert 4.0 < dn["mpjpe_cm"]["noisy"][0] < 5.6  # |N(0, 3 cm I3)| has mean 4.8 cm
-    for heading in ("Long horizon", "Denoising", "(take", "walk_0.bvh", "as Extend (seam)"):
+    for heading in ("Long horizon", "Denoising", "speed / its take", "walk_0.bvh", "as Extend (seam)"):
         assert heading in printed
 
 

@@ -4,8 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from model_core.conventions import UP_AXIS
 from model_core.features import positions_to_features
-from model_core.metrics import joint_speed, pose_vectors, rollout_report, segments
+from model_core.metrics import feet_report, floor_height, joint_speed, pose_vectors, rollout_report, segments
 from model_core.synthetic import walking_skeleton
 
 
@@ -74,3 +75,31 @@ def test_prediction_errors_also_score_the_extend_seam_blend():
     errors, windows = prediction_errors(Freeze(), [walking_skeleton(120, speed=1.2)])
     assert windows > 0 and set(errors) == {"strnn", "zero_velocity", "constant_velocity", "strnn_seam_blend"}
     assert errors["strnn_seam_blend"][0] < errors["strnn"][0]
+
+
+def test_feet_report_sees_hovering_sinking_and_gliding():
+    pos = walking_skeleton(300)
+    floor = floor_height(pos)
+    real = feet_report(pos, floor)
+    assert real.touch_fraction == 1.0 and abs(real.floor_offset_cm) < 3 and real.sink_cm < 1
+    lifted = pos.copy()
+    lifted[..., UP_AXIS] += 0.12  # the whole body 12 cm above the floor
+    hover = feet_report(lifted, floor)
+    assert hover.touch_fraction == 0.0 and hover.floor_offset_cm > 9
+    sunk = pos.copy()
+    sunk[..., UP_AXIS] -= 0.07
+    assert feet_report(sunk, floor).sink_cm > 6
+    glide = np.repeat(pos[:1], 300, 0)  # one pose pushed along the ground at 1 m/s, feet in the air
+    glide[..., UP_AXIS] += 0.1
+    glide[..., 2] += np.arange(300)[:, None] / 30.0
+    assert feet_report(glide, floor).touch_fraction == 0.0
+    still = feet_report(np.repeat(pos[:1], 60, 0), floor)
+    assert np.isnan(still.touch_fraction)  # no locomotion: nothing to judge
+
+
+def test_rollout_report_judges_the_feet_of_the_last_block():
+    pos, feats = _walk(1200)
+    speed = float(joint_speed(pos).mean())
+    report = rollout_report(feats, pos[:20], speed, segments(pose_vectors(feats[:400])), floor=floor_height(pos))
+    assert report.feet.touch_fraction == 1.0 and report.feet.sink_cm < 1
+    assert rollout_report(feats, pos[:20], speed, segments(pose_vectors(feats[:400]))).feet is None
