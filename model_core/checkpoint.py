@@ -23,6 +23,9 @@ REPO = Path(__file__).resolve().parent.parent
 DEFAULT_MODEL = REPO / "models" / "strnn_default"
 DENOISE_MODEL = REPO / "models" / "strnn_denoise"  # the model Denoise uses unless told otherwise
 PURPOSES = ("generate", "denoise")  # what a release is trained for (model.json "purpose"; absent: the first)
+# What a release holds (model.json "architecture"; absent: the first). The others are published
+# baselines (model_core/baselines.py), scored by scripts/evaluate.py and never run by the engines.
+ARCHITECTURES = ("strnn", "simlpe", "residual_gru")
 
 
 def default_denoiser(fallback=None):
@@ -58,6 +61,18 @@ class Checkpoint:
     def purpose(self) -> str:
         """``generate`` (predicts: extend, follow, denoise) or ``denoise`` (a reconstruction-only model)."""
         return self.meta.get("purpose", PURPOSES[0])
+
+    @property
+    def architecture(self) -> str:
+        """``strnn``, or the name of a baseline (:data:`ARCHITECTURES`)."""
+        return self.meta.get("architecture", ARCHITECTURES[0])
+
+    def require_strnn(self) -> None:
+        """Raise :class:`CheckpointError` if this release is a baseline, which only evaluate.py runs."""
+        if self.architecture != ARCHITECTURES[0]:
+            raise CheckpointError(f"this model folder holds a {self.architecture} baseline (model.json architecture "
+                                  f"{self.architecture!r}), not an STRNN model: it is only for scoring, with "
+                                  f"scripts/evaluate.py --baseline-model FOLDER")
 
     def require_generator(self, what: str) -> None:
         """Raise :class:`CheckpointError` if this is a denoise-only model, which cannot do ``what``."""
@@ -149,4 +164,7 @@ def load_release(folder: str | Path | None = None) -> Checkpoint:
     if ckpt.purpose not in PURPOSES:
         raise CheckpointError(f"{folder / 'model.json'}: unknown purpose {ckpt.purpose!r} "
                               f"(one of {', '.join(PURPOSES)})")
+    if ckpt.architecture not in ARCHITECTURES:
+        raise CheckpointError(f"{folder / 'model.json'}: unknown architecture {ckpt.architecture!r} "
+                              f"(one of {', '.join(ARCHITECTURES)})")
     return ckpt

@@ -60,6 +60,7 @@ class Engine:
     seam_frames = 10.0  # fade-out (frames) of the seam correction in predict(); chosen on the validation split
 
     def __init__(self, ckpt: Checkpoint):
+        ckpt.require_strnn()
         cfg = ckpt.config
         self.ckpt = ckpt
         self.m, self.n, self.width = cfg["encode_len"], cfg["predict_len"], cfg["width"]

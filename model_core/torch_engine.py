@@ -24,6 +24,7 @@ _OPTIONAL = ("num_batches_tracked",)
 
 def build_model(ckpt: Checkpoint) -> STRNN:
     """The torch STRNN of a release checkpoint, in eval mode (batch norms use running stats)."""
+    ckpt.require_strnn()
     model = STRNN(STRNNConfig(**ckpt.config))
     expected = {k: tuple(v.shape) for k, v in model.state_dict().items() if not k.endswith(_OPTIONAL)}
     found = {k: tuple(v.shape) for k, v in ckpt.weights.items()}

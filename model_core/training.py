@@ -217,6 +217,7 @@ def initial_weights(path: str | Path) -> dict[str, torch.Tensor]:
     path = Path(path)
     if path.is_dir():
         release = load_release(path)
+        release.require_strnn()
         fresh = STRNN(STRNNConfig(**release.config)).state_dict()
         return {k: torch.from_numpy(np.asarray(release.weights[k])) if k in release.weights else v
                 for k, v in fresh.items()}
@@ -427,6 +428,18 @@ def init_record(init: str | Path) -> dict:
     return record
 
 
+LICENCE = ("CC BY-NC 4.0 (trained on the Bandai Namco Research Motion Dataset, credit Bandai Namco "
+           "Research Inc.) and CMU Graphics Lab Motion Capture Database terms (data obtained from "
+           "mocap.cs.cmu.edu; the database was created with funding from NSF EIA-0196217)")
+
+
+def data_record(data: MotionData) -> dict:
+    """What a release was trained on: the folder's name, clips and frames per split, the split rule."""
+    return {"root": Path(data.root).name, "clips": {s: len(data.split(s)) for s in SPLITS},
+            "frames": {s: int(sum(len(c.features) for c in data.split(s))) for s in SPLITS},
+            "split_rule": "crc32(take key) % 20: 0-1 test, 2 validation, else train (model_core/dataset.py)"}
+
+
 def write_release(model: STRNN, cfg: TrainConfig, data: MotionData, norm: Normaliser, history: list, folder: Path):
     weights = {k: v.detach().cpu().numpy() for k, v in model.state_dict().items() if v.dtype.is_floating_point}
     seeds, names = pick_seeds(data, cfg.model.encode_len)
@@ -435,12 +448,8 @@ def write_release(model: STRNN, cfg: TrainConfig, data: MotionData, norm: Normal
         "training": {"command": cfg.command, "steps": cfg.steps, "optimizer": cfg.optimizer, "batch": cfg.batch,
                      "final": history[-1] if history else None,
                      **({"init": init_record(cfg.init)} if cfg.init else {})},
-        "data": {"root": Path(data.root).name, "clips": {s: len(data.split(s)) for s in SPLITS},
-                 "frames": {s: int(sum(len(c.features) for c in data.split(s))) for s in SPLITS},
-                 "split_rule": "crc32(take key) % 20: 0-1 test, 2 validation, else train (model_core/dataset.py)"},
-        "licence": "CC BY-NC 4.0 (trained on the Bandai Namco Research Motion Dataset, credit Bandai Namco "
-                   "Research Inc.) and CMU Graphics Lab Motion Capture Database terms (data obtained from "
-                   "mocap.cs.cmu.edu; the database was created with funding from NSF EIA-0196217)",
+        "data": data_record(data),
+        "licence": LICENCE,
     }
     save_release(folder, weights, cfg.model.to_dict(), norm.mean, norm.std, meta, seeds, names)
 

@@ -1,10 +1,11 @@
 #!/usr/bin/env python3
-"""Train STRNN on a folder of BVH files.
+"""Train STRNN, or a baseline to score it against (--arch simlpe | residual_gru), on a folder of BVH files.
 
 Single machine:   python scripts/train.py --data DIR --out runs/NAME
 Data-parallel:    torchrun --nproc_per_node N scripts/train.py --data DIR --out runs/NAME
 Resume:           the same command with --resume (state in OUT/train_state.pt).
 The release checkpoint (safetensors + JSON + seeds) is written to OUT/release.
+A baseline's --max-minutes is its time budget: its release is written also when that ends the run.
 """
 
 from __future__ import annotations
@@ -21,6 +22,10 @@ from model_core.dataset import DataError  # noqa: E402
 from model_core.model import STRNNConfig  # noqa: E402
 from model_core.training import TrainConfig, export_state, train  # noqa: E402
 
+ARCHS = ("strnn", "simlpe", "residual_gru")
+DEFAULT_WIDTH = {"strnn": 128, "residual_gru": 512}
+DEFAULT_LR = {"strnn": 1e-3, "simlpe": 3e-4, "residual_gru": 1e-3}
+
 VARIANTS = {
     "composite": dict(spatial=True, residual=True),  # the full model (paper: Composite)
     "spatiotemp": dict(spatial=True, residual=False),  # no residual filter (SpatioTemp)
@@ -32,8 +37,13 @@ def parse_args(argv=None) -> argparse.Namespace:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--data", required=True, help="folder of .bvh files (searched recursively)")
     p.add_argument("--out", default="runs/default", help="output folder (state, log, release)")
+    p.add_argument("--arch", choices=ARCHS, default="strnn",
+                   help="STRNN, or a baseline: siMLPe (Guo et al. 2023) or the residual GRU (Martinez et al. "
+                        "2017); the STRNN-only options below are ignored for a baseline")
     p.add_argument("--variant", choices=VARIANTS, default="composite", help="architecture (paper's ablations)")
-    p.add_argument("--width", type=int, default=128, help="L4 width and LSTM size (paper: 512)")
+    p.add_argument("--width", type=int, default=None,
+                   help="STRNN: L4 width and LSTM size (default 128, paper: 512); residual GRU: units (default 512)")
+    p.add_argument("--blocks", type=int, default=48, help="siMLPe: temporal MLP blocks")
     p.add_argument("--encode-len", type=int, default=20, help="context frames m")
     p.add_argument("--predict-len", type=int, default=20, help="predicted frames n")
     p.add_argument("--residual-width", type=int, default=512, help="hidden units of the residual filter")
@@ -41,7 +51,8 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--steps", type=int, default=5000, help="optimiser steps over all phases")
     p.add_argument("--batch", type=int, default=128, help="windows per step")
     p.add_argument("--optimizer", choices=("adam", "adadelta"), default="adam")
-    p.add_argument("--lr", type=float, default=1e-3, help="learning rate (Adam)")
+    p.add_argument("--lr", type=float, default=None,
+                   help="learning rate (default: 1e-3; siMLPe 3e-4, the paper's)")
     p.add_argument("--smooth-weight", type=float, default=1.0, help="weight of the long-horizon cost")
     p.add_argument("--recon-weight", type=float, default=1.0,
                    help="weight of the reconstructed context frames against the predicted frames in the MSE")
@@ -74,27 +85,53 @@ def parse_args(argv=None) -> argparse.Namespace:
     return p.parse_args(argv)
 
 
+def command_line(argv) -> str:
+    return "python scripts/train.py " + " ".join(shlex.quote(a) for a in (argv or sys.argv[1:]) if a != "--export")
+
+
+def baseline_run(args, argv):
+    """Train a baseline (imported here: STRNN runs never load its module)."""
+    from model_core.baseline_training import BaselineTrainConfig, train_baseline
+    from model_core.baselines import MODELS
+
+    if args.export or args.init:
+        raise ValueError("--export and --init are for STRNN runs")
+    shape = dict(encode_len=args.encode_len, predict_len=args.predict_len)
+    shape |= {"blocks": args.blocks} if args.arch == "simlpe" else {"width": args.width or DEFAULT_WIDTH[args.arch]}
+    cfg = BaselineTrainConfig(data=args.data, out=args.out, model=MODELS[args.arch][1](**shape), steps=args.steps,
+                              batch=args.batch, lr=learning_rate(args), seed=args.seed, cache=args.cache,
+                              max_minutes=args.max_minutes, checkpoint_seconds=args.checkpoint_seconds,
+                              command=command_line(argv), mirror=args.mirror, hold_out=args.hold_out)
+    return train_baseline(cfg, resume=args.resume, progress=not args.quiet)
+
+
+def strnn_run(args, argv):
+    model = STRNNConfig(width=args.width or DEFAULT_WIDTH["strnn"], encode_len=args.encode_len,
+                        predict_len=args.predict_len, residual_width=args.residual_width, dropout=args.dropout,
+                        offsets=args.offsets, **VARIANTS[args.variant])
+    cfg = TrainConfig(data=args.data, out=args.out, model=model, steps=args.steps, batch=args.batch,
+                      optimizer=args.optimizer, lr=learning_rate(args), smooth_weight=args.smooth_weight,
+                      recon_weight=args.recon_weight, init=args.init,
+                      rollout_windows=args.rollout_windows, rollout_fraction=args.rollout_fraction,
+                      denoise_fraction=args.denoise_fraction,
+                      noise_start=args.noise_start, seed=args.seed, cache=args.cache, max_minutes=args.max_minutes,
+                      checkpoint_seconds=args.checkpoint_seconds, purpose=args.purpose,
+                      mirror=args.mirror, hold_out=args.hold_out, command=command_line(argv))
+    return export_state(cfg) if args.export else train(cfg, resume=args.resume, progress=not args.quiet)
+
+
+def learning_rate(args) -> float:
+    return DEFAULT_LR[args.arch] if args.lr is None else args.lr
+
+
 def main(argv=None) -> int:
     args = parse_args(argv)
     if args.threads:
         import torch
 
         torch.set_num_threads(args.threads)
-    model = STRNNConfig(width=args.width, encode_len=args.encode_len, predict_len=args.predict_len,
-                        residual_width=args.residual_width, dropout=args.dropout, offsets=args.offsets,
-                        **VARIANTS[args.variant])
-    cfg = TrainConfig(data=args.data, out=args.out, model=model, steps=args.steps, batch=args.batch,
-                      optimizer=args.optimizer, lr=args.lr, smooth_weight=args.smooth_weight,
-                      recon_weight=args.recon_weight, init=args.init,
-                      rollout_windows=args.rollout_windows, rollout_fraction=args.rollout_fraction,
-                      denoise_fraction=args.denoise_fraction,
-                      noise_start=args.noise_start, seed=args.seed, cache=args.cache, max_minutes=args.max_minutes,
-                      checkpoint_seconds=args.checkpoint_seconds, purpose=args.purpose,
-                      mirror=args.mirror, hold_out=args.hold_out,
-                      command="python scripts/train.py " + " ".join(
-                          shlex.quote(a) for a in (argv or sys.argv[1:]) if a != "--export"))
     try:
-        release = export_state(cfg) if args.export else train(cfg, resume=args.resume, progress=not args.quiet)
+        release = (strnn_run if args.arch == "strnn" else baseline_run)(args, argv)
     except (DataError, ValueError) as e:
         print(f"error: {e}", file=sys.stderr)
         return 2

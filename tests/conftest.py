@@ -53,3 +53,33 @@ def smallest_bvh():
         return files[0]
 
     return find
+
+
+@pytest.fixture
+def baseline_release(tmp_path):
+    """``baseline_release(arch, seed=0, **config) -> folder``: an untrained baseline (siMLPe or residual GRU)
+    saved as a release folder, with random normalisation and output layer so that it moves."""
+    import numpy as np
+    import torch
+
+    from model_core.baselines import MODELS
+    from model_core.checkpoint import save_release
+
+    def make(arch: str, seed: int = 0, **config) -> Path:
+        torch.manual_seed(seed)
+        rng = np.random.default_rng(seed)
+        model_cls, config_cls = MODELS[arch]
+        model = model_cls(config_cls(**config))
+        with torch.no_grad():
+            last = model.fc_out if arch == "simlpe" else model.out
+            last.weight.normal_(0.0, 0.01)
+        c, m = model.cfg.frame_size, model.cfg.encode_len
+        mean, std = rng.normal(0.0, 0.2, c).astype(np.float32), rng.uniform(0.5, 1.5, c).astype(np.float32)
+        seeds = (mean + std * rng.normal(size=(2, m, c))).astype(np.float32)
+        weights = {k: v.numpy() for k, v in model.state_dict().items()}
+        folder = tmp_path / f"{arch}_{seed}"
+        save_release(folder, weights, model.cfg.to_dict(), mean, std, {"architecture": arch, "licence": "test"},
+                     seeds, ["a", "b"])
+        return folder
+
+    return make
