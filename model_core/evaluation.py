@@ -7,12 +7,15 @@ import time
 
 import numpy as np
 
+from .conventions import MODEL_FPS
 from .dataset import MotionData
 from .features import positions_to_features
 from .metrics import (
     HORIZONS_MS,
     add_noise,
+    add_pops,
     best_butterworth,
+    best_median,
     floor_height,
     joint_speed,
     mpjpe_cm,
@@ -20,20 +23,30 @@ from .metrics import (
     prediction_errors,
     rollout_report,
     segments,
+    upsample,
 )
+from .motion_ops import denoise_positions
 
 
-def select_clips(data: MotionData, split: str) -> list:
+def select_clips(data: MotionData, split: str, group: str | None = None) -> list:
+    """The clips of a split (``all``: every clip), or of a held-out ``group`` when one is named."""
+    if group:
+        clips = data.group(group)
+        if not clips:
+            raise ValueError(f"{data.root}: no clips of the held-out group {group!r}")
+        return clips
     clips = data.clips if split == "all" else data.split(split)
     if not clips:
         raise ValueError(f"{data.root}: no clips in the {split!r} split (use --split all for a foreign folder)")
     return clips
 
 
-def evaluate_prediction(engine, clips) -> dict:
-    errors, windows = prediction_errors(engine, [c.positions for c in clips])
-    seam = errors.pop("strnn_seam_blend")  # printed beside the table, not a key of the JSON document
-    return {"horizons_ms": list(HORIZONS_MS), "mpjpe_cm": errors, "windows": windows, "strnn_seam_blend": seam}
+def evaluate_prediction(engine, clips, baselines: dict | None = None) -> dict:
+    """Prediction MPJPE (cm) per horizon of STRNN, the simple baselines, the ``baselines``
+    ``{name: engine}`` models and STRNN as Extend delivers it (``strnn_as_extend``, with its seam blend)."""
+    errors, windows = prediction_errors(engine, [c.positions for c in clips], extra_engines=baselines)
+    errors["strnn_as_extend"] = errors.pop("strnn_seam_blend")
+    return {"horizons_ms": list(HORIZONS_MS), "mpjpe_cm": errors, "windows": windows}
 
 
 def data_speed(clips, statistic=np.mean) -> float:
@@ -83,21 +96,51 @@ def _drift(blocks: list[float]) -> float:
     return float(blocks[-1] / blocks[0]) if len(blocks) > 1 and blocks[0] > 0 else float("nan")
 
 
-def evaluate_denoise(engine, clips, stds_cm, seed: int = 0) -> dict:
-    usable = [c.positions for c in clips if len(c.positions) >= 2 * engine.m]
+def evaluate_denoise(engine, clips, stds_cm, seed: int = 0, fps: float = MODEL_FPS) -> dict:
+    """Denoise as the product runs it (:func:`motion_ops.denoise_positions`, at ``fps``: clips are
+    upsampled by a cubic when it is above the model's rate) against the best Butterworth filter, at
+    each Gaussian noise std in cm (0: the clean take, how much Denoise changes it)."""
+    usable = _at_rate([c.positions for c in clips if len(c.positions) >= 2 * engine.m], fps)
     out = {"std_cm": list(stds_cm), "mpjpe_cm": {"strnn": [], "butterworth_best": [], "noisy": []},
            "butterworth_cutoff_hz": [], "strnn_frames_per_s": []}
     for std in stds_cm:
         rng = np.random.default_rng(seed)
         noisy = [add_noise(p, std, rng) for p in usable]
-        started = time.perf_counter()
-        denoised = [engine.denoise_positions(n) for n in noisy]
-        out["strnn_frames_per_s"].append(sum(map(len, noisy)) / (time.perf_counter() - started))
-        strnn = np.concatenate([mpjpe_cm(d, c) for c, d in zip(usable, denoised)]).mean()
-        bw, fc = best_butterworth(usable, noisy)
-        raw = np.concatenate([mpjpe_cm(n, c) for c, n in zip(usable, noisy)]).mean()
-        out["mpjpe_cm"]["strnn"].append(float(strnn))
-        out["mpjpe_cm"]["butterworth_best"].append(bw)
-        out["mpjpe_cm"]["noisy"].append(float(raw))
-        out["butterworth_cutoff_hz"].append(fc)
+        _score(out, engine, usable, noisy, fps)
     return out
+
+
+def evaluate_pops(engine, clips, rate: float, seed: int = 0, fps: float = MODEL_FPS) -> dict:
+    """Denoise against the best Butterworth and the best median filter on clips where ``rate`` of
+    the joint-frames jump 10 to 30 cm for one frame (as from a marker swap)."""
+    usable = _at_rate([c.positions for c in clips if len(c.positions) >= 2 * engine.m], fps)
+    rng = np.random.default_rng(seed)
+    noisy = [add_pops(p, rate, rng) for p in usable]
+    out = {"rate": rate, "mpjpe_cm": {"strnn": [], "butterworth_best": [], "median_best": [], "noisy": []},
+           "butterworth_cutoff_hz": [], "median_frames": [], "strnn_frames_per_s": []}
+    _score(out, engine, usable, noisy, fps)
+    err, size = best_median(usable, noisy)
+    out["mpjpe_cm"]["median_best"].append(err)
+    out["median_frames"].append(size)
+    out["mpjpe_cm"] = {k: v[0] for k, v in out["mpjpe_cm"].items()}
+    return out
+
+
+def _score(out: dict, engine, clean: list, noisy: list, fps: float) -> None:
+    """Append Denoise's, the best Butterworth's and the input's MPJPE (cm) to ``out``."""
+    started = time.perf_counter()
+    denoised = [denoise_positions(engine, n, fps) for n in noisy]
+    out["strnn_frames_per_s"].append(sum(map(len, noisy)) / (time.perf_counter() - started))
+    bw, fc = best_butterworth(clean, noisy, fps=fps)
+    for key, value in (("strnn", _mpjpe(denoised, clean)), ("butterworth_best", bw), ("noisy", _mpjpe(noisy, clean))):
+        out["mpjpe_cm"][key].append(float(value))
+    out["butterworth_cutoff_hz"].append(fc)
+
+
+def _mpjpe(pred: list, true: list) -> float:
+    return float(np.concatenate([mpjpe_cm(p, t) for p, t in zip(pred, true)]).mean())
+
+
+def _at_rate(clips: list, fps: float) -> list:
+    """Clips at the model's rate brought to ``fps`` (a Catmull-Rom cubic between the frames)."""
+    return clips if fps == MODEL_FPS else [upsample(c, fps / MODEL_FPS) for c in clips]

@@ -52,10 +52,11 @@ def extend_batch(engine, contexts: np.ndarray, frames: int) -> np.ndarray:
     return out
 
 
-def prediction_errors(engine, clips: list[np.ndarray], horizons_ms=HORIZONS_MS) -> tuple[dict, int]:
-    """MPJPE (cm) at each horizon for STRNN, zero- and constant-velocity, and for STRNN with the
-    seam blend Extend applies (``strnn_seam_blend``, :func:`motion_ops.blend_seam`); and the
-    window count."""
+def prediction_errors(engine, clips: list[np.ndarray], horizons_ms=HORIZONS_MS,
+                      extra_engines: dict | None = None) -> tuple[dict, int]:
+    """MPJPE (cm) at each horizon for STRNN, zero- and constant-velocity, each of ``extra_engines``
+    ``{name: engine}`` (baselines, continued as STRNN is), and for STRNN with the seam blend Extend
+    applies (``strnn_seam_blend``, :func:`motion_ops.blend_seam`); and the window count."""
     from .motion_ops import blend_seam
 
     steps = horizon_frames(horizons_ms)
@@ -66,6 +67,7 @@ def prediction_errors(engine, clips: list[np.ndarray], horizons_ms=HORIZONS_MS) 
         "zero_velocity": np.repeat(last, max(steps), 1),
         "constant_velocity": last + (last - prev) * np.arange(1, max(steps) + 1)[None, :, None, None],
     }
+    preds |= {name: extend_batch(e, ctx, max(steps)) for name, e in (extra_engines or {}).items()}
     preds["strnn_seam_blend"] = np.stack([blend_seam(c, p) for c, p in zip(ctx, preds["strnn"])])
     idx = [s - 1 for s in steps]
     out = {name: [float(v) for v in mpjpe_cm(p[:, idx], fut[:, idx]).mean(0)] for name, p in preds.items()}
@@ -188,17 +190,58 @@ def add_noise(pos: np.ndarray, std_cm: float, rng: np.random.Generator) -> np.nd
     return (pos + rng.normal(0.0, std_cm / 100.0, pos.shape)).astype(np.float32)
 
 
+def add_pops(pos: np.ndarray, rate: float, rng: np.random.Generator, low_m: float = 0.1,
+             high_m: float = 0.3) -> np.ndarray:
+    """``pos`` ``[F, J, 3]`` with ``rate`` of its joint-frames moved ``low_m`` to ``high_m`` in a random
+    direction for that one frame (single-frame pops, as from a marker swap)."""
+    out = np.array(pos, np.float64)
+    hit = rng.random(out.shape[:2]) < rate
+    way = rng.normal(size=out.shape)
+    way /= np.linalg.norm(way, axis=-1, keepdims=True)
+    out[hit] += (way * rng.uniform(low_m, high_m, out.shape[:2])[..., None])[hit]
+    return out.astype(np.float32)
+
+
+def median_filter(pos: np.ndarray, size: int) -> np.ndarray:
+    """Running median along time of ``[F, ...]`` over ``size`` (odd) frames, the ends repeated."""
+    r = size // 2
+    padded = np.concatenate([np.repeat(pos[:1], r, 0), pos, np.repeat(pos[-1:], r, 0)])
+    return np.median(np.stack([padded[k:k + len(pos)] for k in range(size)]), 0).astype(np.float32)
+
+
+def best_median(clean: list[np.ndarray], noisy: list[np.ndarray], sizes=(3, 5, 7, 9)) -> tuple[float, int]:
+    """(MPJPE cm, window in frames) of the median filter that is best on this data."""
+    best = (np.inf, 0)
+    for size in sizes:
+        err = np.concatenate([mpjpe_cm(median_filter(n, size), c) for c, n in zip(clean, noisy)]).mean()
+        best = min(best, (float(err), size))
+    return best
+
+
+def upsample(pos: np.ndarray, factor: float) -> np.ndarray:
+    """``[F, ...]`` resampled at ``factor`` times the rate with a Catmull-Rom cubic (passes every frame)."""
+    x = np.asarray(pos, np.float64)
+    t = np.arange(int(np.floor((len(x) - 1) * factor + 1e-9)) + 1) / factor
+    i = np.minimum(np.floor(t).astype(int), len(x) - 2)
+    u = (t - i).reshape((-1,) + (1,) * (x.ndim - 1))
+    p0, p1 = x[np.maximum(i - 1, 0)], x[i]
+    p2, p3 = x[i + 1], x[np.minimum(i + 2, len(x) - 1)]
+    out = 0.5 * (2 * p1 + (p2 - p0) * u + (2 * p0 - 5 * p1 + 4 * p2 - p3) * u ** 2
+                 + (3 * p1 - p0 - 3 * p2 + p3) * u ** 3)
+    return out.astype(np.float32)
+
+
 def butterworth(pos: np.ndarray, cutoff_hz: float, fps: float = MODEL_FPS) -> np.ndarray:
     """4th-order zero-phase low-pass along time of ``[F, J, 3]``."""
     b, a = butter(4, cutoff_hz / (fps / 2.0))
     return filtfilt(b, a, pos, axis=0).astype(np.float32)
 
 
-def best_butterworth(clean: list[np.ndarray], noisy: list[np.ndarray],
-                     cutoffs=(1, 1.5, 2, 2.5, 3, 3.5, 4, 5, 6, 7, 8, 10, 12)) -> tuple[float, float]:
+def best_butterworth(clean: list[np.ndarray], noisy: list[np.ndarray], cutoffs=(1, 1.5, 2, 2.5, 3, 3.5, 4, 5, 6, 7, 8,
+                     10, 12), fps: float = MODEL_FPS) -> tuple[float, float]:
     """(MPJPE cm, cutoff Hz) of the Butterworth cutoff that is best on this data and noise."""
     best = (np.inf, 0.0)
-    for fc in cutoffs:
-        err = np.concatenate([mpjpe_cm(butterworth(n, fc), c) for c, n in zip(clean, noisy)]).mean()
+    for fc in [c for c in cutoffs if c < 0.45 * fps]:
+        err = np.concatenate([mpjpe_cm(butterworth(n, fc, fps), c) for c, n in zip(clean, noisy)]).mean()
         best = min(best, (float(err), float(fc)))
     return best

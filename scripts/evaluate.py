@@ -1,7 +1,8 @@
 #!/usr/bin/env python3
 """Evaluate an STRNN checkpoint on a folder of BVH files (metrics of DESIGN.md).
 
-Prediction MPJPE at 80..1000 ms for STRNN, zero- and constant-velocity always;
+Prediction MPJPE at 80..1000 ms for STRNN, zero- and constant-velocity always, and for
+baseline models (siMLPe, residual GRU, trained by train.py --arch) with --baseline-model;
 long-horizon rollouts with --long-horizon FRAMES --seeds K; denoising against the
 best Butterworth filter and the noisy input with --denoise-std S [S ...]; path following
 (path error, foot skate and knee pops before/after foot lock, synthesis speed) with --paths.
@@ -23,9 +24,15 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from model_core.bvh import BvhError  # noqa: E402
 from model_core.checkpoint import DEFAULT_MODEL, CheckpointError, default_denoiser  # noqa: E402
-from model_core.dataset import DataError, load_folder  # noqa: E402
+from model_core.dataset import DataError, load_data_config, load_folder  # noqa: E402
 from model_core.engine import Engine  # noqa: E402
-from model_core.evaluation import evaluate_denoise, evaluate_long_horizon, evaluate_prediction, select_clips  # noqa: E402
+from model_core.evaluation import (  # noqa: E402
+    evaluate_denoise,
+    evaluate_long_horizon,
+    evaluate_pops,
+    evaluate_prediction,
+    select_clips,
+)
 from model_core.files import write_json  # noqa: E402
 from model_core.rigs import RigError  # noqa: E402
 
@@ -34,13 +41,27 @@ def parse_args(argv=None):
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--data", required=True, help="folder of .bvh files of a supported rig (searched recursively)")
     p.add_argument("--checkpoint", default=str(DEFAULT_MODEL), help="release folder (default: bundled model)")
-    p.add_argument("--split", choices=("all", "train", "validation", "test"), default="all",
-                   help="which clips of the folder (the project's split rule); 'all' for a foreign folder")
+    clips = p.add_mutually_exclusive_group()
+    clips.add_argument("--split", choices=("all", "train", "validation", "test"), default="all",
+                       help="which clips of the folder (the project's split rule); 'all' for a foreign folder")
+    clips.add_argument("--group", choices=sorted(load_data_config()["held_out"]),
+                       help="every clip of this held-out group of configs/data.toml instead of a split")
+    p.add_argument("--baseline-model", action="append", default=[], metavar="FOLDER",
+                   help="release folder of a baseline (train.py --arch simlpe | residual_gru), scored on "
+                        "prediction beside STRNN as prediction.mpjpe_cm.<architecture> (repeatable; needs torch)")
+    p.add_argument("--threads", type=int, default=0,
+                   help="torch CPU threads for baseline models and path following (0: torch's default)")
     p.add_argument("--json", help="write the results as JSON here")
     p.add_argument("--long-horizon", type=int, metavar="FRAMES", help="open-loop rollout length")
     p.add_argument("--seeds", type=int, default=20, help="number of long-horizon seeds")
     p.add_argument("--reference", help="folder of BVH files for D_1nn and speed (default: --data's clips)")
-    p.add_argument("--denoise-std", type=float, nargs="+", metavar="S", help="noise std in cm")
+    p.add_argument("--denoise-std", type=float, nargs="+", metavar="S",
+                   help="Gaussian noise std in cm (0: the clean take, to see how much Denoise changes it)")
+    p.add_argument("--denoise-pops", type=float, metavar="RATE",
+                   help="also score single-frame pops of 10 to 30 cm on this fraction of joint-frames, against "
+                        "the best Butterworth and the best median filter")
+    p.add_argument("--denoise-fps", type=float, default=30.0, metavar="FPS",
+                   help="denoise at this frame rate (the clips are upsampled by a cubic above 30 fps)")
     p.add_argument("--denoise-checkpoint", default=None, metavar="FOLDER",
                    help="release folder that denoises (default: the bundled denoising model, which Denoise "
                         "uses, if it exists, else --checkpoint)")
@@ -51,18 +72,22 @@ def parse_args(argv=None):
     return p.parse_args(argv)
 
 
-def print_table(result: dict, extra: dict):
-    pred = result["prediction"]
+def print_prediction(result: dict):
+    """The prediction table; the ratios are to the best of the baselines (simple ones and models) per horizon."""
+    pred, rows = result["prediction"], dict(result["prediction"]["mpjpe_cm"])
     print(f"\nPrediction MPJPE (cm), {result['clips']} clips, {result['windows']} windows")
     print(f"{'horizon ms':<20}" + "".join(f"{h:>8}" for h in pred["horizons_ms"]))
-    for name, row in pred["mpjpe_cm"].items():
+    seam = rows.pop("strnn_as_extend")  # what Extend Clip delivers: STRNN with its seam blend
+    for name, row in rows.items():
         print(f"{name:<20}" + "".join(f"{v:8.2f}" for v in row))
-    best = [min(z, c) for z, c in zip(pred["mpjpe_cm"]["zero_velocity"], pred["mpjpe_cm"]["constant_velocity"])]
-    print(f"{'strnn / best base':<20}" + "".join(f"{s / b:8.2f}" for s, b in zip(pred["mpjpe_cm"]["strnn"], best)))
-    if "strnn_seam_blend" in extra:  # what Extend Clip delivers: the same with its seam blend
-        seam = extra["strnn_seam_blend"]
-        print(f"{'as Extend (seam)':<20}" + "".join(f"{v:8.2f}" for v in seam))
-        print(f"{'  / best base':<20}" + "".join(f"{s / b:8.2f}" for s, b in zip(seam, best)))
+    best = [min(v) for v in zip(*(row for name, row in rows.items() if name != "strnn"))]
+    print(f"{'strnn / best base':<20}" + "".join(f"{s / b:8.2f}" for s, b in zip(rows["strnn"], best)))
+    print(f"{'as Extend (seam)':<20}" + "".join(f"{v:8.2f}" for v in seam))
+    print(f"{'  / best base':<20}" + "".join(f"{s / b:8.2f}" for s, b in zip(seam, best)))
+
+
+def print_table(result: dict, extra: dict):
+    print_prediction(result)
     if "long_horizon" in result:
         lh = result["long_horizon"]
         print(f"\nLong horizon: {lh['seeds']} seeds x {lh['frames']} frames: exploded {lh['exploded']}, "
@@ -79,6 +104,13 @@ def print_table(result: dict, extra: dict):
             print(f"{name:<20}" + "".join(f"{v:8.2f}" for v in row))
         print(f"{'best cutoff Hz':<20}" + "".join(f"{v:8.1f}" for v in extra["butterworth_cutoff_hz"]))
         print(f"{'strnn frames/s':<20}" + "".join(f"{v:8.0f}" for v in extra["denoise_fps"]))
+    if "denoise_pops" in result:
+        pops = result["denoise_pops"]
+        cutoff, size = extra["pops_filters"]
+        print(f"\nSingle-frame pops on {100 * pops['rate']:g} % of joint-frames, MPJPE (cm), model "
+              f"{extra['denoise_checkpoint']}: best Butterworth at {cutoff:g} Hz, best median over {size} frames")
+        for name, value in pops["mpjpe_cm"].items():
+            print(f"{name:<20}{value:8.2f}")
     if "paths" in result:
         print_paths(result["paths"])
 
@@ -104,29 +136,56 @@ def run(args) -> dict:
     data = load_folder(args.data, cache_dir=args.cache or None)
     for failure in data.failures:
         print(f"skipped: {failure}", file=sys.stderr)
-    clips = select_clips(data, args.split)
-    print(f"evaluating {args.checkpoint} on {len(clips)} clips of {args.data} ({args.split})", file=sys.stderr)
-    pred = evaluate_prediction(engine, clips)
+    clips = select_clips(data, args.split, args.group)
+    print(f"evaluating {args.checkpoint} on {len(clips)} clips of {args.data} ({args.group or args.split})",
+          file=sys.stderr)
+    baselines = load_baselines(args)
+    pred = evaluate_prediction(engine, clips, {name: b for name, (b, _) in baselines.items()})
     result = {"checkpoint": str(args.checkpoint), "data": str(args.data), "clips": len(clips),
               "windows": pred.pop("windows"), "prediction": pred}
-    extra = {"strnn_seam_blend": pred.pop("strnn_seam_blend")}
+    result |= {"group": args.group} if args.group else {}
+    result |= {"baseline_models": {name: folder for name, (_, folder) in baselines.items()}} if baselines else {}
+    extra = {}
     if args.long_horizon:
         reference = select_clips(load_folder(args.reference, cache_dir=args.cache or None), "all") \
             if args.reference else None
         lh = evaluate_long_horizon(engine, clips, args.long_horizon, args.seeds, reference,
                                    log=lambda m: print(m, file=sys.stderr))
         result["long_horizon"] = lh
-    if args.denoise_std:
+    if args.denoise_std or args.denoise_pops:
         folder = args.denoise_checkpoint or default_denoiser(args.checkpoint)
-        extra["denoise_checkpoint"] = str(folder)
-        dn = evaluate_denoise(Engine.load(folder), clips, args.denoise_std)
+        extra["denoise_checkpoint"] = f"{folder} at {args.denoise_fps:g} fps"
+        denoiser = Engine.load(folder)
+    if args.denoise_std:
+        dn = evaluate_denoise(denoiser, clips, args.denoise_std, fps=args.denoise_fps)
         extra["butterworth_cutoff_hz"] = dn.pop("butterworth_cutoff_hz")
         extra["denoise_fps"] = dn.pop("strnn_frames_per_s")
         result["denoise"] = dn
+    if args.denoise_pops:
+        pops = evaluate_pops(denoiser, clips, args.denoise_pops, fps=args.denoise_fps)
+        extra["pops_filters"] = (pops.pop("butterworth_cutoff_hz")[0], pops.pop("median_frames")[0])
+        pops.pop("strnn_frames_per_s")
+        result["denoise_pops"] = pops
     if args.paths:
         result["paths"] = run_paths(args, clips)
     print_table(result, extra)
     return result
+
+
+def load_baselines(args) -> dict:
+    """``{architecture: (engine, folder)}`` of the --baseline-model folders (torch imported only for them)."""
+    if not args.baseline_model:
+        return {}
+    from model_core.baselines import BaselineEngine
+
+    out = {}
+    for folder in args.baseline_model:
+        engine = BaselineEngine.load(folder)
+        if engine.name in out:
+            raise ValueError(f"two --baseline-model folders hold a {engine.name} model ({out[engine.name][1]}, "
+                             f"{folder}): score one per architecture at a time")
+        out[engine.name] = (engine, str(folder))
+    return out
 
 
 def run_paths(args, clips) -> dict:
@@ -155,6 +214,10 @@ def print_paths(pt: dict) -> None:
 
 def main(argv=None) -> int:
     args = parse_args(argv)
+    if args.threads:
+        import torch
+
+        torch.set_num_threads(args.threads)
     try:
         result = run(args)
     except (BvhError, RigError, DataError, CheckpointError, ValueError) as e:

@@ -35,7 +35,7 @@ def test_one_run_writes_exactly_the_metric_keys(walks, tmp_path, capsys):
     assert set(doc) == {"checkpoint", "data", "clips", "windows", "prediction", "long_horizon", "denoise"}
     assert doc["clips"] == 3 and doc["windows"] > 0
     assert doc["prediction"]["horizons_ms"] == [80, 160, 320, 400, 560, 1000]
-    assert set(doc["prediction"]["mpjpe_cm"]) == {"strnn", "zero_velocity", "constant_velocity"}
+    assert set(doc["prediction"]["mpjpe_cm"]) == {"strnn", "zero_velocity", "constant_velocity", "strnn_as_extend"}
     assert all(len(v) == 6 for v in doc["prediction"]["mpjpe_cm"].values())
     zero, const = doc["prediction"]["mpjpe_cm"]["zero_velocity"], doc["prediction"]["mpjpe_cm"]["constant_velocity"]
     assert zero[-1] > zero[0] and const[-1] > const[0]  # errors grow with the horizon
@@ -71,3 +71,49 @@ def test_a_denoise_only_checkpoint_is_pointed_to_denoise_checkpoint(walks, tmp_p
                           str(tmp_path / "dn"), "--json", str(out)]) == 0
     assert f"model {tmp_path / 'dn'}" in capsys.readouterr().out
     assert set(json.loads(out.read_text())["denoise"]["mpjpe_cm"]) == {"strnn", "butterworth_best", "noisy"}
+
+
+def test_baseline_models_get_their_rows_and_the_ratio_uses_the_best(walks, tmp_path, capsys, baseline_release):
+    pytest.importorskip("torch")
+    simlpe, gru = baseline_release("simlpe"), baseline_release("residual_gru", width=16)
+    out, plain = tmp_path / "eval.json", tmp_path / "plain.json"
+    assert evaluate.main(["--data", str(walks), "--cache", "", "--json", str(plain)]) == 0
+    assert evaluate.main(["--data", str(walks), "--cache", "", "--baseline-model", str(simlpe),
+                          "--baseline-model", str(gru), "--threads", "1", "--json", str(out)]) == 0
+    printed = capsys.readouterr().out
+    doc, before = json.loads(out.read_text()), json.loads(plain.read_text())
+    rows = doc["prediction"]["mpjpe_cm"]
+    assert list(rows) == ["strnn", "zero_velocity", "constant_velocity", "simlpe", "residual_gru", "strnn_as_extend"]
+    assert all(len(v) == 6 for v in rows.values())
+    for name in ("strnn", "zero_velocity", "constant_velocity", "strnn_as_extend"):
+        assert rows[name] == before["prediction"]["mpjpe_cm"][name]  # the baselines change nothing else
+    assert doc["baseline_models"] == {"simlpe": str(simlpe), "residual_gru": str(gru)}
+    best = [min(v) for v in zip(*(rows[k] for k in ("zero_velocity", "constant_velocity", "simlpe", "residual_gru")))]
+    ratio = next(line for line in printed.splitlines() if line.startswith("strnn / best base"))
+    assert ratio.split()[-6:] == [f"{s / b:.2f}" for s, b in zip(rows["strnn"], best)]
+
+
+def test_two_baselines_of_one_architecture_and_a_baseline_as_checkpoint_are_refused(walks, capsys,
+                                                                                      baseline_release):
+    pytest.importorskip("torch")
+    a, b = baseline_release("simlpe"), baseline_release("simlpe", seed=1)
+    assert evaluate.main(["--data", str(walks), "--cache", "", "--baseline-model", str(a),
+                          "--baseline-model", str(b)]) == 2
+    assert "score one per architecture" in capsys.readouterr().err
+    assert evaluate.main(["--data", str(walks), "--cache", "", "--checkpoint", str(a)]) == 2
+    assert "--baseline-model" in capsys.readouterr().err
+
+
+def test_group_scores_every_clip_of_a_held_out_group(tmp_path):
+    root = tmp_path / "data"
+    for i, rel in enumerate(["cmu/iclone/006_01.bvh", "cmu/iclone/006_02.bvh", "cmu/iclone/007_01.bvh"]):
+        (root / rel).parent.mkdir(parents=True, exist_ok=True)
+        write_bvh(root / rel, walking_skeleton(frames=150, speed=1.0 + 0.2 * i, radius=4.0 + i))
+    out = tmp_path / "eval.json"
+    assert evaluate.main(["--data", str(root), "--cache", "", "--group", "actor", "--json", str(out)]) == 0
+    doc = json.loads(out.read_text())
+    assert doc["clips"] == 2 and doc["group"] == "actor"
+    with pytest.raises(SystemExit):
+        evaluate.parse_args(["--data", str(root), "--group", "actor", "--split", "test"])
+    with pytest.raises(SystemExit):
+        evaluate.parse_args(["--data", str(root), "--group", "no_such_group"])

@@ -26,8 +26,11 @@ def release_folder() -> Path | None:
 
 
 def find_mocap() -> Path | None:
-    """Unpacked motion capture (git-ignored data/mocap, or ../shared/mocap), None when absent."""
-    for root in (REPO / "data" / "mocap", REPO.parent / "shared" / "mocap"):
+    """Unpacked motion capture ($STRNN_MOCAP_DIR alone when set, else git-ignored data/mocap or
+    ../shared/mocap), None when absent."""
+    roots = [Path(os.environ["STRNN_MOCAP_DIR"])] if os.environ.get("STRNN_MOCAP_DIR") else \
+        [REPO / "data" / "mocap", REPO.parent / "shared" / "mocap"]
+    for root in roots:
         if any(root.glob("*/*/*.bvh")) or any(root.glob("*/*/*/*.bvh")):
             return root
     return None

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import bpy
 import numpy as np
+import pytest
 from scenes import (
     action_of,
     addon_module,
@@ -96,9 +97,14 @@ def test_steps_report_model_progress_and_stop_without_changes(real_model, addon,
 
 
 def test_denoise_noisy_clip_with_model(real_model, addon, tmp_path):
+    """On a real take with rotation jitter the bundled denoising model leaves under half of it.
+    The claim is about real capture, which the repository cannot ship: without the data it skips."""
     root = find_mocap()
     clip = root / "bandai-namco/dataset-2/dataset-2_walk_normal_001.bvh" if root else None
-    obj = import_bvh(clip if clip and clip.exists() else walk_bvh(tmp_path, frames=90), update_scene_fps=True)
+    if clip is None or not clip.exists():
+        pytest.skip("needs the motion-capture data (unpack ../shared/mocap into data/mocap): the claim is "
+                    "about a real take")
+    obj = import_bvh(clip, update_scene_fps=True)
     frames = np.arange(int(action_of(obj).frame_range[0]), int(action_of(obj).frame_range[1]) + 1)
     clean = evaluated_joints(addon, obj, frames)
     rng = np.random.default_rng(0)
