@@ -1,8 +1,8 @@
 """Foot lock: pin feet on the ground while they are in contact, by two-bone leg IK.
 
 Works on any canonical joint-position motion ``[F, 21, 3]`` (Y-up, any unit, any frame
-rate): model output and mocap alike. Only the knee, ankle and toe of each leg move;
-every bone keeps its length on every frame.
+rate): model output and mocap alike. Only the knee, ankle and toe of each leg move (and,
+after ``fixed`` frames, the whole body up and down); every bone keeps its length on every frame.
 
 - Contacts ``[F, 4]`` in :data:`conventions.CONTACTS` order (l_heel, l_toe, r_heel, r_toe):
   the model's contact channels (:func:`contacts_from_features`) or detected from heights
@@ -11,12 +11,18 @@ every bone keeps its length on every frame.
   mean horizontal position of that joint over the span. Inside the span the joint is put
   on its target; the correction needed at the span's edges fades in before and out after
   it over ``blend_s`` seconds. Heels are locked first, then toes on the heel-locked foot
-  (the foot keeps its orientation, so a toe lock moves the ankle with it). Heights are
-  left as they were.
+  (the foot keeps its orientation, so a toe lock moves the ankle with it).
+- Heights: each contact span moves the foot up or down so that, on average over the span, its
+  contact joint is at the height it has in contact on the take's floor (the ``fixed`` frames when
+  there are some, the whole clip otherwise), faded in and out like the horizontal pull, so
+  generated feet neither sink into the floor nor hover above it; and no heel or toe goes below
+  that height at any frame. After ``fixed`` frames, a body whose feet hover where they should
+  stand comes down as a whole first (the legs alone could only reach by straightening).
 - Two-bone IK from the (unmoved) hip: the knee stays in its own plane (the plane of hip,
   knee and ankle, turned by the shortest arc onto the new hip-to-ankle axis), the foot
   keeps its orientation (the toe follows the ankle), and a target out of reach is eased
-  towards full extension instead of snapping the leg straight.
+  towards a soft limit short of full extension (:data:`MIN_KNEE_DEG` of bend, or the input's
+  own extension where that is straighter) instead of snapping the leg straight.
 """
 
 from __future__ import annotations
@@ -25,12 +31,22 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .conventions import CONTACT_JOINTS, CONTACTS, GROUND_AXES, JOINT_INDEX, LAYOUT, MODEL_FPS
-from .features import detect_contacts
+from .conventions import (
+    CONTACT_JOINTS,
+    CONTACTS,
+    GROUND_AXES,
+    JOINT_INDEX,
+    LAYOUT,
+    MODEL_FPS,
+    STANDARD_LEG_LENGTH,
+    UP_AXIS,
+)
+from .features import detect_contacts, gaussian_smooth
 from .rigs import leg_length
 
 LEGS = tuple(tuple(JOINT_INDEX[f"{s}_{j}"] for j in ("upleg", "knee", "foot", "toe")) for s in ("l", "r"))
 _HIP, _KNEE, _ANKLE, _TOE = (np.array([leg[k] for leg in LEGS]) for k in range(4))  # each [2]: left, right
+MIN_KNEE_DEG = 6.0  # the IK keeps at least this knee bend unless the input's leg was straighter
 _STRAIGHT = 0.01  # sine of the thigh-to-leg-axis angle below which a leg counts as straight
 # Contact channels of the left and right heel, and of the left and right toe.
 _HEEL_CHANNELS = [[name for name, _ in CONTACTS].index(f"{s}_heel") for s in ("l", "r")]
@@ -43,6 +59,7 @@ class FootLockSettings:
     min_gap_s: float = 0.07  # contact gaps shorter than this (flicker) are filled before locking
     softness: float = 0.03  # fraction of the leg's reach over which an unreachable target eases out
     max_offset: float = 0.35  # legs' lengths: a span needing a bigger correction is no contact, left alone
+    floor_tolerance: float = 0.01  # metres (for a standard body): contacts this close to the floor stay
 
 
 def contacts_from_features(feats: np.ndarray) -> np.ndarray:
@@ -157,17 +174,89 @@ def lock_offsets(x: np.ndarray, mask: np.ndarray, blend: float, fixed: np.ndarra
 
 
 def ankle_targets(pos: np.ndarray, contacts: np.ndarray, blend: float, fixed: np.ndarray | None = None,
-                  limit: float = np.inf) -> np.ndarray:
+                  limit: float = np.inf, rest: np.ndarray | None = None, tolerance: float = 0.0) -> np.ndarray:
     """Where each ankle should be ``[F, 2, 3]`` (left, right). Heels first: each heel span pins the
     ankle. Then toes, on the heel-locked foot (kept at its orientation): each toe span pins the
-    toe, moving the ankle with it, so a heel lifting off rolls the foot about a planted toe."""
+    toe, moving the ankle with it, so a heel lifting off rolls the foot about a planted toe.
+    ``rest`` ``[4]``: the height of each contact joint (l_heel, l_toe, r_heel, r_toe) standing on
+    the floor; contacts further than ``tolerance`` from it are brought to it and no heel or toe goes
+    further than that below it (None: heights unchanged)."""
     mask = np.asarray(contacts) > 0.5
     ankle = pos[:, _ANKLE]
     foot = pos[:, _TOE] - ankle  # [F, 2, 3] ankle-to-toe, kept
     pull, _ = lock_offsets(ankle, mask[:, _HEEL_CHANNELS], blend, fixed, limit)
     ankle = ankle + pull
     pull, _ = lock_offsets(ankle + foot, mask[:, _TOE_CHANNELS], blend, fixed, limit)
-    return ankle + pull
+    ankle = ankle + pull
+    if rest is not None:
+        ankle = ankle + _height_pull(ankle, foot, mask, blend, fixed, rest, tolerance)
+    return ankle
+
+
+def _height_pull(ankle: np.ndarray, foot: np.ndarray, mask: np.ndarray, blend: float, fixed: np.ndarray | None,
+                 rest: np.ndarray, tolerance: float) -> np.ndarray:
+    """Vertical move of each ankle ``[F, 2, 3]``: :func:`span_lift`, then, at every frame, up by what
+    the heel or toe would still be below its rest height."""
+    heel_need, toe_need = _needs(ankle, foot, rest)
+    lift = span_lift(ankle, foot, mask, blend, fixed, rest, tolerance)
+    lift = lift + np.maximum(np.maximum(heel_need - lift, toe_need - lift) - tolerance, 0.0)
+    if fixed is not None:
+        lift[fixed] = 0.0
+    out = np.zeros(ankle.shape)
+    out[..., UP_AXIS] = lift
+    return out
+
+
+def _needs(ankle: np.ndarray, foot: np.ndarray, rest: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """How far up ``[F, 2]`` each heel (at the ankle) and each toe is from its rest height."""
+    return rest[_HEEL_CHANNELS] - ankle[..., UP_AXIS], rest[_TOE_CHANNELS] - (ankle + foot)[..., UP_AXIS]
+
+
+def span_lift(ankle: np.ndarray, foot: np.ndarray, mask: np.ndarray, blend: float, fixed: np.ndarray | None,
+              rest: np.ndarray, tolerance: float = 0.0) -> np.ndarray:
+    """Vertical move ``[F, 2]`` of each foot: each contact span lifts (or lowers) it by the mean over the
+    span of what its heel (or, with only the toe down, its toe) needs to reach its rest height, less
+    ``tolerance``, faded like the horizontal pull, so the foot keeps its own roll within the span."""
+    heel, toe = mask[:, _HEEL_CHANNELS], mask[:, _TOE_CHANNELS]
+    heel_need, toe_need = _needs(ankle, foot, rest)
+    need = np.where(heel, heel_need, toe_need)
+    on = heel | toe
+    if fixed is not None:
+        on &= ~fixed[:, None]
+    span, level = span_targets(need[..., None], on)
+    level = np.sign(level) * np.maximum(np.abs(level) - tolerance, 0.0)  # the take's own variation stays
+    per_frame = np.where(on[..., None], level[span] if len(level) else 0.0, 0.0)
+    total, weight = _faded(per_frame, on, blend)
+    return total[..., 0] / np.maximum(weight, 1.0)
+
+
+def body_drop(pos: np.ndarray, mask: np.ndarray, blend: float, fixed: np.ndarray | None,
+              rest: np.ndarray, tolerance: float) -> np.ndarray:
+    """How far down ``[F]`` (<= 0) the whole body goes so that a hovering foot in contact can reach
+    the floor, which the legs alone could only do by straightening: the lower of the two feet's
+    span lifts where negative, smoothed over ``blend`` frames (fixed frames stay)."""
+    ankle = pos[:, _ANKLE]
+    lift = span_lift(ankle, pos[:, _TOE] - ankle, mask, blend, fixed, rest, tolerance)
+    drop = gaussian_smooth(np.minimum(lift.min(1), 0.0), max(blend / 2.0, 1.0))
+    if fixed is not None:
+        drop[fixed] = 0.0
+    return drop
+
+
+def rest_heights(pos: np.ndarray, contacts: np.ndarray, frames: np.ndarray | None = None) -> np.ndarray | None:
+    """Height of each contact joint ``[4]`` (heel at the ankle, toe) standing on the floor: the median
+    over its contact frames among ``frames`` (bool ``[F]``, default all), or over all its contact
+    frames when it has none there; None when the clip has no contact at all."""
+    on = np.asarray(contacts) > 0.5
+    if not on.any():
+        return None
+    use = on & (np.ones(len(on), bool) if frames is None else np.asarray(frames, bool))[:, None]
+    heights = np.asarray(pos)[:, CONTACT_JOINTS, UP_AXIS]
+    out = []
+    for k in range(on.shape[1]):
+        pick = use[:, k] if use[:, k].any() else on[:, k]
+        out.append(np.median(heights[pick, k]) if pick.any() else np.percentile(heights[:, k], 5))
+    return np.array(out)
 
 
 def _unit(v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -182,6 +271,14 @@ def _rotate_shortest(v: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
     # v' = v c + (axis x v) + axis (axis . v) / (1 + c); near-opposite axes are left unrotated
     k = 1.0 / np.maximum(1.0 + c, 1e-9)
     return v * c + np.cross(axis, v) + axis * np.sum(axis * v, -1, keepdims=True) * k
+
+
+def knee_limit_reach(l1: np.ndarray, l2: np.ndarray, rest: np.ndarray) -> np.ndarray:
+    """The furthest hip-to-ankle distance the IK may use: the leg with :data:`MIN_KNEE_DEG` of knee
+    bend, or ``rest`` (the input's own) where that is longer."""
+    bend = np.radians(MIN_KNEE_DEG)
+    soft = np.sqrt(l1 ** 2 + l2 ** 2 + 2 * l1 * l2 * np.cos(bend))
+    return np.minimum(np.maximum(soft, rest), l1 + l2)
 
 
 def soft_reach(dist: np.ndarray, rest: np.ndarray, reach: np.ndarray, softness: float) -> np.ndarray:
@@ -212,7 +309,7 @@ def two_bone_ik(hip: np.ndarray, knee: np.ndarray, ankle: np.ndarray, target: np
         bend0 = bend0 + lean[..., None] * _unit(fwd)[0]
     bend0 = _unit(bend0)[0]
     axis, d = _unit(target - hip)
-    d = soft_reach(d, d0, l1 + l2, softness)
+    d = soft_reach(d, d0, knee_limit_reach(l1, l2, d0), softness)
     d = np.maximum(d, np.abs(l1 - l2) + 1e-6 * (l1 + l2))
     along = (l1 ** 2 - l2 ** 2 + d ** 2) / (2.0 * np.maximum(d, 1e-12))
     height = np.sqrt(np.maximum(l1 ** 2 - along ** 2, 0.0))
@@ -247,7 +344,13 @@ def foot_lock(pos: np.ndarray, fps: float = MODEL_FPS, contacts: np.ndarray | No
         return pos.astype(np.float32)
     mask = fill_gaps(contacts > 0.5, int(round(cfg.min_gap_s * fps)))
     limit = cfg.max_offset * leg_length(pos)
-    target = ankle_targets(pos, mask, cfg.blend_s * fps, fixed if fixed.any() else None, limit)
+    rest = rest_heights(pos, mask, fixed if fixed.any() else None)
+    tolerance = cfg.floor_tolerance * leg_length(pos) / STANDARD_LEG_LENGTH
+    if rest is not None and fixed.any():  # below the frames kept, a hovering body comes down first
+        pos = pos.copy()
+        drop = body_drop(pos, mask, cfg.blend_s * fps, fixed if fixed.any() else None, rest, tolerance)
+        pos[..., UP_AXIS] += drop[:, None]
+    target = ankle_targets(pos, mask, cfg.blend_s * fps, fixed if fixed.any() else None, limit, rest, tolerance)
     fwd = body_forward(pos)[:, None].repeat(2, 1)
     knee, ankle = two_bone_ik(pos[:, _HIP], pos[:, _KNEE], pos[:, _ANKLE], target, cfg.softness, fwd)
     out = pos.copy()

@@ -33,6 +33,7 @@ from model_core.evaluation import (  # noqa: E402
     evaluate_prediction,
     select_clips,
 )
+from model_core.feet_evaluation import evaluate_feet  # noqa: E402
 from model_core.files import write_json  # noqa: E402
 from model_core.rigs import RigError  # noqa: E402
 
@@ -60,6 +61,9 @@ def parse_args(argv=None):
     p.add_argument("--denoise-pops", type=float, metavar="RATE",
                    help="also score single-frame pops of 10 to 30 cm on this fraction of joint-frames, against "
                         "the best Butterworth and the best median filter")
+    p.add_argument("--feet", action="store_true",
+                   help="feet of extended motion before and after Foot Lock: skate beside the real takes', sink "
+                        "below the take's floor, knees left fully straight")
     p.add_argument("--denoise-fps", type=float, default=30.0, metavar="FPS",
                    help="denoise at this frame rate (the clips are upsampled by a cubic above 30 fps)")
     p.add_argument("--denoise-checkpoint", default=None, metavar="FOLDER",
@@ -111,6 +115,12 @@ def print_table(result: dict, extra: dict):
               f"{extra['denoise_checkpoint']}: best Butterworth at {cutoff:g} Hz, best median over {size} frames")
         for name, value in pops["mpjpe_cm"].items():
             print(f"{name:<20}{value:8.2f}")
+    if "feet" in result:
+        ft = result["feet"]
+        print(f"\nFeet of {ft['frames']} extended frames after each of {ft['clips']} clips' first 20, before -> after "
+              f"Foot Lock: skate {ft['skate_raw_cm']:.2f} -> {ft['skate_locked_cm']:.2f} cm/frame on contact frames "
+              f"(real takes {ft['skate_real_cm']:.2f}), deepest sink below the take's floor {ft['sink_raw_cm']:.1f} "
+              f"-> {ft['sink_locked_cm']:.1f} cm, knees left fully straight {100 * ft['straight_knees_locked']:.1f} %")
     if "paths" in result:
         print_paths(result["paths"])
 
@@ -166,6 +176,8 @@ def run(args) -> dict:
         extra["pops_filters"] = (pops.pop("butterworth_cutoff_hz")[0], pops.pop("median_frames")[0])
         pops.pop("strnn_frames_per_s")
         result["denoise_pops"] = pops
+    if args.feet:
+        result["feet"] = evaluate_feet(engine, clips)
     if args.paths:
         result["paths"] = run_paths(args, clips)
     print_table(result, extra)

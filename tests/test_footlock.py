@@ -174,3 +174,55 @@ def test_fixed_frames_stay_and_locks_continue_from_them():
     jump = np.linalg.norm(np.diff(locked[keep - 3:keep + 3], axis=0), axis=-1).max()
     usual = np.linalg.norm(np.diff(slid, axis=0), axis=-1).max()
     assert jump <= usual, "no jump at the seam"
+
+
+def test_ik_keeps_a_bent_knee_off_full_extension():
+    """A target far out of reach leaves the knee bent by the soft limit, never snapped straight;
+    a leg that was straight already may stay straight."""
+    hip, knee, ankle = leg(0.3)
+    far = hip + np.array([0.0, -1.5, 0.0])
+    k, a = fl.two_bone_ik(hip, knee, ankle, far)
+    pos = np.repeat(walking_skeleton(1), 1, 0).astype(np.float64)
+    pos[0, fl._HIP[0]], pos[0, fl._KNEE[0]], pos[0, fl._ANKLE[0]] = hip, k, a
+    assert fl.knee_angles(pos)[0, 0] >= fl.MIN_KNEE_DEG - 1e-6
+    hip, knee, ankle = leg(0.0)
+    k, a = fl.two_bone_ik(hip, knee, ankle, far)
+    assert np.linalg.norm(a - hip) == pytest.approx(0.87, abs=1e-6)
+
+
+@pytest.mark.parametrize("shift", [-0.07, 0.10])
+def test_generated_feet_are_put_back_on_the_floor(shift):
+    """Frames after a fixed stretch that sink 7 cm into the floor (or hover 10 cm above it): after the
+    lock, contact heels and toes are back at the heights the clean walk has them (within the lock's 1 cm
+    tolerance on average, 3 cm at worst), and no
+    heel or toe is more than 2 cm below its height in contact in the fixed frames."""
+    clean = walking_skeleton(150).astype(np.float64)
+    keep = 40
+    moved = clean.copy()
+    moved[keep:, :, 1] += shift * np.clip((np.arange(150 - keep) / 15.0), 0, 1)[:, None]  # eases in over 0.5 s
+    contacts = fl.detect_foot_contacts(clean)
+    locked = fl.foot_lock(moved, MODEL_FPS, contacts, fixed=np.arange(150) < keep)
+    rest = fl.rest_heights(clean, contacts > 0.5, np.arange(150) < keep)
+    on = contacts[keep + 20:] > 0.5
+    heights = locked[keep + 20:][:, CONTACT_JOINTS, 1]
+    before = moved[keep + 20:][:, CONTACT_JOINTS, 1]
+    truth = clean[keep + 20:][:, CONTACT_JOINTS, 1]  # the heights the feet had on the floor
+    assert np.abs(heights - truth)[on].mean() < 0.015 < 0.05 < np.abs(before - truth)[on].mean()
+    assert np.abs(heights - truth)[on].max() < 0.03
+    assert (rest - locked[keep:][:, CONTACT_JOINTS, 1]).max() < 0.02
+    assert np.abs(bone_lengths(locked) - bone_lengths(moved)).max() < 1e-5
+
+
+def test_feet_evaluation_of_extended_walks():
+    """The bundled model extends procedural walks; after Foot Lock the feet skate less, sink no
+    more than 2 cm below the context's floor, and no knee is left fully straight."""
+    from model_core.dataset import Clip
+    from model_core.engine import Engine
+    from model_core.feet_evaluation import evaluate_feet
+
+    clips = [Clip(f"walk_{i}", "test", walking_skeleton(60, speed=1.0 + 0.2 * i), np.zeros((60, 70)))
+             for i in range(3)]
+    out = evaluate_feet(Engine.load(), clips, frames=90)
+    assert out["clips"] == 3 and out["frames"] == 90
+    assert out["skate_locked_cm"] < out["skate_raw_cm"]
+    assert out["sink_locked_cm"] <= 2.0 and out["straight_knees_locked"] == 0.0
