@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import fusion
+from . import familiarity as _familiarity, fusion
 from .conventions import JOINT_INDEX, MODEL_FPS, STANDARD_LEG_LENGTH, UP_AXIS
 from .features import gaussian_smooth
 from .rigs import leg_length
@@ -81,6 +81,14 @@ def extend_positions(engine, pos: np.ndarray, fps: float, frames: int) -> np.nda
     new = np.asarray(engine.extend(norm.to_model(ctx), n_model), dtype=np.float64)
     seq = np.concatenate([ctx[-1:], blend_seam(ctx, norm.to_user(new))])  # model frame 0 = the last context frame
     return sample_at(seq, MODEL_FPS, np.arange(1, frames + 1) / fps)
+
+
+def familiarity(engine, pos: np.ndarray, fps: float) -> _familiarity.Familiarity:
+    """How familiar a clip ``[F, 21, 3]`` (Y-up, scene units, ``fps``; at least the model's context)
+    is to the model (:mod:`familiarity`), read at the model's rate and scale as Extend reads it."""
+    n = model_frames_available(len(pos), fps)
+    clip = sample_at(pos, fps, (len(pos) - 1) / fps - np.arange(n)[::-1] / MODEL_FPS)
+    return _familiarity.assess(engine, fit_normalisation(clip).to_model(clip))
 
 
 def blend_seam(ctx: np.ndarray, new: np.ndarray, frames: int = SEAM_FRAMES) -> np.ndarray:

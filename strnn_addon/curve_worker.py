@@ -14,7 +14,7 @@ from ..model_core.conventions import zup_to_yup
 from ..model_core.solve import anchor_positions, fk, solve
 from . import anim, curves, engine_bridge, mapping, pipeline, rig_io
 from .pipeline import UserError
-from .workers import RECORD, _lock, _model_steps, _prefs, _write_new, made_by
+from .workers import RECORD, _lock, _model_steps, _prefs, _write_new, familiarity_record, made_by
 
 
 def follow_curve_steps(context, obj, *, curve: str = "", frames: int = 0, speed: float = 0.0, foot_lock: bool = True,
@@ -60,6 +60,8 @@ def follow_curve_steps(context, obj, *, curve: str = "", frames: int = 0, speed:
     new_frames = start + np.arange(n, dtype=np.float64)
     record = made_by("Follow Curve", clip, engine_bridge.model_used(_prefs(context)), curve=curve_obj.name,
                      frames=n, speed=float(speed), foot_lock=foot_lock, steering_steps=steps)
+    if context_pos is not None:
+        record.update(familiarity_record(engine_bridge.familiarity(_prefs(context), context_pos, clip.fps)))
     if clip.action is not None:
         return _write_new(context, clip, "curve", new_frames, loc, rot, previous, None, record)
     return _write_fresh(context, clip, new_frames, loc, rot, record)

@@ -134,6 +134,11 @@ def extend(prefs, positions: np.ndarray, fps: float, frames: int) -> np.ndarray:
     return motion_ops.extend_positions(generator_from_prefs(prefs), positions, fps, frames)
 
 
+def familiarity(prefs, positions: np.ndarray, fps: float):
+    """How familiar ``positions`` ``[F, 21, 3]`` (Y-up scene units at ``fps``) are to the main model."""
+    return motion_ops.familiarity(generator_from_prefs(prefs), positions, fps)
+
+
 def denoise_steps(prefs, positions: np.ndarray, fps: float, strength: float):
     """Denoised ``positions`` ``[F, 21, 3]`` (same space and frames), blended by ``strength``.
     A step generator (``model_core.steps``): yields the fraction of the clip done as it goes."""

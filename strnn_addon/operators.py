@@ -114,10 +114,12 @@ class STRNN_OT_extend_clip(_Staged, bpy.types.Operator):
                             foot_lock=self.foot_lock, from_frame=start)
 
     def done(self, action) -> str:
+        from .workers import report_note
+
         if self.from_current:
             return (f"Continued after frame {bpy.context.scene.frame_current} with {self.frames} new frames in new "
-                    f"action {action.name!r}")
-        return f"Added {self.frames} frames in new action {action.name!r}"
+                    f"action {action.name!r}{report_note(action)}")
+        return f"Added {self.frames} frames in new action {action.name!r}{report_note(action)}"
 
 
 class STRNN_OT_denoise_action(_Staged, bpy.types.Operator):
@@ -193,7 +195,9 @@ class STRNN_OT_follow_curve(_Staged, bpy.types.Operator):
         curve = find_curve(bpy.context, self.curve)
         others = len(curve.data.splines) - 1
         note = f" (it followed the first of the curve's {others + 1} splines)" if others else ""
-        return f"Walked the curve {curve.name!r} into new action {action.name!r}{note}"
+        from .workers import report_note
+
+        return f"Walked the curve {curve.name!r} into new action {action.name!r}{note}{report_note(action)}"
 
 
 class STRNN_OT_auto_map(bpy.types.Operator):

@@ -138,6 +138,7 @@ def extend_steps(context, obj, *, frames: int = 120, context_frames: int = 0, fo
     new_frames = end + 1 + np.arange(frames, dtype=np.float64)
     record = made_by("Extend Clip", clip, engine_bridge.model_used(_prefs(context)), frames=frames,
                      context_frames=len(ctx_frames), foot_lock=foot_lock, from_frame=from_frame)
+    record.update(familiarity_record(_model_call(engine_bridge.familiarity, _prefs(context), pos, clip.fps)))
     replace = None if end == clip.last else (end + 0.5, float("inf"))  # the old tail goes
     return _write_new(context, clip, "extended", new_frames, loc, rot, previous, replace, record)
 
@@ -236,6 +237,23 @@ def made_by(operation: str, clip, model: str = "", **settings) -> dict:
         record["model"] = model
     record["settings"] = {k: v for k, v in settings.items() if v is not None}
     return record
+
+
+def familiarity_record(found) -> dict:
+    """The record's ``familiarity`` entry: the clip's reconstruction error against the model's usual,
+    and the note the operator reports when the clip is unlike what the model learnt."""
+    entry = {"reconstruction_cm": round(found.error_cm, 2)}
+    if found.usual_cm:
+        entry["usual_cm_p90"] = found.usual_cm
+    if found.note():
+        entry["note"] = found.note()
+    return {"familiarity": entry}
+
+
+def report_note(action) -> str:
+    """The familiarity note of a new action's record, as a sentence to append to a report ('' if none)."""
+    note = action.get(RECORD, {}).get("familiarity", {}).get("note", "")
+    return f". {note}" if note else ""
 
 
 def _write_new(context, clip, suffix, frames, loc, rot, previous, replace, record: dict, bones=None):

@@ -96,6 +96,18 @@ def test_steps_report_model_progress_and_stop_without_changes(real_model, addon,
     assert seen == ["read", "model", "solve", "write"] and new is action_of(obj) and new is not action
 
 
+def shake(obj, degrees: float = 2.0, seed: int = 0) -> None:
+    """Shake every Euler rotation key of ``obj``'s action by about ``degrees`` (Gaussian)."""
+    rng = np.random.default_rng(seed)
+    for fc in fcurves_of(obj):
+        if fc.data_path.endswith("rotation_euler"):
+            co = np.empty(2 * len(fc.keyframe_points), np.float32)
+            fc.keyframe_points.foreach_get("co", co)
+            co[1::2] += rng.normal(0, np.radians(degrees), len(co) // 2)
+            fc.keyframe_points.foreach_set("co", co)
+            fc.update()
+
+
 def test_denoise_noisy_clip_with_model(real_model, addon, tmp_path):
     """On a real take with rotation jitter the bundled denoising model leaves under half of it.
     The claim is about real capture, which the repository cannot ship: without the data it skips."""
@@ -107,14 +119,7 @@ def test_denoise_noisy_clip_with_model(real_model, addon, tmp_path):
     obj = import_bvh(clip, update_scene_fps=True)
     frames = np.arange(int(action_of(obj).frame_range[0]), int(action_of(obj).frame_range[1]) + 1)
     clean = evaluated_joints(addon, obj, frames)
-    rng = np.random.default_rng(0)
-    for fc in fcurves_of(obj):  # shake every rotation by about 2 degrees
-        if fc.data_path.endswith("rotation_euler"):
-            co = np.empty(2 * len(fc.keyframe_points), np.float32)
-            fc.keyframe_points.foreach_get("co", co)
-            co[1::2] += rng.normal(0, 0.035, len(co) // 2)
-            fc.keyframe_points.foreach_set("co", co)
-            fc.update()
+    shake(obj)
     noisy = evaluated_joints(addon, obj, frames)
     denoise()
     out = evaluated_joints(addon, obj, frames)
@@ -135,7 +140,8 @@ def test_denoise_model_folder_preference_picks_the_denoiser(real_model, addon, t
     assert Path(bridge.denoiser_folder(prefs)) == expected
     path, frames, outputs = walk_bvh(tmp_path, frames=60), np.arange(1, 61), []
     for folder in ("", str(real_model)):
-        obj = import_bvh(path)  # the same clip each time
+        obj = import_bvh(path)  # the same clip each time, with the same jitter
+        shake(obj)
         prefs.denoise_model_folder = folder
         try:
             denoise()

@@ -7,6 +7,8 @@ continue the clip without a jump, neither freeze nor explode, and keep bone leng
 
 from __future__ import annotations
 
+import importlib
+
 import bpy
 import numpy as np
 import pytest
@@ -192,3 +194,15 @@ def test_from_current_frame_refused(fake_model, addon, frame, match):
     with pytest.raises(RuntimeError, match=match):
         bpy.ops.strnn.extend_clip(frames=20, from_current=True)
     assert action_of(obj) is old and same_keys(snapshot, key_snapshot(obj))
+
+
+def test_extend_says_when_the_motion_is_unfamiliar(real_model, addon):
+    """A procedural walk is far from any capture: the new action records how far, and the report
+    (built from that record) tells the animator to check the result."""
+    obj = mixamo_walk(60)
+    assert bpy.ops.strnn.extend_clip(frames=10) == {"FINISHED"}
+    found = action_of(obj)["strnn"]["familiarity"]
+    assert found["reconstruction_cm"] > found["usual_cm_p90"]
+    assert "unlike what the model learnt" in found["note"]
+    workers = importlib.import_module(addon.__name__ + ".strnn_addon.workers")
+    assert workers.report_note(action_of(obj)).startswith(". This motion is unlike")

@@ -22,9 +22,10 @@ def test_extend_then_denoise_then_lock(addon, tmp_path, real_model):
     need = addon_module(addon, "strnn_addon.pipeline").min_scene_frames(bpy.context.scene.render.fps)
     assert bpy.ops.strnn.extend_clip(frames=30, foot_lock=True) == {"FINISHED"}
     assert "strnn" not in source  # the original is left as it was
-    assert record(obj) == {"operation": "Extend Clip", "version": VERSION, "source_action": "walk",
-                           "model": str(real_model), "settings": {"frames": 30, "context_frames": need,
-                                                                   "foot_lock": True}}
+    made = record(obj)
+    assert set(made.pop("familiarity")) >= {"reconstruction_cm", "usual_cm_p90"}
+    assert made == {"operation": "Extend Clip", "version": VERSION, "source_action": "walk",
+                    "model": str(real_model), "settings": {"frames": 30, "context_frames": need, "foot_lock": True}}
     extended = action_of(obj).name
     assert bpy.ops.strnn.denoise_action(strength=0.5, use_range=True, frame_start=5, frame_end=70) == {"FINISHED"}
     denoised = record(obj)
