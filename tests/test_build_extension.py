@@ -44,6 +44,7 @@ def test_wheel_listed_in_manifest(tmp_path):
     assert out.name == "strnn_motion-0.1.0.zip"
     assert 'wheels = ["./wheels/tinypkg-0.1-py3-none-any.whl"]' in manifest_of(out)
     assert "wheels/tinypkg-0.1-py3-none-any.whl" in names_of(out)
+    assert "LICENSE" in names_of(out) and "GNU GENERAL PUBLIC LICENSE" in zipfile.ZipFile(out).read("LICENSE").decode()
     assert "wheels" not in (REPO / "blender_manifest.toml").read_text()  # only the staged copy changes
 
 
