@@ -1,0 +1,118 @@
+"""In-betweening: the frames between a context and a target, from the motion model.
+
+The model continues the context across the gap as Extend would. Its continuation is then
+bent onto the target with corrections that grow smoothly over the gap, from nothing at the
+context (where the motion already continues it) to exactly what is missing at the target:
+
+- the body's heading and ground position (the root), so that it arrives where and facing how
+  the target stands: the continuation's path is turned about the gap's start and shifted;
+- the pose in the body's own frame (root-local joints), so that it arrives in the target pose.
+
+Each correction follows a cubic Hermite curve with zero slope at the start; with two or more
+target frames its slope at the end also matches the target's own velocity, so the motion
+leaves the gap as the target moves on (no pop after it). Positions are ``[F, 21, 3]`` metres,
+Y-up, at the model's rate; :func:`inbetween_positions` takes a user's clip at any rate and unit.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .conventions import MODEL_FPS, ROOT, UP_AXIS
+from .features import heading, yaw_matrix
+from .motion_ops import fit_normalisation, sample_at
+
+MAX_GAP_S = 4.0  # longest gap the model is asked to bridge (its continuation drifts beyond a few seconds)
+
+
+def _root_and_local(pos: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(ground position of the hips ``[F, 3]``, heading ``[F]``, joints in the body's frame ``[F, J, 3]``)."""
+    pos = np.asarray(pos, np.float64)
+    yaw = heading(pos, sigma=0.0)
+    root = pos[:, ROOT].copy()
+    root[:, UP_AXIS] = 0.0
+    local = np.einsum("fij,fkj->fki", yaw_matrix(-yaw), pos - root[:, None])
+    return root, yaw, local
+
+
+def _hermite(s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Cubic Hermite weights of the end value and the end slope at ``s`` in [0, 1] (zero value and
+    slope at the start)."""
+    return 3 * s ** 2 - 2 * s ** 3, s ** 3 - s ** 2
+
+
+def _wrap(angle: np.ndarray) -> np.ndarray:
+    return (angle + np.pi) % (2 * np.pi) - np.pi
+
+
+def bend_onto(pred: np.ndarray, start: np.ndarray, target: np.ndarray) -> np.ndarray:
+    """The continuation ``pred`` ``[N + 1, J, 3]`` (its last frame where the target's first should be)
+    bent onto ``target`` ``[T, J, 3]`` (T >= 1); ``start`` ``[J, 3]`` is the context's last frame.
+    Returns the ``N`` gap frames and the frame where the target is, ``[N + 1, J, 3]``."""
+    n1 = len(pred)
+    s = np.arange(1, n1 + 1) / n1
+    h_end, h_slope = _hermite(s)
+    p_root, p_yaw, p_local = _root_and_local(pred)
+    t_root, t_yaw, t_local = _root_and_local(target)
+    origin = _root_and_local(start[None])[0][0]
+    # Heading: turn the continuation's path about the gap's start onto the target's heading.
+    turn = _wrap(t_yaw[0] - p_yaw[-1])
+    turn_slope = 0.0
+    if len(target) > 1:  # arrive turning as the target turns on
+        turn_slope = (_wrap(t_yaw[1] - t_yaw[0]) - _wrap(p_yaw[-1] - p_yaw[-2])) * n1
+    angle = turn * h_end + turn_slope * h_slope
+    rot = yaw_matrix(angle)
+    root = origin + np.einsum("fij,fj->fi", rot, p_root - origin)
+    # Ground position: shift what is still missing at the target, slope matched to its velocity.
+    miss = t_root[0] - root[-1]
+    miss_slope = np.zeros(3)
+    if len(target) > 1:
+        miss_slope = ((t_root[1] - t_root[0]) - (root[-1] - root[-2])) * n1
+    root = root + h_end[:, None] * miss + h_slope[:, None] * miss_slope
+    # Pose in the body's frame.
+    local = p_local + h_end[:, None, None] * (t_local[0] - p_local[-1])
+    if len(target) > 1:
+        local = local + h_slope[:, None, None] * ((t_local[1] - t_local[0]) - (p_local[-1] - p_local[-2])) * n1
+    yaw = p_yaw + angle
+    out = np.einsum("fij,fkj->fki", yaw_matrix(yaw), local) + root[:, None]
+    return out.astype(np.float32)
+
+
+def inbetween(engine, context: np.ndarray, target: np.ndarray, frames: int) -> np.ndarray:
+    """``frames`` frames ``[frames, J, 3]`` between ``context`` ``[C, J, 3]`` (C >= 1; up to the model's
+    ``m`` last frames are read, fewer are padded by holding the first) and ``target`` ``[T, J, 3]``
+    (T >= 1), all at the model's rate and scale."""
+    context = np.asarray(context, np.float64)
+    if len(context) < engine.m:
+        context = np.concatenate([np.repeat(context[:1], engine.m - len(context), 0), context])
+    pred = np.asarray(engine.extend(context[-engine.m:].astype(np.float32), frames + 1), np.float64)
+    return bend_onto(pred, context[-1], np.asarray(target, np.float64))[:-1]
+
+
+def inbetween_positions(engine, before: np.ndarray, after: np.ndarray, fps: float, frames: int) -> np.ndarray:
+    """Fill a gap of ``frames`` scene frames between ``before`` ``[B, 21, 3]`` (the frames up to the gap)
+    and ``after`` ``[A, 21, 3]`` (the frames from its end on), Y-up scene units at ``fps``.
+
+    Both sides are read at the model's rate, aligned on the gap's edges; the model's in-between is
+    brought back to the scene's frames. Returns ``[frames, 21, 3]`` in the same space."""
+    if frames < 1:
+        raise ValueError("the gap has no frame to fill")
+    gap_s = (frames + 1) / fps
+    if gap_s > MAX_GAP_S:
+        raise ValueError(f"the gap of {frames} frames ({gap_s:.1f} s) is longer than the {MAX_GAP_S:g} s the model "
+                         "can bridge: key a pose inside it and fill the two shorter gaps")
+    n_before = int(math.floor((len(before) - 1) * MODEL_FPS / fps + 1e-6)) + 1
+    ctx = sample_at(before, fps, (len(before) - 1) / fps - np.arange(min(n_before, engine.m))[::-1] / MODEL_FPS)
+    n_after = min(int(math.floor((len(after) - 1) * MODEL_FPS / fps + 1e-6)) + 1, 2)
+    tgt = sample_at(after, fps, np.arange(n_after) / MODEL_FPS)
+    norm = fit_normalisation(np.concatenate([ctx, tgt]))
+    n_model = max(int(round(gap_s * MODEL_FPS)) - 1, 1)
+    inner = inbetween(engine, norm.to_model(ctx), norm.to_model(tgt), n_model)
+    seq = np.concatenate([ctx[-1:], norm.to_user(inner), tgt[:1]])  # model frames 0 .. n_model + 1
+    times = np.r_[0.0, np.arange(1, n_model + 1) * gap_s / (n_model + 1), gap_s]
+    flat = seq.reshape(len(seq), -1)
+    want = np.arange(1, frames + 1) / fps
+    out = np.stack([np.interp(want, times, flat[:, k]) for k in range(flat.shape[1])], -1)
+    return out.reshape(frames, *seq.shape[1:])

@@ -1,0 +1,89 @@
+"""In-betweening evaluation (``scripts/evaluate.py --inbetween N ...``), in the spirit of the LaFAN1
+benchmark (Harvey et al. 2020) but in centimetres on the 21 joints: windows of 20 context frames,
+a gap of N frames and the frame after it as the target, stride 15. For each gap length: L2P (mean
+global joint position error over the gap), the error at the target frame, and foot skate on the
+gap's contact frames; beside linear interpolation of the root and of the root-relative joints (the
+standard baseline), the same with the heading interpolated on the circle and the joints in the
+body's frame, and the real takes' own foot skate. Positions are metres, Y-up, 30 fps.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .features import detect_contacts, yaw_matrix
+from .footlock import foot_lock, foot_skate_cm
+from .inbetween import _root_and_local, _wrap, bend_onto
+from .metrics import extend_batch, mpjpe_cm
+
+CONTEXT = 20
+STRIDE = 15
+
+
+def windows(clips: list[np.ndarray], gap: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(contexts ``[W, 20, J, 3]``, true gaps ``[W, gap, J, 3]``, targets ``[W, J, 3]``)."""
+    ctx, mid, tgt = [], [], []
+    for pos in clips:
+        for s in range(0, len(pos) - CONTEXT - gap, STRIDE):
+            ctx.append(pos[s:s + CONTEXT])
+            mid.append(pos[s + CONTEXT:s + CONTEXT + gap])
+            tgt.append(pos[s + CONTEXT + gap])
+    if not ctx:
+        raise ValueError(f"no clip has the {CONTEXT + gap + 1} frames an in-betweening window of {gap} needs")
+    return np.stack(ctx), np.stack(mid), np.stack(tgt)
+
+
+def interpolate(last: np.ndarray, target: np.ndarray, gap: int, heading: bool = False) -> np.ndarray:
+    """Linear interpolation ``[gap, J, 3]`` from ``last`` to ``target`` ``[J, 3]``: of the root and the
+    root-relative joints, or (``heading``) of the root, the heading on the circle and the joints in
+    the body's frame."""
+    s = (np.arange(1, gap + 1) / (gap + 1))[:, None, None]
+    if not heading:
+        r0, r1 = last[:1], target[:1]
+        return (r0 + s * (r1 - r0)) + (last - r0) + s * ((target - r1) - (last - r0))
+    (a, b) = (_root_and_local(p[None]) for p in (last, target))
+    root = a[0] + s[:, 0] * (b[0] - a[0])
+    yaw = a[1][0] + s[:, 0, 0] * _wrap(b[1][0] - a[1][0])
+    local = a[2] + s * (b[2] - a[2])
+    return np.einsum("fij,fkj->fki", yaw_matrix(yaw), local) + root[:, None]
+
+
+def evaluate_inbetween(engine, clips, gaps=(15, 30, 60)) -> dict:
+    out = {"gap_frames": list(gaps), "windows": [],
+           "l2p_cm": {"strnn": [], "interpolation": [], "interpolation_heading": []},
+           "target_error_cm": {"strnn": []},
+           "foot_skate_cm": {"strnn": [], "strnn_locked": [], "interpolation": [], "real": []}}
+    positions = [c.positions for c in clips]
+    for gap in gaps:
+        ctx, true, tgt = windows(positions, gap)
+        pred = extend_batch(engine, ctx, gap + 1)
+        bent = np.stack([bend_onto(p, c[-1], t[None]) for p, c, t in zip(pred, ctx, tgt)])
+        ours, arrive = bent[:, :-1], bent[:, -1]
+        lerp = np.stack([interpolate(c[-1], t, gap) for c, t in zip(ctx, tgt)])
+        turn = np.stack([interpolate(c[-1], t, gap, heading=True) for c, t in zip(ctx, tgt)])
+        out["windows"].append(int(len(ctx)))
+        for name, motion in (("strnn", ours), ("interpolation", lerp), ("interpolation_heading", turn)):
+            out["l2p_cm"][name].append(float(mpjpe_cm(motion, true).mean()))
+        out["target_error_cm"]["strnn"].append(float(mpjpe_cm(arrive, tgt).mean()))
+        locked = np.stack([lock_gap(c, g, t) for c, g, t in zip(ctx, ours, tgt)])
+        for name, motion in (("strnn", ours), ("strnn_locked", locked), ("interpolation", lerp), ("real", true)):
+            out["foot_skate_cm"][name].append(_skate(ctx, motion, tgt))
+    return out
+
+
+def lock_gap(ctx: np.ndarray, gap: np.ndarray, tgt: np.ndarray) -> np.ndarray:
+    """The gap ``[N, J, 3]`` after Foot Lock with the context and the target frame fixed, as Fill Gap's
+    Foot Lock option runs it."""
+    seq = np.concatenate([ctx, gap, tgt[None]])
+    fixed = np.ones(len(seq), bool)
+    fixed[len(ctx):len(ctx) + len(gap)] = False
+    return foot_lock(seq, fixed=fixed)[len(ctx):len(ctx) + len(gap)]
+
+
+def _skate(ctx: np.ndarray, gap: np.ndarray, tgt: np.ndarray) -> float:
+    """Mean foot skate (cm / frame) over the gaps' contact frames, contacts detected on each window."""
+    values = []
+    for c, g, t in zip(ctx, gap, tgt):
+        seq = np.concatenate([c[-1:], g, t[None]])
+        values.append(foot_skate_cm(seq, detect_contacts(np.concatenate([c, g, t[None]]))[len(c) - 1:]))
+    return float(np.mean(values))

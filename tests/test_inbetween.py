@@ -1,0 +1,65 @@
+"""In-betweening: the continuation bent onto the target arrives there (pose, root, heading) and,
+given two target frames, at the target's own velocity; the bundled model fills a gap of a user's
+clip at any rate and unit; the interpolation baselines of the evaluation."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from model_core.engine import Engine
+from model_core.features import heading
+from model_core.inbetween import bend_onto, inbetween, inbetween_positions
+from model_core.inbetween_evaluation import evaluate_inbetween, interpolate
+from model_core.synthetic import walking_skeleton
+
+
+def test_bend_onto_arrives_at_the_target_and_its_velocity():
+    walk = walking_skeleton(120, radius=5.0).astype(np.float64)
+    start, truth = walk[39], walk[40:71]
+    pred = walking_skeleton(150, radius=3.0, speed=1.0)[40:71].astype(np.float64)  # a wrong continuation
+    out = bend_onto(pred, start, walk[70:72])
+    assert np.abs(out[-1] - walk[70]).max() < 1e-4  # the pose, root and heading of the target
+    np.testing.assert_allclose(out[-1] - out[-2], walk[71] - walk[70], atol=3e-3)  # arrives moving on
+    assert np.abs(out - truth).max() > 0.01  # it is the bent continuation, not the truth
+    first = np.linalg.norm(out[0] - pred[0], axis=-1).max()
+    assert first < 0.01, "no jump at the start of the gap"
+
+
+def test_the_model_fills_a_gap_at_any_rate_and_unit():
+    engine = Engine.load()
+    walk = walking_skeleton(8 * 60, fps=60.0) * 100.0  # centimetres at 60 fps
+    before, after = walk[:100], walk[160:]
+    gap = inbetween_positions(engine, before, after, 60.0, 59)
+    assert gap.shape == (59, 21, 3) and np.isfinite(gap).all()
+    seq = np.concatenate([before[-3:], gap, after[:3]])
+    step = np.linalg.norm(np.diff(seq, axis=0), axis=-1).max(1)
+    assert step.max() < 3 * np.linalg.norm(np.diff(walk, axis=0), axis=-1).max(1).max(), "no pop"
+    assert np.linalg.norm(gap[-1] - after[0], axis=-1).mean() < 4.0  # 1/60 s before the target, in cm
+    with pytest.raises(ValueError, match="longer than"):
+        inbetween_positions(engine, before, after, 60.0, 300)
+
+
+def test_a_single_context_pose_is_enough():
+    engine = Engine.load()
+    walk = walking_skeleton(60)
+    out = inbetween(engine, walk[:1], walk[40:41], 39)
+    assert out.shape == (39, 21, 3) and np.isfinite(out).all()
+
+
+def test_interpolation_baselines_and_the_evaluation_keys():
+    walk = walking_skeleton(200, radius=4.0)
+    lerp = interpolate(walk[0], walk[30], 29)
+    np.testing.assert_allclose(lerp[14], 0.5 * (walk[0] + walk[30]), atol=0.02)  # halfway, up to the root split
+    turn = interpolate(walk[0], walk[30], 29, heading=True)
+    yaw = heading(turn, sigma=0.0)
+    assert np.all(np.diff(np.unwrap(yaw)) * np.sign(np.unwrap(yaw)[-1] - yaw[0]) >= -1e-6)  # turns one way
+
+    class Clip:
+        positions = walk
+
+    out = evaluate_inbetween(Engine.load(), [Clip()], gaps=(15, 30))
+    assert out["gap_frames"] == [15, 30] and out["windows"][0] > 0
+    assert set(out["l2p_cm"]) == {"strnn", "interpolation", "interpolation_heading"}
+    assert max(out["target_error_cm"]["strnn"]) < 1.0
+    assert set(out["foot_skate_cm"]) == {"strnn", "strnn_locked", "interpolation", "real"}
