@@ -29,8 +29,8 @@ sys.path.insert(0, str(REPO / "scripts"))
 
 import bpy  # noqa: E402
 
-from model_core.conventions import JOINTS, PARENT_NAMES, yup_to_zup  # noqa: E402
-from model_core.synthetic import _offset  # noqa: E402
+from model_core.motion.conventions import JOINTS, PARENT_NAMES, yup_to_zup  # noqa: E402
+from model_core.motion.synthetic import _offset  # noqa: E402
 
 FINGERS = ("Thumb", "Index", "Middle", "Ring", "Pinky")
 
@@ -39,9 +39,9 @@ def untrained_release(folder: Path) -> Path:
     """A randomly initialised model of the default size, saved as a release (timing only)."""
     import torch
 
-    from model_core.checkpoint import save_release
-    from model_core.conventions import LAYOUT
-    from model_core.model import STRNN, STRNNConfig
+    from model_core.io.checkpoint import save_release
+    from model_core.model.strnn import STRNN, STRNNConfig
+    from model_core.motion.conventions import LAYOUT
 
     torch.manual_seed(0)
     cfg = STRNNConfig()

@@ -10,8 +10,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..model_core.conventions import zup_to_yup
-from ..model_core.solve import anchor_positions, fk, solve
+from ..model_core.motion.conventions import zup_to_yup
+from ..model_core.rig.solve import anchor_positions, fk, solve
 from . import anim, curves, engine_bridge, mapping, pipeline, rig_io
 from .pipeline import UserError
 from .workers import RECORD, _lock, _model_steps, _prefs, _write_new, familiarity_record, made_by

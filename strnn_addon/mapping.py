@@ -2,9 +2,9 @@
 
 from __future__ import annotations
 
-from ..model_core import bonemap
-from ..model_core.conventions import JOINTS
-from ..model_core.solve import Anchors, Rig, SolveError
+from ..model_core.motion.conventions import JOINTS
+from ..model_core.rig import bonemap
+from ..model_core.rig.solve import Anchors, Rig, SolveError
 from .props import TAIL_JOINTS, joint_label
 
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import bpy
 from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, PointerProperty, StringProperty
 
-from ..model_core.conventions import JOINTS
+from ..model_core.motion.conventions import JOINTS
 
 ADDON_ID = __package__.rpartition(".")[0]  # the extension's module, e.g. bl_ext.user_default.strnn_motion
 TAIL_JOINTS = ("l_toe", "r_toe", "l_fingertip", "r_fingertip")

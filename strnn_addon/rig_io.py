@@ -1,6 +1,6 @@
 """Read an armature's rest pose and its action into arrays (the Blender boundary).
 
-Everything returned is NumPy: the rest pose as a :class:`model_core.solve.Rig`, the
+Everything returned is NumPy: the rest pose as a :class:`model_core.rig.solve.Rig`, the
 local pose channels per frame, and canonical joint positions in world space. Frames
 are the scene's; world space is Blender's Z-up in scene units.
 """
@@ -12,8 +12,8 @@ import re
 import bpy
 import numpy as np
 
-from ..model_core import rotations
-from ..model_core.solve import Rig, fk
+from ..model_core.motion import rotations
+from ..model_core.rig.solve import Rig, fk
 
 _ROT_PATHS = {"QUATERNION": "rotation_quaternion", "AXIS_ANGLE": "rotation_axis_angle"}
 

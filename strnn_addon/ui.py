@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import bpy
 
-from ..model_core.conventions import JOINTS
+from ..model_core.motion.conventions import JOINTS
 from .operators import check_message
 from .props import TAIL_JOINTS, joint_label
 

@@ -1,6 +1,6 @@
 """Extend Clip, Denoise Action and Foot Lock, as keyword-only workers the operators call.
 
-Each worker is a step generator (``model_core.steps``) that yields the name of each
+Each worker is a step generator (``model_core.inference.steps``) that yields the name of each
 stage (read, model, solve, write) before running it, and may yield the fraction of a stage
 done as it goes (Follow Curve, window by window), so the operators can show progress and
 stop on Esc in between; :func:`run` drives one to the end. Every check and all the computing happen
@@ -15,9 +15,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..model_core import footlock
-from ..model_core.solve import solve
-from ..model_core.steps import drive
+from ..model_core.inference.steps import drive
+from ..model_core.ops import footlock
+from ..model_core.rig.solve import solve
 from . import engine_bridge, pipeline, rig_io
 from .pipeline import UserError
 from .props import preferences

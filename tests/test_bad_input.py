@@ -8,11 +8,11 @@ from pathlib import Path
 
 import pytest
 
-from model_core.bvh import BvhError, read_bvh
-from model_core.bvh_export import write_bvh
-from model_core.dataset import DataError, find_bvh, load_folder
-from model_core.rigs import RigError, load_clip
-from model_core.synthetic import walking_skeleton
+from model_core.io.bvh import BvhError, read_bvh
+from model_core.io.bvh_export import write_bvh
+from model_core.model.dataset import DataError, find_bvh, load_folder
+from model_core.motion.synthetic import walking_skeleton
+from model_core.rig.rigs import RigError, load_clip
 
 REPO = Path(__file__).resolve().parent.parent
 

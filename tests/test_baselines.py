@@ -13,8 +13,12 @@ import pytest
 
 torch = pytest.importorskip("torch")
 
-from model_core.baseline_training import BaselineTrainConfig, lr_scale, train_baseline  # noqa: E402
-from model_core.baselines import (  # noqa: E402
+from model_core.inference.engine import Engine  # noqa: E402
+from model_core.inference.torch_engine import TorchEngine  # noqa: E402
+from model_core.io.bvh_export import write_bvh  # noqa: E402
+from model_core.io.checkpoint import DEFAULT_MODEL, CheckpointError  # noqa: E402
+from model_core.model.baseline_training import BaselineTrainConfig, lr_scale, train_baseline  # noqa: E402
+from model_core.model.baselines import (  # noqa: E402
     MODELS,
     BaselineEngine,
     ResidualGRU,
@@ -23,12 +27,8 @@ from model_core.baselines import (  # noqa: E402
     SiMLPeConfig,
     dct_matrix,
 )
-from model_core.bvh_export import write_bvh  # noqa: E402
-from model_core.checkpoint import DEFAULT_MODEL, CheckpointError  # noqa: E402
-from model_core.conventions import LAYOUT  # noqa: E402
-from model_core.engine import Engine  # noqa: E402
-from model_core.synthetic import walking_skeleton  # noqa: E402
-from model_core.torch_engine import TorchEngine  # noqa: E402
+from model_core.motion.conventions import LAYOUT  # noqa: E402
+from model_core.motion.synthetic import walking_skeleton  # noqa: E402
 
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO / "scripts"))

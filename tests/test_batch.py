@@ -8,8 +8,8 @@ from pathlib import Path
 
 import pytest
 
-from model_core.bvh_export import write_bvh
-from model_core.synthetic import walking_skeleton
+from model_core.io.bvh_export import write_bvh
+from model_core.motion.synthetic import walking_skeleton
 
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO / "scripts"))

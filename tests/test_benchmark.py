@@ -10,8 +10,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from model_core.benchmark import model_costs, roofline
-from model_core.conventions import LAYOUT
+from model_core.eval.benchmark import model_costs, roofline
+from model_core.motion.conventions import LAYOUT
 
 REPO = Path(__file__).resolve().parent.parent
 

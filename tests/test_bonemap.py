@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import pytest
 
-from model_core.bonemap import auto_map, missing, split_side
-from model_core.conventions import JOINTS
+from model_core.motion.conventions import JOINTS
+from model_core.rig.bonemap import auto_map, missing, split_side
 
 
 @pytest.mark.parametrize("name, want", [

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from model_core.bvh import forward_kinematics, read_bvh, resample
+from model_core.io.bvh import forward_kinematics, read_bvh, resample
 
 TWO_BONES = """HIERARCHY
 ROOT Hips

@@ -12,9 +12,14 @@ torch = pytest.importorskip("torch")
 
 from test_engine import random_release  # noqa: E402
 
-from model_core import footlock as fl  # noqa: E402
-from model_core.checkpoint import load_release  # noqa: E402
-from model_core.control import (  # noqa: E402
+from model_core.eval.metrics import bone_lengths_of as bone_lengths  # noqa: E402
+from model_core.inference.steps import drive  # noqa: E402
+from model_core.io.checkpoint import load_release  # noqa: E402
+from model_core.motion.conventions import CONTACT_JOINTS, LAYOUT, PARENTS  # noqa: E402
+from model_core.motion.features import features_to_positions, heading, positions_to_features  # noqa: E402
+from model_core.motion.synthetic import walking_skeleton  # noqa: E402
+from model_core.ops import footlock as fl  # noqa: E402
+from model_core.ops.follow import (  # noqa: E402
     ControlSettings,
     PathFollower,
     align_to_path,
@@ -24,12 +29,7 @@ from model_core.control import (  # noqa: E402
     follow_path_steps,
     foot_speed_cm,
 )
-from model_core.conventions import CONTACT_JOINTS, LAYOUT, PARENTS  # noqa: E402
-from model_core.features import features_to_positions, heading, positions_to_features  # noqa: E402
-from model_core.metrics import bone_lengths_of as bone_lengths  # noqa: E402
-from model_core.paths import Path, evaluation_paths, path_errors_cm  # noqa: E402
-from model_core.steps import drive  # noqa: E402
-from model_core.synthetic import walking_skeleton  # noqa: E402
+from model_core.ops.paths import Path, evaluation_paths, path_errors_cm  # noqa: E402
 
 REPO = FilePath(__file__).resolve().parent.parent
 
@@ -187,7 +187,7 @@ def test_predictor_pass_equals_the_full_model(tmp_path, spatial, residual):
 def test_path_evaluation_section(follower):
     from types import SimpleNamespace
 
-    from model_core.path_evaluation import evaluate_paths
+    from model_core.eval.path_evaluation import evaluate_paths
 
     clips = [SimpleNamespace(name=f"walk_{i}", positions=walking_skeleton(60)) for i in range(2)]
     out = evaluate_paths(follower(steps=0, speed=3.0), clips, seeds=1, log=lambda m: None)

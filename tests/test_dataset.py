@@ -8,9 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from model_core.bvh_export import write_bvh
-from model_core.conventions import LAYOUT
-from model_core.dataset import (
+from model_core.io.bvh_export import write_bvh
+from model_core.model.dataset import (
     DATA_CONFIG,
     Clip,
     DataError,
@@ -24,7 +23,8 @@ from model_core.dataset import (
     take_key,
     window_starts,
 )
-from model_core.synthetic import walking_skeleton
+from model_core.motion.conventions import LAYOUT
+from model_core.motion.synthetic import walking_skeleton
 
 
 def test_split_rule_is_fixed():

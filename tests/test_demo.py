@@ -8,12 +8,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from model_core.bvh import read_bvh
-from model_core.checkpoint import save_release
-from model_core.dataset import Normaliser
-from model_core.features import positions_to_features
-from model_core.rigs import canonical_positions
-from model_core.synthetic import walking_skeleton
+from model_core.io.bvh import read_bvh
+from model_core.io.checkpoint import save_release
+from model_core.model.dataset import Normaliser
+from model_core.motion.features import positions_to_features
+from model_core.motion.synthetic import walking_skeleton
+from model_core.rig.rigs import canonical_positions
 
 REPO = Path(__file__).resolve().parent.parent
 
@@ -22,7 +22,7 @@ REPO = Path(__file__).resolve().parent.parent
 def tiny_model(tmp_path) -> Path:
     """A release folder with random weights of a small STRNN and one seed window."""
     torch = pytest.importorskip("torch")
-    from model_core.model import STRNN, STRNNConfig
+    from model_core.model.strnn import STRNN, STRNNConfig
 
     torch.manual_seed(0)
     cfg = STRNNConfig(width=64, residual_width=64)
@@ -83,7 +83,7 @@ def test_demo_rejects_a_seed_out_of_range(tiny_model, tmp_path, capsys):
 
 
 def test_default_seed_is_the_first_walk():
-    from model_core.checkpoint import walk_seed_index as default_seed
+    from model_core.io.checkpoint import walk_seed_index as default_seed
 
     assert default_seed(["a/x_raise-up_active_002.bvh@24", "a/x_run_active_016.bvh@30",
                          "a/x_walk_active_008.bvh@30", "a/x_walk_normal_001.bvh@30"]) == 2
@@ -92,8 +92,8 @@ def test_default_seed_is_the_first_walk():
 
 def test_denoise_check_halves_the_jitter_on_generated_motion():
     """On motion like the demo's (the shipped model continuing a shipped walking seed)."""
-    from model_core.checkpoint import DEFAULT_MODEL, DENOISE_MODEL
-    from model_core.demo_pipeline import denoise_check, seed_continuation
+    from model_core.eval.demo_pipeline import denoise_check, seed_continuation
+    from model_core.io.checkpoint import DEFAULT_MODEL, DENOISE_MODEL
 
     if not (DEFAULT_MODEL / "model.json").exists() or not (DENOISE_MODEL / "model.json").exists():
         pytest.skip("needs the shipped models")

@@ -7,12 +7,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from model_core.checkpoint import DENOISE_MODEL, CheckpointError
-from model_core.conventions import LAYOUT
-from model_core.dataset import split_of
-from model_core.engine import Engine
-from model_core.metrics import add_noise, best_butterworth, mpjpe_cm
-from model_core.rigs import load_clip
+from model_core.eval.metrics import add_noise, best_butterworth, mpjpe_cm
+from model_core.inference.engine import Engine
+from model_core.io.checkpoint import DENOISE_MODEL, CheckpointError
+from model_core.model.dataset import split_of
+from model_core.motion.conventions import LAYOUT
+from model_core.rig.rigs import load_clip
 
 pytestmark = pytest.mark.skipif(not (DENOISE_MODEL / "model.safetensors").exists(), reason="no denoising model")
 
@@ -23,7 +23,7 @@ def denoiser() -> Engine:
 
 
 def test_numpy_matches_torch_and_prediction_is_refused(denoiser):
-    torch_engine = pytest.importorskip("model_core.torch_engine")
+    torch_engine = pytest.importorskip("model_core.inference.torch_engine")
     seeds = denoiser.seeds
     assert len(seeds) > 0 and seeds.shape[1:] == (denoiser.m, LAYOUT.size)
     np.testing.assert_allclose(denoiser.forward(seeds), torch_engine.TorchEngine.load(DENOISE_MODEL).forward(seeds),

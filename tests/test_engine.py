@@ -15,12 +15,12 @@ import pytest
 
 torch = pytest.importorskip("torch")
 
-from model_core.checkpoint import DEFAULT_MODEL, REPO, CheckpointError, load_release, save_release  # noqa: E402
-from model_core.conventions import LAYOUT  # noqa: E402
-from model_core.engine import Engine, bone_lengths  # noqa: E402
-from model_core.model import STRNN, STRNNConfig  # noqa: E402
-from model_core.steps import drive  # noqa: E402
-from model_core.torch_engine import TorchEngine  # noqa: E402
+from model_core.inference.engine import Engine, bone_lengths  # noqa: E402
+from model_core.inference.steps import drive  # noqa: E402
+from model_core.inference.torch_engine import TorchEngine  # noqa: E402
+from model_core.io.checkpoint import DEFAULT_MODEL, REPO, CheckpointError, load_release, save_release  # noqa: E402
+from model_core.model.strnn import STRNN, STRNNConfig  # noqa: E402
+from model_core.motion.conventions import LAYOUT  # noqa: E402
 
 C = LAYOUT.size
 VARIANTS = [(s, r) for s in (True, False) for r in (True, False)]  # (spatial, residual)
@@ -164,7 +164,7 @@ def test_a_denoise_only_model_denoises_and_refuses_to_predict(tmp_path):
         assert engine.denoise(np.repeat(engine.seeds[0], 3, 0)).shape == (3 * engine.m, C)
         with pytest.raises(CheckpointError, match="trained for Denoise alone.*strnn_default"):
             engine.extrapolate(engine.seeds[0], 5)
-    from model_core.control import PathFollower
+    from model_core.ops.follow import PathFollower
 
     with pytest.raises(CheckpointError, match="cannot follow a path"):
         PathFollower.load(tmp_path)
@@ -211,7 +211,7 @@ def test_config_mismatch_is_a_clear_error(release):
 
 
 def test_numpy_engine_does_not_import_torch():
-    code = "import sys, model_core.engine, model_core.benchmark; sys.exit('torch' in sys.modules)"
+    code = "import sys, model_core.inference.engine, model_core.eval.benchmark; sys.exit('torch' in sys.modules)"
     assert subprocess.run([sys.executable, "-c", code], cwd=REPO).returncode == 0
 
 
@@ -229,7 +229,7 @@ def test_numpy_safetensors_reader_matches_the_library(tmp_path):
     """Blender's Python has no safetensors package: the NumPy reader must give the same arrays."""
     from safetensors.numpy import load_file, save_file
 
-    from model_core.checkpoint import read_safetensors
+    from model_core.io.checkpoint import read_safetensors
 
     arrays = {"a": np.arange(12, dtype=np.float32).reshape(3, 4), "b": np.array([1, -2], dtype=np.int64),
               "c": np.zeros((0, 5), np.float32)}
@@ -255,7 +255,7 @@ def test_seam_correction_carries_the_context_offset_into_the_prediction(tmp_path
 
 
 def test_blend_track_keeps_consistent_data_and_takes_the_rates_when_weighted():
-    from model_core.engine import blend_track
+    from model_core.inference.engine import blend_track
 
     rng = np.random.default_rng(0)
     track = np.cumsum(rng.normal(size=(50, 2)), 0)
@@ -270,8 +270,8 @@ def test_blend_track_keeps_consistent_data_and_takes_the_rates_when_weighted():
 
 
 def test_fit_yaw_shift_recovers_a_known_placement():
-    from model_core.engine import fit_yaw_shift
-    from model_core.features import yaw_matrix
+    from model_core.inference.engine import fit_yaw_shift
+    from model_core.motion.features import yaw_matrix
 
     rng = np.random.default_rng(0)
     body = rng.normal(0, 0.4, (30, 21, 3))

@@ -5,12 +5,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from model_core.bvh import forward_kinematics, read_bvh
-from model_core.bvh_export import euler_zxy, swing, write_bvh
-from model_core.conventions import JOINTS
-from model_core.plots import contact_sheet, frame_indices
-from model_core.rigs import canonical_positions, detect_rig, load_clip
-from model_core.synthetic import walking_skeleton
+from model_core.eval.plots import contact_sheet, frame_indices
+from model_core.io.bvh import forward_kinematics, read_bvh
+from model_core.io.bvh_export import euler_zxy, swing, write_bvh
+from model_core.motion.conventions import JOINTS
+from model_core.motion.synthetic import walking_skeleton
+from model_core.rig.rigs import canonical_positions, detect_rig, load_clip
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 

@@ -5,11 +5,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from model_core import familiarity
-from model_core.engine import Engine
-from model_core.features import features_to_positions
-from model_core.motion_ops import familiarity as clip_familiarity
-from model_core.synthetic import walking_skeleton
+from model_core.inference.engine import Engine
+from model_core.motion.features import features_to_positions
+from model_core.motion.synthetic import walking_skeleton
+from model_core.ops import familiarity
+from model_core.ops.familiarity import clip_familiarity
 
 
 def test_real_takes_are_familiar_and_a_procedural_walk_is_not():

@@ -5,13 +5,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from model_core.bvh import read_bvh
-from model_core.conventions import JOINT_INDEX, JOINTS, LAYOUT, MODEL_FPS, STANDARD_LEG_LENGTH, UP_AXIS
-from model_core.dataset import fps_override
-from model_core.features import features_to_positions, mirror_features, positions_to_features
-from model_core.metrics import bone_lengths_of as bone_lengths
-from model_core.rigs import detect_rig, leg_length, load_clip
-from model_core.synthetic import walking_skeleton
+from model_core.eval.metrics import bone_lengths_of as bone_lengths
+from model_core.io.bvh import read_bvh
+from model_core.model.dataset import fps_override
+from model_core.motion.conventions import JOINT_INDEX, JOINTS, LAYOUT, MODEL_FPS, STANDARD_LEG_LENGTH, UP_AXIS
+from model_core.motion.features import features_to_positions, mirror_features, positions_to_features
+from model_core.motion.synthetic import walking_skeleton
+from model_core.rig.rigs import detect_rig, leg_length, load_clip
 
 # (folder under the mocap root, file pattern, expected rig family)
 REAL_FAMILIES = [

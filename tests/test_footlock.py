@@ -5,11 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from model_core import footlock as fl
-from model_core.conventions import CONTACT_JOINTS, MODEL_FPS
-from model_core.features import positions_to_features
-from model_core.metrics import bone_lengths_of as bone_lengths
-from model_core.synthetic import walking_skeleton
+from model_core.eval.metrics import bone_lengths_of as bone_lengths
+from model_core.motion.conventions import CONTACT_JOINTS, MODEL_FPS
+from model_core.motion.features import positions_to_features
+from model_core.motion.synthetic import walking_skeleton
+from model_core.ops import footlock as fl
 
 
 def sliding(pos: np.ndarray, amplitude: float = 0.05) -> np.ndarray:
@@ -41,7 +41,7 @@ def test_sliding_synthetic_walk_is_locked():
 
 
 def test_real_walk_is_locked(mocap_root, smallest_bvh):
-    from model_core.rigs import load_clip
+    from model_core.rig.rigs import load_clip
 
     clean = load_clip(smallest_bvh(mocap_root, "*walk*.bvh"))
     check_lock(clean)
@@ -216,9 +216,9 @@ def test_generated_feet_are_put_back_on_the_floor(shift):
 def test_feet_evaluation_of_extended_walks():
     """The bundled model extends procedural walks; after Foot Lock the feet skate less, sink no
     more than 2 cm below the context's floor, and no knee is left fully straight."""
-    from model_core.dataset import Clip
-    from model_core.engine import Engine
-    from model_core.feet_evaluation import evaluate_feet
+    from model_core.eval.feet_evaluation import evaluate_feet
+    from model_core.inference.engine import Engine
+    from model_core.model.dataset import Clip
 
     clips = [Clip(f"walk_{i}", "test", walking_skeleton(60, speed=1.0 + 0.2 * i), np.zeros((60, 70)))
              for i in range(3)]

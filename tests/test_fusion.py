@@ -6,12 +6,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from model_core import fusion
-from model_core.checkpoint import DEFAULT_MODEL, default_denoiser
-from model_core.engine import Engine
-from model_core.metrics import add_noise, add_pops, best_butterworth, best_median, mpjpe_cm
-from model_core.motion_ops import denoise_positions
-from model_core.synthetic import walking_skeleton
+from model_core.eval.metrics import add_noise, add_pops, best_butterworth, best_median, mpjpe_cm
+from model_core.inference.engine import Engine
+from model_core.io.checkpoint import DEFAULT_MODEL, default_denoiser
+from model_core.motion.synthetic import walking_skeleton
+from model_core.ops import fusion
+from model_core.ops.denoise import denoise_positions
 
 
 @pytest.fixture(scope="module")

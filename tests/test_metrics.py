@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from model_core.conventions import UP_AXIS
-from model_core.features import positions_to_features
-from model_core.metrics import feet_report, floor_height, joint_speed, pose_vectors, rollout_report, segments
-from model_core.synthetic import walking_skeleton
+from model_core.eval.metrics import feet_report, floor_height, joint_speed, pose_vectors, rollout_report, segments
+from model_core.motion.conventions import UP_AXIS
+from model_core.motion.features import positions_to_features
+from model_core.motion.synthetic import walking_skeleton
 
 
 def _walk(frames: int = 2000):
@@ -66,7 +66,7 @@ def test_prediction_errors_also_score_the_extend_seam_blend():
     """Extend's seam blend starts the continuation where the context's last velocity leads: for a
     stand-in that freezes the last pose (gliding on at the root's speed) it brings the first
     frames of a walk closer to the truth."""
-    from model_core.metrics import prediction_errors
+    from model_core.eval.metrics import prediction_errors
 
     class Freeze:
         def extrapolate(self, feats, frames):

@@ -5,11 +5,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from model_core.checkpoint import DEFAULT_MODEL, default_denoiser
-from model_core.engine import Engine
-from model_core.motion_ops import blend_seam, denoise_positions, extend_positions, fit_normalisation, sample_at
-from model_core.rigs import leg_length
-from model_core.synthetic import walking_skeleton
+from model_core.inference.engine import Engine
+from model_core.io.checkpoint import DEFAULT_MODEL, default_denoiser
+from model_core.motion.synthetic import walking_skeleton
+from model_core.ops.denoise import denoise_positions
+from model_core.ops.extend import extend_positions
+from model_core.ops.normalise import fit_normalisation, sample_at
+from model_core.ops.seam import blend_seam
+from model_core.rig.rigs import leg_length
 
 
 class GlideEngine:

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from model_core.features import yaw_matrix
-from model_core.paths import Path, PathError, control_signal, evaluation_paths, path_errors_cm
+from model_core.motion.features import yaw_matrix
+from model_core.ops.paths import Path, PathError, control_signal, evaluation_paths, path_errors_cm
 
 
 def circle(radius=2.0, n=400):

@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from model_core.conventions import JOINTS, STANDARD_LEG_LENGTH
-from model_core.rigs import RIG_FAMILIES, RigError, detect_rig, leg_length, normalise_name
-from model_core.synthetic import walking_skeleton
+from model_core.motion.conventions import JOINTS, STANDARD_LEG_LENGTH
+from model_core.motion.synthetic import walking_skeleton
+from model_core.rig.rigs import RIG_FAMILIES, RigError, detect_rig, leg_length, normalise_name
 
 
 def family_names(family: str) -> list[str]:

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from model_core import rotations as R
+from model_core.motion import rotations as R
 
 
 @pytest.fixture

@@ -5,13 +5,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from model_core import rotations
-from model_core.bvh import local_transforms, read_bvh
-from model_core.bvh_export import write_bvh
-from model_core.conventions import JOINTS
-from model_core.rigs import detect_rig
-from model_core.solve import Anchors, Rig, SolveError, anchor_positions, fk, solve, solved_bones
-from model_core.synthetic import walking_skeleton
+from model_core.io.bvh import local_transforms, read_bvh
+from model_core.io.bvh_export import write_bvh
+from model_core.motion import rotations
+from model_core.motion.conventions import JOINTS
+from model_core.motion.synthetic import walking_skeleton
+from model_core.rig.rigs import detect_rig
+from model_core.rig.solve import Anchors, Rig, SolveError, anchor_positions, fk, solve, solved_bones
 
 
 @pytest.fixture(scope="module")

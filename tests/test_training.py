@@ -14,12 +14,12 @@ import pytest
 import torch
 from safetensors.numpy import load_file
 
-from model_core.bvh_export import write_bvh
-from model_core.dataset import Normaliser
-from model_core.features import mirror_features
-from model_core.model import STRNN, STRNNConfig, smoothness_cost
-from model_core.synthetic import walking_skeleton
-from model_core.training import Mirror, TrainConfig, rolled_context, rollout_batch, train, window_loss
+from model_core.io.bvh_export import write_bvh
+from model_core.model.dataset import Normaliser
+from model_core.model.strnn import STRNN, STRNNConfig, smoothness_cost
+from model_core.model.training import Mirror, TrainConfig, rolled_context, rollout_batch, train, window_loss
+from model_core.motion.features import mirror_features
+from model_core.motion.synthetic import walking_skeleton
 
 REPO = Path(__file__).resolve().parent.parent
 

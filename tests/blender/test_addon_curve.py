@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 from scenes import action_of, addon_module, evaluated_joints, import_bvh, key_snapshot, mixamo_bones, same_keys
 
-from model_core.bvh_export import write_bvh
-from model_core.synthetic import walking_skeleton
+from model_core.io.bvh_export import write_bvh
+from model_core.motion.synthetic import walking_skeleton
 
 
 def curve_module(addon):
