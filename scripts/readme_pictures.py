@@ -193,7 +193,7 @@ def add_jitter(obj, degrees: float, seed: int) -> None:
     noisy capture. The F-curves come from the installed extension's own reader (layered or legacy)."""
     import batch_worker
 
-    anim = importlib.import_module(f"{batch_worker.ADDON}.strnn_addon.anim")
+    anim = importlib.import_module(f"{batch_worker.ADDON}.strnn_addon.scene.anim")
     rng = np.random.default_rng(seed)
     for fc in anim.Channels(obj.animation_data.action, obj.animation_data).fcurves:
         if fc.data_path.endswith("rotation_euler"):

@@ -223,7 +223,7 @@ def rigify_walk(frames: int = 60):
 
 
 def addon_module(addon, name: str):
-    """A submodule of the installed extension, e.g. ``addon_module(addon, "strnn_addon.pipeline")``."""
+    """A submodule of the installed extension, e.g. ``addon_module(addon, "strnn_addon.scene.pipeline")``."""
     import importlib
 
     return importlib.import_module(f"{addon.__name__}.{name}")
@@ -231,8 +231,8 @@ def addon_module(addon, name: str):
 
 def evaluated_joints(addon, obj, frames) -> np.ndarray:
     """World canonical joints ``[F, 21, 3]`` (Blender axes) as Blender evaluates them, frame by frame."""
-    pipeline = addon_module(addon, "strnn_addon.pipeline")
-    rig_io = addon_module(addon, "strnn_addon.rig_io")
+    pipeline = addon_module(addon, "strnn_addon.scene.pipeline")
+    rig_io = addon_module(addon, "strnn_addon.scene.rig_io")
     solve = addon_module(addon, "model_core.rig.solve")
     clip = pipeline.prepare(bpy.context, obj)
     pose, world = rig_io.pose_matrices_evaluated(bpy.context, obj, clip.rig, np.asarray(frames, dtype=np.float64))

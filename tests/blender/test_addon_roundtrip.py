@@ -30,8 +30,8 @@ def test_solve_round_trip_real_clip(addon, family):
         pytest.skip("motion capture not unpacked (data/mocap or ../shared/mocap)")
     obj = import_bvh(root / CLIPS[family], update_scene_fps=True)
     pkg = addon.__name__
-    pipeline = importlib.import_module(pkg + ".strnn_addon.pipeline")
-    rig_io = importlib.import_module(pkg + ".strnn_addon.rig_io")
+    pipeline = importlib.import_module(pkg + ".strnn_addon.scene.pipeline")
+    rig_io = importlib.import_module(pkg + ".strnn_addon.scene.rig_io")
     solve = importlib.import_module(pkg + ".model_core.rig.solve")
     clip = pipeline.prepare(bpy.context, obj)
     assert clip.mapping and len(clip.mapping) == 21

@@ -1,4 +1,4 @@
-"""Building blocks of the workers (workers.py): check the input, read joint positions,
+"""Building blocks of the stages (``stages/``): check the input, read joint positions,
 convert between world and armature space, and write solved poses into a new action.
 
 Bad input raises :class:`UserError` (what is wrong and how to fix it) before anything in
@@ -13,9 +13,9 @@ from dataclasses import dataclass
 import bpy
 import numpy as np
 
-from ..model_core.motion import rotations
-from ..model_core.motion.conventions import JOINT_INDEX, MODEL_FPS, yup_to_zup, zup_to_yup
-from ..model_core.rig.solve import Anchors, Rig, anchor_positions, solved_bones
+from ...model_core.motion import rotations
+from ...model_core.motion.conventions import JOINT_INDEX, MODEL_FPS, yup_to_zup, zup_to_yup
+from ...model_core.rig.solve import Anchors, Rig, anchor_positions, solved_bones
 from . import anim, mapping, rig_io
 
 MIN_MODEL_FRAMES = 20

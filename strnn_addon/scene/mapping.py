@@ -2,10 +2,10 @@
 
 from __future__ import annotations
 
-from ..model_core.motion.conventions import JOINTS
-from ..model_core.rig import bonemap
-from ..model_core.rig.solve import Anchors, Rig, SolveError
-from .props import TAIL_JOINTS, joint_label
+from ...model_core.motion.conventions import JOINTS
+from ...model_core.rig import bonemap
+from ...model_core.rig.solve import Anchors, Rig, SolveError
+from ..props import TAIL_JOINTS, joint_label
 
 
 class MapError(ValueError):

@@ -12,8 +12,8 @@ import re
 import bpy
 import numpy as np
 
-from ..model_core.motion import rotations
-from ..model_core.rig.solve import Rig, fk
+from ...model_core.motion import rotations
+from ...model_core.rig.solve import Rig, fk
 
 _ROT_PATHS = {"QUATERNION": "rotation_quaternion", "AXIS_ANGLE": "rotation_axis_angle"}
 

@@ -1,4 +1,4 @@
-"""Follow Curve as a keyword-only worker (a stage generator like those of workers.py).
+"""Follow Curve: walk an armature along a curve with the model, as a stage generator (see :mod:`.common`).
 
 With an action, the new frames continue it from its last frames, steering onto the curve;
 without one, the walk starts on the curve's start from a seed shipped with the model, sized
@@ -8,13 +8,15 @@ the new action is made, so a failure or a cancel changes nothing.
 
 from __future__ import annotations
 
+import bpy
 import numpy as np
 
-from ..model_core.motion.conventions import zup_to_yup
-from ..model_core.rig.solve import anchor_positions, fk, solve
-from . import anim, curves, engine_bridge, mapping, pipeline, rig_io
-from .pipeline import UserError
-from .workers import RECORD, _lock, _model_steps, _prefs, _write_new, familiarity_record, made_by
+from ...model_core.motion.conventions import zup_to_yup
+from ...model_core.rig.solve import anchor_positions, fk, solve
+from .. import engine_bridge
+from ..scene import anim, curves, mapping, pipeline, rig_io
+from ..scene.pipeline import UserError
+from .common import RECORD, familiarity_record, lock, made_by, model_steps, prefs, write_new
 
 
 def follow_curve_steps(context, obj, *, curve: str = "", frames: int = 0, speed: float = 0.0, foot_lock: bool = True,
@@ -45,12 +47,12 @@ def follow_curve_steps(context, obj, *, curve: str = "", frames: int = 0, speed:
         held_loc, held_rot, _ = rig_io.read_local_pose(clip.obj, clip.rig, [], np.zeros(1))
         context_pos, rest, previous = None, _rest_joints(clip, held_loc, held_rot), {}
     yield "model"
-    new_pos = yield from _model_steps(engine_bridge.follow_curve_steps(
-        _prefs(context), points, cyclic, clip.fps, frames or None, speed or None, steps, context_pos, rest))
+    new_pos = yield from model_steps(engine_bridge.follow_curve_steps(
+        prefs(context), points, cyclic, clip.fps, frames or None, speed or None, steps, context_pos, rest))
     if foot_lock:
         known = 0 if context_pos is None else len(context_pos)
         joined = new_pos if context_pos is None else np.concatenate([context_pos, new_pos])
-        new_pos = _lock(joined, clip.fps, fixed=np.arange(len(joined)) < known)[known:]
+        new_pos = lock(joined, clip.fps, fixed=np.arange(len(joined)) < known)[known:]
     yield "solve"
     n = len(new_pos)
     loc, rot = solve(clip.rig, clip.anchors, pipeline.to_armature(clip, new_pos), np.repeat(held_loc, n, 0),
@@ -58,12 +60,12 @@ def follow_curve_steps(context, obj, *, curve: str = "", frames: int = 0, speed:
     yield "write"
     start = clip.last + 1 if clip.action is not None else context.scene.frame_start
     new_frames = start + np.arange(n, dtype=np.float64)
-    record = made_by("Follow Curve", clip, engine_bridge.model_used(_prefs(context)), curve=curve_obj.name,
+    record = made_by("Follow Curve", clip, engine_bridge.model_used(prefs(context)), curve=curve_obj.name,
                      frames=n, speed=float(speed), foot_lock=foot_lock, steering_steps=steps)
     if context_pos is not None:
-        record.update(familiarity_record(engine_bridge.familiarity(_prefs(context), context_pos, clip.fps)))
+        record.update(familiarity_record(engine_bridge.familiarity(prefs(context), context_pos, clip.fps)))
     if clip.action is not None:
-        return _write_new(context, clip, "curve", new_frames, loc, rot, previous, None, record)
+        return write_new(context, clip, "curve", new_frames, loc, rot, previous, None, record)
     return _write_fresh(context, clip, new_frames, loc, rot, record)
 
 
@@ -90,8 +92,6 @@ def _rest_joints(clip: pipeline.Clip, loc: np.ndarray, rot: np.ndarray) -> np.nd
 
 def _write_fresh(context, clip, frames, loc, rot, record: dict):
     """A new action for an armature that had none: keyed, assigned, the scene's range widened."""
-    import bpy
-
     action = bpy.data.actions.new(f"{clip.obj.name}.curve")
     clip.first, clip.last = int(frames[0]), int(frames[-1])  # no static keys outside the new frames
     try:
