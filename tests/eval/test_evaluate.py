@@ -12,7 +12,7 @@ import pytest
 from model_core.io.bvh_export import write_bvh
 from model_core.motion.synthetic import walking_skeleton
 
-REPO = Path(__file__).resolve().parent.parent
+REPO = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(REPO / "scripts"))
 
 import evaluate  # noqa: E402
@@ -61,7 +61,7 @@ def test_without_options_only_prediction(walks, tmp_path):
 
 
 def test_a_denoise_only_checkpoint_is_pointed_to_denoise_checkpoint(walks, tmp_path, capsys):
-    from test_engine import random_release
+    from releases import random_release
 
     random_release(tmp_path / "dn", m=20, n=1, purpose="denoise")
     assert evaluate.main(["--data", str(walks), "--cache", "", "--checkpoint", str(tmp_path / "dn")]) == 2

@@ -13,7 +13,7 @@ import pytest
 from model_core.eval.benchmark import model_costs, roofline
 from model_core.motion.conventions import LAYOUT
 
-REPO = Path(__file__).resolve().parent.parent
+REPO = Path(__file__).resolve().parents[2]
 
 
 def temporal_weights(c: int, w: int, window: int, r: int) -> dict:
@@ -40,7 +40,7 @@ def test_model_costs_by_hand():
 
 
 def test_benchmark_script_smoke(tmp_path, monkeypatch):
-    from test_engine import random_release
+    from releases import random_release
 
     for var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
         monkeypatch.setenv(var, "1")  # restored after the test; the script sets them

@@ -14,7 +14,7 @@ from model_core.model.dataset import DataError, find_bvh, load_folder
 from model_core.motion.synthetic import walking_skeleton
 from model_core.rig.rigs import RigError, load_clip
 
-REPO = Path(__file__).resolve().parent.parent
+REPO = Path(__file__).resolve().parents[2]
 
 HEADER = """HIERARCHY
 ROOT Hips

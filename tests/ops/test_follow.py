@@ -10,7 +10,7 @@ import pytest
 
 torch = pytest.importorskip("torch")
 
-from test_engine import random_release  # noqa: E402
+from releases import random_release  # noqa: E402
 
 from model_core.eval.metrics import bone_lengths_of as bone_lengths  # noqa: E402
 from model_core.inference.steps import drive  # noqa: E402
@@ -31,7 +31,7 @@ from model_core.ops.follow import (  # noqa: E402
 )
 from model_core.ops.paths import Path, evaluation_paths, path_errors_cm  # noqa: E402
 
-REPO = FilePath(__file__).resolve().parent.parent
+REPO = FilePath(__file__).resolve().parents[2]
 
 
 @pytest.fixture(autouse=True)

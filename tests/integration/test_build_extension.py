@@ -10,7 +10,7 @@ import pytest
 
 pytest.importorskip("bpy")  # Blender's blender_ext.py comes with the bpy wheel
 
-REPO = Path(__file__).resolve().parent.parent
+REPO = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(REPO / "scripts"))
 
 import build_extension  # noqa: E402

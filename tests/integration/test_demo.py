@@ -15,7 +15,7 @@ from model_core.motion.features import positions_to_features
 from model_core.motion.synthetic import walking_skeleton
 from model_core.rig.rigs import canonical_positions
 
-REPO = Path(__file__).resolve().parent.parent
+REPO = Path(__file__).resolve().parents[2]
 
 
 @pytest.fixture

@@ -11,7 +11,7 @@ import pytest
 from model_core.io.bvh_export import write_bvh
 from model_core.motion.synthetic import walking_skeleton
 
-REPO = Path(__file__).resolve().parent.parent
+REPO = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(REPO / "scripts"))
 
 import strnn_batch  # noqa: E402

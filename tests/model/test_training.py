@@ -21,7 +21,7 @@ from model_core.model.training import Mirror, TrainConfig, rolled_context, rollo
 from model_core.motion.features import mirror_features
 from model_core.motion.synthetic import walking_skeleton
 
-REPO = Path(__file__).resolve().parent.parent
+REPO = Path(__file__).resolve().parents[2]
 
 
 @pytest.fixture(scope="module")

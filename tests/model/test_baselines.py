@@ -30,7 +30,7 @@ from model_core.model.baselines import (  # noqa: E402
 from model_core.motion.conventions import LAYOUT  # noqa: E402
 from model_core.motion.synthetic import walking_skeleton  # noqa: E402
 
-REPO = Path(__file__).resolve().parent.parent
+REPO = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(REPO / "scripts"))
 
 import train as train_script  # noqa: E402
