@@ -6,9 +6,12 @@ the operators make, so a test can swap them for a stand-in.
 
 from __future__ import annotations
 
+import importlib
 import json
+from dataclasses import replace
 from pathlib import Path
 
+import bpy
 import numpy as np
 
 from ..model_core.io.checkpoint import DEFAULT_MODEL, default_denoiser
@@ -125,8 +128,6 @@ def generator_from_prefs(prefs):
 def bpy_path(path: str) -> str:
     """Resolve Blender's ``//`` relative paths."""
     if path.startswith("//"):
-        import bpy
-
         return bpy.path.abspath(path)
     return path
 
@@ -158,8 +159,6 @@ TORCH_MISSING = ("Follow Curve needs PyTorch, which this Blender's Python does n
 def load_follower(folder: str = "", threads: int = 0):
     """The torch path follower for ``folder`` ('' = bundled), cached; :class:`EngineError` without torch."""
     try:
-        import importlib
-
         importlib.import_module("torch")
     except ImportError as e:
         raise EngineError(TORCH_MISSING) from e
@@ -182,8 +181,6 @@ def follow_curve_steps(prefs, points: np.ndarray, cyclic: bool, fps: float, fram
     """Positions ``[frames, 21, 3]`` (Y-up scene units at ``fps``) walking the curve ``points`` ``[P, 3]``
     (Y-up) after ``context`` ``[F, 21, 3]``, or from a shipped seed sized like ``rest`` ``[21, 3]``.
     A step generator (``model_core.inference.steps``): yields the fraction done after each model window."""
-    from dataclasses import replace
-
     follower = load_follower(main_folder(prefs), prefs.threads if prefs else 0)
     from ..model_core.ops.follow import follow_curve_steps as model_steps  # after the check: it needs torch
 

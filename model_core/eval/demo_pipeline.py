@@ -15,10 +15,14 @@ from pathlib import Path
 
 import numpy as np
 
-from ..io.checkpoint import CheckpointError, default_denoiser, walk_seed_index
+from ..inference.engine import Engine
+from ..io.checkpoint import DEFAULT_MODEL, CheckpointError, default_denoiser, walk_seed_index
+from ..motion.conventions import MODEL_FPS
 from ..motion.features import features_to_positions, heading, yaw_matrix
+from ..ops.denoise import denoise_positions
 from ..ops.footlock import detect_foot_contacts, foot_lock, foot_skate_cm
 from ..ops.paths import Path as CurvePath, evaluation_paths
+from .metrics import add_noise, mpjpe_cm
 
 BASELINES = {"strnn": "STRNN", "zero_velocity": "zero velocity", "constant_velocity": "constant velocity"}
 
@@ -41,8 +45,6 @@ def seed_continuation(model: str | Path | None, seed_index: int | None, frames: 
     """(positions ``[m + frames, 21, 3]`` of the seed and its continuation, seed name, m, engine);
     ``seed_index`` None picks the first walk (:func:`checkpoint.walk_seed_index`). Raises
     ``CheckpointError`` / ``ValueError`` with a readable message."""
-    from ..inference.engine import Engine
-
     eng = Engine.load(model)
     seeds = eng.seeds
     if len(seeds) == 0:
@@ -109,11 +111,6 @@ def denoise_check(positions: np.ndarray, std_cm: float = 3.0, model: str | Path 
     then the call Denoise makes on it (scale normalised to the model's, as for a user's rig):
     (mean joint error of the jittered, of the denoised motion, in cm; the model folder).
     ``model`` None: the bundled denoising model, else the default model."""
-    from ..inference.engine import Engine
-    from ..motion.conventions import MODEL_FPS
-    from ..ops.denoise import denoise_positions
-    from .metrics import add_noise, mpjpe_cm
-
     folder = model or default_denoiser()
     engine = Engine.load(folder)
     noisy = add_noise(positions, std_cm, np.random.default_rng(seed))
@@ -157,8 +154,6 @@ def plot_demo(path: str | Path, evaluation: dict | None, skate_before: float, sk
 
 def load_evaluation(model: str | Path | None) -> dict | None:
     """The model folder's evaluation.json, or None."""
-    from ..io.checkpoint import DEFAULT_MODEL
-
     folder = Path(model) if model else DEFAULT_MODEL
     try:
         return json.loads((folder / "evaluation.json").read_text())
