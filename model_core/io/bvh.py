@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..motion.geometry import interpolate_frames
 from ..motion.rotations import axis_matrix
 
 _AXES = {"X": 0, "Y": 1, "Z": 2}
@@ -237,8 +238,4 @@ def resample(x: np.ndarray, src_fps: float, dst_fps: float) -> np.ndarray:
         return x
     duration = (n - 1) / src_fps
     m = int(np.floor(duration * dst_fps + 1e-6)) + 1
-    t = np.arange(m) * (src_fps / dst_fps)
-    i0 = np.clip(np.floor(t + 1e-6).astype(int), 0, n - 1)
-    i1 = np.clip(i0 + 1, 0, n - 1)
-    w = np.clip(t - i0, 0.0, 1.0).reshape((-1,) + (1,) * (x.ndim - 1))
-    return (x[i0] * (1 - w) + x[i1] * w).astype(x.dtype)
+    return interpolate_frames(x, np.arange(m) * (src_fps / dst_fps), snap=1e-6).astype(x.dtype)

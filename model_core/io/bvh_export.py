@@ -29,6 +29,7 @@ import numpy as np
 
 from ..motion.conventions import JOINT_INDEX, MODEL_FPS
 from ..motion.features import heading, yaw_matrix
+from ..motion.geometry import shortest_arc, unit
 from .files import write_text
 
 _SIDE = {"l": "Left", "r": "Right"}
@@ -108,29 +109,10 @@ def build_skeleton(pos: np.ndarray) -> list[Joint]:
     return joints
 
 
-def _normalise(v: np.ndarray) -> np.ndarray:
-    n = np.linalg.norm(v, axis=-1, keepdims=True)
-    return v / np.maximum(n, 1e-12)
-
-
 def swing(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Smallest rotations ``[F, 3, 3]`` taking unit vector ``a [3]`` onto unit vectors ``b [F, 3]``."""
-    a = np.broadcast_to(np.asarray(a, dtype=np.float64), b.shape)
-    v = np.cross(a, b)
-    c = np.einsum("fi,fi->f", a, b)
-    k = np.zeros(b.shape[:1] + (3, 3))
-    k[:, 0, 1], k[:, 0, 2], k[:, 1, 2] = -v[:, 2], v[:, 1], -v[:, 0]
-    k[:, 1, 0], k[:, 2, 0], k[:, 2, 1] = v[:, 2], -v[:, 1], v[:, 0]
-    r = np.eye(3) + k + (k @ k) / np.maximum(1.0 + c, 1e-12)[:, None, None]
-    opposite = c < -1 + 1e-9
-    if np.any(opposite):  # a half turn about any axis perpendicular to a
-        ao = a[opposite]
-        n = np.cross(ao, np.array([1.0, 0.0, 0.0]))
-        weak = np.linalg.norm(n, axis=-1) < 1e-3
-        n[weak] = np.cross(ao[weak], np.array([0.0, 0.0, 1.0]))
-        n = _normalise(n)
-        r[opposite] = 2 * np.einsum("fi,fj->fij", n, n) - np.eye(3)
-    return r
+    """Smallest rotations ``[F, 3, 3]`` taking unit vector ``a [3]`` onto unit vectors ``b [F, 3]``
+    (:func:`geometry.shortest_arc`)."""
+    return shortest_arc(np.broadcast_to(np.asarray(a, dtype=np.float64), b.shape), b)
 
 
 def frame_rotation(rest_a, rest_b, cur_a: np.ndarray, cur_b: np.ndarray) -> np.ndarray:
@@ -138,8 +120,8 @@ def frame_rotation(rest_a, rest_b, cur_a: np.ndarray, cur_b: np.ndarray) -> np.n
     onto the current one (``cur_a``, ``cur_b``, ``[F, 3]``): the primary exactly, the secondary's plane."""
 
     def basis(a, b):
-        x = _normalise(a)
-        z = _normalise(np.cross(x, b))
+        x = unit(a)
+        z = unit(np.cross(x, b))
         return np.stack([x, np.cross(z, x), z], axis=-1)  # columns
 
     rest = basis(np.asarray(rest_a, float)[None], np.asarray(rest_b, float)[None])[0]
@@ -168,7 +150,7 @@ def _global_rotations(joints: list[Joint], pos: np.ndarray) -> np.ndarray:
             cur_across = pos[:, j[pair[0]]] - pos[:, j[pair[1]]]
             grot[:, i] = frame_rotation(rest_dir, rest_across, cur_dir, cur_across)
         else:
-            grot[:, i] = swing(_normalise(rest_dir), _normalise(cur_dir))
+            grot[:, i] = swing(unit(rest_dir), unit(cur_dir))
     return grot
 
 

@@ -48,11 +48,17 @@ def yaw_matrix(yaw: np.ndarray) -> np.ndarray:
     return np.stack([np.stack([c, z, s], -1), np.stack([z, o, z], -1), np.stack([-s, z, c], -1)], -2)
 
 
-def heading(pos: np.ndarray, sigma: float = HEADING_SIGMA_FRAMES) -> np.ndarray:
-    """Facing angle per frame ``[F]`` (radians about +Y) from hips and shoulders."""
+def facing(pos: np.ndarray) -> np.ndarray:
+    """Horizontal facing direction ``[F, 3]`` (Y-up, not normalised) from the hips and shoulders of
+    ``pos`` ``[F, 21, 3]``: square to the line across them."""
     j = JOINT_INDEX
     across = (pos[:, j["l_upleg"]] - pos[:, j["r_upleg"]]) + (pos[:, j["l_arm"]] - pos[:, j["r_arm"]])
-    fwd = np.cross(across, np.array([0.0, 1.0, 0.0]))
+    return np.cross(across, np.array([0.0, 1.0, 0.0]))
+
+
+def heading(pos: np.ndarray, sigma: float = HEADING_SIGMA_FRAMES) -> np.ndarray:
+    """Facing angle per frame ``[F]`` (radians about +Y) from hips and shoulders (:func:`facing`)."""
+    fwd = facing(pos)
     fwd[:, UP_AXIS] = 0.0
     if sigma > 0 and len(fwd) > 1:
         fwd = gaussian_smooth(fwd, sigma)

@@ -9,6 +9,7 @@ import numpy as np
 from ..inference.steps import drive
 from ..motion.conventions import MODEL_FPS
 from ..motion.features import gaussian_smooth
+from ..motion.geometry import interpolate_frames
 from . import fusion
 from .normalise import fit_normalisation, sample_at
 
@@ -69,7 +70,5 @@ def _scaled(steps, start: float, share: float):
 
 
 def _sample_times(x: np.ndarray, src_times: np.ndarray, times: np.ndarray) -> np.ndarray:
-    """Linear interpolation of ``x`` ``[N, ...]`` sampled at ``src_times`` ``[N]`` at ``times`` ``[M]``."""
-    flat = x.reshape(len(x), -1)
-    out = np.stack([np.interp(times, src_times, flat[:, k]) for k in range(flat.shape[1])], -1)
-    return out.reshape((len(times),) + x.shape[1:])
+    """Linear interpolation of ``x`` ``[N, ...]`` sampled at increasing ``src_times`` ``[N]`` at ``times`` ``[M]``."""
+    return interpolate_frames(x, np.interp(times, src_times, np.arange(len(src_times))))

@@ -47,6 +47,7 @@ from ..motion.features import (
     positions_to_features,
     yaw_matrix,
 )
+from ..motion.geometry import rotate_ground
 from .normalise import fit_normalisation, model_frames_available, sample_at
 from .paths import Path, Steering, control_signal
 from .seam import blend_seam
@@ -76,31 +77,19 @@ def natural_speed(feats: np.ndarray, fps: float = MODEL_FPS) -> float:
     return float(np.linalg.norm(np.asarray(feats)[:, LAYOUT.velocity], axis=-1).mean() * fps)
 
 
-def _rotate(yaw: torch.Tensor, xz: torch.Tensor) -> torch.Tensor:
-    """Ground vectors ``[..., 2]`` (x, z) turned by ``yaw`` ``[...]`` (as :func:`features.yaw_matrix`)."""
-    c, s = torch.cos(yaw), torch.sin(yaw)
-    return torch.stack([c * xz[..., 0] + s * xz[..., 1], -s * xz[..., 0] + c * xz[..., 1]], -1)
-
-
-def _rotate_np(yaw: float, xz: np.ndarray) -> np.ndarray:
-    """NumPy twin of :func:`_rotate` for one ``yaw`` and points ``[..., 2]``."""
-    c, s = np.cos(yaw), np.sin(yaw)
-    return np.stack([c * xz[..., 0] + s * xz[..., 1], -s * xz[..., 0] + c * xz[..., 1]], -1)
-
-
 def ground_track(raw: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
     """Headings ``[T]`` and root ground positions ``[T, 2]`` (x, z) integrated over raw features
     ``[T, C]``, relative to the first frame's root and heading."""
     yaw_rate, vel = raw[:, LAYOUT.yaw_rate], raw[:, LAYOUT.velocity]
     yaw = torch.cat([yaw_rate.new_zeros(1), torch.cumsum(yaw_rate[:-1], 0)])
-    return yaw, torch.cat([vel.new_zeros(1, 2), torch.cumsum(_rotate(yaw[:-1], vel[:-1]), 0)])
+    return yaw, torch.cat([vel.new_zeros(1, 2), torch.cumsum(rotate_ground(yaw[:-1], vel[:-1], torch), 0)])
 
 
 def foot_speed_cm(raw: torch.Tensor) -> torch.Tensor:
     """Horizontal speed (cm / frame) ``[T - 1, 4]`` of the contact joints over raw features ``[T, C]``."""
     yaw, root = ground_track(raw)
     local = raw[:, LAYOUT.positions].reshape(len(raw), -1, 3)[:, CONTACT_JOINTS][..., [0, 2]]  # (T, 4, 2)
-    feet = _rotate(yaw[:, None], local) + root[:, None]
+    feet = rotate_ground(yaw[:, None], local, torch) + root[:, None]
     return 100.0 * torch.linalg.vector_norm(feet[1:] - feet[:-1], dim=-1)
 
 
@@ -270,7 +259,7 @@ class PathFollower:
             control, aim = control_signal(path, p[[0, 2]], theta, s, speed, self.n + 1, MODEL_FPS,
                                           Steering(cfg.return_frames))
             control = control[1:]  # the context's last frame already holds the step into the window
-            aim = _rotate_np(-theta, aim[1:-1] - p[[0, 2]])  # new frames' roots, in the last root's frame
+            aim = rotate_ground(-theta, aim[1:-1] - p[[0, 2]])  # new frames' roots, in the last root's frame
             with self._threads():
                 new = self.window(ctx, control, lengths[0, 1:], aim)
             new = project_to_skeleton(smooth_seam(ctx, new, cfg.seam_frames)[None], lengths)[0]

@@ -41,7 +41,8 @@ from ..motion.conventions import (
     STANDARD_LEG_LENGTH,
     UP_AXIS,
 )
-from ..motion.features import detect_contacts, gaussian_smooth
+from ..motion.features import detect_contacts, facing, gaussian_smooth
+from ..motion.geometry import shortest_arc
 from ..rig.rigs import leg_length
 from .normalise import fit_normalisation
 
@@ -264,15 +265,6 @@ def _unit(v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return v / np.maximum(n, 1e-12), n[..., 0]
 
 
-def _rotate_shortest(v: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Rotate vectors ``v`` ``[..., 3]`` by the shortest arc taking unit ``a`` to unit ``b`` (Rodrigues)."""
-    axis = np.cross(a, b)
-    c = np.sum(a * b, -1, keepdims=True)
-    # v' = v c + (axis x v) + axis (axis . v) / (1 + c); near-opposite axes are left unrotated
-    k = 1.0 / np.maximum(1.0 + c, 1e-9)
-    return v * c + np.cross(axis, v) + axis * np.sum(axis * v, -1, keepdims=True) * k
-
-
 def knee_limit_reach(l1: np.ndarray, l2: np.ndarray, rest: np.ndarray) -> np.ndarray:
     """The furthest hip-to-ankle distance the IK may use: the leg with :data:`MIN_KNEE_DEG` of knee
     bend, or ``rest`` (the input's own) where that is longer."""
@@ -313,18 +305,15 @@ def two_bone_ik(hip: np.ndarray, knee: np.ndarray, ankle: np.ndarray, target: np
     d = np.maximum(d, np.abs(l1 - l2) + 1e-6 * (l1 + l2))
     along = (l1 ** 2 - l2 ** 2 + d ** 2) / (2.0 * np.maximum(d, 1e-12))
     height = np.sqrt(np.maximum(l1 ** 2 - along ** 2, 0.0))
-    bend = _unit(_rotate_shortest(bend0, axis0, axis))[0]
+    bend = _unit(np.einsum("...ij,...j->...i", shortest_arc(axis0, axis), bend0))[0]
     bend = _unit(bend - axis * np.sum(bend * axis, -1, keepdims=True))[0]
     new_knee = hip + axis * along[..., None] + bend * height[..., None]
     return new_knee, hip + axis * d[..., None]
 
 
 def body_forward(pos: np.ndarray) -> np.ndarray:
-    """Horizontal facing direction ``[F, 3]`` (unit) from the hips and shoulders (Y-up)."""
-    j = JOINT_INDEX
-    across = (pos[:, j["l_upleg"]] - pos[:, j["r_upleg"]]) + (pos[:, j["l_arm"]] - pos[:, j["r_arm"]])
-    fwd = np.cross(across, np.array([0.0, 1.0, 0.0]))
-    return _unit(fwd)[0]
+    """Horizontal facing direction ``[F, 3]`` (unit) from the hips and shoulders (Y-up): :func:`features.facing`."""
+    return _unit(facing(pos))[0]
 
 
 def foot_lock(pos: np.ndarray, fps: float = MODEL_FPS, contacts: np.ndarray | None = None,

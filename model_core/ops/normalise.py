@@ -16,6 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..motion.conventions import JOINT_INDEX, MODEL_FPS, STANDARD_LEG_LENGTH, UP_AXIS
+from ..motion.geometry import interpolate_frames
 from ..rig.rigs import leg_length
 
 FEET = [JOINT_INDEX[j] for j in ("l_foot", "l_toe", "r_foot", "r_toe")]
@@ -51,11 +52,7 @@ def fit_normalisation(pos: np.ndarray) -> Normalisation:
 def sample_at(x: np.ndarray, fps: float, times: np.ndarray) -> np.ndarray:
     """Linear interpolation of ``x`` ``[N, ...]`` (frame k at time k / fps) at ``times`` ``[M]``
     seconds, clamped at both ends -> ``[M, ...]``."""
-    t = np.clip(np.asarray(times, dtype=np.float64) * fps, 0, len(x) - 1)
-    i0 = np.minimum(np.floor(t + 1e-9).astype(int), len(x) - 1)
-    i1 = np.minimum(i0 + 1, len(x) - 1)
-    w = (t - i0).reshape((-1,) + (1,) * (np.ndim(x) - 1))
-    return np.asarray(x, dtype=np.float64)[i0] * (1 - w) + np.asarray(x, dtype=np.float64)[i1] * w
+    return interpolate_frames(x, np.asarray(times, dtype=np.float64) * fps)
 
 
 def model_frames_available(frames: int, fps: float) -> int:

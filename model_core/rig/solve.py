@@ -30,6 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..motion.conventions import JOINT_INDEX, JOINTS, PARENT_NAMES
+from ..motion.geometry import rotvec_to_matrix, shortest_arc, unit
 
 # Upper limbs whose twist follows the plane of (joint, child, grandchild).
 _PLANE_TWIST = {"l_upleg": ("l_knee", "l_foot"), "r_upleg": ("r_knee", "r_foot"),
@@ -139,32 +140,6 @@ def anchor_positions(rig: Rig, anchors: Anchors, pose: np.ndarray) -> np.ndarray
     return np.einsum("fjab,jb->fja", m, offset)[..., :3]
 
 
-def _unit(v: np.ndarray) -> np.ndarray:
-    return v / np.maximum(np.linalg.norm(v, axis=-1, keepdims=True), 1e-12)
-
-
-def _rotation_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Shortest-arc rotations ``[F, 3, 3]`` taking directions ``a`` to ``b`` ``[F, 3]``."""
-    a, b = _unit(a), _unit(b)
-    v = np.cross(a, b)
-    c = np.sum(a * b, -1)
-    # Opposite directions: turn half a circle about any axis perpendicular to a.
-    perp = _unit(np.cross(a, np.where(np.abs(a[:, :1]) < 0.9, [[1.0, 0, 0]], [[0, 1.0, 0]])))
-    flip = c < -1 + 1e-9
-    axis_angle = np.where(flip[:, None], perp * np.pi, _unit(v) * np.arctan2(np.linalg.norm(v, axis=-1), c)[:, None])
-    return _rodrigues(axis_angle)
-
-
-def _rodrigues(w: np.ndarray) -> np.ndarray:
-    """Rotation matrices ``[F, 3, 3]`` from rotation vectors ``[F, 3]`` (axis * angle)."""
-    theta = np.linalg.norm(w, axis=-1)[:, None, None]
-    k = np.zeros(w.shape[:-1] + (3, 3))
-    k[:, 0, 1], k[:, 0, 2], k[:, 1, 2] = -w[:, 2], w[:, 1], -w[:, 0]
-    k = k - np.swapaxes(k, -1, -2)
-    safe = np.maximum(theta, 1e-12)
-    return np.eye(3) + np.sin(theta) / safe * k + (1 - np.cos(theta)) / safe ** 2 * (k @ k)
-
-
 def _kabsch(u: np.ndarray, t: np.ndarray, w: np.ndarray) -> np.ndarray:
     """Rotations ``[F, 3, 3]`` minimising sum_i w_i |R u_i - t_i|^2; ``u``, ``t`` ``[F, N, 3]``, ``w`` ``[N]``."""
     h = np.einsum("n,fni,fnj->fij", w, u, t)
@@ -178,19 +153,19 @@ def _kabsch(u: np.ndarray, t: np.ndarray, w: np.ndarray) -> np.ndarray:
 def _twist(g: np.ndarray, axis: np.ndarray, n_local: np.ndarray, n_target: np.ndarray) -> np.ndarray:
     """Twist ``g`` ``[F, 3, 3]`` about world ``axis`` ``[F, 3]`` so ``g @ n_local`` follows ``n_target``
     (both ``[F, 3]``, un-normalised plane normals), faded out where either plane is degenerate."""
-    axis = _unit(axis)
+    axis = unit(axis)
     n_now = np.einsum("fij,fj->fi", g, n_local)
     strength = np.minimum(np.linalg.norm(n_now, axis=-1), np.linalg.norm(n_target, axis=-1))
     weight = np.clip((strength - _TWIST_NONE) / (_TWIST_FULL - _TWIST_NONE), 0.0, 1.0)
     a = n_now - axis * np.sum(n_now * axis, -1, keepdims=True)
     b = n_target - axis * np.sum(n_target * axis, -1, keepdims=True)
     angle = np.arctan2(np.sum(np.cross(a, b) * axis, -1), np.sum(a * b, -1))
-    return _rodrigues(axis * (angle * weight)[:, None]) @ g
+    return rotvec_to_matrix(axis * (angle * weight)[:, None]) @ g
 
 
 def _plane(p0: np.ndarray, p1: np.ndarray, p2: np.ndarray) -> np.ndarray:
     """Normal of the bend at ``p1`` ``[F, 3]``, length = sine of the bend angle."""
-    return np.cross(_unit(p1 - p0), _unit(p2 - p1))
+    return np.cross(unit(p1 - p0), unit(p2 - p1))
 
 
 def _aim(rig: Rig, anchors: Anchors, joint: str, ref: tuple, head: np.ndarray, base_rot: np.ndarray,
@@ -211,7 +186,7 @@ def _aim(rig: Rig, anchors: Anchors, joint: str, ref: tuple, head: np.ndarray, b
     if len(kids) > 1:
         weights = np.array([2.0] + [1.0] * (len(kids) - 1))  # the torso child first: keep the spine aimed
         return _kabsch(u, t, weights)
-    g = _rotation_between(np.einsum("fij,fj->fi", base_rot, u[:, 0]), t[:, 0]) @ base_rot
+    g = shortest_arc(np.einsum("fij,fj->fi", base_rot, u[:, 0]), t[:, 0]) @ base_rot
     if joint in _PLANE_TWIST:
         c, d = (JOINT_INDEX[n] for n in _PLANE_TWIST[joint])
         ud = to_local(ref_anchor[:, [d]])[:, 0]
@@ -246,7 +221,7 @@ def _aim_bridge(ref: tuple, b: int, joints: list[int], head: np.ndarray, base_ro
     t = targets[:, joints] - head[:, None]
     if len(joints) > 1:
         return _kabsch(u, t, np.ones(len(joints)))
-    return _rotation_between(np.einsum("fij,fj->fi", base_rot, u[:, 0]), t[:, 0]) @ base_rot
+    return shortest_arc(np.einsum("fij,fj->fi", base_rot, u[:, 0]), t[:, 0]) @ base_rot
 
 
 def solve(rig: Rig, anchors: Anchors, targets: np.ndarray, ref_loc: np.ndarray,
