@@ -17,6 +17,7 @@ import numpy as np
 from ..io.checkpoint import Checkpoint, load_release
 from ..motion.conventions import LAYOUT, PARENTS
 from ..motion.features import RootStart, features_to_positions, integrate_root, positions_to_features, yaw_matrix
+from ..ops.seam import PREDICT_SEAM_FRAMES, seam_fade
 from .spatial_fold import fold_spatial
 from .steps import drive
 
@@ -57,7 +58,7 @@ def _cell(gates: np.ndarray, c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 class Engine:
     """STRNN inference in NumPy. Build with :meth:`load`."""
 
-    seam_frames = 10.0  # fade-out (frames) of the seam correction in predict(); chosen on the validation split
+    seam_frames = PREDICT_SEAM_FRAMES  # fade-out (frames) of the seam correction in predict() (ops/seam.py)
 
     def __init__(self, ckpt: Checkpoint):
         ckpt.require_strnn()
@@ -144,7 +145,7 @@ class Engine:
         pred = window[:, self.m:]
         if self.seam_frames > 0:
             offset = context[:, -1, LAYOUT.positions] - window[:, self.m - 1, LAYOUT.positions]
-            fade = np.exp(-np.arange(1, self.n + 1, dtype=np.float32) / self.seam_frames)
+            fade = seam_fade(self.n, self.seam_frames)
             pred[..., LAYOUT.positions] += fade[None, :, None] * offset[:, None]
         return pred
 

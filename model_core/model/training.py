@@ -20,11 +20,11 @@ import torch
 import torch.distributed as dist
 from torch.nn.parallel import DistributedDataParallel
 
-from ..inference.engine import Engine
 from ..io.checkpoint import PURPOSES, load_release, save_release
 from ..io.files import write_atomic
 from ..motion.conventions import LAYOUT
 from ..motion.features import MIRROR_SIGN, MIRROR_SOURCE, features_to_positions, positions_to_features
+from ..ops.seam import PREDICT_SEAM_FRAMES, seam_fade
 from .dataset import SPLITS, MotionData, Normaliser, load_folder, window_starts
 from .strnn import STRNN, STRNNConfig, smoothness_cost
 
@@ -169,7 +169,8 @@ def window_loss(model: STRNN, window: torch.Tensor, cfg: TrainConfig, phase: str
     return mse + cfg.smooth_weight * smoothness_cost(out)
 
 
-def rolled_context(model: STRNN, window: torch.Tensor, k: int, seam_frames: float = Engine.seam_frames) -> torch.Tensor:
+def rolled_context(model: STRNN, window: torch.Tensor, k: int,
+                   seam_frames: float = PREDICT_SEAM_FRAMES) -> torch.Tensor:
     """The model's own context after ``k`` open-loop windows from the first m frames of ``window``
     ``(B, m + k n + ..., C)``, generated as the engine does (eval mode, seam correction), without gradient."""
     m, n = model.cfg.encode_len, model.cfg.predict_len
@@ -177,7 +178,7 @@ def rolled_context(model: STRNN, window: torch.Tensor, k: int, seam_frames: floa
     model.eval()
     ctx = window[:, :m]
     pos = LAYOUT.positions
-    fade = torch.exp(-torch.arange(1, n + 1, dtype=window.dtype) / seam_frames)[None, :, None]
+    fade = seam_fade(n, seam_frames, torch, window.dtype)[None, :, None]
     with torch.no_grad():
         for _ in range(k):
             out = model(ctx)

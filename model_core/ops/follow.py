@@ -50,7 +50,7 @@ from ..motion.features import (
 from ..motion.geometry import rotate_ground
 from .normalise import fit_normalisation, model_frames_available, sample_at
 from .paths import Path, Steering, control_signal
-from .seam import blend_seam
+from .seam import SEAM_FRAMES, blend_seam
 
 WALK_SPEED = 1.3  # m/s used when the seed barely moves (its own speed cannot steer anything)
 POSITION_SCALE = 0.1  # metres: root position errors are costed in units of 10 cm
@@ -67,7 +67,7 @@ class ControlSettings:
     w_pos: float = 1.0  # weight of the root positions' deviation from the path (H_ctr integrated; 10 cm units)
     tune: str = "predictor"  # which weights the copy fine-tunes: "predictor" (LSTM cell, fast) or "all"
     return_frames: float = 30.0  # frames over which an offset from the path (and its heading) is steered out
-    seam_frames: int = 10  # frames over which the pose's jump at each window's start is faded out
+    seam_frames: int = SEAM_FRAMES  # frames over which the pose's jump at each window's start is faded out
     seed: int = 0  # torch seed: a fixed seed gives the same motion
     threads: int = 1  # torch CPU threads while following (batch 1: more cost more than they give); 0: as set
 

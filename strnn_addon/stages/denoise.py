@@ -4,12 +4,11 @@ from __future__ import annotations
 
 import numpy as np
 
+from ...model_core.ops.seam import fade_edges
 from ...model_core.rig.solve import solve
 from .. import engine_bridge
 from ..scene import pipeline, rig_io
 from .common import frame_range, lock, made_by, model_steps, noop, prefs, run, write_new
-
-EDGE_FADE_S = 0.2  # a partial Denoise range fades in and out over this long where it meets untouched frames
 
 
 def denoise_action(context, obj, *, progress=noop, **options):
@@ -41,17 +40,3 @@ def denoise_steps(context, obj, *, frame_start: int | None = None, frame_end: in
     record = made_by("Denoise Action", clip, engine_bridge.model_used(prefs(context), "denoise"), frame_start=a,
                      frame_end=b, strength=float(strength), foot_lock=foot_lock)
     return write_new(context, clip, "denoised", frames, loc, rot, previous, (a, b), record)
-
-
-def fade_edges(before: np.ndarray, after: np.ndarray, fps: float, fade_in: bool, fade_out: bool) -> np.ndarray:
-    """``after`` ``[F, 21, 3]`` blended from ``before`` over :data:`EDGE_FADE_S` at the start
-    (``fade_in``) and end (``fade_out``) of a range, so it meets the frames around it without a pop."""
-    n = len(after)
-    k = min(int(round(EDGE_FADE_S * fps)), n // 4)
-    weight = np.ones(n)
-    ramp = np.arange(1, k + 1) / (k + 1)
-    if k and fade_in:
-        weight[:k] = np.minimum(weight[:k], ramp)
-    if k and fade_out:
-        weight[n - k:] = np.minimum(weight[n - k:], ramp[::-1])
-    return before + weight[:, None, None] * (after - before)
