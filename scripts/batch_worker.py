@@ -80,7 +80,7 @@ def install_extension(bpy, zip_path: str, user_dir: Path):
 
 def add_path_curve(bpy, name: str):
     """A poly curve object of the built-in ground path ``name`` (model (x, z) -> Blender (x, -z, 0))."""
-    from model_core.paths import evaluation_paths
+    from model_core.ops.paths import evaluation_paths
 
     points, cyclic = evaluation_paths()[name]
     data = bpy.data.curves.new(f"path_{name}", "CURVE")

@@ -29,8 +29,8 @@ sys.path.insert(0, str(REPO / "scripts"))
 
 import bpy  # noqa: E402
 
-from model_core.conventions import JOINTS, PARENT_NAMES, yup_to_zup  # noqa: E402
-from model_core.synthetic import _offset  # noqa: E402
+from model_core.motion.conventions import JOINTS, PARENT_NAMES, yup_to_zup  # noqa: E402
+from model_core.motion.synthetic import _offset  # noqa: E402
 
 FINGERS = ("Thumb", "Index", "Middle", "Ring", "Pinky")
 
@@ -39,9 +39,9 @@ def untrained_release(folder: Path) -> Path:
     """A randomly initialised model of the default size, saved as a release (timing only)."""
     import torch
 
-    from model_core.checkpoint import save_release
-    from model_core.conventions import LAYOUT
-    from model_core.model import STRNN, STRNNConfig
+    from model_core.io.checkpoint import save_release
+    from model_core.model.strnn import STRNN, STRNNConfig
+    from model_core.motion.conventions import LAYOUT
 
     torch.manual_seed(0)
     cfg = STRNNConfig()
@@ -190,9 +190,9 @@ def floor_time(obj, frames: int) -> tuple[float, float]:
 
 
 def stage_times(worker, *args, **kwargs) -> dict:
-    """Seconds of each stage of ``worker(*args, progress=..., **kwargs)`` (a workers.py runner, which
-    calls ``progress(stage)`` as each stage starts): a stage lasts until the next starts (the first
-    also covers the checks before it), plus the ``total``."""
+    """Seconds of each stage of ``worker(*args, progress=..., **kwargs)`` (a runner of
+    ``strnn_addon/stages/``, which calls ``progress(stage)`` as each stage starts): a stage lasts
+    until the next starts (the first also covers the checks before it), plus the ``total``."""
     marks: list[tuple[str, float]] = []
     start = time.perf_counter()
     worker(*args, progress=lambda stage: marks.append((stage, time.perf_counter())), **kwargs)
@@ -214,15 +214,16 @@ def main(argv: list[str] | None = None) -> dict:
     model = find_model(args)
     package = install(Path(tempfile.mkdtemp()))
     bpy.context.preferences.addons[package].preferences.model_folder = str(model)
-    workers = importlib.import_module(package + ".strnn_addon.workers")
+    extend = importlib.import_module(package + ".strnn_addon.stages.extend")
+    denoise = importlib.import_module(package + ".strnn_addon.stages.denoise")
     best: dict = {}
     for _ in range(args.repeat):
         obj = build_scene(args.frames)
         read_floor, write_floor = floor_time(obj, args.frames)
         if args.operator == "extend":
-            timings = stage_times(workers.extend_clip, bpy.context, obj, frames=args.frames)
+            timings = stage_times(extend.extend_clip, bpy.context, obj, frames=args.frames)
         else:
-            timings = stage_times(workers.denoise_action, bpy.context, obj)
+            timings = stage_times(denoise.denoise_action, bpy.context, obj)
         timings.update(floor_read=read_floor, floor_write=write_floor)
         if not best or timings["total"] < best["total"]:
             best = timings

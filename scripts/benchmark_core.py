@@ -38,7 +38,7 @@ def parse_args(argv=None) -> argparse.Namespace:
 
 
 def find_model(given: Path | None) -> Path:
-    from model_core.checkpoint import DEFAULT_MODEL
+    from model_core.io.checkpoint import DEFAULT_MODEL
 
     if given is not None:
         return given
@@ -53,10 +53,10 @@ def find_model(given: Path | None) -> Path:
 
 def load_engine(kind: str, folder: Path, device: str):
     if kind == "numpy":
-        from model_core.engine import Engine
+        from model_core.inference.engine import Engine
 
         return Engine.load(folder)
-    from model_core.torch_engine import TorchEngine
+    from model_core.inference.torch_engine import TorchEngine
 
     return TorchEngine.load(folder, device)
 
@@ -74,7 +74,7 @@ def cpu_name() -> str:
 def machine(weights: dict, threads: int) -> dict:
     import numpy as np
 
-    from model_core.benchmark import measure_bandwidth, measure_gemv, measure_sgemm
+    from model_core.eval.benchmark import measure_bandwidth, measure_gemv, measure_sgemm
 
     print("measuring the machine (SGEMM, memory copy) ...", flush=True)
     return {"cpu": cpu_name(), "cores": os.cpu_count(), "threads": threads,
@@ -83,8 +83,8 @@ def machine(weights: dict, threads: int) -> dict:
 
 
 def run(args: argparse.Namespace) -> dict:
-    from model_core.benchmark import model_costs, roofline, time_extrapolate
-    from model_core.checkpoint import load_release
+    from model_core.eval.benchmark import model_costs, roofline, time_extrapolate
+    from model_core.io.checkpoint import load_release
 
     folder = find_model(args.model)
     ckpt = load_release(folder)

@@ -38,11 +38,11 @@ def main(argv=None) -> int:
         os.environ[var] = str(args.threads)
     import torch
 
-    from model_core.control import PathFollower, follow_path
-    from model_core.engine import Engine
-    from model_core.features import features_to_positions
-    from model_core.paths import Path as CurvePath, evaluation_paths
-    from model_core.torch_engine import TorchEngine
+    from model_core.inference.engine import Engine
+    from model_core.inference.torch_engine import TorchEngine
+    from model_core.motion.features import features_to_positions
+    from model_core.ops.follow import PathFollower, follow_path
+    from model_core.ops.paths import Path as CurvePath, evaluation_paths
 
     torch.set_num_threads(args.threads)
     follower = PathFollower.load(args.model)

@@ -2,7 +2,7 @@
 """Measure a model's usual reconstruction error on held-back takes and keep it in its model.json.
 
 The operators compare a clip's reconstruction error with it to say when a clip is unlike what the
-model learnt (model_core/familiarity.py). Run it once per release, on takes the model did not
+model learnt (model_core/ops/familiarity.py). Run it once per release, on takes the model did not
 train on:
 
   python scripts/calibrate_familiarity.py --data data/mocap --split validation --checkpoint models/strnn_default
@@ -17,11 +17,11 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from model_core import familiarity  # noqa: E402
-from model_core.checkpoint import DEFAULT_MODEL, CheckpointError  # noqa: E402
-from model_core.dataset import DataError, load_folder  # noqa: E402
-from model_core.engine import Engine  # noqa: E402
-from model_core.files import write_json  # noqa: E402
+from model_core.inference.engine import Engine  # noqa: E402
+from model_core.io.checkpoint import DEFAULT_MODEL, CheckpointError  # noqa: E402
+from model_core.io.files import write_json  # noqa: E402
+from model_core.model.dataset import DataError, load_folder  # noqa: E402
+from model_core.ops import familiarity  # noqa: E402
 
 
 def main(argv=None) -> int:

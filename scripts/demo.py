@@ -35,11 +35,11 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 import numpy as np
 
-from model_core.bvh_export import write_bvh
-from model_core.checkpoint import CheckpointError
-from model_core.conventions import MODEL_FPS
-from model_core.demo_pipeline import build_motion, denoise_check, load_evaluation, plot_demo
-from model_core.plots import contact_sheet
+from model_core.eval.demo_pipeline import build_motion, denoise_check, load_evaluation, plot_demo
+from model_core.eval.plots import contact_sheet
+from model_core.io.bvh_export import write_bvh
+from model_core.io.checkpoint import CheckpointError
+from model_core.motion.conventions import MODEL_FPS
 
 
 def parse_args(argv=None) -> argparse.Namespace:

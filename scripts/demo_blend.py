@@ -22,8 +22,8 @@ from matplotlib.colors import to_rgba
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from model_core.bonemap import split_side  # noqa: E402
-from model_core.plots import SIDE_COLOURS  # noqa: E402
+from model_core.eval.plots import SIDE_COLOURS  # noqa: E402
+from model_core.rig.bonemap import split_side  # noqa: E402
 
 
 def parse_args(argv=None) -> argparse.Namespace:

@@ -22,20 +22,20 @@ from pathlib import Path
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # small matmuls: BLAS threads only spin
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from model_core.bvh import BvhError  # noqa: E402
-from model_core.checkpoint import DEFAULT_MODEL, CheckpointError, default_denoiser  # noqa: E402
-from model_core.dataset import DataError, load_data_config, load_folder  # noqa: E402
-from model_core.engine import Engine  # noqa: E402
-from model_core.evaluation import (  # noqa: E402
+from model_core.eval.evaluation import (  # noqa: E402
     evaluate_denoise,
     evaluate_long_horizon,
     evaluate_pops,
     evaluate_prediction,
     select_clips,
 )
-from model_core.feet_evaluation import evaluate_feet  # noqa: E402
-from model_core.files import write_json  # noqa: E402
-from model_core.rigs import RigError  # noqa: E402
+from model_core.eval.feet_evaluation import evaluate_feet  # noqa: E402
+from model_core.inference.engine import Engine  # noqa: E402
+from model_core.io.bvh import BvhError  # noqa: E402
+from model_core.io.checkpoint import DEFAULT_MODEL, CheckpointError, default_denoiser  # noqa: E402
+from model_core.io.files import write_json  # noqa: E402
+from model_core.model.dataset import DataError, load_data_config, load_folder  # noqa: E402
+from model_core.rig.rigs import RigError  # noqa: E402
 
 
 def parse_args(argv=None):
@@ -188,7 +188,7 @@ def load_baselines(args) -> dict:
     """``{architecture: (engine, folder)}`` of the --baseline-model folders (torch imported only for them)."""
     if not args.baseline_model:
         return {}
-    from model_core.baselines import BaselineEngine
+    from model_core.model.baselines import BaselineEngine
 
     out = {}
     for folder in args.baseline_model:
@@ -201,8 +201,8 @@ def load_baselines(args) -> dict:
 
 
 def run_paths(args, clips) -> dict:
-    from model_core.control import PathFollower
-    from model_core.path_evaluation import evaluate_paths, synthesis_speed, walking_seeds
+    from model_core.eval.path_evaluation import evaluate_paths, synthesis_speed, walking_seeds
+    from model_core.ops.follow import PathFollower
 
     follower = PathFollower.load(args.checkpoint)
     paths = evaluate_paths(follower, clips, args.path_seeds, log=lambda m: print(m, file=sys.stderr))

@@ -39,10 +39,10 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
-from model_core.conventions import JOINTS, PARENTS
-from model_core.features import detect_contacts
-from model_core.footlock import foot_skate_cm
-from model_core.plots import body_view, joint_colour
+from model_core.eval.plots import body_view, joint_colour
+from model_core.motion.conventions import JOINTS, PARENTS
+from model_core.motion.features import detect_contacts
+from model_core.ops.footlock import foot_skate_cm
 
 BANDAI_SCALE = 0.01  # the Bandai-Namco files are in centimetres: import them in metres
 EXTEND_CLIP = "bandai-namco/dataset-2/dataset-2_walk-turn-right_normal_004.bvh"
@@ -123,7 +123,7 @@ def ghosts(ax, joints: np.ndarray, every: int, axes, colour=None, alpha=(0.25, 1
 
 def filmstrip(ax, joints: np.ndarray, frames: list[int], spacing: float, colour=None, first_slot: int = 0):
     """Skeletons ``[F, 21, 3]`` (Z-up) side by side, each seen from its own side
-    (:func:`model_core.plots.body_view`), hips at slot * ``spacing``."""
+    (:func:`model_core.eval.plots.body_view`), hips at slot * ``spacing``."""
     flat = body_view(z_up_to_model(joints))[frames]  # (len(frames), 21, 2)
     for slot, pose in enumerate(flat, first_slot):
         draw_pose(ax, np.stack([pose[:, 0] + slot * spacing, np.zeros(len(pose)), pose[:, 1]], -1), (0, 2), 1.0,
@@ -193,7 +193,7 @@ def add_jitter(obj, degrees: float, seed: int) -> None:
     noisy capture. The F-curves come from the installed extension's own reader (layered or legacy)."""
     import batch_worker
 
-    anim = importlib.import_module(f"{batch_worker.ADDON}.strnn_addon.anim")
+    anim = importlib.import_module(f"{batch_worker.ADDON}.strnn_addon.scene.anim")
     rng = np.random.default_rng(seed)
     for fc in anim.Channels(obj.animation_data.action, obj.animation_data).fcurves:
         if fc.data_path.endswith("rotation_euler"):

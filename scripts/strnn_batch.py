@@ -36,7 +36,7 @@ sys.path.insert(0, str(REPO))
 
 from batch_worker import process_file  # noqa: E402
 
-from model_core.files import write_json  # noqa: E402  (model_core never imports bpy)
+from model_core.io.files import write_json  # noqa: E402  (model_core never imports bpy)
 
 EXTENSIONS = (".bvh", ".blend")
 PATHS = ("line", "circle", "s_curve", "figure_eight")

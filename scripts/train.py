@@ -17,10 +17,10 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from model_core.checkpoint import PURPOSES  # noqa: E402
-from model_core.dataset import DataError  # noqa: E402
-from model_core.model import STRNNConfig  # noqa: E402
-from model_core.training import TrainConfig, export_state, train  # noqa: E402
+from model_core.io.checkpoint import PURPOSES  # noqa: E402
+from model_core.model.dataset import DataError  # noqa: E402
+from model_core.model.strnn import STRNNConfig  # noqa: E402
+from model_core.model.training import TrainConfig, export_state, train  # noqa: E402
 
 ARCHS = ("strnn", "simlpe", "residual_gru")
 DEFAULT_WIDTH = {"strnn": 128, "residual_gru": 512}
@@ -91,8 +91,8 @@ def command_line(argv) -> str:
 
 def baseline_run(args, argv):
     """Train a baseline (imported here: STRNN runs never load its module)."""
-    from model_core.baseline_training import BaselineTrainConfig, train_baseline
-    from model_core.baselines import MODELS
+    from model_core.model.baseline_training import BaselineTrainConfig, train_baseline
+    from model_core.model.baselines import MODELS
 
     if args.export or args.init:
         raise ValueError("--export and --init are for STRNN runs")

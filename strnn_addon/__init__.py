@@ -1,6 +1,8 @@
-"""STRNN Motion for Blender: extend and denoise an armature's action with the motion model.
+"""STRNN Motion for Blender: Extend Clip, Denoise Action, Foot Lock and Follow Curve on an
+armature's action with the motion model, and Auto-Map Bones to map a rig's bones to its joints.
 
-Everything here touches bpy; the maths lives in the sibling package ``model_core``.
+Everything here touches bpy (``scene/`` reads and writes the scene, ``stages/`` runs each
+operation); the maths lives in the sibling package ``model_core``. See ARCHITECTURE.md.
 """
 
 from __future__ import annotations

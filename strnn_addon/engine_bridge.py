@@ -6,13 +6,18 @@ the operators make, so a test can swap them for a stand-in.
 
 from __future__ import annotations
 
+import importlib
 import json
+from dataclasses import replace
 from pathlib import Path
 
+import bpy
 import numpy as np
 
-from ..model_core import motion_ops
-from ..model_core.checkpoint import DEFAULT_MODEL, default_denoiser
+from ..model_core.io.checkpoint import DEFAULT_MODEL, default_denoiser
+from ..model_core.ops.denoise import denoise_positions_steps
+from ..model_core.ops.extend import extend_positions
+from ..model_core.ops.familiarity import clip_familiarity
 
 _CACHE: dict[tuple, object] = {}
 
@@ -74,9 +79,9 @@ def load_engine(folder: str = "", engine: str = "NUMPY", threads: int = 0, setti
         _set_threads(engine, threads)
         try:
             if engine == "TORCH":
-                from ..model_core.torch_engine import TorchEngine as Engine
+                from ..model_core.inference.torch_engine import TorchEngine as Engine
             else:
-                from ..model_core.engine import Engine
+                from ..model_core.inference.engine import Engine
             if len(_CACHE) >= 2:  # the main model and the denoiser stay loaded; older choices go
                 _CACHE.pop(next(iter(_CACHE)))
             _CACHE[key] = Engine.load(path)
@@ -123,27 +128,25 @@ def generator_from_prefs(prefs):
 def bpy_path(path: str) -> str:
     """Resolve Blender's ``//`` relative paths."""
     if path.startswith("//"):
-        import bpy
-
         return bpy.path.abspath(path)
     return path
 
 
 def extend(prefs, positions: np.ndarray, fps: float, frames: int) -> np.ndarray:
     """Continue ``positions`` ``[F, 21, 3]`` (Y-up scene units at ``fps``) by ``frames`` -> ``[frames, 21, 3]``."""
-    return motion_ops.extend_positions(generator_from_prefs(prefs), positions, fps, frames)
+    return extend_positions(generator_from_prefs(prefs), positions, fps, frames)
 
 
 def familiarity(prefs, positions: np.ndarray, fps: float):
     """How familiar ``positions`` ``[F, 21, 3]`` (Y-up scene units at ``fps``) are to the main model."""
-    return motion_ops.familiarity(generator_from_prefs(prefs), positions, fps)
+    return clip_familiarity(generator_from_prefs(prefs), positions, fps)
 
 
 def denoise_steps(prefs, positions: np.ndarray, fps: float, strength: float):
     """Denoised ``positions`` ``[F, 21, 3]`` (same space and frames), blended by ``strength``.
-    A step generator (``model_core.steps``): yields the fraction of the clip done as it goes."""
+    A step generator (``model_core.inference.steps``): yields the fraction of the clip done as it goes."""
     engine = engine_from_prefs(prefs, denoiser_folder(prefs), "Denoise Model Folder")
-    return (yield from motion_ops.denoise_positions_steps(engine, positions, fps, strength))
+    return (yield from denoise_positions_steps(engine, positions, fps, strength))
 
 
 _FOLLOWERS: dict[str, object] = {}
@@ -156,15 +159,13 @@ TORCH_MISSING = ("Follow Curve needs PyTorch, which this Blender's Python does n
 def load_follower(folder: str = "", threads: int = 0):
     """The torch path follower for ``folder`` ('' = bundled), cached; :class:`EngineError` without torch."""
     try:
-        import importlib
-
         importlib.import_module("torch")
     except ImportError as e:
         raise EngineError(TORCH_MISSING) from e
     path = model_path(folder)
     if str(path) not in _FOLLOWERS:
         _set_threads("TORCH", threads)
-        from ..model_core.control import PathFollower
+        from ..model_core.ops.follow import PathFollower
 
         try:
             _FOLLOWERS.clear()
@@ -179,11 +180,9 @@ def follow_curve_steps(prefs, points: np.ndarray, cyclic: bool, fps: float, fram
                        rest: np.ndarray | None = None):
     """Positions ``[frames, 21, 3]`` (Y-up scene units at ``fps``) walking the curve ``points`` ``[P, 3]``
     (Y-up) after ``context`` ``[F, 21, 3]``, or from a shipped seed sized like ``rest`` ``[21, 3]``.
-    A step generator (``model_core.steps``): yields the fraction done after each model window."""
-    from dataclasses import replace
-
+    A step generator (``model_core.inference.steps``): yields the fraction done after each model window."""
     follower = load_follower(main_folder(prefs), prefs.threads if prefs else 0)
-    from ..model_core.control import follow_curve_steps as model_steps  # after the check: it needs torch
+    from ..model_core.ops.follow import follow_curve_steps as model_steps  # after the check: it needs torch
 
     saved = follower.settings
     follower.settings = replace(saved, steps=int(steps))

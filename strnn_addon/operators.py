@@ -1,17 +1,24 @@
-"""Operators: thin wrappers that gather options and hand them to the workers."""
+"""Operators: thin wrappers that gather options and hand them to the stages (``stages/``)."""
 
 from __future__ import annotations
 
 import bpy
 from bpy.props import IntProperty, StringProperty
 
-from . import mapping, props as options
-from .pipeline import UserError, check_object
+from . import props as options
 from .props import joint_label
+from .scene import mapping
+from .scene.curves import find_curve
+from .scene.pipeline import UserError, check_object
+from .stages.common import STAGES, report_note, run
+from .stages.denoise import denoise_steps
+from .stages.extend import extend_steps
+from .stages.follow import follow_curve_steps
+from .stages.footlock import foot_lock_steps
 
 
 class _Staged:
-    """Runs a worker generator (see workers.py): all at once in ``execute`` (scripts, redo panel),
+    """Runs a worker generator (see stages/common.py): all at once in ``execute`` (scripts, redo panel),
     stage by stage from a timer in ``modal`` when invoked from the UI, with progress in the status
     bar and Esc to cancel between stages, or between the steps of a stage that yields its fraction
     done as it goes (Follow Curve's model windows). Nothing is written before the last stage."""
@@ -23,8 +30,6 @@ class _Staged:
         raise NotImplementedError
 
     def execute(self, context):
-        from .workers import STAGES, run
-
         wm = context.window_manager
         wm.progress_begin(0, len(STAGES))
         try:
@@ -60,8 +65,6 @@ class _Staged:
 
     def _advance(self, context):
         """Run the next stage; the operator's final result when the work ends, else None."""
-        from .workers import STAGES
-
         try:
             stage = next(self._steps)
         except StopIteration as stop:
@@ -107,15 +110,11 @@ class STRNN_OT_extend_clip(_Staged, bpy.types.Operator):
     foot_lock: options.foot_lock(False)
 
     def steps(self, context):
-        from .workers import extend_steps
-
         start = context.scene.frame_current if self.from_current else None
         return extend_steps(context, context.active_object, frames=self.frames, context_frames=self.context_frames,
                             foot_lock=self.foot_lock, from_frame=start)
 
     def done(self, action) -> str:
-        from .workers import report_note
-
         if self.from_current:
             return (f"Continued after frame {bpy.context.scene.frame_current} with {self.frames} new frames in new "
                     f"action {action.name!r}{report_note(action)}")
@@ -136,8 +135,6 @@ class STRNN_OT_denoise_action(_Staged, bpy.types.Operator):
     foot_lock: options.foot_lock(False)
 
     def steps(self, context):
-        from .workers import denoise_steps
-
         start, end = (self.frame_start, self.frame_end) if self.use_range else (None, None)
         return denoise_steps(context, context.active_object, frame_start=start, frame_end=end,
                              strength=self.strength, foot_lock=self.foot_lock)
@@ -159,8 +156,6 @@ class STRNN_OT_foot_lock(_Staged, bpy.types.Operator):
     frame_end: options.range_end("Lock")
 
     def steps(self, context):
-        from .workers import foot_lock_steps
-
         start, end = (self.frame_start, self.frame_end) if self.use_range else (None, None)
         return foot_lock_steps(context, context.active_object, frame_start=start, frame_end=end, blend=self.blend)
 
@@ -184,19 +179,13 @@ class STRNN_OT_follow_curve(_Staged, bpy.types.Operator):
                           description="Fine-tuning steps per 20-frame window that pull the motion onto the curve")
 
     def steps(self, context):
-        from .curve_worker import follow_curve_steps
-
         return follow_curve_steps(context, context.active_object, curve=self.curve, frames=self.frames,
                                   speed=self.speed, foot_lock=self.foot_lock, steps=self.steering)
 
     def done(self, action) -> str:
-        from .curves import find_curve
-
         curve = find_curve(bpy.context, self.curve)
         others = len(curve.data.splines) - 1
         note = f" (it followed the first of the curve's {others + 1} splines)" if others else ""
-        from .workers import report_note
-
         return f"Walked the curve {curve.name!r} into new action {action.name!r}{note}{report_note(action)}"
 
 

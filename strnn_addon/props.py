@@ -2,10 +2,13 @@
 
 from __future__ import annotations
 
+import textwrap
+
 import bpy
 from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, PointerProperty, StringProperty
 
-from ..model_core.conventions import JOINTS
+from ..model_core.motion.conventions import JOINTS
+from . import engine_bridge
 
 ADDON_ID = __package__.rpartition(".")[0]  # the extension's module, e.g. bl_ext.user_default.strnn_motion
 TAIL_JOINTS = ("l_toe", "r_toe", "l_fingertip", "r_fingertip")
@@ -134,18 +137,14 @@ class STRNN_AP_preferences(bpy.types.AddonPreferences):
 
 def draw_models(layout, prefs) -> None:
     """Which model each operation uses, and its licence (the bundled ones are non-commercial)."""
-    import textwrap
-
-    from .engine_bridge import model_card, model_used
-
     box = layout.box()
     for ops, purpose, setting in (("Extend, Follow Curve", "generate", "Model Folder"),
                                   ("Denoise", "denoise", "Denoise Model Folder")):
-        folder = model_used(prefs, purpose)
+        folder = engine_bridge.model_used(prefs, purpose)
         if not folder:
             box.label(text=f"{ops}: no model in the {setting}", icon="ERROR")
             continue
-        card = model_card(folder)
+        card = engine_bridge.model_card(folder)
         box.label(text=f"{ops}: {card['name']}", icon="OUTLINER_DATA_ARMATURE")
         col = box.column(align=True)
         if card["non_commercial"]:

@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import bpy
 
-from ..model_core.conventions import JOINTS
+from ..model_core.motion.conventions import JOINTS
+from . import torch_install
 from .operators import check_message
 from .props import TAIL_JOINTS, joint_label
 
@@ -103,10 +104,8 @@ class STRNN_PT_follow_curve(_Sidebar, bpy.types.Panel):
     bl_parent_id = "STRNN_PT_main"
 
     def draw(self, context):
-        from .torch_install import torch_available
-
         settings = context.scene.strnn
-        if not torch_available():
+        if not torch_install.torch_available():
             self.layout.label(text="Needs PyTorch: Preferences > Add-ons > STRNN Motion > Install PyTorch",
                               icon="INFO")
         col = self.layout.column(align=True)

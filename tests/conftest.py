@@ -62,8 +62,8 @@ def baseline_release(tmp_path):
     import numpy as np
     import torch
 
-    from model_core.baselines import MODELS
-    from model_core.checkpoint import save_release
+    from model_core.io.checkpoint import save_release
+    from model_core.model.baselines import MODELS
 
     def make(arch: str, seed: int = 0, **config) -> Path:
         torch.manual_seed(seed)

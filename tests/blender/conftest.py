@@ -81,7 +81,7 @@ def real_model(addon):
     """The real engine on the bundled (or a trained) model; skips when there is none."""
     if release_folder() is None:
         pytest.skip("no trained model (models/strnn_default or runs/*/release)")
-    pytest.importorskip(addon.__name__ + ".model_core.engine")
+    pytest.importorskip(addon.__name__ + ".model_core.inference.engine")
     prefs = bpy.context.preferences.addons[addon.__name__].preferences
     prefs.model_folder = str(release_folder())
     yield release_folder()

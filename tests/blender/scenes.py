@@ -8,8 +8,8 @@ from pathlib import Path
 import bpy
 import numpy as np
 
-from model_core.bvh_export import write_bvh
-from model_core.synthetic import walking_skeleton
+from model_core.io.bvh_export import write_bvh
+from model_core.motion.synthetic import walking_skeleton
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -79,8 +79,8 @@ def same_keys(a: dict, b: dict) -> bool:
 
 def _rest_joints() -> dict[str, np.ndarray]:
     """Canonical joint rest positions, Blender axes (Z up, facing -Y, left = +X), metres."""
-    from model_core.conventions import JOINTS, PARENT_NAMES, yup_to_zup
-    from model_core.synthetic import _offset
+    from model_core.motion.conventions import JOINTS, PARENT_NAMES, yup_to_zup
+    from model_core.motion.synthetic import _offset
 
     pos: dict[str, np.ndarray] = {}
     for joint in JOINTS:
@@ -223,7 +223,7 @@ def rigify_walk(frames: int = 60):
 
 
 def addon_module(addon, name: str):
-    """A submodule of the installed extension, e.g. ``addon_module(addon, "strnn_addon.pipeline")``."""
+    """A submodule of the installed extension, e.g. ``addon_module(addon, "strnn_addon.scene.pipeline")``."""
     import importlib
 
     return importlib.import_module(f"{addon.__name__}.{name}")
@@ -231,9 +231,9 @@ def addon_module(addon, name: str):
 
 def evaluated_joints(addon, obj, frames) -> np.ndarray:
     """World canonical joints ``[F, 21, 3]`` (Blender axes) as Blender evaluates them, frame by frame."""
-    pipeline = addon_module(addon, "strnn_addon.pipeline")
-    rig_io = addon_module(addon, "strnn_addon.rig_io")
-    solve = addon_module(addon, "model_core.solve")
+    pipeline = addon_module(addon, "strnn_addon.scene.pipeline")
+    rig_io = addon_module(addon, "strnn_addon.scene.rig_io")
+    solve = addon_module(addon, "model_core.rig.solve")
     clip = pipeline.prepare(bpy.context, obj)
     pose, world = rig_io.pose_matrices_evaluated(bpy.context, obj, clip.rig, np.asarray(frames, dtype=np.float64))
     local = solve.anchor_positions(clip.rig, clip.anchors, pose)

@@ -6,7 +6,7 @@ import bpy
 import pytest
 from scenes import build_armature, find_mocap, import_bvh, mixamo_bones, rigify_bones, walk_bvh
 
-from model_core.conventions import JOINTS
+from model_core.motion.conventions import JOINTS
 
 FAMILY_CLIPS = {
     "bandai_namco": "bandai-namco/dataset-2/dataset-2_walk_normal_001.bvh",

@@ -11,12 +11,12 @@ import numpy as np
 import pytest
 from scenes import action_of, addon_module, evaluated_joints, import_bvh, key_snapshot, mixamo_bones, same_keys
 
-from model_core.bvh_export import write_bvh
-from model_core.synthetic import walking_skeleton
+from model_core.io.bvh_export import write_bvh
+from model_core.motion.synthetic import walking_skeleton
 
 
 def curve_module(addon):
-    return addon_module(addon, "strnn_addon.curves")
+    return addon_module(addon, "strnn_addon.scene.curves")
 
 
 def add_curve(kind: str, **kw):
@@ -125,7 +125,7 @@ def test_steps_report_model_progress_and_stop_without_changes(addon, torch_model
     obj = import_bvh(write_bvh(tmp_path / "walk.bvh", walking_skeleton(40)), update_scene_fps=True)
     curve = add_curve("poly", points=[(0, 0, 0), (0, -6, 0)])
     bpy.context.view_layer.objects.active = obj
-    worker = addon_module(addon, "strnn_addon.curve_worker")
+    worker = addon_module(addon, "strnn_addon.stages.follow")
     action, names = action_of(obj), sorted(a.name for a in bpy.data.actions)
     steps = worker.follow_curve_steps(bpy.context, obj, curve=curve.name, frames=120)
     assert [next(steps), next(steps)] == ["read", "model"]
@@ -134,7 +134,7 @@ def test_steps_report_model_progress_and_stop_without_changes(addon, torch_model
     steps.close()
     assert action_of(obj) is action and sorted(a.name for a in bpy.data.actions) == names
     seen = []
-    new = addon_module(addon, "strnn_addon.workers").run(
+    new = addon_module(addon, "strnn_addon.stages.common").run(
         worker.follow_curve_steps(bpy.context, obj, curve=curve.name, frames=120), seen.append)
     assert seen == ["read", "model", "solve", "write"] and new is action_of(obj) and new is not action
 

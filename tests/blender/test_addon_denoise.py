@@ -83,16 +83,16 @@ def test_strength_zero_changes_no_motion(fake_model, addon, monkeypatch):
 def test_steps_report_model_progress_and_stop_without_changes(real_model, addon, tmp_path):
     """What the operator's modal runs; closing it in the model stage (Esc) changes nothing."""
     obj = import_bvh(walk_bvh(tmp_path, frames=400))
-    workers = addon_module(addon, "strnn_addon.workers")
+    denoise = addon_module(addon, "strnn_addon.stages.denoise")
     action, names = action_of(obj), sorted(a.name for a in bpy.data.actions)
-    steps = workers.denoise_steps(bpy.context, obj)
+    steps = denoise.denoise_steps(bpy.context, obj)
     assert [next(steps), next(steps)] == ["read", "model"]
     fraction = next(steps)
     assert isinstance(fraction, float) and 0 < fraction <= 1
     steps.close()
     assert action_of(obj) is action and sorted(a.name for a in bpy.data.actions) == names
     seen = []
-    new = workers.run(workers.denoise_steps(bpy.context, obj), seen.append)
+    new = addon_module(addon, "strnn_addon.stages.common").run(denoise.denoise_steps(bpy.context, obj), seen.append)
     assert seen == ["read", "model", "solve", "write"] and new is action_of(obj) and new is not action
 
 

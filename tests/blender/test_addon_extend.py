@@ -112,8 +112,8 @@ def seam_and_speed(pos: np.ndarray, n_ctx: int) -> tuple[float, float]:
 def bone_length_change(addon, obj, frames: np.ndarray) -> float:
     """Largest relative change of any bone's length (parent head to head) against the first frame;
     the hips bone moves freely (root motion), so its link to its parent is left out."""
-    rig_io = addon_module(addon, "strnn_addon.rig_io")
-    pipeline = addon_module(addon, "strnn_addon.pipeline")
+    rig_io = addon_module(addon, "strnn_addon.scene.rig_io")
+    pipeline = addon_module(addon, "strnn_addon.scene.pipeline")
     clip = pipeline.prepare(bpy.context, obj)
     rig, hips = clip.rig, clip.anchors.bone[0]
     pose, _ = rig_io.pose_matrices_evaluated(bpy.context, obj, rig, frames.astype(np.float64))
@@ -204,5 +204,5 @@ def test_extend_says_when_the_motion_is_unfamiliar(real_model, addon):
     found = action_of(obj)["strnn"]["familiarity"]
     assert found["reconstruction_cm"] > found["usual_cm_p90"]
     assert "unlike what the model learnt" in found["note"]
-    workers = importlib.import_module(addon.__name__ + ".strnn_addon.workers")
-    assert workers.report_note(action_of(obj)).startswith(". This motion is unlike")
+    common = importlib.import_module(addon.__name__ + ".strnn_addon.stages.common")
+    assert common.report_note(action_of(obj)).startswith(". This motion is unlike")

@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 from scenes import action_of, evaluated_joints, import_bvh, key_snapshot, same_keys
 
-from model_core import footlock as fl
-from model_core.bvh_export import write_bvh
-from model_core.conventions import JOINT_INDEX, zup_to_yup
-from model_core.synthetic import walking_skeleton
+from model_core.io.bvh_export import write_bvh
+from model_core.motion.conventions import JOINT_INDEX, zup_to_yup
+from model_core.motion.synthetic import walking_skeleton
+from model_core.ops import footlock as fl
 
 LEG_WORDS = ("UpLeg", "Leg", "Foot", "Toe")  # Mixamo names of the leg bones a BVH import has
 LEG_JOINTS = [JOINT_INDEX[f"{s}_{j}"] for s in "lr" for j in ("knee", "foot", "toe")]

@@ -19,7 +19,7 @@ def record(obj) -> dict:
 def test_extend_then_denoise_then_lock(addon, tmp_path, real_model):
     obj = import_bvh(walk_bvh(tmp_path, frames=60))
     source = action_of(obj)
-    need = addon_module(addon, "strnn_addon.pipeline").min_scene_frames(bpy.context.scene.render.fps)
+    need = addon_module(addon, "strnn_addon.scene.pipeline").min_scene_frames(bpy.context.scene.render.fps)
     assert bpy.ops.strnn.extend_clip(frames=30, foot_lock=True) == {"FINISHED"}
     assert "strnn" not in source  # the original is left as it was
     made = record(obj)

@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 from scenes import action_of, evaluated_joints, find_mocap, import_bvh
 
-from model_core.conventions import STANDARD_LEG_LENGTH
-from model_core.rigs import leg_length
+from model_core.motion.conventions import STANDARD_LEG_LENGTH
+from model_core.rig.rigs import leg_length
 
 CLIPS = {
     "bandai_namco": "bandai-namco/dataset-2/dataset-2_walk_normal_001.bvh",
@@ -30,9 +30,9 @@ def test_solve_round_trip_real_clip(addon, family):
         pytest.skip("motion capture not unpacked (data/mocap or ../shared/mocap)")
     obj = import_bvh(root / CLIPS[family], update_scene_fps=True)
     pkg = addon.__name__
-    pipeline = importlib.import_module(pkg + ".strnn_addon.pipeline")
-    rig_io = importlib.import_module(pkg + ".strnn_addon.rig_io")
-    solve = importlib.import_module(pkg + ".model_core.solve")
+    pipeline = importlib.import_module(pkg + ".strnn_addon.scene.pipeline")
+    rig_io = importlib.import_module(pkg + ".strnn_addon.scene.rig_io")
+    solve = importlib.import_module(pkg + ".model_core.rig.solve")
     clip = pipeline.prepare(bpy.context, obj)
     assert clip.mapping and len(clip.mapping) == 21
     frames = np.arange(clip.first, min(clip.last, clip.first + MAX_FRAMES - 1) + 1, dtype=np.float64)
@@ -47,7 +47,7 @@ def test_solve_round_trip_real_clip(addon, family):
     pipeline.write_pose(clip, new, frames, loc, rot, {}, (frames[0], frames[-1]))
     pipeline.finish(bpy.context, clip, new)
     assert action_of(obj) == new
-    conv = importlib.import_module(pkg + ".model_core.conventions")
+    conv = importlib.import_module(pkg + ".model_core.motion.conventions")
     got = conv.zup_to_yup(evaluated_joints(addon, obj, frames))
     to_metres = STANDARD_LEG_LENGTH / leg_length(pos)
     err_cm = np.linalg.norm(got - pos, axis=-1) * to_metres * 100

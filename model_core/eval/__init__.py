@@ -1,0 +1,1 @@
+"""Measuring the model: metrics, evaluations, benchmarks, plots and the demo pipeline."""

@@ -1,0 +1,146 @@
+"""One evaluation run over a data folder: prediction, long horizon and denoising,
+each beside its baselines, as the JSON document ``scripts/evaluate.py`` writes."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from ..model.dataset import MotionData
+from ..motion.conventions import MODEL_FPS
+from ..motion.features import positions_to_features
+from ..ops.denoise import denoise_positions
+from .metrics import (
+    HORIZONS_MS,
+    add_noise,
+    add_pops,
+    best_butterworth,
+    best_median,
+    floor_height,
+    joint_speed,
+    mpjpe_cm,
+    pose_vectors,
+    prediction_errors,
+    rollout_report,
+    segments,
+    upsample,
+)
+
+
+def select_clips(data: MotionData, split: str, group: str | None = None) -> list:
+    """The clips of a split (``all``: every clip), or of a held-out ``group`` when one is named."""
+    if group:
+        clips = data.group(group)
+        if not clips:
+            raise ValueError(f"{data.root}: no clips of the held-out group {group!r}")
+        return clips
+    clips = data.clips if split == "all" else data.split(split)
+    if not clips:
+        raise ValueError(f"{data.root}: no clips in the {split!r} split (use --split all for a foreign folder)")
+    return clips
+
+
+def evaluate_prediction(engine, clips, baselines: dict | None = None) -> dict:
+    """Prediction MPJPE (cm) per horizon of STRNN, the simple baselines, the ``baselines``
+    ``{name: engine}`` models and STRNN as Extend delivers it (``strnn_as_extend``, with its seam blend)."""
+    errors, windows = prediction_errors(engine, [c.positions for c in clips], extra_engines=baselines)
+    errors["strnn_as_extend"] = errors.pop("strnn_seam_blend")
+    return {"horizons_ms": list(HORIZONS_MS), "mpjpe_cm": errors, "windows": windows}
+
+
+def data_speed(clips, statistic=np.mean) -> float:
+    """Mean (or another ``statistic`` of the) joint speed (m / frame) over the clips' frames."""
+    return float(statistic(np.concatenate([joint_speed(c.positions) for c in clips])))
+
+
+def pick_seed_windows(clips, count: int, length: int = 20) -> list[tuple[str, np.ndarray]]:
+    """``count`` seeds spread evenly over the clips (sorted by name): (name, positions ``[length, J, 3]``)."""
+    usable = sorted((c for c in clips if len(c.positions) >= 2 * length), key=lambda c: c.name)
+    if not usable:
+        raise ValueError(f"no clip has the {2 * length} frames a seed needs")
+    picks = np.linspace(0, len(usable) - 1, count).round().astype(int)
+    return [(usable[i].name, usable[i].positions[length:2 * length]) for i in picks]
+
+
+def evaluate_long_horizon(engine, clips, frames: int, seeds: int, reference=None, log=print) -> dict:
+    ref_clips = reference or clips
+    speed, median = data_speed(ref_clips), data_speed(ref_clips, np.median)
+    ref = np.concatenate([segments(pose_vectors(c.features)) for c in ref_clips if len(c.features) >= 40])
+    chosen = pick_seed_windows(clips, seeds)
+    by_name = {c.name: c.positions for c in clips}
+    seed_feats = np.stack([positions_to_features(p)[0] for _, p in chosen])
+    log(f"long horizon: {seeds} seeds x {frames} frames open loop")
+    rollouts = engine.extrapolate(seed_feats, frames)
+    block = min(1000, frames)
+    reports = [rollout_report(r, p, speed, ref, block=block, median_speed=median, floor=floor_height(by_name[name]))
+               for r, (name, p) in zip(rollouts, chosen)]
+    take_speed = [float(joint_speed(by_name[name]).mean()) for name, _ in chosen]
+    return {
+        "frames": frames, "seeds": seeds,
+        "exploded": int(sum(r.exploded for r in reports)),
+        "frozen": int(sum(r.frozen for r in reports)),
+        "speed_ratio_last_1000": [r.speed_ratio_last_1000 for r in reports],
+        "d1nn_per_block": [r.d1nn_per_block for r in reports],
+        "seed_clips": [name for name, _ in chosen],
+        # each rollout's last-block speed against its seed's own take's mean joint speed
+        "seed_take_speed_ratio": [r.speed_ratio_last_1000 * speed / t for r, t in zip(reports, take_speed)],
+        "d1nn_drift": [_drift(r.d1nn_per_block) for r in reports],
+        "feet": {key: [getattr(r.feet, key) if r.feet else float("nan") for r in reports]
+                 for key in ("touch_fraction", "floor_offset_cm", "sink_cm")},
+    }
+
+
+def _drift(blocks: list[float]) -> float:
+    """D_1nn of the last block over the first (nan with one block)."""
+    return float(blocks[-1] / blocks[0]) if len(blocks) > 1 and blocks[0] > 0 else float("nan")
+
+
+def evaluate_denoise(engine, clips, stds_cm, seed: int = 0, fps: float = MODEL_FPS) -> dict:
+    """Denoise as the product runs it (:func:`denoise.denoise_positions`, at ``fps``: clips are
+    upsampled by a cubic when it is above the model's rate) against the best Butterworth filter, at
+    each Gaussian noise std in cm (0: the clean take, how much Denoise changes it)."""
+    usable = _at_rate([c.positions for c in clips if len(c.positions) >= 2 * engine.m], fps)
+    out = {"std_cm": list(stds_cm), "mpjpe_cm": {"strnn": [], "butterworth_best": [], "noisy": []},
+           "butterworth_cutoff_hz": [], "strnn_frames_per_s": []}
+    for std in stds_cm:
+        rng = np.random.default_rng(seed)
+        noisy = [add_noise(p, std, rng) for p in usable]
+        _score(out, engine, usable, noisy, fps)
+    return out
+
+
+def evaluate_pops(engine, clips, rate: float, seed: int = 0, fps: float = MODEL_FPS) -> dict:
+    """Denoise against the best Butterworth and the best median filter on clips where ``rate`` of
+    the joint-frames jump 10 to 30 cm for one frame (as from a marker swap)."""
+    usable = _at_rate([c.positions for c in clips if len(c.positions) >= 2 * engine.m], fps)
+    rng = np.random.default_rng(seed)
+    noisy = [add_pops(p, rate, rng) for p in usable]
+    out = {"rate": rate, "mpjpe_cm": {"strnn": [], "butterworth_best": [], "median_best": [], "noisy": []},
+           "butterworth_cutoff_hz": [], "median_frames": [], "strnn_frames_per_s": []}
+    _score(out, engine, usable, noisy, fps)
+    err, size = best_median(usable, noisy)
+    out["mpjpe_cm"]["median_best"].append(err)
+    out["median_frames"].append(size)
+    out["mpjpe_cm"] = {k: v[0] for k, v in out["mpjpe_cm"].items()}
+    return out
+
+
+def _score(out: dict, engine, clean: list, noisy: list, fps: float) -> None:
+    """Append Denoise's, the best Butterworth's and the input's MPJPE (cm) to ``out``."""
+    started = time.perf_counter()
+    denoised = [denoise_positions(engine, n, fps) for n in noisy]
+    out["strnn_frames_per_s"].append(sum(map(len, noisy)) / (time.perf_counter() - started))
+    bw, fc = best_butterworth(clean, noisy, fps=fps)
+    for key, value in (("strnn", _mpjpe(denoised, clean)), ("butterworth_best", bw), ("noisy", _mpjpe(noisy, clean))):
+        out["mpjpe_cm"][key].append(float(value))
+    out["butterworth_cutoff_hz"].append(fc)
+
+
+def _mpjpe(pred: list, true: list) -> float:
+    return float(np.concatenate([mpjpe_cm(p, t) for p, t in zip(pred, true)]).mean())
+
+
+def _at_rate(clips: list, fps: float) -> list:
+    """Clips at the model's rate brought to ``fps`` (a Catmull-Rom cubic between the frames)."""
+    return clips if fps == MODEL_FPS else [upsample(c, fps / MODEL_FPS) for c in clips]

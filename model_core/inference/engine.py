@@ -1,0 +1,314 @@
+"""NumPy inference engine for STRNN (no torch needed): predict, extrapolate, denoise.
+
+Loads the same release checkpoint as the torch model. Batch norms are folded into
+the layers that read them, the four spatial levels become one dense matrix each
+(zeros where the body graph has no edge), and the backward decoder and forward
+predictor step together, so a 20-frame window costs a few hundred small NumPy calls.
+Features in and out are RAW (un-normalised) ``[..., T, C]`` in :data:`LAYOUT` order.
+"""
+
+from __future__ import annotations
+
+from functools import lru_cache
+from pathlib import Path
+
+import numpy as np
+
+from ..io.checkpoint import Checkpoint, load_release
+from ..motion.conventions import LAYOUT, PARENTS
+from ..motion.features import RootStart, features_to_positions, integrate_root, positions_to_features, yaw_matrix
+from ..ops.seam import PREDICT_SEAM_FRAMES, seam_fade
+from .spatial_fold import fold_spatial
+from .steps import drive
+
+
+def _lstm(w: dict, prefix: str, suffix: str = "") -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(W_ih.T, W_hh.T, bias) with i, f, o rows halved so one tanh yields all gates."""
+    wih, whh = w[f"{prefix}.weight_ih{suffix}"], w[f"{prefix}.weight_hh{suffix}"]
+    b = w[f"{prefix}.bias_ih{suffix}"] + w[f"{prefix}.bias_hh{suffix}"]
+    h = whh.shape[1]
+    scale = np.ones(4 * h, np.float32)
+    scale[: 2 * h] = 0.5  # input and forget gates
+    scale[3 * h:] = 0.5  # output gate; sigmoid(z) = 0.5 * tanh(z / 2) + 0.5
+    return (wih * scale[:, None]).T.copy(), (whh * scale[:, None]).T.copy(), (b * scale).astype(np.float32)
+
+
+@lru_cache(maxsize=8)
+def _gate_affine(h: int) -> tuple[np.ndarray, np.ndarray]:
+    """(scale, shift) ``[4H]`` taking tanh of the pre-scaled gates to sigmoid (i, f, o) and tanh (g):
+    sigmoid(z) = 0.5 * tanh(z / 2) + 0.5."""
+    scale = np.full(4 * h, 0.5, np.float32)
+    scale[2 * h:3 * h] = 1.0
+    return scale, 1.0 - scale
+
+
+def _cell(gates: np.ndarray, c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """LSTM state update from pre-scaled gates ``[..., 4H]`` (PyTorch order i, f, g, o).
+    Few, in-place NumPy calls: at batch 1 their overhead, not arithmetic, is the cost."""
+    h = c.shape[-1]
+    scale, shift = _gate_affine(h)
+    t = np.tanh(gates)
+    t *= scale
+    t += shift
+    c = t[..., h:2 * h] * c
+    c += t[..., :h] * t[..., 2 * h:3 * h]
+    return t[..., 3 * h:] * np.tanh(c), c
+
+
+class Engine:
+    """STRNN inference in NumPy. Build with :meth:`load`."""
+
+    seam_frames = PREDICT_SEAM_FRAMES  # fade-out (frames) of the seam correction in predict() (ops/seam.py)
+
+    def __init__(self, ckpt: Checkpoint):
+        ckpt.require_strnn()
+        cfg = ckpt.config
+        self.ckpt = ckpt
+        self.m, self.n, self.width = cfg["encode_len"], cfg["predict_len"], cfg["width"]
+        self.offsets = bool(cfg.get("offsets", False))
+        self.mean, self.std = ckpt.mean, ckpt.std
+        w = {k: v.astype(np.float32) for k, v in ckpt.weights.items()}
+        self.enc_frame, self.dec_frame, out_bn = fold_spatial(w, cfg)
+        # The last encoder batch norm (scale a, shift s) feeds each LSTM's input weights.
+        a, s = out_bn
+        wih, self.enc_whh, b = _lstm(w, "encoder", "_l0")
+        self.enc_wih, self.enc_b = a[:, None] * wih, b + s @ wih
+        dec, pred = _lstm(w, "decoder"), _lstm(w, "predictor")
+        self.step_wih = np.stack([a[:, None] * dec[0], a[:, None] * pred[0]])  # (2, W, 4H)
+        self.step_whh = np.stack([dec[1], pred[1]])
+        self.step_b = np.stack([dec[2] + s @ dec[0], pred[2] + s @ pred[0]])[:, None]  # (2, 1, 4H)
+        # The decoder's first input is the learnt start code, not a batch-normed frame code.
+        self.start_gates = (w["start"] - s) @ dec[0]
+        self.filter = [(w[f"filter.net.{i}.weight"].T.copy(), w[f"filter.net.{i}.bias"]) for i in (0, 2, 4, 6)] \
+            if cfg["residual"] else None
+
+    @classmethod
+    def load(cls, folder: str | Path | None = None) -> Engine:
+        """Load a release folder (default: the bundled model)."""
+        return cls(load_release(folder))
+
+    @property
+    def seeds(self) -> np.ndarray:
+        """Shipped seed windows, raw features ``[K, m, C]``."""
+        return self.ckpt.seeds
+
+    # ----------------------------------------------------------------- core
+    def _window(self, x: np.ndarray) -> np.ndarray:
+        """Normalised context ``(B, m, C)`` -> normalised window ``(B, m + n, C)``."""
+        b, m, c = x.shape
+        xin = self.enc_frame(x.reshape(b * m, c)) @ self.enc_wih
+        xin = (xin + self.enc_b).reshape(b, m, -1)
+        h = np.zeros((b, self.width), np.float32)
+        cs = np.zeros_like(h)
+        for t in range(m):
+            h, cs = _cell(xin[:, t] + h @ self.enc_whh, cs)
+        hs, cs = np.stack([h, h]), np.stack([cs, cs])  # (2, B, H): decoder, predictor
+        first = self.enc_frame(x[:, -1])  # (B, W)
+        gin = np.stack([np.broadcast_to(self.start_gates, (b, self.start_gates.shape[0])),
+                        first @ self.step_wih[1]]) + self.step_b
+        steps = max(self.m, self.n)
+        out = np.empty((2, steps, b, c), np.float32)
+        base = np.concatenate([x[:, -1], x[:, -1]]) if self.offsets else None  # (2B, C)
+        for t in range(steps):
+            hs, cs = _cell(gin + np.matmul(hs, self.step_whh), cs)
+            frames = self.dec_frame(hs.reshape(2 * b, -1))  # (2B, C)
+            if base is not None:
+                frames += base
+            out[:, t] = frames.reshape(2, b, c)
+            if t + 1 < steps:
+                gin = np.matmul(self.enc_frame(frames).reshape(2, b, -1), self.step_wih) + self.step_b
+        window = np.concatenate([out[0, : self.m][::-1], out[1, : self.n]]).transpose(1, 0, 2)  # (B, T, C)
+        if self.filter is not None:
+            y = window.reshape(b, -1)
+            z = y
+            for i, (wt, bias) in enumerate(self.filter):
+                z = z @ wt + bias
+                if i < 3:
+                    z = np.where(z > 0, z, np.expm1(np.minimum(z, 0)))  # ELU
+            window = (y + z).reshape(window.shape)
+        return window
+
+    def forward(self, context: np.ndarray) -> np.ndarray:
+        """Raw context ``[B, m, C]`` -> raw decoded context + prediction ``[B, m + n, C]``."""
+        x = ((np.asarray(context, np.float32) - self.mean) / self.std).astype(np.float32)
+        return self._window(x) * self.std + self.mean
+
+    def predict(self, context: np.ndarray) -> np.ndarray:
+        """Raw context ``[B, m, C]`` -> the next ``n`` raw frames ``[B, n, C]``.
+
+        Seam correction: the decoder's error on the last context frame (its offset from the
+        true frame) is carried into the prediction and fades out over ``seam_frames`` frames,
+        so the continuation starts where the context ends (0 turns it off)."""
+        self.ckpt.require_generator("predict motion")
+        context = np.asarray(context, np.float32)
+        window = self.forward(context)
+        pred = window[:, self.m:]
+        if self.seam_frames > 0:
+            offset = context[:, -1, LAYOUT.positions] - window[:, self.m - 1, LAYOUT.positions]
+            fade = seam_fade(self.n, self.seam_frames)
+            pred[..., LAYOUT.positions] += fade[None, :, None] * offset[:, None]
+        return pred
+
+    def extrapolate(self, seed: np.ndarray, frames: int, keep_bone_lengths: bool = True) -> np.ndarray:
+        """Open-loop generation: repeat (take the last m frames, predict n more).
+
+        ``seed``: raw features ``[m, C]`` or ``[B, m, C]``; returns ``[frames, C]`` or
+        ``[B, frames, C]``. With ``keep_bone_lengths`` each predicted window is put back on
+        the seed's skeleton (bone directions kept) and contacts rounded before it is fed back.
+        """
+        seed = np.asarray(seed, np.float32)
+        single = seed.ndim == 2
+        ctx = seed[None] if single else seed
+        ctx = ctx[:, -self.m:]
+        lengths = bone_lengths(ctx) if keep_bone_lengths else None
+        chunks, total = [], 0
+        while total < frames:
+            new = self.predict(ctx)
+            if keep_bone_lengths:
+                new = project_to_skeleton(new, lengths)
+            chunks.append(new)
+            total += new.shape[1]
+            ctx = np.concatenate([ctx, new], 1)[:, -self.m:]
+        out = np.concatenate(chunks, 1)[:, :frames]
+        return out[0] if single else out
+
+    def denoise(self, feats: np.ndarray, stride: int | None = None) -> np.ndarray:
+        """Project raw features ``[F, C]`` (F >= m) onto the manifold: overlapping m-frame
+        windows through encoder and decoder, blended with a Hann weight."""
+        return drive(self.denoise_steps(feats, stride))
+
+    def denoise_steps(self, feats: np.ndarray, stride: int | None = None, batch: int = 256):
+        """:meth:`denoise` as a step generator (:mod:`steps`): yields the fraction of the windows
+        done after each ``batch`` of them, returns the features."""
+        feats = np.asarray(feats, np.float32)
+        f = len(feats)
+        if f < self.m:
+            raise ValueError(f"denoising needs at least {self.m} frames, got {f}")
+        stride = stride or max(1, self.m // 4)
+        starts = sorted(set(range(0, f - self.m + 1, stride)) | {f - self.m})
+        windows = np.stack([feats[s:s + self.m] for s in starts])
+        parts = []
+        for i in range(0, len(windows), batch):
+            parts.append(self.forward(windows[i:i + batch])[:, : self.m])
+            yield min(i + batch, len(windows)) / len(windows)
+        decoded = np.concatenate(parts)
+        weight = np.hanning(self.m + 2)[1:-1].astype(np.float32)[:, None]
+        acc = np.zeros_like(feats)
+        norm = np.zeros((f, 1), np.float32)
+        for s, d in zip(starts, decoded):
+            acc[s:s + self.m] += weight * d
+            norm[s:s + self.m] += weight
+        return acc / norm
+
+    # ------------------------------------------------------ position level
+    def extend(self, positions: np.ndarray, frames: int, **kw) -> np.ndarray:
+        """Continue global positions ``[F, 21, 3]`` (metres, Y-up, 30 fps, F >= m) by
+        ``frames`` new frames ``[frames, 21, 3]``, root motion continuing."""
+        feats, start = positions_to_features(positions)
+        root, yaw = integrate_root(feats, start)
+        new = self.extrapolate(feats[-self.m:], frames, **kw)
+        joined = np.concatenate([feats[-1:], new])
+        return features_to_positions(joined, RootStart(root[-1], float(yaw[-1])))[1:]
+
+    def denoise_positions(self, positions: np.ndarray, root_weight: float = 3.0,
+                          yaw_weight: float = 10.0) -> np.ndarray:
+        """Denoise global positions ``[F, 21, 3]``: :meth:`denoise_positions_steps` run to the end."""
+        return drive(self.denoise_positions_steps(positions, root_weight, yaw_weight))
+
+    def denoise_positions_steps(self, positions: np.ndarray, root_weight: float = 3.0, yaw_weight: float = 10.0):
+        """Denoise global positions ``[F, 21, 3]``; a step generator like :meth:`denoise_steps`.
+
+        The body comes from the model. It is placed on the input frame by frame by the heading
+        and shift that fit it best to all 21 input joints (least squares, so the noise of the
+        joints averages out); then the heading track is smoothed and the shift track blended
+        with the model's own root steps (its slow part from the fit, its fast part from the
+        model), ``yaw_weight`` and ``root_weight`` setting how smooth (chosen on the validation
+        split)."""
+        positions = np.asarray(positions, dtype=np.float64)
+        feats, _ = positions_to_features(positions)
+        clean = yield from self.denoise_steps(feats)
+        origin = RootStart(np.zeros(3), 0.0)
+        root_model, _ = integrate_root(clean, origin)
+        body = features_to_positions(clean, origin) - root_model[:, None]  # root at the origin
+        yaw, shift = fit_yaw_shift(body, positions)
+        yaw = blend_track(yaw[:, None], np.zeros((len(yaw) - 1, 1)), yaw_weight)[:, 0]
+        rot = yaw_matrix(yaw)
+        steps = np.einsum("fij,fj->fi", rot[:-1], np.diff(root_model, axis=0))
+        root = blend_track(shift, steps, root_weight)
+        return (np.einsum("fij,fkj->fki", rot, body) + root[:, None]).astype(np.float32)
+
+
+def fit_yaw_shift(body: np.ndarray, target: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per frame, the turn about the up axis ``[F]`` (unwrapped radians) and shift ``[F, 3]``
+    that put ``body`` ``[F, J, 3]`` closest to ``target`` ``[F, J, 3]`` in the least-squares
+    sense: ``yaw_matrix(yaw) @ body + shift ~ target``."""
+    bc, tc = body.mean(1), target.mean(1)
+    b, t = body - bc[:, None], target - tc[:, None]
+    sin = (t[..., 0] * b[..., 2] - t[..., 2] * b[..., 0]).sum(1)
+    cos = (t[..., 0] * b[..., 0] + t[..., 2] * b[..., 2]).sum(1)
+    yaw = np.unwrap(np.arctan2(sin, cos))
+    return yaw, tc - np.einsum("fij,fj->fi", yaw_matrix(yaw), bc)
+
+
+def blend_track(noisy: np.ndarray, steps: np.ndarray, weight: float) -> np.ndarray:
+    """Track ``[F, K]`` minimising ``|p - noisy|^2 + weight * |diff(p) - steps|^2`` (``steps`` ``[F-1, K]``)."""
+    f = len(noisy)
+    # Normal equations (I + w D^T D) p = noisy + w D^T steps: tridiagonal, solved by elimination.
+    diag = 1.0 + weight * np.r_[1.0, np.full(f - 2, 2.0), 1.0] if f > 1 else np.ones(1)
+    rhs = noisy.astype(np.float64).copy()
+    rhs[:-1] -= weight * steps
+    rhs[1:] += weight * steps
+    return solve_tridiagonal(np.full(f - 1, -weight), diag, rhs)
+
+
+def solve_tridiagonal(off: np.ndarray, diag: np.ndarray, rhs: np.ndarray) -> np.ndarray:
+    """Solve a symmetric tridiagonal system (``off`` ``[F-1]``, ``diag`` ``[F]``) for ``rhs`` ``[F, K]``."""
+    d, r = diag.astype(np.float64).copy(), rhs.astype(np.float64).copy()
+    for i in range(1, len(d)):
+        k = off[i - 1] / d[i - 1]
+        d[i] -= k * off[i - 1]
+        r[i] -= k * r[i - 1]
+    r[-1] /= d[-1]
+    for i in range(len(d) - 2, -1, -1):
+        r[i] = (r[i] - off[i] * r[i + 1]) / d[i]
+    return r
+
+
+def bone_lengths(feats: np.ndarray) -> np.ndarray:
+    """Median bone lengths ``[B, J]`` (0 for the root) of raw features ``[B, T, C]``."""
+    local = feats[..., LAYOUT.positions].reshape(*feats.shape[:-1], -1, 3)
+    bones = local[..., 1:, :] - local[..., PARENTS[1:], :]
+    return np.concatenate([np.zeros(feats.shape[:1] + (1,)), np.median(np.linalg.norm(bones, axis=-1), 1)], -1)
+
+
+def _chain_matrices() -> tuple[np.ndarray, np.ndarray]:
+    """``bone [J-1, J]``: joint positions -> bone vectors (joint j minus its parent, row j-1);
+    ``chain [J, J-1]``: bone vectors -> joint offsets from the root (the bones from the root to j)."""
+    j = len(PARENTS)
+    bone = np.zeros((j - 1, j), np.float32)
+    bone[np.arange(j - 1), np.arange(1, j)] = 1.0
+    bone[np.arange(j - 1), PARENTS[1:]] -= 1.0
+    chain = np.zeros((j, j - 1), np.float32)
+    for joint in range(1, j):
+        k = joint
+        while k > 0:
+            chain[joint, k - 1] = 1.0
+            k = PARENTS[k]
+    return bone, chain
+
+
+_BONE, _CHAIN = _chain_matrices()
+
+
+def project_to_skeleton(feats: np.ndarray, lengths: np.ndarray) -> np.ndarray:
+    """Put raw features ``[B, T, C]`` back on bones of ``lengths`` ``[B, J]`` (directions kept,
+    the root where it was) and round the contacts. Two small matmuls instead of a loop over joints."""
+    out = feats.copy()
+    local = feats[..., LAYOUT.positions].reshape(*feats.shape[:-1], -1, 3)
+    d = np.tensordot(local, _BONE, axes=([-2], [1]))  # bone vectors (B, T, 3, J-1)
+    norm = np.sqrt(np.einsum("...dj,...dj->...j", d, d))[..., None, :]
+    d *= lengths[:, None, None, 1:] / np.maximum(norm, 1e-8)
+    fixed = local[..., :1, :] + np.tensordot(d, _CHAIN, axes=([-1], [1])).swapaxes(-1, -2)  # (B, T, J, 3)
+    out[..., LAYOUT.positions] = fixed.reshape(*feats.shape[:-1], -1)
+    out[..., LAYOUT.contacts] = np.round(np.clip(out[..., LAYOUT.contacts], 0, 1))
+    return out

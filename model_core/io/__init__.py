@@ -1,0 +1,1 @@
+"""Files in and out: BVH reading and writing, released checkpoints, atomic writes."""

@@ -1,0 +1,170 @@
+"""Release checkpoints: ``model.safetensors`` (weights, cannot run code on load) beside
+``model.json`` (config, feature layout, normalisation, skeleton, data, licence) and
+``seeds.npz`` (20-frame feature windows from test-split takes, loaded without pickle).
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+try:  # the library where it is installed; Blender's Python lacks it, so reading has a fallback
+    from safetensors.numpy import load_file, save_file
+except ImportError:  # pragma: no cover - exercised in Blender
+    load_file = save_file = None
+
+from ..motion.conventions import CONTACTS, JOINTS, LAYOUT, MODEL_FPS, PARENT_NAMES, UP_AXIS
+from .files import write_atomic, write_json
+
+REPO = Path(__file__).resolve().parents[2]
+DEFAULT_MODEL = REPO / "models" / "strnn_default"
+DENOISE_MODEL = REPO / "models" / "strnn_denoise"  # the model Denoise uses unless told otherwise
+PURPOSES = ("generate", "denoise")  # what a release is trained for (model.json "purpose"; absent: the first)
+# What a release holds (model.json "architecture"; absent: the first). The others are published
+# baselines (model_core/model/baselines.py), scored by scripts/evaluate.py and never run by the engines.
+ARCHITECTURES = ("strnn", "simlpe", "residual_gru")
+
+
+def default_denoiser(fallback=None):
+    """The bundled denoising model's folder if it is there, else ``fallback`` (the model that
+    Denoise uses when none is named)."""
+    return DENOISE_MODEL if (DENOISE_MODEL / "model.json").exists() else fallback
+
+
+def walk_seed_index(names: list[str]) -> int:
+    """Index of the first shipped seed taken from a walk (by its clip name), else 0."""
+    low = [n.lower() for n in names]
+    return next((i for key in ("walk_", "walk") for i, n in enumerate(low) if key in n), 0)
+
+
+class CheckpointError(ValueError):
+    """A model folder is missing files or holds an unsupported format."""
+
+
+@dataclass
+class Checkpoint:
+    """Everything inference needs: weights ``{name: float32 array}``, config dict,
+    normalisation ``mean``/``std`` ``[C]``, metadata and seed windows ``[K, m, C]``."""
+
+    weights: dict[str, np.ndarray]
+    config: dict
+    mean: np.ndarray
+    std: np.ndarray
+    meta: dict
+    seeds: np.ndarray
+    seed_names: list[str]
+
+    @property
+    def purpose(self) -> str:
+        """``generate`` (predicts: extend, follow, denoise) or ``denoise`` (a reconstruction-only model)."""
+        return self.meta.get("purpose", PURPOSES[0])
+
+    @property
+    def architecture(self) -> str:
+        """``strnn``, or the name of a baseline (:data:`ARCHITECTURES`)."""
+        return self.meta.get("architecture", ARCHITECTURES[0])
+
+    def require_strnn(self) -> None:
+        """Raise :class:`CheckpointError` if this release is a baseline, which only evaluate.py runs."""
+        if self.architecture != ARCHITECTURES[0]:
+            raise CheckpointError(f"this model folder holds a {self.architecture} baseline (model.json architecture "
+                                  f"{self.architecture!r}), not an STRNN model: it is only for scoring, with "
+                                  f"scripts/evaluate.py --baseline-model FOLDER")
+
+    def require_generator(self, what: str) -> None:
+        """Raise :class:`CheckpointError` if this is a denoise-only model, which cannot do ``what``."""
+        if self.purpose == "denoise":
+            raise CheckpointError(f"this model was trained for Denoise alone (model.json purpose 'denoise'), so "
+                                  f"it cannot {what}: use a generating model such as models/strnn_default")
+
+
+_DTYPES = {"F32": "<f4", "F64": "<f8", "F16": "<f2", "I64": "<i8", "I32": "<i4", "U8": "u1", "BOOL": "?"}
+
+
+def read_safetensors(path: str | Path) -> dict[str, np.ndarray]:
+    """Read a .safetensors file with NumPy alone: an 8-byte little-endian header length,
+    a JSON header of ``{name: {dtype, shape, data_offsets}}``, then the raw tensor bytes."""
+    raw = Path(path).read_bytes()
+    if len(raw) < 8:
+        raise CheckpointError(f"{path}: too short to be a safetensors file")
+    size = int.from_bytes(raw[:8], "little")
+    try:
+        header = json.loads(raw[8:8 + size])
+    except ValueError as e:
+        raise CheckpointError(f"{path}: unreadable safetensors header ({e})") from None
+    body = memoryview(raw)[8 + size:]
+    out = {}
+    for name, info in header.items():
+        if name == "__metadata__":
+            continue
+        if info["dtype"] not in _DTYPES:
+            raise CheckpointError(f"{path}: tensor {name!r} has unsupported dtype {info['dtype']}")
+        begin, end = info["data_offsets"]
+        out[name] = np.frombuffer(body[begin:end], dtype=_DTYPES[info["dtype"]]).reshape(info["shape"]).copy()
+    return out
+
+
+def save_release(folder: str | Path, weights: dict[str, np.ndarray], config: dict, mean, std,
+                 meta: dict, seeds: np.ndarray, seed_names: list[str]) -> Path:
+    """Write a release checkpoint folder atomically, file by file."""
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    doc = {
+        "format": "strnn-release-1",
+        "config": config,
+        "fps": MODEL_FPS,
+        "up_axis": "xyz"[UP_AXIS],
+        "units": "metres",
+        "layout": {"size": LAYOUT.size, "positions": [LAYOUT.positions.start, LAYOUT.positions.stop],
+                   "velocity": [LAYOUT.velocity.start, LAYOUT.velocity.stop], "yaw_rate": LAYOUT.yaw_rate,
+                   "contacts": [LAYOUT.contacts.start, LAYOUT.contacts.stop],
+                   "contact_names": [c for c, _ in CONTACTS]},
+        "skeleton": {"joints": list(JOINTS), "parents": [PARENT_NAMES[j] for j in JOINTS]},
+        "normalisation": {"mean": np.asarray(mean).tolist(), "std": np.asarray(std).tolist()},
+        **meta,
+    }
+    contiguous = {k: np.ascontiguousarray(v, dtype=np.float32) for k, v in weights.items()}
+    write_atomic(folder / "model.safetensors", lambda p: save_file(contiguous, str(p)))
+    write_json(folder / "model.json", doc)
+    def write_seeds(p: Path):
+        with open(p, "wb") as f:  # a file object keeps np.savez from renaming the temporary file
+            np.savez(f, features=np.asarray(seeds, np.float32), names=np.array(seed_names, dtype=str))
+
+    write_atomic(folder / "seeds.npz", write_seeds)
+    return folder
+
+
+def load_release(folder: str | Path | None = None) -> Checkpoint:
+    """Load a release checkpoint folder (default: the bundled model). Never unpickles."""
+    folder = Path(folder) if folder else DEFAULT_MODEL
+    if folder.is_file():
+        folder = folder.parent
+    for name in ("model.safetensors", "model.json"):
+        if not (folder / name).exists():
+            raise CheckpointError(f"{folder}: missing {name}; a model folder holds model.safetensors, "
+                                  "model.json and seeds.npz (see models/strnn_default)")
+    doc = json.loads((folder / "model.json").read_text())
+    if doc.get("format") != "strnn-release-1":
+        raise CheckpointError(f"{folder / 'model.json'}: unsupported format {doc.get('format')!r}")
+    if doc["layout"]["size"] != LAYOUT.size:
+        raise CheckpointError(f"{folder}: feature size {doc['layout']['size']} does not match "
+                              f"this code's {LAYOUT.size}")
+    seeds, names = np.zeros((0, doc["config"]["encode_len"], LAYOUT.size), np.float32), []
+    if (folder / "seeds.npz").exists():
+        z = np.load(folder / "seeds.npz", allow_pickle=False)
+        seeds, names = z["features"], [str(n) for n in z["names"]]
+    norm = doc["normalisation"]
+    meta = {k: v for k, v in doc.items() if k not in ("config", "normalisation")}
+    reader = load_file if load_file is not None else read_safetensors
+    ckpt = Checkpoint(reader(str(folder / "model.safetensors")), doc["config"],
+                      np.array(norm["mean"], np.float32), np.array(norm["std"], np.float32), meta, seeds, names)
+    if ckpt.purpose not in PURPOSES:
+        raise CheckpointError(f"{folder / 'model.json'}: unknown purpose {ckpt.purpose!r} "
+                              f"(one of {', '.join(PURPOSES)})")
+    if ckpt.architecture not in ARCHITECTURES:
+        raise CheckpointError(f"{folder / 'model.json'}: unknown architecture {ckpt.architecture!r} "
+                              f"(one of {', '.join(ARCHITECTURES)})")
+    return ckpt

@@ -1,0 +1,1 @@
+"""The networks (STRNN and the baselines), the dataset and their training."""

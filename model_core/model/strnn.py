@@ -1,0 +1,167 @@
+"""STRNN in PyTorch: spatial encoder/decoder, LSTM encoder + backward decoder +
+forward predictor (conditional), residual filter. Shapes: ``B`` batch, ``T`` time,
+``C`` feature channels (normalised, :data:`conventions.LAYOUT`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import torch
+from torch import nn
+
+from ..motion.conventions import LAYOUT, LIMBS, group_channels as group_indices
+
+
+@dataclass
+class STRNNConfig:
+    frame_size: int = LAYOUT.size  # channels per frame
+    width: int = 512  # L4 width and LSTM hidden size; L1..L3 are width/8, /4, /2
+    encode_len: int = 20  # m: context frames
+    predict_len: int = 20  # n: predicted frames (the decoder reconstructs m)
+    spatial: bool = True  # hierarchical body-part encoder; False = "Temporal" (one linear layer)
+    residual: bool = True  # residual filter over decoded + predicted frames
+    residual_width: int = 512  # hidden units of the residual filter
+    dropout: float = 0.0  # after each spatial layer (paper: 0.1; 0 trains better at width 128, see the model card)
+    # The frame decoder outputs offsets from the last context frame (a residual connection over
+    # time) instead of whole frames, so the first predicted frames start where the context ends.
+    offsets: bool = False
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+class Block(nn.Sequential):
+    """Fully connected, tanh, dropout, batch norm (the paper's spatial layer)."""
+
+    def __init__(self, n_in: int, n_out: int, dropout: float):
+        super().__init__(nn.Linear(n_in, n_out), nn.Tanh(), nn.Dropout(dropout), nn.BatchNorm1d(n_out))
+
+
+class SpatialEncoder(nn.Module):
+    """Frames ``(N, C)`` -> body code ``(N, width)`` through L1..L4."""
+
+    def __init__(self, cfg: STRNNConfig):
+        super().__init__()
+        w1, w2, w3, w4, d = cfg.width // 8, cfg.width // 4, cfg.width // 2, cfg.width, cfg.dropout
+        g = group_indices()
+        for name, idx in g.items():
+            self.register_buffer(f"idx_{name}", torch.tensor(idx), persistent=False)
+        self.l1 = nn.ModuleDict({k: Block(len(g[k]), w1, d) for k in ("torso",) + LIMBS})
+        self.l2 = nn.ModuleDict({k: Block(2 * w1, w2, d) for k in LIMBS})
+        self.l3 = nn.ModuleDict({k: Block(2 * w2, w3, d) for k in ("upper", "lower")})
+        self.l4 = Block(2 * w3 + len(g["root"]) + len(g["contacts"]), w4, d)
+
+    def forward(self, x):
+        part = {k: self.l1[k](x[:, getattr(self, f"idx_{k}")]) for k in self.l1}
+        merged = {k: self.l2[k](torch.cat([part[k], part["torso"]], -1)) for k in LIMBS}
+        upper = self.l3["upper"](torch.cat([merged["l_arm"], merged["r_arm"]], -1))
+        lower = self.l3["lower"](torch.cat([merged["l_leg"], merged["r_leg"]], -1))
+        rest = torch.cat([upper, lower, x[:, self.idx_root], x[:, self.idx_contacts]], -1)
+        return self.l4(rest)  # (N, width)
+
+
+class SpatialDecoder(nn.Module):
+    """Body code ``(N, width)`` -> frames ``(N, C)``, mirroring :class:`SpatialEncoder`."""
+
+    def __init__(self, cfg: STRNNConfig):
+        super().__init__()
+        w1, w2, w3, w4, d = cfg.width // 8, cfg.width // 4, cfg.width // 2, cfg.width, cfg.dropout
+        g = group_indices()
+        self.groups = g
+        self.frame_size = cfg.frame_size
+        self.l4 = nn.ModuleDict({k: Block(w4, w3, d) for k in ("upper", "lower")})
+        self.root = nn.Linear(w4, len(g["root"]))
+        self.contacts = nn.Linear(w4, len(g["contacts"]))
+        self.l3 = nn.ModuleDict({k: Block(w3, w2, d) for k in LIMBS})
+        self.l2 = nn.ModuleDict({k: Block(w2, 2 * w1, d) for k in LIMBS})
+        self.out = nn.ModuleDict({k: nn.Linear(w1, len(g[k])) for k in LIMBS})
+        self.torso = nn.Linear(4 * w1, len(g["torso"]))
+        order = [i for k in ("root", "contacts", "torso") + LIMBS for i in g[k]]
+        self.register_buffer("perm", torch.argsort(torch.tensor(order)), persistent=False)
+
+    def forward(self, h):
+        upper, lower = self.l4["upper"](h), self.l4["lower"](h)
+        src = {"l_arm": upper, "r_arm": upper, "l_leg": lower, "r_leg": lower}
+        limb = {k: self.l2[k](self.l3[k](src[k])) for k in LIMBS}  # (N, 2*w1): limb half, torso half
+        w1 = limb["l_arm"].shape[-1] // 2
+        torso = self.torso(torch.cat([limb[k][:, w1:] for k in LIMBS], -1))
+        parts = [self.root(h), self.contacts(h), torso] + [self.out[k](limb[k][:, :w1]) for k in LIMBS]
+        return torch.cat(parts, -1)[:, self.perm]  # (N, C) in layout order
+
+
+class ResidualFilter(nn.Module):
+    """Four fully connected layers (ELU) over a whole window ``(B, T, C)``, added back."""
+
+    def __init__(self, cfg: STRNNConfig):
+        super().__init__()
+        n = (cfg.encode_len + cfg.predict_len) * cfg.frame_size
+        w = cfg.residual_width
+        self.net = nn.Sequential(nn.Linear(n, w), nn.ELU(), nn.Linear(w, w), nn.ELU(),
+                                 nn.Linear(w, w), nn.ELU(), nn.Linear(w, n))
+        nn.init.zeros_(self.net[-1].weight)
+        nn.init.zeros_(self.net[-1].bias)
+
+    def forward(self, x):
+        return x + self.net(x.flatten(1)).view_as(x)
+
+
+class STRNN(nn.Module):
+    """Encode m frames, decode them backwards and predict n frames forwards."""
+
+    def __init__(self, cfg: STRNNConfig):
+        super().__init__()
+        self.cfg = cfg
+        c, w = cfg.frame_size, cfg.width
+        self.encode_frame = SpatialEncoder(cfg) if cfg.spatial else nn.Linear(c, w)
+        self.decode_frame = SpatialDecoder(cfg) if cfg.spatial else nn.Linear(w, c)
+        self.encoder = nn.LSTM(w, w, batch_first=True)
+        self.decoder = nn.LSTMCell(w, w)
+        self.predictor = nn.LSTMCell(w, w)
+        self.start = nn.Parameter(torch.zeros(w))  # first input of the backward decoder
+        self.filter = ResidualFilter(cfg) if cfg.residual else None
+
+    def encode_frames(self, x):
+        b, t, c = x.shape
+        return self.encode_frame(x.reshape(b * t, c)).view(b, t, -1)  # (B, T, W)
+
+    def spatio_temporal(self, x):
+        """Context ``(B, m, C)`` -> decoded ``(B, m, C)`` (chronological) and predicted ``(B, n, C)``."""
+        cfg = self.cfg
+        _, (h, c) = self.encoder(self.encode_frames(x))
+        h, c = h[0], c[0]  # (B, W)
+        dec_in = self.start.expand_as(h)
+        pred_in = self.encode_frames(x[:, -1:])[:, 0]
+        (hd, cd), (hp, cp) = (h, c), (h, c)
+        base = x[:, -1] if cfg.offsets else 0.0
+        decoded, predicted = [], []
+        for i in range(max(cfg.encode_len, cfg.predict_len)):
+            if i < cfg.encode_len:
+                hd, cd = self.decoder(dec_in, (hd, cd))
+                frame = base + self.decode_frame(hd)
+                decoded.append(frame)
+                dec_in = self.encode_frame(frame)
+            if i < cfg.predict_len:
+                hp, cp = self.predictor(pred_in, (hp, cp))
+                frame = base + self.decode_frame(hp)
+                predicted.append(frame)
+                pred_in = self.encode_frame(frame)
+        return torch.stack(decoded[::-1], 1), torch.stack(predicted, 1)
+
+    def forward(self, x, use_filter: bool = True):
+        """Context ``(B, m, C)`` -> window ``(B, m + n, C)``: decoded context then prediction."""
+        decoded, predicted = self.spatio_temporal(x)
+        out = torch.cat([decoded, predicted], 1)
+        if self.filter is not None and use_filter:
+            out = self.filter(out)
+        return out
+
+
+def smoothness_cost(window, root: slice = LAYOUT.root):
+    """Long-horizon cost: mean squared 2nd difference of body channels + squared 1st
+    difference of the root channels, over the whole window ``(B, T, C)``."""
+    body = window[..., LAYOUT.positions]
+    acc = body[:, 2:] - 2 * body[:, 1:-1] + body[:, :-2]
+    vel = window[:, 1:, root] - window[:, :-1, root]
+    return acc.pow(2).mean() + vel.pow(2).mean()
+

@@ -1,0 +1,1 @@
+"""Motion itself: the conventions (axes, joints, feature layout), features, rotations and synthetic clips."""

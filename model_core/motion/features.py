@@ -1,0 +1,150 @@
+"""The feature representation of DESIGN.md and its exact inverse.
+
+A frame's features (layout in :data:`conventions.LAYOUT`): joint positions in
+the root's local frame (origin = hips projected on the ground, +Z = heading),
+the root's ground velocity expressed in that frame (metres per frame), the yaw
+rate (radians per frame, about +Y) and four foot contacts. The inverse
+integrates the root from a start position and heading, so
+``features_to_positions(*positions_to_features(p))`` gives ``p`` back.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .conventions import CONTACT_JOINTS, CONTACTS, JOINT_INDEX, JOINTS, LAYOUT, MODEL_FPS, UP_AXIS
+
+# Contact thresholds: a foot joint is in contact when it is within this height
+# of its own lowest level in the clip and moves slower than this ground speed.
+CONTACT_HEIGHT = 0.05  # metres
+CONTACT_SPEED = 0.6  # metres per second
+HEADING_SIGMA_FRAMES = 3.0
+
+
+def gaussian_smooth(x: np.ndarray, sigma: float) -> np.ndarray:
+    """Gaussian filter along axis 0 with edge padding; equals ``scipy.ndimage.gaussian_filter1d``
+    (mode ``nearest``, truncate 4). NumPy only, because Blender's Python has no SciPy."""
+    radius = int(4.0 * sigma + 0.5)
+    taps = np.exp(-0.5 * (np.arange(-radius, radius + 1) / sigma) ** 2)
+    taps /= taps.sum()
+    padded = np.concatenate([np.repeat(x[:1], radius, 0), x, np.repeat(x[-1:], radius, 0)])
+    return sum(w * padded[k:k + len(x)] for k, w in enumerate(taps))
+
+
+@dataclass
+class RootStart:
+    """Where integration starts: ground position ``[3]`` (y = 0) and heading (radians)."""
+
+    position: np.ndarray
+    yaw: float
+
+
+def yaw_matrix(yaw: np.ndarray) -> np.ndarray:
+    """Rotations about +Y ``[..., 3, 3]`` taking +Z to (sin yaw, 0, cos yaw)."""
+    c, s = np.cos(yaw), np.sin(yaw)
+    z, o = np.zeros_like(yaw), np.ones_like(yaw)
+    return np.stack([np.stack([c, z, s], -1), np.stack([z, o, z], -1), np.stack([-s, z, c], -1)], -2)
+
+
+def facing(pos: np.ndarray) -> np.ndarray:
+    """Horizontal facing direction ``[F, 3]`` (Y-up, not normalised) from the hips and shoulders of
+    ``pos`` ``[F, 21, 3]``: square to the line across them."""
+    j = JOINT_INDEX
+    across = (pos[:, j["l_upleg"]] - pos[:, j["r_upleg"]]) + (pos[:, j["l_arm"]] - pos[:, j["r_arm"]])
+    return np.cross(across, np.array([0.0, 1.0, 0.0]))
+
+
+def heading(pos: np.ndarray, sigma: float = HEADING_SIGMA_FRAMES) -> np.ndarray:
+    """Facing angle per frame ``[F]`` (radians about +Y) from hips and shoulders (:func:`facing`)."""
+    fwd = facing(pos)
+    fwd[:, UP_AXIS] = 0.0
+    if sigma > 0 and len(fwd) > 1:
+        fwd = gaussian_smooth(fwd, sigma)
+    return np.unwrap(np.arctan2(fwd[:, 0], fwd[:, 2]))
+
+
+def detect_contacts(pos: np.ndarray, fps: float = MODEL_FPS) -> np.ndarray:
+    """Foot contacts ``float32 [F, 4]`` from heights and speeds of heels and toes."""
+    feet = pos[:, CONTACT_JOINTS]  # (F, 4, 3)
+    height = feet[..., UP_AXIS] - np.percentile(feet[..., UP_AXIS], 2, axis=0)
+    ground = feet[..., [0, 2]]
+    speed = np.zeros(height.shape)
+    if len(pos) > 1:
+        step = np.linalg.norm(np.diff(ground, axis=0), axis=-1) * fps
+        speed[1:-1] = 0.5 * (step[1:] + step[:-1])
+        speed[0], speed[-1] = step[0], step[-1]
+    return ((height < CONTACT_HEIGHT) & (speed < CONTACT_SPEED)).astype(np.float32)
+
+
+def positions_to_features(pos: np.ndarray, fps: float = MODEL_FPS,
+                          contacts: np.ndarray | None = None) -> tuple[np.ndarray, RootStart]:
+    """Global positions ``[F, 21, 3]`` (metres, Y-up) -> features ``float32 [F, LAYOUT.size]``.
+
+    Returns the features and the :class:`RootStart` that :func:`features_to_positions`
+    needs to put the motion back where it was.
+    """
+    pos = np.asarray(pos, dtype=np.float64)
+    n = len(pos)
+    yaw = heading(pos)
+    root = pos[:, JOINT_INDEX["hips"]].copy()
+    root[:, UP_AXIS] = 0.0
+    inv = yaw_matrix(-yaw)  # (F, 3, 3) world -> local
+    local = np.einsum("fij,fkj->fki", inv, pos - root[:, None])
+    feats = np.zeros((n, LAYOUT.size), dtype=np.float64)
+    feats[:, LAYOUT.positions] = local.reshape(n, -1)
+    if n > 1:
+        vel = np.einsum("fij,fj->fi", inv[:-1], np.diff(root, axis=0))
+        dyaw = np.diff(yaw)
+        feats[:-1, LAYOUT.velocity] = vel[:, [0, 2]]
+        feats[:-1, LAYOUT.yaw_rate] = dyaw
+        feats[-1, LAYOUT.root] = feats[-2, LAYOUT.root]
+    feats[:, LAYOUT.contacts] = detect_contacts(pos, fps) if contacts is None else contacts
+    return feats.astype(np.float32), RootStart(root[0].copy(), float(yaw[0]))
+
+
+def integrate_root(feats: np.ndarray, start: RootStart | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Root ground positions ``[F, 3]`` and headings ``[F]`` integrated from features ``[F, C]``."""
+    start = start or RootStart(np.zeros(3), 0.0)
+    feats = np.asarray(feats, dtype=np.float64)
+    n = len(feats)
+    yaw = start.yaw + np.concatenate([[0.0], np.cumsum(feats[:-1, LAYOUT.yaw_rate])])
+    vel = np.zeros((n, 3))
+    vel[:, [0, 2]] = feats[:, LAYOUT.velocity]
+    step = np.einsum("fij,fj->fi", yaw_matrix(yaw), vel)
+    root = np.asarray(start.position, dtype=np.float64) + np.concatenate([np.zeros((1, 3)), np.cumsum(step[:-1], 0)])
+    return root, yaw
+
+
+def features_to_positions(feats: np.ndarray, start: RootStart | None = None) -> np.ndarray:
+    """Features ``[F, C]`` -> global positions ``float32 [F, 21, 3]`` by integrating the root."""
+    root, yaw = integrate_root(feats, start)
+    local = np.asarray(feats, dtype=np.float64)[:, LAYOUT.positions].reshape(len(feats), -1, 3)
+    return (np.einsum("fij,fkj->fki", yaw_matrix(yaw), local) + root[:, None]).astype(np.float32)
+
+
+def _mirror_map() -> tuple[np.ndarray, np.ndarray]:
+    """(source channel ``[C]``, sign ``[C]``) of the left-right mirror of a feature frame."""
+    swap = {"l_": "r_", "r_": "l_"}
+    src, sign = np.arange(LAYOUT.size), np.ones(LAYOUT.size, np.float32)
+    for j, name in enumerate(JOINTS):
+        other = JOINT_INDEX[swap.get(name[:2], name[:2]) + name[2:]] if name[:2] in swap else j
+        src[3 * j:3 * j + 3] = np.arange(3 * other, 3 * other + 3)
+        sign[3 * j] = -1.0  # the lateral axis (root-local X) flips
+    sign[LAYOUT.velocity.start] = -1.0
+    sign[LAYOUT.yaw_rate] = -1.0
+    names = [c for c, _ in CONTACTS]
+    for k, name in enumerate(names):
+        src[LAYOUT.contacts.start + k] = LAYOUT.contacts.start + names.index(swap[name[:2]] + name[2:])
+    return src, sign
+
+
+MIRROR_SOURCE, MIRROR_SIGN = _mirror_map()
+
+
+def mirror_features(feats: np.ndarray) -> np.ndarray:
+    """Raw features ``[..., C]`` of the same motion mirrored left to right (the body's left side
+    becomes its right, turns to the left become turns to the right): exact, as the features of the
+    mirrored positions."""
+    return feats[..., MIRROR_SOURCE] * MIRROR_SIGN

@@ -1,0 +1,74 @@
+"""Denoise Action's maths: the model's reconstruction of a user's clip, weighed against the input."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..inference.steps import drive
+from ..motion.conventions import MODEL_FPS
+from ..motion.features import gaussian_smooth
+from ..motion.geometry import interpolate_frames
+from . import fusion
+from .normalise import fit_normalisation, sample_at
+
+
+def denoise_positions(engine, pos: np.ndarray, fps: float, strength: float = 1.0) -> np.ndarray:
+    """Denoised clip ``[F, 21, 3]`` (same space and frames as ``pos``), blended with the input by
+    ``strength`` in [0, 1] (0: unchanged, 1: the model's output)."""
+    return drive(denoise_positions_steps(engine, pos, fps, strength))
+
+
+def denoise_positions_steps(engine, pos: np.ndarray, fps: float, strength: float = 1.0):
+    """:func:`denoise_positions` as a step generator (:mod:`steps`): yields the fraction done.
+
+    Pops are found and the noise measured at the clip's own rate (:mod:`fusion`). The model reads
+    the repaired clip at its own rate, once per phase of a faster clip (frames 0, 2, 4... and 1, 3,
+    5... of a 60 fps clip), and the phases' reconstructions, brought back to the clip's frames, are
+    averaged. That estimate is weighed against the input by how much each deserves: a clean take
+    comes back nearly as it was."""
+    duration = (len(pos) - 1) / fps
+    fixed, found = fusion.assess(np.asarray(pos, np.float64))
+    # Scale and ground from a smoothed clip: noise lengthens the legs and lowers the lowest foot.
+    norm = fit_normalisation(gaussian_smooth(fixed, fps / 15.0) if len(fixed) > 1 else fixed)
+    x, fixed = norm.to_model(pos).astype(np.float64), norm.to_model(fixed).astype(np.float64)
+    found = fusion.Assessment(found.noise_m * norm.scale, found.pops)
+    frames = np.arange(len(pos)) / fps
+    phases = [k / fps for k in range(max(1, int(round(fps / MODEL_FPS))))]
+    phases = [p for p in phases if len(_model_times(duration, p)) >= engine.m] or [0.0]
+    prior = np.zeros_like(x)
+    for i, phase in enumerate(phases):
+        times = _model_times(duration, phase)
+        clean = yield from _scaled(engine.denoise_positions_steps(sample_at(fixed, fps, times).astype(np.float32)),
+                                   i / len(phases), 1 / len(phases))
+        prior += _sample_times(np.asarray(clean, np.float64), times, frames) / len(phases)
+    out = norm.to_user(fusion.fuse(fixed, prior, found, fps))
+    user = np.asarray(pos, dtype=np.float64)
+    return user + strength * (out - user)
+
+
+def _model_times(duration: float, phase: float) -> np.ndarray:
+    """Times (s) at the model's rate from ``phase`` on, the clip's start and end included."""
+    times = phase + np.arange(int(math.floor((duration - phase) * MODEL_FPS + 1e-6)) + 1) / MODEL_FPS
+    if phase > 1e-9:
+        times = np.r_[0.0, times]
+    if times[-1] < duration - 1e-9:
+        times = np.append(times, duration)
+    return times
+
+
+def _scaled(steps, start: float, share: float):
+    """Re-yield a step generator's fractions as ``start + share * fraction``; return its value."""
+    value = yield from ((start + share * f) for f in ())  # keeps this a generator when steps is empty
+    try:
+        while True:
+            yield start + share * next(steps)
+    except StopIteration as stop:
+        value = stop.value
+    return value
+
+
+def _sample_times(x: np.ndarray, src_times: np.ndarray, times: np.ndarray) -> np.ndarray:
+    """Linear interpolation of ``x`` ``[N, ...]`` sampled at increasing ``src_times`` ``[N]`` at ``times`` ``[M]``."""
+    return interpolate_frames(x, np.interp(times, src_times, np.arange(len(src_times))))

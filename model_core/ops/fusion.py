@@ -1,0 +1,212 @@
+"""Denoise that trusts the input as much as it deserves.
+
+The model's reconstruction of a take is one estimate of the true motion; the take itself
+is another. How much each is worth is measured on the take:
+
+- the input's noise level per joint, from its 4th differences in time (white noise dominates
+  them, smooth motion hardly reaches them), robustly, so a clean take reads as clean;
+- single-frame pops (a joint jumping for one frame, as from a marker swap), as joint-frames
+  far from the cubic through their neighbours; they get no weight at all;
+- the model's error, frame by frame, from how far it is from the input beyond the noise:
+  where the model cannot follow the motion (a kick it never saw), it gets little weight.
+
+The result minimises, per joint and axis, the weighted distance to the input and to the
+model plus a small penalty on acceleration: a banded linear system solved exactly. Clean
+takes come back nearly unchanged; noisy ones lean on the model and the smoothness prior.
+Works at the take's own frame rate. Positions are ``[F, J, 3]`` in metres (model scale).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..motion.features import gaussian_smooth
+
+D4_NOISE_GAIN = np.sqrt(70.0)  # std of the 4th difference of unit white noise
+POP_FLOOR_M = 0.05  # a pop moves a joint at least this far from where its neighbours put it
+POP_FACTOR = 3.5  # ... and this many times the joint's median residual
+POP_FILL_ERROR_M = 0.005  # how far a repaired pop may be from the truth
+POP_SPEED_SHARE = 0.5  # ... and half the distance the joint travels per frame around it
+MODEL_ERROR_FLOOR_M = 0.003  # the model is never trusted beyond this accuracy
+NOISE_FLOOR_M = 0.0005  # nor the input beyond this one
+ORDER = 2  # the prior penalises this difference in time (2: acceleration, 3: jerk)
+NOISE_GAIN = {2: 6.0, 3: 20.0}  # variance of that difference of unit white noise
+BIAS_WINDOW_S = 0.1  # sigma of the low-pass that separates the model's error from the input's noise
+TRUST_WINDOW_S = 0.25  # sigma of the window over which the model's error is measured
+
+
+@dataclass
+class Assessment:
+    """What was measured on a take: noise std per joint ``[J]`` (m) and pops ``bool [F, J]``."""
+
+    noise_m: np.ndarray
+    pops: np.ndarray
+
+
+def noise_level(pos: np.ndarray) -> np.ndarray:
+    """Robust std (m) of white noise per joint ``[J]`` of positions ``[F, J, 3]`` (F >= 5)."""
+    d4 = np.diff(np.asarray(pos, np.float64), n=4, axis=0)
+    mad = np.median(np.abs(d4 - np.median(d4, 0)), axis=(0, 2))
+    return np.maximum(1.4826 * mad / D4_NOISE_GAIN, NOISE_FLOOR_M)
+
+
+def _cubic_from_neighbours(x: np.ndarray) -> np.ndarray:
+    """Each frame of ``[F, ...]`` (F >= 5) as the cubic through the two frames on each side predicts it;
+    the first and last two frames from the line through the next (previous) two."""
+    pred = np.empty_like(x)
+    pred[2:-2] = (-x[:-4] + 4 * x[1:-3] + 4 * x[3:-1] - x[4:]) / 6.0
+    pred[:2] = 2 * x[1:3] - x[2:4]
+    pred[-2:] = 2 * x[-3:-1] - x[-4:-2]
+    return pred
+
+
+def _extrapolated(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Each frame of ``[F, ...]`` as the line through the two frames before it predicts it, and the
+    line through the two after it (where a side has no two frames, the frame itself)."""
+    left, right = np.empty_like(x), np.empty_like(x)
+    left[2:] = 2 * x[1:-1] - x[:-2]
+    right[:-2] = 2 * x[1:-1] - x[2:]
+    left[:2], right[-2:] = x[:2], x[-2:]
+    return left, right
+
+
+def repair_pops(pos: np.ndarray, rounds: int = 3) -> tuple[np.ndarray, np.ndarray]:
+    """(positions with pops replaced by their neighbours' cubic, pops ``bool [F, J]``).
+
+    A pop is a joint-frame whose distance from that cubic is a local maximum in time and above
+    both :data:`POP_FLOOR_M` and :data:`POP_FACTOR` times the joint's median distance. Repeated
+    ``rounds`` times, so that pops next to each other are found one after the other."""
+    x = np.array(pos, np.float64)
+    pops = np.zeros(x.shape[:2], bool)
+    if len(x) < 5:
+        return x, pops
+    for _ in range(rounds):
+        left, right = _extrapolated(x)
+        dl, dr = x - left, x - right
+        # Off the lines from both sides, and the same way: a sudden stop is off only one of them.
+        off = np.minimum(np.linalg.norm(dl, axis=-1), np.linalg.norm(dr, axis=-1))  # (F, J)
+        r = off * ((dl * dr).sum(-1) > 0)
+        speed = np.zeros_like(r)
+        speed[1:-1] = 0.5 * np.linalg.norm(x[2:] - x[:-2], axis=-1)  # fast curves bend the lines too
+        limit = np.maximum(np.maximum(POP_FACTOR * np.median(off, 0), POP_FLOOR_M), POP_SPEED_SHARE * speed)
+        peak = r >= np.maximum(np.r_[r[:1] * 0, r[:-1]], np.r_[r[1:], r[-1:] * 0])
+        peak[:2] = peak[-2:] = False  # the first and last two frames have a line on one side only
+        new = (r > limit) & peak & ~pops
+        if not new.any():
+            break
+        x[new] = _cubic_from_neighbours(x)[new]
+        pops |= new
+    return x, pops
+
+
+def assess(pos: np.ndarray) -> tuple[np.ndarray, Assessment]:
+    """(pop-repaired positions, :class:`Assessment`) of a take ``[F, J, 3]``."""
+    fixed, pops = repair_pops(pos)
+    return fixed, Assessment(noise_level(fixed), pops)
+
+
+def fuse(pos: np.ndarray, model: np.ndarray, found: Assessment, fps: float) -> np.ndarray:
+    """The motion ``[F, J, 3]`` that weighs the pop-repaired input ``pos`` by its noise (less at the
+    repaired pops) and the model's estimate ``model`` by its measured error, with a penalty on
+    acceleration.
+
+    The model's error is the running median, over :data:`TRUST_WINDOW_S` on each side, of its
+    squared distance from the input less the input's noise: a median, so that one bad frame does
+    not make the model look wrong around it. The first and last two frames, where pops cannot be
+    told from their neighbours, count as pops when the input is far from the model there."""
+    x = np.asarray(pos, np.float64)
+    m = np.asarray(model, np.float64)
+    f, j = x.shape[:2]
+    sigma2 = found.noise_m ** 2  # (J,)
+    gap2 = ((x - m) ** 2).sum(-1)  # (F, J)
+    tau2 = model_error2(x - m, sigma2, fps)
+    pops = found.pops.copy()
+    edge = np.r_[:min(2, f), max(f - 2, 0):f]
+    pops[edge] |= gap2[edge] > np.maximum(POP_FLOOR_M ** 2, 25.0 * 3.0 * (sigma2 + tau2[edge]))
+    x = np.where(pops[..., None] & ~found.pops[..., None], m, x)
+    # At a pop the input is the cubic through its neighbours: their noise and what the cubic misses.
+    w = np.where(pops, 1.0 / (2.0 * sigma2 + POP_FILL_ERROR_M ** 2), 1.0 / sigma2)  # (F, J)
+    v = 1.0 / tau2
+    # The prior's strength: the acceleration the motion itself has, the larger of what the input shows
+    # beyond its noise and what the model's (noise-free) estimate shows.
+    if f > 2:
+        q = np.maximum((np.diff(x, n=ORDER, axis=0) ** 2).mean((0, 2)) - NOISE_GAIN[ORDER] * sigma2,
+                       (np.diff(m, n=ORDER, axis=0) ** 2).mean((0, 2)))
+    else:
+        q = np.ones(j)
+    lam = 1.0 / np.maximum(q, 1e-10)
+    weights = np.repeat((w + v)[..., None], 3, -1).reshape(f, -1)
+    rhs = (w[..., None] * x + v[..., None] * m).reshape(f, -1)
+    return solve_smooth(weights, rhs, np.repeat(lam, 3)).reshape(x.shape)
+
+
+def model_error2(gap: np.ndarray, sigma2: np.ndarray, fps: float) -> np.ndarray:
+    """The model's squared error per axis ``[F, J]`` from its gap to the input ``[F, J, 3]``: the gap
+    low-passed over :data:`BIAS_WINDOW_S` (where the input's noise averages out and the model's
+    own, slowly varying, error stays), less what is left of the noise, taken as a running median
+    over :data:`TRUST_WINDOW_S` on each side so that one bad frame does not make the model look
+    wrong around it."""
+    sigma = max(1.0, BIAS_WINDOW_S * fps)
+    radius = int(4.0 * sigma + 0.5)
+    taps = np.exp(-0.5 * (np.arange(-radius, radius + 1) / sigma) ** 2)
+    left = (taps / taps.sum()) @ (taps / taps.sum())  # share of white noise variance left after the filter
+    bias2 = (gaussian_smooth(gap, sigma) ** 2).sum(-1) / 3.0 - left * sigma2
+    # The noise is white and the acceleration prior removes most of it, the model's error is slow and
+    # stays: it is weighed against the input's noise as it is after the low-pass, not as it is raw.
+    return np.maximum(running_median(bias2, int(round(TRUST_WINDOW_S * fps))), MODEL_ERROR_FLOOR_M ** 2) / left
+
+
+def running_median(x: np.ndarray, radius: int) -> np.ndarray:
+    """Median over ``2 radius + 1`` frames around each frame of ``[F, ...]`` (the window kept inside)."""
+    f = len(x)
+    if f <= 2 * radius + 1:
+        return np.broadcast_to(np.median(x, 0), x.shape).copy()
+    padded = np.concatenate([np.repeat(x[:1], radius, 0), x, np.repeat(x[-1:], radius, 0)])
+    out = np.empty_like(x)
+    for a in range(0, f, 4096):  # bounded memory on long takes
+        b = min(a + 4096, f)
+        out[a:b] = np.median(np.stack([padded[a + k:b + k] for k in range(2 * radius + 1)]), 0)
+    return out
+
+
+def solve_smooth(weights: np.ndarray, rhs: np.ndarray, lam: np.ndarray) -> np.ndarray:
+    """Solve ``(diag(weights) + lam D^T D) y = rhs`` per column (D: second differences in time).
+
+    ``weights``, ``rhs``: ``[F, K]``; ``lam``: ``[K]``. The matrix is symmetric pentadiagonal and
+    positive definite; an LDL^T elimination over frames, vectorised over the K columns."""
+    f = len(weights)
+    a0 = weights.astype(np.float64).copy()
+    if f < 3:
+        return rhs / np.maximum(a0, 1e-12)
+    c0, c1 = np.zeros(f), np.zeros(f - 1)  # D^T D: each row [1, -2, 1] of D adds its outer product
+    c0[:-2] += 1.0
+    c0[1:-1] += 4.0
+    c0[2:] += 1.0
+    c1[:-1] -= 2.0
+    c1[1:] -= 2.0
+    a0 += c0[:, None] * lam
+    a1 = c1[:, None] * lam
+    a2 = np.ones(f - 2)[:, None] * lam
+    return _ldl_pentadiagonal(a0, a1, a2, rhs.astype(np.float64))
+
+
+def _ldl_pentadiagonal(a0, a1, a2, b):
+    f = len(a0)
+    d = np.empty_like(a0)
+    p = np.zeros_like(a0)  # L[i, i-1]
+    q = np.zeros_like(a0)  # L[i, i-2]
+    z = np.empty_like(b)
+    for i in range(f):
+        if i >= 2:
+            q[i] = a2[i - 2] / d[i - 2]
+        if i >= 1:
+            p[i] = (a1[i - 1] - (q[i] * d[i - 2] * p[i - 1] if i >= 2 else 0.0)) / d[i - 1]
+        d[i] = a0[i] - (p[i] ** 2 * d[i - 1] if i >= 1 else 0.0) - (q[i] ** 2 * d[i - 2] if i >= 2 else 0.0)
+        z[i] = b[i] - (p[i] * z[i - 1] if i >= 1 else 0.0) - (q[i] * z[i - 2] if i >= 2 else 0.0)
+    z /= d
+    y = np.empty_like(b)
+    for i in range(f - 1, -1, -1):
+        y[i] = z[i] - (p[i + 1] * y[i + 1] if i + 1 < f else 0.0) - (q[i + 2] * y[i + 2] if i + 2 < f else 0.0)
+    return y

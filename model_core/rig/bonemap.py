@@ -1,0 +1,159 @@
+"""Map an armature's bones onto the 21 canonical joints (no bpy).
+
+A mapping is ``{joint: (bone name, use_tail)}``: a canonical joint sits at a bone's
+HEAD, or at its TAIL where ``use_tail`` is set (finger tips and toes a rig has no
+bone for: the hand's or foot's tail; BVH End Sites, which Blender's importer turns
+into the tail of the last bone). The known families of :data:`rigs.RIG_FAMILIES`
+are tried first; what they leave open is filled by a generic left/right heuristic
+(``.L`` / ``_L`` / ``Left`` / ``l`` prefixes and suffixes, common bone words) and by
+the hierarchy (the chest is where the two arms meet, the hips where the legs meet).
+"""
+
+from __future__ import annotations
+
+import re
+
+from ..motion.conventions import JOINTS, PARENT_NAMES
+from .rigs import RIG_FAMILIES, normalise_name
+
+Mapping = dict[str, tuple[str, bool]]
+
+# Bone words per canonical joint (side removed, lower case, only letters and digits), best first.
+_WORDS: dict[str, tuple[str, ...]] = {
+    "hips": ("hips", "hip", "pelvis"), "head": ("head",), "neck": ("neck", "neck1", "neck01"),
+    "upleg": ("upleg", "upperleg", "thigh", "legupper", "hip"),
+    "knee": ("leg", "lowerleg", "shin", "calf", "knee", "leglower"),
+    "foot": ("foot", "ankle"), "toe": ("toebase", "toe", "toes", "ball"),
+    "arm": ("arm", "upperarm", "uparm", "armupper", "shoulder"),
+    "elbow": ("forearm", "lowerarm", "elbow", "armlower"), "wrist": ("hand", "wrist"),
+    "fingertip": ("handmiddle4", "middle4", "handmiddle3end", "middle3", "fmiddle03", "middlefinger3"),
+}
+_SUFFIX = re.compile(r"^(?P<base>.+?)[._\-\s](?P<side>l|r|left|right)(?:[._]\d+)?$")
+_PREFIX = re.compile(r"^(?P<side>left|right|l|r)[._\-\s]?(?P<base>.+)$")
+_INFIX = re.compile(r"^(?P<pre>.+?)[._\-\s](?P<side>l|r|left|right)[._\-\s](?P<base>.+)$")
+_CAMEL = re.compile(r"^(?:[^:|]*[:|])?(?P<side>[lrLR])(?=[A-Z][a-z])(?P<base>.+)$")
+_LEAVES = ("fingertip", "toe")  # joints a hand's or foot's tail can stand in for
+_STRIP = re.compile(r"^(def|org|mch|bip\d*|b|cc_base)[._\-\s]+")
+
+
+def split_side(name: str) -> tuple[str | None, str]:
+    """(``"l"``, ``"r"`` or None, base word) of a bone name: ``"thigh.L"`` -> (``"l"``, ``"thigh"``)."""
+    camel = _CAMEL.match(name)
+    low = normalise_name(name)
+    side, base = None, low
+    for pattern in (_SUFFIX, _INFIX):
+        m = pattern.match(low)
+        if m:
+            side, base = m["side"][0], m["base"]
+            break
+    else:
+        m = _PREFIX.match(low)
+        if m and m["side"] in ("left", "right"):
+            side, base = m["side"][0], m["base"]
+        elif camel:
+            side, base = camel["side"].lower(), camel["base"].lower()
+        elif m and low[1:2] in "._- ":
+            side, base = m["side"], m["base"]
+    base = re.sub(r"[^a-z0-9]", "", _STRIP.sub("", base))
+    return side, base
+
+
+def _family_map(names: list[str]) -> tuple[str, Mapping]:
+    """The known family matching most joints: (family, partial mapping)."""
+    lookup = {normalise_name(n): n for n in names}
+    best: tuple[str, Mapping] = ("", {})
+    for family, table in RIG_FAMILIES.items():
+        found: Mapping = {}
+        for joint in JOINTS:
+            for cand in table[joint]:
+                c = cand.lower()
+                if c in lookup:
+                    found[joint] = (lookup[c], False)
+                    break
+                if c.endswith("_end") and c[:-4] in lookup:
+                    found[joint] = (lookup[c[:-4]], True)
+                    break
+        if len(found) > len(best[1]):
+            best = (family, found)
+    return best
+
+
+def _by_words(names: list[str], mapping: Mapping) -> None:
+    """Fill joints still open from bone words and sides, in place."""
+    parsed = [split_side(n) for n in names]
+    used = {bone for bone, _ in mapping.values()}
+    for joint in JOINTS:
+        if joint in mapping:
+            continue
+        side, key = (joint[0], joint[2:]) if joint[1] == "_" else (None, joint)
+        for word in _WORDS.get(key, ()):
+            hit = next((n for n, (s, b) in zip(names, parsed) if s == side and b == word and n not in used), None)
+            if hit:
+                mapping[joint] = (hit, False)
+                used.add(hit)
+                break
+
+
+def _chain(parents: list[int], b: int) -> list[int]:
+    """Bone ``b`` and its ancestors, nearest first."""
+    out = []
+    while b >= 0:
+        out.append(b)
+        b = parents[b]
+    return out
+
+
+def _common(parents: list[int], a: int, b: int) -> int:
+    """Lowest common ancestor of bones ``a`` and ``b`` (-1 if none)."""
+    up = set(_chain(parents, a))
+    return next((x for x in _chain(parents, b) if x in up), -1)
+
+
+def _by_hierarchy(names: list[str], parents: list[int], mapping: Mapping) -> None:
+    """Fill hips, chest (spine1), spine and neck from where the limbs meet, in place."""
+    idx = {n: i for i, n in enumerate(names)}
+    have = lambda j: j in mapping and not mapping[j][1]
+    if not have("hips") and have("l_upleg") and have("r_upleg"):
+        c = _common(parents, idx[mapping["l_upleg"][0]], idx[mapping["r_upleg"][0]])
+        if c >= 0:
+            mapping["hips"] = (names[c], False)
+    if not have("spine1") and have("l_arm") and have("r_arm"):
+        c = _common(parents, idx[mapping["l_arm"][0]], idx[mapping["r_arm"][0]])
+        if c >= 0:
+            mapping["spine1"] = (names[c], False)
+    if have("hips") and have("spine1") and not have("spine"):
+        path = _chain(parents, idx[mapping["spine1"][0]])
+        h = idx[mapping["hips"][0]]
+        if h in path and path.index(h) >= 2:
+            mapping["spine"] = (names[path[path.index(h) - 1]], False)
+    if have("spine1") and have("head") and not have("neck"):
+        path = _chain(parents, idx[mapping["head"][0]])
+        s = idx[mapping["spine1"][0]]
+        if s in path and path.index(s) >= 2:
+            mapping["neck"] = (names[path[path.index(s) - 1]], False)
+
+
+def auto_map(names: list[str], parents: list[int]) -> tuple[str, Mapping]:
+    """Map bones (``names``, ``parents`` int indices, -1 for roots) onto the canonical joints.
+
+    Returns (rig family or ``"generic"``, mapping); joints that could not be found are absent
+    (see :func:`missing`). Finger tips and toes fall back to the hand's and foot's tail.
+    """
+    family, mapping = _family_map(names)
+    if any(j not in mapping and not j.endswith(_LEAVES) for j in JOINTS):
+        family = "generic"  # the family's names left body joints open
+    if len(mapping) < len(JOINTS):
+        _by_words(names, mapping)
+        _by_hierarchy(names, parents, mapping)
+    for side in "lr":
+        for leaf in ("fingertip", "toe"):
+            joint = f"{side}_{leaf}"
+            parent = PARENT_NAMES[joint]
+            if joint not in mapping and parent in mapping and not mapping[parent][1]:
+                mapping[joint] = (mapping[parent][0], True)
+    return family, mapping
+
+
+def missing(mapping: Mapping) -> list[str]:
+    """Canonical joints with no bone in ``mapping``."""
+    return [j for j in JOINTS if not mapping.get(j) or not mapping[j][0]]

@@ -1,0 +1,175 @@
+"""Name maps from known skeleton families onto the 21 canonical joints.
+
+Each family maps a canonical joint to candidate joint names, most preferred
+first. A candidate ending in ``_end`` names a BVH End Site (the reader names an
+End Site ``<parent>_end``). Matching ignores case and a namespace prefix such as
+``mixamorig:`` or ``Armature|``. A finger tip that no candidate provides is
+estimated by extending the hand along its own rest direction.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..io.bvh import Bvh, BvhError, forward_kinematics, read_bvh, resample
+from ..motion.conventions import JOINT_INDEX, JOINTS, MODEL_FPS, STANDARD_LEG_LENGTH, UP_AXIS
+
+# Hand length (wrist to middle finger tip) as a fraction of the forearm's.
+_HAND_TO_FOREARM = 0.73
+
+
+def _sided(template: dict[str, list[str]], left: tuple[str, str], right: tuple[str, str]):
+    """Expand ``{side}`` placeholders: left/right keys get each side's spelling."""
+    out: dict[str, list[str]] = {}
+    for key, names in template.items():
+        if key.startswith("{s}"):
+            for side, spell in (("l", left), ("r", right)):
+                out[f"{side}{key[3:]}"] = [n.format(S=spell[0], s=spell[1]) for n in names]
+        else:
+            out[key] = names
+    return out
+
+
+RIG_FAMILIES: dict[str, dict[str, list[str]]] = {
+    "bandai_namco": _sided({
+        "hips": ["Hips"], "spine": ["Spine"], "spine1": ["Chest"], "neck": ["Neck"], "head": ["Head"],
+        "{s}_upleg": ["UpperLeg_{S}"], "{s}_knee": ["LowerLeg_{S}"], "{s}_foot": ["Foot_{S}"],
+        "{s}_toe": ["Toes_{S}"], "{s}_arm": ["UpperArm_{S}"], "{s}_elbow": ["LowerArm_{S}"],
+        "{s}_wrist": ["Hand_{S}"], "{s}_fingertip": [],
+    }, ("L", ""), ("R", "")),
+    "cmu_cgspeed": _sided({
+        "hips": ["Hips"], "spine": ["Spine"], "spine1": ["Spine1"], "neck": ["Neck1"], "head": ["Head"],
+        "{s}_upleg": ["{S}UpLeg"], "{s}_knee": ["{S}Leg"], "{s}_foot": ["{S}Foot"],
+        "{s}_toe": ["{S}ToeBase"], "{s}_arm": ["{S}Arm"], "{s}_elbow": ["{S}ForeArm"],
+        "{s}_wrist": ["{S}Hand"], "{s}_fingertip": [],  # CMU finger joints are short stubs
+    }, ("Left", ""), ("Right", "")),
+    "cmu_bvh11": _sided({
+        "hips": ["Hips"], "spine": ["Chest"], "spine1": ["Chest2"], "neck": ["Neck"], "head": ["Head"],
+        "{s}_upleg": ["{S}Hip"], "{s}_knee": ["{S}Knee"], "{s}_foot": ["{S}Ankle"],
+        "{s}_toe": ["{S}Toe"], "{s}_arm": ["{S}Shoulder"], "{s}_elbow": ["{S}Elbow"],
+        "{s}_wrist": ["{S}Wrist"], "{s}_fingertip": [],
+    }, ("Left", "L"), ("Right", "R")),
+    "iclone_cc_base": _sided({
+        "hips": ["CC_Base_Hip"], "spine": ["CC_Base_Waist"], "spine1": ["CC_Base_Spine02"],
+        "neck": ["CC_Base_NeckTwist01"], "head": ["CC_Base_Head"],
+        "{s}_upleg": ["CC_Base_{S}_Thigh"], "{s}_knee": ["CC_Base_{S}_Calf"], "{s}_foot": ["CC_Base_{S}_Foot"],
+        "{s}_toe": ["CC_Base_{S}_ToeBase"], "{s}_arm": ["CC_Base_{S}_Upperarm"],
+        "{s}_elbow": ["CC_Base_{S}_Forearm"], "{s}_wrist": ["CC_Base_{S}_Hand"],
+        "{s}_fingertip": ["CC_Base_{S}_Mid3_end", "CC_Base_{S}_Mid3"],
+    }, ("L", ""), ("R", "")),
+    "acrnn": _sided({
+        "hips": ["hip"], "spine": ["abdomen"], "spine1": ["chest"], "neck": ["neck"], "head": ["head"],
+        "{s}_upleg": ["{S}Thigh"], "{s}_knee": ["{S}Shin"], "{s}_foot": ["{S}Foot"],
+        "{s}_toe": ["{S}Foot_end"], "{s}_arm": ["{S}Shldr"], "{s}_elbow": ["{S}ForeArm"],
+        "{s}_wrist": ["{S}Hand"], "{s}_fingertip": ["{S}Mid2_end", "{S}Mid2"],
+    }, ("l", ""), ("r", "")),
+    "mixamo": _sided({
+        "hips": ["Hips"], "spine": ["Spine"], "spine1": ["Spine2", "Spine1"], "neck": ["Neck"], "head": ["Head"],
+        "{s}_upleg": ["{S}UpLeg"], "{s}_knee": ["{S}Leg"], "{s}_foot": ["{S}Foot"],
+        "{s}_toe": ["{S}ToeBase"], "{s}_arm": ["{S}Arm"], "{s}_elbow": ["{S}ForeArm"],
+        "{s}_wrist": ["{S}Hand"],
+        "{s}_fingertip": ["{S}HandMiddle4", "{S}HandMiddle3_end", "{S}HandMiddle3"],
+    }, ("Left", ""), ("Right", "")),
+    "rigify_deform": _sided({
+        "hips": ["DEF-spine"], "spine": ["DEF-spine.001"], "spine1": ["DEF-spine.003"],
+        "neck": ["DEF-spine.004"], "head": ["DEF-spine.006"],
+        "{s}_upleg": ["DEF-thigh.{S}"], "{s}_knee": ["DEF-shin.{S}"], "{s}_foot": ["DEF-foot.{S}"],
+        "{s}_toe": ["DEF-toe.{S}"], "{s}_arm": ["DEF-upper_arm.{S}"], "{s}_elbow": ["DEF-forearm.{S}"],
+        "{s}_wrist": ["DEF-hand.{S}"], "{s}_fingertip": ["DEF-f_middle.03.{S}_end", "DEF-f_middle.03.{S}"],
+    }, ("L", ""), ("R", "")),
+}
+
+
+class RigError(ValueError):
+    """A skeleton could not be mapped onto the canonical joints."""
+
+
+@dataclass
+class RigMap:
+    """Which source joint feeds each canonical joint (None: estimated tip)."""
+
+    family: str
+    sources: dict[str, str | None]
+
+
+def normalise_name(name: str) -> str:
+    """Lower-case a joint name and drop a namespace prefix (``mixamorig:``, ``Armature|``)."""
+    return re.split(r"[:|]", name)[-1].lower()
+
+
+def _match(family: dict[str, list[str]], names: list[str]) -> tuple[dict[str, str | None], list[str]]:
+    lookup = {normalise_name(n): n for n in names}
+    found: dict[str, str | None] = {}
+    missing = []
+    for joint in JOINTS:
+        hit = next((lookup[c.lower()] for c in family[joint] if c.lower() in lookup), None)
+        if hit is None and joint.endswith("fingertip"):
+            found[joint] = None  # estimated from the wrist
+        elif hit is None:
+            missing.append(joint)
+        else:
+            found[joint] = hit
+    return found, missing
+
+
+def detect_rig(names: list[str], source: str = "skeleton") -> RigMap:
+    """Auto-detect the rig family from joint names; raise :class:`RigError` listing what is missing."""
+    best = None
+    for fam, table in RIG_FAMILIES.items():
+        found, missing = _match(table, names)
+        if not missing:
+            return RigMap(fam, found)
+        if best is None or len(missing) < len(best[2]):
+            best = (fam, found, missing)
+    fam, _, missing = best
+    raise RigError(
+        f"{source}: unknown rig; closest family is {fam!r} but these canonical joints were not found: "
+        f"{', '.join(missing)}. Known families: {', '.join(RIG_FAMILIES)}."
+    )
+
+
+def leg_length(pos: np.ndarray) -> float:
+    """Median hip-to-ankle length over frames and both legs. ``pos``: canonical ``[F, 21, 3]``."""
+    lengths = []
+    for s in ("l", "r"):
+        a, b, c = (JOINT_INDEX[f"{s}_{j}"] for j in ("upleg", "knee", "foot"))
+        lengths.append(np.linalg.norm(pos[:, a] - pos[:, b], axis=-1) + np.linalg.norm(pos[:, b] - pos[:, c], axis=-1))
+    return float(np.median(np.concatenate(lengths)))
+
+
+def canonical_positions(bvh: Bvh, rig: RigMap | None = None) -> np.ndarray:
+    """Canonical joint positions ``[frames, 21, 3]`` in file units at the file's frame rate."""
+    rig = rig or detect_rig(bvh.names, bvh.path)
+    gpos, grot = forward_kinematics(bvh)
+    out = np.empty((bvh.frames, len(JOINTS), 3))
+    for j, joint in enumerate(JOINTS):
+        src = rig.sources[joint]
+        if src is not None:
+            out[:, j] = gpos[:, bvh.index(src)]
+            continue
+        wrist = bvh.index(rig.sources[joint.replace("fingertip", "wrist")])
+        rest_dir = bvh.offsets[wrist]  # rest frames align with the world, so this is the hand's axis too
+        tip = rest_dir * _HAND_TO_FOREARM
+        out[:, j] = gpos[:, wrist] + np.einsum("fij,j->fi", grot[:, wrist], tip)
+    return out
+
+
+def load_clip(path: str | Path, fps: float | None = None) -> np.ndarray:
+    """Read a BVH file as canonical motion ``float32 [frames, 21, 3]``: metres, standard
+    leg length, :data:`MODEL_FPS`, ground at y = 0.
+
+    ``fps`` overrides a wrong header frame rate. Raises ``BvhError`` or ``RigError``.
+    """
+    bvh = read_bvh(path, fps=fps)
+    pos = canonical_positions(bvh)
+    legs = leg_length(pos)
+    if not np.isfinite(legs) or legs <= 1e-6:
+        raise BvhError(f"{path}: legs have zero length; cannot normalise the skeleton's scale")
+    pos = resample(pos * (STANDARD_LEG_LENGTH / legs), bvh.fps, MODEL_FPS)
+    feet = pos[:, [JOINT_INDEX[j] for j in ("l_foot", "l_toe", "r_foot", "r_toe")], UP_AXIS]
+    pos[..., UP_AXIS] -= np.percentile(feet.min(axis=1), 5)
+    return pos.astype(np.float32)

@@ -1,0 +1,265 @@
+"""Forward kinematics of a Blender-style armature and the positions-to-rotations solve.
+
+Everything here is in ARMATURE space (the armature object's local frame, any axes,
+any unit): the Blender side converts world and model positions in and out.
+
+Glossary
+--------
+- Rig: bones in parent-first order; ``rest`` ``[B, 4, 4]`` is each bone's rest matrix
+  in armature space (Blender's ``Bone.matrix_local``: head at the translation, the
+  bone along its local +Y).
+- Pose (Blender's "basis"): per bone a local location ``[F, B, 3]`` and rotation
+  ``[F, B, 3, 3]`` relative to the rest pose, so that
+  ``pose[b] = pose[parent] @ inv(rest[parent]) @ rest[b] @ T(loc) @ R(rot)``.
+- Anchor: where a canonical joint sits on the rig: bone ``index`` and whether it is
+  the bone's head (``tail=False``) or tail.
+
+The solve keeps the rig's bone lengths: only the root bone (the one mapped to the
+hips) moves; every other mapped bone is rotated so that it points at its canonical
+children. A bone with several canonical children (hips, chest) takes the rotation that
+best fits all of them (body planes: hips and shoulders, by a Kabsch fit); a bone with
+one child swings from its reference pose by the shortest arc, and upper legs and upper
+arms then twist about their own axis so the knee and elbow planes follow the targets.
+Bones with no canonical child and bones outside the map keep their reference pose.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..motion.conventions import JOINT_INDEX, JOINTS, PARENT_NAMES
+from ..motion.geometry import rotvec_to_matrix, shortest_arc, unit
+
+# Upper limbs whose twist follows the plane of (joint, child, grandchild).
+_PLANE_TWIST = {"l_upleg": ("l_knee", "l_foot"), "r_upleg": ("r_knee", "r_foot"),
+                "l_arm": ("l_elbow", "l_wrist"), "r_arm": ("r_elbow", "r_wrist")}
+# Plane normals shorter than this (sine of the bend angle) give no twist; full twist above _TWIST_FULL.
+_TWIST_NONE, _TWIST_FULL = 0.05, 0.25
+CHILDREN = {j: tuple(c for c in JOINTS if PARENT_NAMES[c] == j) for j in JOINTS}
+
+
+class SolveError(ValueError):
+    """A bone map does not fit the rig's hierarchy."""
+
+
+@dataclass
+class Rig:
+    """An armature's rest pose. ``parents`` int ``[B]`` (-1 for roots, parents first),
+    ``rest`` ``[B, 4, 4]`` armature space, ``lengths`` ``[B]`` in armature units."""
+
+    names: list[str]
+    parents: np.ndarray
+    rest: np.ndarray
+    lengths: np.ndarray
+
+    def __post_init__(self):
+        self.parents = np.asarray(self.parents, dtype=np.int64)
+        self.rest = np.asarray(self.rest, dtype=np.float64)
+        self.lengths = np.asarray(self.lengths, dtype=np.float64)
+        for b, p in enumerate(self.parents):
+            if p >= b:
+                raise SolveError(f"bone {self.names[b]!r} comes before its parent; order bones parents first")
+        inv_parent = np.linalg.inv(self.rest[np.maximum(self.parents, 0)])
+        rel = inv_parent @ self.rest
+        self.rel_rest = np.where((self.parents < 0)[:, None, None], self.rest, rel)  # (B, 4, 4)
+
+    def index(self, name: str) -> int:
+        return self.names.index(name)
+
+    def is_ancestor(self, a: int, b: int) -> bool:
+        """Whether bone ``a`` is ``b`` or one of its ancestors."""
+        while b >= 0:
+            if a == b:
+                return True
+            b = int(self.parents[b])
+        return False
+
+
+@dataclass
+class Anchors:
+    """Where each canonical joint sits: ``bone`` int ``[21]`` and ``tail`` bool ``[21]``."""
+
+    bone: np.ndarray
+    tail: np.ndarray
+
+    @classmethod
+    def from_map(cls, rig: Rig, mapping: dict[str, tuple[str, bool]]) -> Anchors:
+        """``mapping``: canonical joint -> (bone name, use tail). Raises :class:`SolveError`."""
+        missing = [j for j in JOINTS if not mapping.get(j) or mapping[j][0] not in rig.names]
+        if missing:
+            raise SolveError(f"no bone mapped for: {', '.join(missing)}")
+        bone = np.array([rig.index(mapping[j][0]) for j in JOINTS])
+        tail = np.array([bool(mapping[j][1]) for j in JOINTS])
+        out = cls(bone, tail)
+        out.check(rig)
+        return out
+
+    def check(self, rig: Rig) -> None:
+        """Each canonical child must sit below its parent joint's bone, at a distinct place."""
+        for j, name in enumerate(JOINTS):
+            parent = PARENT_NAMES[name]
+            if parent is None:
+                if self.tail[j]:
+                    raise SolveError("the hips joint must be a bone head, not a tail")
+                continue
+            p = JOINT_INDEX[parent]
+            same = self.bone[j] == self.bone[p] and self.tail[j] == self.tail[p]
+            if same or not rig.is_ancestor(int(self.bone[p]), int(self.bone[j])) or self.tail[p]:
+                raise SolveError(f"joint {name} (bone {rig.names[self.bone[j]]!r}) must be a different place "
+                                 f"below joint {parent} (bone {rig.names[self.bone[p]]!r})")
+
+
+def compose(loc: np.ndarray, rot: np.ndarray) -> np.ndarray:
+    """Homogeneous matrices ``[..., 4, 4]`` from locations ``[..., 3]`` and rotations ``[..., 3, 3]``."""
+    m = np.zeros(rot.shape[:-2] + (4, 4))
+    m[..., :3, :3] = rot
+    m[..., :3, 3] = loc
+    m[..., 3, 3] = 1.0
+    return m
+
+
+def fk(rig: Rig, loc: np.ndarray, rot: np.ndarray, scale: np.ndarray | None = None) -> np.ndarray:
+    """Pose matrices ``[F, B, 4, 4]`` (armature space) from local ``loc`` ``[F, B, 3]``,
+    ``rot`` ``[F, B, 3, 3]`` and optional ``scale`` ``[F, B, 3]``."""
+    basis = compose(loc, rot * scale[..., None, :] if scale is not None else rot)
+    out = np.empty(basis.shape)
+    for b, p in enumerate(rig.parents):
+        local = rig.rel_rest[b] @ basis[:, b]
+        out[:, b] = local if p < 0 else out[:, p] @ local
+    return out
+
+
+def anchor_positions(rig: Rig, anchors: Anchors, pose: np.ndarray) -> np.ndarray:
+    """Canonical joint positions ``[F, 21, 3]`` from pose matrices ``[F, B, 4, 4]``."""
+    m = pose[:, anchors.bone]  # (F, 21, 4, 4)
+    offset = np.zeros((len(anchors.bone), 4))
+    offset[:, 1] = np.where(anchors.tail, rig.lengths[anchors.bone], 0.0)
+    offset[:, 3] = 1.0
+    return np.einsum("fjab,jb->fja", m, offset)[..., :3]
+
+
+def _kabsch(u: np.ndarray, t: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """Rotations ``[F, 3, 3]`` minimising sum_i w_i |R u_i - t_i|^2; ``u``, ``t`` ``[F, N, 3]``, ``w`` ``[N]``."""
+    h = np.einsum("n,fni,fnj->fij", w, u, t)
+    uu, _, vt = np.linalg.svd(h)
+    d = np.sign(np.linalg.det(np.swapaxes(vt, -1, -2) @ np.swapaxes(uu, -1, -2)))
+    fix = np.broadcast_to(np.eye(3), h.shape).copy()
+    fix[:, 2, 2] = d
+    return np.swapaxes(vt, -1, -2) @ fix @ np.swapaxes(uu, -1, -2)
+
+
+def _twist(g: np.ndarray, axis: np.ndarray, n_local: np.ndarray, n_target: np.ndarray) -> np.ndarray:
+    """Twist ``g`` ``[F, 3, 3]`` about world ``axis`` ``[F, 3]`` so ``g @ n_local`` follows ``n_target``
+    (both ``[F, 3]``, un-normalised plane normals), faded out where either plane is degenerate."""
+    axis = unit(axis)
+    n_now = np.einsum("fij,fj->fi", g, n_local)
+    strength = np.minimum(np.linalg.norm(n_now, axis=-1), np.linalg.norm(n_target, axis=-1))
+    weight = np.clip((strength - _TWIST_NONE) / (_TWIST_FULL - _TWIST_NONE), 0.0, 1.0)
+    a = n_now - axis * np.sum(n_now * axis, -1, keepdims=True)
+    b = n_target - axis * np.sum(n_target * axis, -1, keepdims=True)
+    angle = np.arctan2(np.sum(np.cross(a, b) * axis, -1), np.sum(a * b, -1))
+    return rotvec_to_matrix(axis * (angle * weight)[:, None]) @ g
+
+
+def _plane(p0: np.ndarray, p1: np.ndarray, p2: np.ndarray) -> np.ndarray:
+    """Normal of the bend at ``p1`` ``[F, 3]``, length = sine of the bend angle."""
+    return np.cross(unit(p1 - p0), unit(p2 - p1))
+
+
+def _aim(rig: Rig, anchors: Anchors, joint: str, ref: tuple, head: np.ndarray, base_rot: np.ndarray,
+         targets: np.ndarray) -> np.ndarray:
+    """Global rotation ``[F, 3, 3]`` of the bone at ``joint`` pointing at its canonical children.
+
+    ``ref`` = (reference pose ``[F, B, 4, 4]``, reference anchors ``[F, 21, 3]``); ``head`` ``[F, 3]``
+    is where the bone's head is now, ``base_rot`` its orientation with its reference local rotation."""
+    ref_pose, ref_anchor = ref
+    b = int(anchors.bone[JOINT_INDEX[joint]])
+    kids = [JOINT_INDEX[c] for c in CHILDREN[joint]]
+    if not kids:
+        return base_rot
+    g_ref, head_ref = ref_pose[:, b, :3, :3], ref_pose[:, b, :3, 3]
+    to_local = lambda p: np.einsum("fji,fnj->fni", g_ref, p - head_ref[:, None])  # (F, N, 3) in the bone's frame
+    u = to_local(ref_anchor[:, kids])
+    t = targets[:, kids] - head[:, None]
+    if len(kids) > 1:
+        weights = np.array([2.0] + [1.0] * (len(kids) - 1))  # the torso child first: keep the spine aimed
+        return _kabsch(u, t, weights)
+    g = shortest_arc(np.einsum("fij,fj->fi", base_rot, u[:, 0]), t[:, 0]) @ base_rot
+    if joint in _PLANE_TWIST:
+        c, d = (JOINT_INDEX[n] for n in _PLANE_TWIST[joint])
+        ud = to_local(ref_anchor[:, [d]])[:, 0]
+        n_local = _plane(np.zeros_like(u[:, 0]), u[:, 0], ud)
+        n_target = _plane(head, targets[:, c], targets[:, d])
+        g = _twist(g, t[:, 0], n_local, n_target)
+    return g
+
+
+def _bridges(rig: Rig, anchors: Anchors, joint_at: dict[int, str]) -> dict[int, list[int]]:
+    """{bone: joint indices} for unmapped bones that carry canonical joints directly (as the
+    parent of their bones, or by their tail) strictly below the canonical parent's bone."""
+    out: dict[int, list[int]] = {}
+    for j, name in enumerate(JOINTS):
+        parent = PARENT_NAMES[name]
+        if parent is None:
+            continue
+        c = int(anchors.bone[j])
+        b = c if anchors.tail[j] else int(rig.parents[c])
+        top = int(anchors.bone[JOINT_INDEX[parent]])
+        if b >= 0 and b not in joint_at and b != top and rig.is_ancestor(top, b):
+            out.setdefault(b, []).append(j)
+    return out
+
+
+def _aim_bridge(ref: tuple, b: int, joints: list[int], head: np.ndarray, base_rot: np.ndarray,
+                targets: np.ndarray) -> np.ndarray:
+    """Global rotation ``[F, 3, 3]`` of unmapped bone ``b`` pointing at the canonical ``joints`` it carries."""
+    ref_pose, ref_anchor = ref
+    g_ref, head_ref = ref_pose[:, b, :3, :3], ref_pose[:, b, :3, 3]
+    u = np.einsum("fji,fnj->fni", g_ref, ref_anchor[:, joints] - head_ref[:, None])  # (F, N, 3)
+    t = targets[:, joints] - head[:, None]
+    if len(joints) > 1:
+        return _kabsch(u, t, np.ones(len(joints)))
+    return shortest_arc(np.einsum("fij,fj->fi", base_rot, u[:, 0]), t[:, 0]) @ base_rot
+
+
+def solve(rig: Rig, anchors: Anchors, targets: np.ndarray, ref_loc: np.ndarray,
+          ref_rot: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Local bone transforms that put the rig's canonical joints on ``targets``.
+
+    ``targets``: ``[F, 21, 3]`` armature space. ``ref_loc`` ``[F, B, 3]`` and ``ref_rot``
+    ``[F, B, 3, 3]``: the reference local pose (the original frames, or the pose to hold):
+    unmapped bones keep it, mapped bones swing from it. Returns local ``loc`` ``[F, B, 3]``
+    (only the hips bone's changes) and ``rot`` ``[F, B, 3, 3]``.
+    """
+    targets = np.asarray(targets, dtype=np.float64)
+    ref_pose = fk(rig, ref_loc, ref_rot)
+    ref = (ref_pose, anchor_positions(rig, anchors, ref_pose))
+    joint_at = {int(anchors.bone[j]): name for j, name in enumerate(JOINTS) if not anchors.tail[j]}
+    bridges = _bridges(rig, anchors, joint_at)
+    hips = int(anchors.bone[JOINT_INDEX["hips"]])
+    loc, rot = np.array(ref_loc, dtype=np.float64), np.array(ref_rot, dtype=np.float64)
+    pose = np.empty(ref_pose.shape)
+    for b, p in enumerate(rig.parents):
+        base = rig.rel_rest[b] if p < 0 else pose[:, p] @ rig.rel_rest[b]  # (F, 4, 4) or (4, 4)
+        base = np.broadcast_to(base, pose[:, b].shape)
+        r_base, t_base = base[:, :3, :3], base[:, :3, 3]
+        if b == hips:
+            loc[:, b] = np.einsum("fji,fj->fi", r_base, targets[:, JOINT_INDEX["hips"]] - t_base)
+        head = t_base + np.einsum("fij,fj->fi", r_base, loc[:, b])
+        base_rot = r_base @ rot[:, b]
+        if b in joint_at:
+            g = _aim(rig, anchors, joint_at[b], ref, head, base_rot, targets)
+            rot[:, b] = np.swapaxes(r_base, -1, -2) @ g
+        elif b in bridges:  # an unmapped bone just above joints (a clavicle, a pelvis): aim it at them
+            g = _aim_bridge(ref, b, bridges[b], head, base_rot, targets)
+            rot[:, b] = np.swapaxes(r_base, -1, -2) @ g
+        pose[:, b] = base @ compose(loc[:, b], rot[:, b])
+    return loc, rot
+
+
+def solved_bones(rig: Rig, anchors: Anchors) -> list[int]:
+    """Bones whose rotation :func:`solve` sets (the others keep their reference pose), parents first."""
+    joint_at = {int(anchors.bone[j]): name for j, name in enumerate(JOINTS) if not anchors.tail[j]}
+    return sorted(set(joint_at) | set(_bridges(rig, anchors, joint_at)))

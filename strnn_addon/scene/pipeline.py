@@ -1,0 +1,196 @@
+"""Building blocks of the stages (``stages/``): check the input, read joint positions,
+convert between world and armature space, and write solved poses into a new action.
+
+Bad input raises :class:`UserError` (what is wrong and how to fix it) before anything in
+the file changes, so a failed run leaves the scene exactly as it was.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import bpy
+import numpy as np
+
+from ...model_core.motion import rotations
+from ...model_core.motion.conventions import JOINT_INDEX, MODEL_FPS, yup_to_zup, zup_to_yup
+from ...model_core.rig.solve import Anchors, Rig, anchor_positions, solved_bones
+from . import anim, mapping, rig_io
+
+MIN_MODEL_FRAMES = 20
+
+
+class UserError(ValueError):
+    """Bad input: the message says what is wrong and how to fix it."""
+
+
+@dataclass
+class Clip:
+    """An armature with its action, rig and bone map, ready to read and write."""
+
+    obj: object
+    action: object
+    channels: anim.Channels
+    rig: Rig
+    anchors: Anchors
+    mapping: dict
+    world: np.ndarray  # (4, 4)
+    fps: float
+    first: int
+    last: int
+
+
+def scene_fps(scene) -> float:
+    return scene.render.fps / scene.render.fps_base
+
+
+def min_scene_frames(fps: float) -> int:
+    """Scene frames needed to span :data:`MIN_MODEL_FRAMES` frames at the model's rate."""
+    return max(MIN_MODEL_FRAMES, int(math.ceil((MIN_MODEL_FRAMES - 1) * fps / MODEL_FPS - 1e-6)) + 1)
+
+
+def check_object(obj, need_action: bool = True) -> None:
+    """Raise :class:`UserError` unless ``obj`` is an editable, animated (or, without ``need_action``,
+    any) armature with positive scale."""
+    if obj is None:
+        raise UserError("No active object: select an armature with an action in the 3D Viewport")
+    if obj.type != "ARMATURE":
+        raise UserError(f"{obj.name!r} is a {obj.type.lower()}, not an armature: select an armature")
+    for what, data in (("object", obj), ("armature data", obj.data)):
+        if data.library is not None:
+            raise UserError(f"The {what} {data.name!r} is linked from {data.library.filepath!r} and cannot be "
+                            "changed: make it local (Object > Relations > Make Local) or add a library override")
+    if obj.animation_data and obj.animation_data.use_tweak_mode:
+        raise UserError(f"{obj.name!r} is in NLA tweak mode, so its action cannot be swapped for a new one: "
+                        "leave it (NLA Editor > Edit > Stop Tweaking Strip Actions, or Tab there) and try again")
+    action = obj.animation_data.action if obj.animation_data else None
+    if action is None and need_action:
+        raise UserError(f"{obj.name!r} has no action: assign one in the Action Editor, or import a BVH")
+    if action is not None and action.library is not None:
+        raise UserError(f"The action {action.name!r} is linked from a library: make it local first")
+    world = np.array(obj.matrix_world)[:3, :3]
+    if min(obj.scale) <= 0 or np.linalg.det(world) <= 1e-12:
+        raise UserError(f"{obj.name!r} has zero or negative scale {tuple(round(s, 3) for s in obj.scale)}: "
+                        "set a positive scale (or apply it with Object > Apply > Scale)")
+
+
+def prepare(context, obj) -> Clip:
+    """Check ``obj`` and gather what reading and writing need; raises :class:`UserError`."""
+    check_object(obj)
+    action = obj.animation_data.action
+    channels = anim.Channels(action, obj.animation_data)
+    if not any(fc.data_path.startswith("pose.bones") for fc in channels.fcurves):
+        raise UserError(f"The action {action.name!r} animates no bones: key the armature's pose first")
+    first, last = (int(round(x)) for x in action.frame_range)
+    rig = rig_io.read_rig(obj)
+    try:
+        anchors, bone_map = mapping.resolve(obj.data, rig)
+    except mapping.MapError as e:
+        raise UserError(str(e)) from e
+    return Clip(obj, action, channels, rig, anchors, bone_map, rig_io.world_matrix(obj),
+                scene_fps(context.scene), first, last)
+
+
+def joint_positions(context, clip: Clip, frames: np.ndarray) -> np.ndarray:
+    """World-space canonical joints ``[F, 21, 3]`` at scene ``frames``, Y-up (model axes), scene units."""
+    if rig_io.needs_scene_evaluation(clip.obj, clip.channels.fcurves):
+        pose, world = rig_io.pose_matrices_evaluated(context, clip.obj, clip.rig, frames)
+    else:
+        pose = rig_io.pose_matrices_fast(clip.obj, clip.rig, clip.channels.fcurves, frames)
+        world = np.broadcast_to(clip.world, (len(frames), 4, 4))
+    local = anchor_positions(clip.rig, clip.anchors, pose)
+    pos = np.einsum("fij,fkj->fki", world[:, :3, :3], local) + world[:, None, :3, 3]
+    return zup_to_yup(pos)
+
+
+def to_armature(clip: Clip, pos_yup: np.ndarray) -> np.ndarray:
+    """World Y-up positions ``[F, 21, 3]`` -> armature space (Blender axes)."""
+    inv = np.linalg.inv(clip.world)
+    return np.einsum("ij,fkj->fki", inv[:3, :3], yup_to_zup(pos_yup)) + inv[:3, 3]
+
+
+def written_bones(clip: Clip) -> list[int]:
+    """Bones whose rotation the solve sets (mapped bones and the unmapped ones just above a joint)."""
+    return solved_bones(clip.rig, clip.anchors)
+
+
+def new_action_from(clip: Clip, suffix: str):
+    """A copy of the clip's action named after it; the original is kept with a fake user."""
+    new = clip.action.copy()
+    new.name = f"{clip.action.name}.{suffix}"
+    return new
+
+
+def leg_bones(clip: Clip) -> list[int]:
+    """The written bones from each upper leg down (what a foot lock changes)."""
+    uplegs = [int(clip.anchors.bone[JOINT_INDEX[j]]) for j in ("l_upleg", "r_upleg")]
+    return [b for b in written_bones(clip) if any(clip.rig.is_ancestor(u, b) for u in uplegs)]
+
+
+def write_pose(clip: Clip, action, frames: np.ndarray, loc: np.ndarray, rot: np.ndarray,
+               previous: dict, replace: tuple[float, float] | None, bones: list[int] | None = None) -> None:
+    """Key the solved rotations of mapped bones (and the hips bone's location) at ``frames``.
+
+    ``loc`` ``[F, B, 3]``, ``rot`` ``[F, B, 3, 3]``; ``previous`` {bone: raw channel values} keeps
+    Euler angles and quaternion signs continuous with the keys before; ``bones``: only these
+    (default: all :func:`written_bones`)."""
+    channels = anim.Channels(action, clip.obj.animation_data, ensure=True)
+    hips = int(clip.anchors.bone[JOINT_INDEX["hips"]])
+    for b in written_bones(clip) if bones is None else bones:
+        pb = clip.obj.pose.bones[clip.rig.names[b]]
+        prop, values = encode_rotation(pb.rotation_mode, rot[:, b], previous.get(pb.name))
+        _key_property(clip, channels, pb, prop, frames, values, replace)
+        if b == hips:
+            _key_property(clip, channels, pb, "location", frames, loc[:, b], replace)
+
+
+def _key_property(clip: Clip, channels: anim.Channels, pb, prop: str, frames: np.ndarray, values: np.ndarray,
+                  replace: tuple[float, float] | None) -> None:
+    """Key ``values`` ``[F, n]`` on each array index of a pose bone property. A channel the action did
+    not animate gets its static value keyed just outside ``frames`` first, so other frames keep it."""
+    path = f'pose.bones["{bpy.utils.escape_identifier(pb.name)}"].{prop}'
+    static = np.asarray(getattr(pb, prop), dtype=np.float64)
+    edges = np.array([f for f in (frames[0] - 1, frames[-1] + 1) if clip.first <= f <= clip.last])
+    for i in range(values.shape[1]):
+        fc = channels.find(path, i)
+        if fc is None:
+            fc = channels.ensure(path, i, pb.name)
+            if len(edges):
+                anim.write_keys(fc, edges, np.full(len(edges), static[i]))
+        anim.write_keys(fc, frames, values[:, i], replace)
+
+
+def encode_rotation(mode: str, m: np.ndarray, previous: np.ndarray | None) -> tuple[str, np.ndarray]:
+    """(property, values ``[F, 3 or 4]``) of rotations ``m`` ``[F, 3, 3]`` in a bone's rotation mode."""
+    if mode in ("QUATERNION", "AXIS_ANGLE"):
+        prev_q = previous
+        if mode == "AXIS_ANGLE" and previous is not None:
+            prev_q = rotations.matrix_to_quat(rotations.axis_angle_to_matrix(previous))
+        q = rotations.quat_continuous(rotations.matrix_to_quat(m), prev_q)
+        if mode == "QUATERNION":
+            return "rotation_quaternion", q
+        return "rotation_axis_angle", rotations.quat_to_axis_angle(q)
+    return "rotation_euler", rotations.euler_continuous(rotations.matrix_to_euler(m, mode), mode, previous)
+
+
+def raw_rotations(clip: Clip, frame: float) -> dict:
+    """{bone: rotation channel values} of the written bones at one scene frame."""
+    chans = rig_io.bone_channels(clip.channels.fcurves)
+    out = {}
+    for b in written_bones(clip):
+        pb = clip.obj.pose.bones[clip.rig.names[b]]
+        out[pb.name] = rig_io.rotation_values(chans, pb, np.array([float(frame)]))[0]
+    return out
+
+
+def finish(context, clip: Clip, new_action) -> None:
+    """Keep the original action (fake user) and assign the new one on the same slot."""
+    slot = anim.slot_of(clip.obj)
+    if mapping.stored_map(clip.obj.data) != clip.mapping:  # keep the auto-map that was used, for the panel
+        mapping.store_map(clip.obj.data, clip.mapping, clip.obj.data.strnn_map.family)
+    clip.action.use_fake_user = True
+    anim.assign_action(clip.obj, new_action, slot.identifier if slot else None)
+    first, last = (int(round(x)) for x in new_action.frame_range)
+    if context.scene.frame_end < last:
+        context.scene.frame_end = last

@@ -1,0 +1,166 @@
+"""Read an armature's rest pose and its action into arrays (the Blender boundary).
+
+Everything returned is NumPy: the rest pose as a :class:`model_core.rig.solve.Rig`, the
+local pose channels per frame, and canonical joint positions in world space. Frames
+are the scene's; world space is Blender's Z-up in scene units.
+"""
+
+from __future__ import annotations
+
+import re
+
+import bpy
+import numpy as np
+
+from ...model_core.motion import rotations
+from ...model_core.rig.solve import Rig, fk
+
+_ROT_PATHS = {"QUATERNION": "rotation_quaternion", "AXIS_ANGLE": "rotation_axis_angle"}
+
+
+def matrices(coll, attr: str, n: int) -> np.ndarray:
+    """Bulk-read a 4x4 matrix property of ``n`` items -> ``[n, 4, 4]`` (row-major)."""
+    buf = np.empty(n * 16, dtype=np.float32)
+    coll.foreach_get(attr, buf)
+    return buf.reshape(n, 4, 4).transpose(0, 2, 1).astype(np.float64)
+
+
+def read_rig(obj) -> Rig:
+    """Rest pose of an armature object's bones, parents first (armature space)."""
+    bones = obj.data.bones
+    n = len(bones)
+    rest = matrices(bones, "matrix_local", n)
+    lengths = np.empty(n, dtype=np.float32)
+    bones.foreach_get("length", lengths)
+    names = [b.name for b in bones]
+    parent_name = [b.parent.name if b.parent else None for b in bones]
+    order, placed = [], set()
+    while len(order) < n:  # parents first, keeping Blender's order otherwise
+        for i in range(n):
+            if names[i] not in placed and (parent_name[i] is None or parent_name[i] in placed):
+                order.append(i)
+                placed.add(names[i])
+    index = {names[i]: k for k, i in enumerate(order)}
+    parents = [index[parent_name[i]] if parent_name[i] else -1 for i in order]
+    return Rig([names[i] for i in order], np.array(parents), rest[order], lengths[order])
+
+
+def sample_fcurve(fc, frames: np.ndarray) -> np.ndarray:
+    """Values ``[F]`` of an F-curve at scene ``frames`` ``[F]``; exact and fast for baked keys."""
+    n = len(fc.keyframe_points)
+    if n == 0:
+        return np.full(len(frames), fc.evaluate(float(frames[0])) if len(frames) else 0.0)
+    co = np.empty(2 * n, dtype=np.float32)
+    fc.keyframe_points.foreach_get("co", co)
+    kx, ky = co[0::2].astype(np.float64), co[1::2].astype(np.float64)
+    inside = (frames >= kx[0]) & (frames <= kx[-1])
+    at = np.clip(np.searchsorted(kx, frames - 1e-4), 0, n - 1)
+    on_key = np.abs(kx[at] - frames) < 1e-4
+    plain = len(fc.modifiers) == 0 and fc.extrapolation == "CONSTANT"
+    if plain and np.all(on_key | ~inside):
+        return np.where(inside, ky[at], np.where(frames < kx[0], ky[0], ky[-1]))
+    return np.array([fc.evaluate(float(f)) for f in frames])
+
+
+_BONE_PATH = re.compile(r'pose\.bones\["((?:[^"\\]|\\.)*)"\]\.(\w+)')  # pose.bones["name"].prop
+
+
+def bone_channels(fcurves) -> dict[tuple[str, str], dict[int, object]]:
+    """{(bone, property): {array index: fcurve}} for pose bone channels of an action."""
+    out: dict[tuple[str, str], dict[int, object]] = {}
+    for fc in fcurves:
+        found = _BONE_PATH.fullmatch(fc.data_path)
+        if found:
+            bone = bpy.utils.unescape_identifier(found[1])  # Blender escapes " and \ in names
+            out.setdefault((bone, found[2]), {})[fc.array_index] = fc
+    return out
+
+
+def read_local_pose(obj, rig: Rig, fcurves, frames: np.ndarray):
+    """Local pose channels of every bone at scene ``frames`` ``[F]`` from the action's F-curves.
+
+    Returns ``loc`` ``[F, B, 3]``, ``rot`` ``[F, B, 3, 3]``, ``scale`` ``[F, B, 3]``; channels the
+    action does not animate take the pose bone's current value.
+    """
+    chans = bone_channels(fcurves)
+    f = len(frames)
+    loc, scale = np.zeros((f, len(rig.names), 3)), np.ones((f, len(rig.names), 3))
+    rot = np.empty((f, len(rig.names), 3, 3))
+    for b, name in enumerate(rig.names):
+        pb = obj.pose.bones[name]
+        loc[:, b] = _channel(chans, name, "location", pb.location, frames)
+        scale[:, b] = _channel(chans, name, "scale", pb.scale, frames)
+        rot[:, b] = rotation_matrices(pb.rotation_mode, rotation_values(chans, pb, frames))
+    return loc, rot, scale
+
+
+def _channel(chans, bone: str, prop: str, current, frames: np.ndarray) -> np.ndarray:
+    """One vector property ``[F, len(current)]`` sampled from its F-curves or held at ``current``."""
+    curves = chans.get((bone, prop), {})
+    out = np.tile(np.asarray(current, dtype=np.float64), (len(frames), 1))
+    for i, fc in curves.items():
+        if i < out.shape[1]:
+            out[:, i] = sample_fcurve(fc, frames)
+    return out
+
+
+def rotation_values(chans, pb, frames: np.ndarray) -> np.ndarray:
+    prop = _ROT_PATHS.get(pb.rotation_mode, "rotation_euler")
+    return _channel(chans, pb.name, prop, getattr(pb, prop), frames)
+
+
+def rotation_matrices(mode: str, values: np.ndarray) -> np.ndarray:
+    """Blender rotation channel values ``[F, 3 or 4]`` in ``mode`` -> matrices ``[F, 3, 3]``."""
+    if mode == "QUATERNION":
+        return rotations.quat_to_matrix(values)
+    if mode == "AXIS_ANGLE":
+        return rotations.axis_angle_to_matrix(values)
+    return rotations.euler_to_matrix(values, mode)
+
+
+def world_matrix(obj) -> np.ndarray:
+    """The object's world matrix ``[4, 4]``."""
+    return np.array(obj.matrix_world, dtype=np.float64)
+
+
+def needs_scene_evaluation(obj, fcurves) -> str:
+    """Why NumPy forward kinematics would not match Blender for this rig ('' when it does)."""
+    for pb in obj.pose.bones:
+        if len(pb.constraints):
+            return f"bone {pb.name!r} has constraints"
+        b = pb.bone
+        if not b.use_inherit_rotation or b.inherit_scale != "FULL" or not b.use_local_location:
+            return f"bone {b.name!r} has non-default inheritance"
+    ad = obj.animation_data
+    if ad and len(ad.drivers):
+        return "the object has drivers"
+    if any(not fc.data_path.startswith("pose.bones") for fc in fcurves):
+        return "the action animates the object itself"
+    if obj.constraints or obj.parent:
+        return "the object has constraints or a parent"
+    return ""
+
+
+def pose_matrices_fast(obj, rig: Rig, fcurves, frames: np.ndarray) -> np.ndarray:
+    """Armature-space pose matrices ``[F, B, 4, 4]`` by NumPy forward kinematics."""
+    loc, rot, scale = read_local_pose(obj, rig, fcurves, frames)
+    return fk(rig, loc, rot, scale)
+
+
+def pose_matrices_evaluated(context, obj, rig: Rig, frames: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Pose matrices ``[F, B, 4, 4]`` and world matrices ``[F, 4, 4]`` by letting Blender evaluate
+    each frame (constraints, drivers, parents); the scene's current frame is restored."""
+    scene = context.scene
+    keep = (scene.frame_current, scene.frame_subframe)
+    order = {name: i for i, name in enumerate(obj.pose.bones.keys())}
+    perm = [order[n] for n in rig.names]
+    out = np.empty((len(frames), len(rig.names), 4, 4))
+    world = np.empty((len(frames), 4, 4))
+    try:
+        for k, f in enumerate(frames):
+            scene.frame_set(int(np.floor(f)), subframe=float(f - np.floor(f)))
+            out[k] = matrices(obj.pose.bones, "matrix", len(order))[perm]
+            world[k] = world_matrix(obj)
+    finally:
+        scene.frame_set(keep[0], subframe=keep[1])
+    return out, world

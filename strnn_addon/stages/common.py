@@ -1,0 +1,139 @@
+"""What the stages of every operation share: driving a stage generator, model errors as
+:class:`UserError`, the foot lock on scene positions, and the new action with its record.
+
+Each operation (:mod:`.extend`, :mod:`.denoise`, :mod:`.footlock`, :mod:`.follow`) is a step
+generator (``model_core.inference.steps``) that yields the name of each stage (read, model,
+solve, write) before running it, and may yield the fraction of a stage done as it goes (Follow
+Curve, window by window), so the operators can show progress and stop on Esc in between;
+:func:`run` drives one to the end. Every check and all the computing happen before the new
+action is created, so a failure or a cancel leaves the file unchanged.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import tomllib
+from pathlib import Path
+
+import bpy
+
+from ...model_core.inference.steps import drive
+from ...model_core.ops import footlock
+from .. import engine_bridge
+from ..props import preferences
+from ..scene import pipeline
+from ..scene.pipeline import UserError
+
+STAGES = ("read", "model", "solve", "write")
+VERSION = tomllib.loads((Path(__file__).resolve().parents[2] / "blender_manifest.toml").read_text())["version"]
+RECORD = "strnn"  # the custom property of a new action that says how it was made
+
+
+def noop(stage: str) -> None:
+    pass
+
+
+@contextlib.contextmanager
+def model_errors():
+    """Model and engine errors raised inside as a :class:`UserError`."""
+    try:
+        yield
+    except engine_bridge.EngineError as e:
+        raise UserError(str(e)) from e
+    except ValueError as e:
+        raise UserError(f"The model could not run on this clip: {e}") from e
+
+
+def model_call(fn, *args):
+    """Run one model call, turning model and engine errors into a :class:`UserError`."""
+    with model_errors():
+        return fn(*args)
+
+
+def model_steps(steps):
+    """``yield from`` a model's step generator (fractions done), turning its errors into a :class:`UserError`."""
+    with model_errors():
+        return (yield from steps)
+
+
+def run(steps, progress=noop):
+    """Drive a worker generator to the end, calling ``progress(stage)`` at each stage (not at the
+    fractions a stage may yield as it goes); returns its result."""
+    return drive(steps, lambda value: progress(value) if isinstance(value, str) else None)
+
+
+def frame_range(clip, frame_start: int | None, frame_end: int | None, need: int, why: str) -> tuple[int, int]:
+    """The asked frames (None: the action's first / last) clipped to the action; a :class:`UserError`
+    when they are reversed, miss the action or are fewer than ``need`` (``why`` says who needs them)."""
+    name = clip.action.name
+    if frame_start is not None and frame_end is not None:
+        if frame_start > frame_end:
+            raise UserError(f"Start {frame_start} is after End {frame_end}: swap them")
+        if frame_end < clip.first or frame_start > clip.last:
+            raise UserError(f"Frames {frame_start}-{frame_end} lie outside the action {name!r} (frames "
+                            f"{clip.first}-{clip.last}): pick a range inside it")
+    a = clip.first if frame_start is None else max(int(frame_start), clip.first)
+    b = clip.last if frame_end is None else min(int(frame_end), clip.last)
+    if b - a + 1 < need:
+        raise UserError(f"The frame range {a}-{b} of {name!r} has {max(b - a + 1, 0)} frames; {why}: widen the range")
+    return a, b
+
+
+def lock(pos, fps, *, blend: float | None = None, detect_only: bool = False, **kw):
+    """:func:`footlock.foot_lock` of scene positions ``[F, 21, 3]`` (or, with ``detect_only``, their
+    contacts ``[F, 4]``), its errors as :class:`UserError`."""
+    settings = footlock.FootLockSettings()
+    if blend is not None:
+        settings.blend_s = max(float(blend), 0.0)
+    try:
+        if detect_only:
+            return footlock.detect_foot_contacts(pos, fps)
+        return footlock.foot_lock(pos, fps, settings=settings, **kw)
+    except ValueError as e:
+        raise UserError(f"Foot lock could not run on this clip: {e}") from e
+
+
+def prefs(context):
+    return preferences(context)
+
+
+def made_by(operation: str, clip, model: str = "", **settings) -> dict:
+    """The :data:`RECORD` a new action carries: the operation and extension version that made it,
+    the action it was made from, the model folder it used (if any) and its settings."""
+    record = {"operation": operation, "version": VERSION,
+              "source_action": clip.action.name if clip.action is not None else ""}
+    if model:
+        record["model"] = model
+    record["settings"] = {k: v for k, v in settings.items() if v is not None}
+    return record
+
+
+def familiarity_record(found) -> dict:
+    """The record's ``familiarity`` entry: the clip's reconstruction error against the model's usual,
+    and the note the operator reports when the clip is unlike what the model learnt."""
+    entry = {"reconstruction_cm": round(found.error_cm, 2)}
+    if found.usual_cm:
+        entry["usual_cm_p90"] = found.usual_cm
+    if found.note():
+        entry["note"] = found.note()
+    return {"familiarity": entry}
+
+
+def report_note(action) -> str:
+    """The familiarity note of a new action's record, as a sentence to append to a report ('' if none)."""
+    note = action.get(RECORD, {}).get("familiarity", {}).get("note", "")
+    return f". {note}" if note else ""
+
+
+def write_new(context, clip, suffix, frames, loc, rot, previous, replace, record: dict, bones=None):
+    """Create the new action, key it (``bones``: only these), label it with ``record`` and assign
+    it; on failure remove it again."""
+    action = pipeline.new_action_from(clip, suffix)
+    try:
+        action[RECORD] = record
+        pipeline.write_pose(clip, action, frames, loc, rot, previous, replace, bones)
+        pipeline.finish(context, clip, action)
+    except Exception:
+        bpy.data.actions.remove(action)
+        raise
+    return action

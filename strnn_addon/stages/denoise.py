@@ -1,0 +1,42 @@
+"""Denoise Action: clean an armature's action with the denoising model, as a stage generator."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ...model_core.ops.seam import fade_edges
+from ...model_core.rig.solve import solve
+from .. import engine_bridge
+from ..scene import pipeline, rig_io
+from .common import frame_range, lock, made_by, model_steps, noop, prefs, run, write_new
+
+
+def denoise_action(context, obj, *, progress=noop, **options):
+    """:func:`denoise_steps` run to the end; returns the new action."""
+    return run(denoise_steps(context, obj, **options), progress)
+
+
+def denoise_steps(context, obj, *, frame_start: int | None = None, frame_end: int | None = None,
+                  strength: float = 1.0, foot_lock: bool = False):
+    """Denoise ``obj``'s action over [frame_start, frame_end] (default: the whole action),
+    blending the model's output by ``strength``, then lock the feet when ``foot_lock``.
+    A generator like :func:`.extend.extend_steps`."""
+    clip = pipeline.prepare(context, obj)
+    need = pipeline.min_scene_frames(clip.fps)
+    a, b = frame_range(clip, frame_start, frame_end, need, f"denoising needs at least {need} at {clip.fps:g} fps")
+    frames = np.arange(a, b + 1, dtype=np.float64)
+    yield "read"
+    pos = pipeline.joint_positions(context, clip, frames)
+    ref_loc, ref_rot, _ = rig_io.read_local_pose(clip.obj, clip.rig, clip.channels.fcurves, frames)
+    previous = pipeline.raw_rotations(clip, a)
+    yield "model"
+    clean = yield from model_steps(engine_bridge.denoise_steps(prefs(context), pos, clip.fps, float(strength)))
+    clean = fade_edges(pos, clean, clip.fps, a > clip.first, b < clip.last)
+    if foot_lock:
+        clean = lock(clean, clip.fps)
+    yield "solve"
+    loc, rot = solve(clip.rig, clip.anchors, pipeline.to_armature(clip, clean), ref_loc, ref_rot)
+    yield "write"
+    record = made_by("Denoise Action", clip, engine_bridge.model_used(prefs(context), "denoise"), frame_start=a,
+                     frame_end=b, strength=float(strength), foot_lock=foot_lock)
+    return write_new(context, clip, "denoised", frames, loc, rot, previous, (a, b), record)

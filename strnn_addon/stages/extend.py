@@ -1,0 +1,65 @@
+"""Extend Clip: continue an armature's action with the model, as a stage generator."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ...model_core.rig.solve import solve
+from .. import engine_bridge
+from ..scene import pipeline, rig_io
+from ..scene.pipeline import UserError
+from .common import familiarity_record, lock, made_by, model_call, noop, prefs, run, write_new
+
+
+def extend_clip(context, obj, *, progress=noop, **options):
+    """:func:`extend_steps` run to the end; returns the new action."""
+    return run(extend_steps(context, obj, **options), progress)
+
+
+def context_range(clip, context_frames: int, frames: int, end: int) -> np.ndarray:
+    """Scene frames ``[C]`` the model reads: the ``context_frames`` (0: just enough) up to ``end``."""
+    need = pipeline.min_scene_frames(clip.fps)
+    n_ctx = max(context_frames, need)
+    if not clip.first <= end <= clip.last:
+        raise UserError(f"Frame {end} lies outside the action {clip.action.name!r} (frames {clip.first}-"
+                        f"{clip.last}): move the current frame into it to continue from there")
+    span = end - clip.first + 1
+    if n_ctx > span:
+        before = f"up to frame {end}" if end < clip.last else "frames"
+        raise UserError(f"The action {clip.action.name!r} has {span} {before}; extending needs at least "
+                        f"{n_ctx} at {clip.fps:g} fps (the model reads {pipeline.MIN_MODEL_FRAMES} "
+                        "frames at 30 fps): use a longer action, a later frame or a smaller context")
+    if frames < 1:
+        raise UserError("Frames to add must be at least 1")
+    return np.arange(end - n_ctx + 1, end + 1, dtype=np.float64)
+
+
+def extend_steps(context, obj, *, frames: int = 120, context_frames: int = 0, foot_lock: bool = False,
+                 from_frame: int | None = None):
+    """Continue ``obj``'s action by ``frames`` scene frames from its last ``context_frames``
+    (0: just enough for the model's 20-frame context), feet locked on the new frames when
+    ``foot_lock``. ``from_frame``: continue after this frame instead of the action's last, the
+    written bones' keys after it replaced. A generator: yields each stage's name before running
+    it (so a caller can report progress or stop), returns the new action."""
+    clip = pipeline.prepare(context, obj)
+    end = clip.last if from_frame is None else int(from_frame)
+    ctx_frames = context_range(clip, context_frames, frames, end)
+    yield "read"
+    pos = pipeline.joint_positions(context, clip, ctx_frames)
+    held_loc, held_rot, _ = rig_io.read_local_pose(clip.obj, clip.rig, clip.channels.fcurves, ctx_frames[-1:])
+    previous = pipeline.raw_rotations(clip, end)
+    yield "model"
+    new_pos = model_call(engine_bridge.extend, prefs(context), pos, clip.fps, frames)
+    if foot_lock:
+        new_pos = lock(np.concatenate([pos, new_pos]), clip.fps, fixed=np.arange(len(pos) + frames) < len(pos))
+        new_pos = new_pos[len(pos):]
+    yield "solve"
+    targets = pipeline.to_armature(clip, new_pos)
+    loc, rot = solve(clip.rig, clip.anchors, targets, np.repeat(held_loc, frames, 0), np.repeat(held_rot, frames, 0))
+    yield "write"
+    new_frames = end + 1 + np.arange(frames, dtype=np.float64)
+    record = made_by("Extend Clip", clip, engine_bridge.model_used(prefs(context)), frames=frames,
+                     context_frames=len(ctx_frames), foot_lock=foot_lock, from_frame=from_frame)
+    record.update(familiarity_record(model_call(engine_bridge.familiarity, prefs(context), pos, clip.fps)))
+    replace = None if end == clip.last else (end + 0.5, float("inf"))  # the old tail goes
+    return write_new(context, clip, "extended", new_frames, loc, rot, previous, replace, record)

@@ -1,0 +1,108 @@
+"""Follow Curve: walk an armature along a curve with the model, as a stage generator (see :mod:`.common`).
+
+With an action, the new frames continue it from its last frames, steering onto the curve;
+without one, the walk starts on the curve's start from a seed shipped with the model, sized
+like the rig, at the scene's start frame. Everything is read, checked and computed before
+the new action is made, so a failure or a cancel changes nothing.
+"""
+
+from __future__ import annotations
+
+import bpy
+import numpy as np
+
+from ...model_core.motion.conventions import zup_to_yup
+from ...model_core.rig.solve import anchor_positions, fk, solve
+from .. import engine_bridge
+from ..scene import anim, curves, mapping, pipeline, rig_io
+from ..scene.pipeline import UserError
+from .common import RECORD, familiarity_record, lock, made_by, model_steps, prefs, write_new
+
+
+def follow_curve_steps(context, obj, *, curve: str = "", frames: int = 0, speed: float = 0.0, foot_lock: bool = True,
+                       steps: int = 4):
+    """Walk ``obj`` along a curve object (``curve``: its name; '' = the selected curve) for ``frames``
+    scene frames (0: until the curve ends) at ``speed`` scene units per second (0: the motion's
+    own), feet locked when ``foot_lock``; ``steps`` fine-tuning steps per model window.
+    A generator: yields each stage's name before running it, and the fraction of the model
+    stage done after each model window; returns the new action."""
+    clip = _prepare(context, obj)
+    curve_obj = curves.find_curve(context, curve)
+    points, cyclic = curves.curve_points(context, curve_obj)
+    points = zup_to_yup(points)
+    if np.linalg.norm(np.diff(points[:, [0, 2]], axis=0), axis=-1).sum() < 1e-6:
+        raise UserError(f"The curve {curve_obj.name!r} has zero length on the ground: draw a path across the floor")
+    yield "read"
+    if clip.action is not None:
+        need = pipeline.min_scene_frames(clip.fps)
+        if clip.last - clip.first + 1 < need:
+            raise UserError(f"The action {clip.action.name!r} has {clip.last - clip.first + 1} frames; Follow Curve "
+                            f"needs at least {need} at {clip.fps:g} fps to continue it (or remove the action to "
+                            "start from the model's own walk)")
+        ctx = np.arange(clip.last - need + 1, clip.last + 1, dtype=np.float64)
+        context_pos, rest = pipeline.joint_positions(context, clip, ctx), None
+        held_loc, held_rot, _ = rig_io.read_local_pose(clip.obj, clip.rig, clip.channels.fcurves, ctx[-1:])
+        previous = pipeline.raw_rotations(clip, clip.last)
+    else:
+        held_loc, held_rot, _ = rig_io.read_local_pose(clip.obj, clip.rig, [], np.zeros(1))
+        context_pos, rest, previous = None, _rest_joints(clip, held_loc, held_rot), {}
+    yield "model"
+    new_pos = yield from model_steps(engine_bridge.follow_curve_steps(
+        prefs(context), points, cyclic, clip.fps, frames or None, speed or None, steps, context_pos, rest))
+    if foot_lock:
+        known = 0 if context_pos is None else len(context_pos)
+        joined = new_pos if context_pos is None else np.concatenate([context_pos, new_pos])
+        new_pos = lock(joined, clip.fps, fixed=np.arange(len(joined)) < known)[known:]
+    yield "solve"
+    n = len(new_pos)
+    loc, rot = solve(clip.rig, clip.anchors, pipeline.to_armature(clip, new_pos), np.repeat(held_loc, n, 0),
+                     np.repeat(held_rot, n, 0))
+    yield "write"
+    start = clip.last + 1 if clip.action is not None else context.scene.frame_start
+    new_frames = start + np.arange(n, dtype=np.float64)
+    record = made_by("Follow Curve", clip, engine_bridge.model_used(prefs(context)), curve=curve_obj.name,
+                     frames=n, speed=float(speed), foot_lock=foot_lock, steering_steps=steps)
+    if context_pos is not None:
+        record.update(familiarity_record(engine_bridge.familiarity(prefs(context), context_pos, clip.fps)))
+    if clip.action is not None:
+        return write_new(context, clip, "curve", new_frames, loc, rot, previous, None, record)
+    return _write_fresh(context, clip, new_frames, loc, rot, record)
+
+
+def _prepare(context, obj) -> pipeline.Clip:
+    """:func:`pipeline.prepare`, or for an armature without an action the same minus the action."""
+    if obj is not None and obj.type == "ARMATURE" and obj.animation_data and obj.animation_data.action:
+        return pipeline.prepare(context, obj)
+    pipeline.check_object(obj, need_action=False)
+    rig = rig_io.read_rig(obj)
+    try:
+        anchors, bone_map = mapping.resolve(obj.data, rig)
+    except mapping.MapError as e:
+        raise UserError(str(e)) from e
+    frame = context.scene.frame_start
+    return pipeline.Clip(obj, None, None, rig, anchors, bone_map, rig_io.world_matrix(obj),
+                         pipeline.scene_fps(context.scene), frame, frame)
+
+
+def _rest_joints(clip: pipeline.Clip, loc: np.ndarray, rot: np.ndarray) -> np.ndarray:
+    """World canonical joints ``[21, 3]`` (Y-up) of the rig in its current pose ``loc``, ``rot`` ``[1, B, ...]``."""
+    local = anchor_positions(clip.rig, clip.anchors, fk(clip.rig, loc, rot))[0]
+    return zup_to_yup(local @ clip.world[:3, :3].T + clip.world[:3, 3])
+
+
+def _write_fresh(context, clip, frames, loc, rot, record: dict):
+    """A new action for an armature that had none: keyed, assigned, the scene's range widened."""
+    action = bpy.data.actions.new(f"{clip.obj.name}.curve")
+    clip.first, clip.last = int(frames[0]), int(frames[-1])  # no static keys outside the new frames
+    try:
+        action[RECORD] = record
+        pipeline.write_pose(clip, action, frames, loc, rot, {}, None)
+        anim.assign_action(clip.obj, action, None)
+        ad = clip.obj.animation_data
+        if getattr(ad, "action_slot", True) is None and len(action.slots):
+            ad.action_slot = action.slots[0]
+    except Exception:
+        bpy.data.actions.remove(action)
+        raise
+    context.scene.frame_end = max(context.scene.frame_end, clip.last)
+    return action

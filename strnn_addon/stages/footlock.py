@@ -1,0 +1,40 @@
+"""Foot Lock: pin an armature's feet on the ground while they touch it (leg IK), as a stage generator."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ...model_core.ops import footlock
+from ...model_core.rig.solve import solve
+from ..scene import pipeline, rig_io
+from ..scene.pipeline import UserError
+from .common import frame_range, lock, made_by, write_new
+
+MIN_LOCK_FRAMES = 3
+
+
+def foot_lock_steps(context, obj, *, frame_start: int | None = None, frame_end: int | None = None,
+                    blend: float = footlock.FootLockSettings.blend_s):
+    """Pin the feet of ``obj``'s action on the ground while they touch it, over [frame_start,
+    frame_end] (default: the whole action), fading locks in and out over ``blend`` seconds.
+    Only the leg bones get new keys. A generator like :func:`.extend.extend_steps`."""
+    clip = pipeline.prepare(context, obj)
+    a, b = frame_range(clip, frame_start, frame_end, MIN_LOCK_FRAMES, f"foot lock needs at least {MIN_LOCK_FRAMES}")
+    frames = np.arange(max(a - 1, clip.first), min(b + 1, clip.last) + 1, dtype=np.float64)
+    inside = (frames >= a) & (frames <= b)  # plus one untouched frame either side to continue from
+    yield "read"
+    pos = pipeline.joint_positions(context, clip, frames)
+    ref_loc, ref_rot, _ = rig_io.read_local_pose(clip.obj, clip.rig, clip.channels.fcurves, frames)
+    previous = pipeline.raw_rotations(clip, a)
+    yield "model"
+    contacts = lock(pos, clip.fps, detect_only=True)
+    if not contacts[inside].any():
+        raise UserError(f"No foot touches the ground in frames {a}-{b} of {clip.action.name!r} (feet near their "
+                        "lowest height and slower than 0.6 m/s): nothing to lock")
+    locked = lock(pos, clip.fps, contacts=contacts, fixed=~inside, blend=blend)
+    yield "solve"
+    loc, rot = solve(clip.rig, clip.anchors, pipeline.to_armature(clip, locked), ref_loc, ref_rot)
+    yield "write"
+    record = made_by("Foot Lock", clip, frame_start=a, frame_end=b, blend=float(blend))
+    return write_new(context, clip, "footlocked", frames[inside], loc[inside], rot[inside], previous, (a, b),
+                      record, bones=pipeline.leg_bones(clip))

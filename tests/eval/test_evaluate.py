@@ -1,0 +1,119 @@
+"""scripts/evaluate.py end to end on a small folder of BVH files with the bundled model:
+one run, the table printed, and JSON with exactly the keys the metrics define."""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+import pytest
+
+from model_core.io.bvh_export import write_bvh
+from model_core.motion.synthetic import walking_skeleton
+
+REPO = Path(__file__).resolve().parents[2]
+sys.path.insert(0, str(REPO / "scripts"))
+
+import evaluate  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def walks(tmp_path_factory) -> Path:
+    root = tmp_path_factory.mktemp("walks")
+    for i in range(3):
+        write_bvh(root / f"walk_{i}.bvh", walking_skeleton(frames=150, speed=1.0 + 0.2 * i, radius=4.0 + i))
+    return root
+
+
+def test_one_run_writes_exactly_the_metric_keys(walks, tmp_path, capsys):
+    out = tmp_path / "eval.json"
+    evaluate.main(["--data", str(walks), "--cache", "", "--long-horizon", "1000", "--seeds", "2",
+                   "--denoise-std", "3", "--json", str(out)])
+    printed = capsys.readouterr().out
+    doc = json.loads(out.read_text())
+    assert set(doc) == {"checkpoint", "data", "clips", "windows", "prediction", "long_horizon", "denoise"}
+    assert doc["clips"] == 3 and doc["windows"] > 0
+    assert doc["prediction"]["horizons_ms"] == [80, 160, 320, 400, 560, 1000]
+    assert set(doc["prediction"]["mpjpe_cm"]) == {"strnn", "zero_velocity", "constant_velocity", "strnn_as_extend"}
+    assert all(len(v) == 6 for v in doc["prediction"]["mpjpe_cm"].values())
+    zero, const = doc["prediction"]["mpjpe_cm"]["zero_velocity"], doc["prediction"]["mpjpe_cm"]["constant_velocity"]
+    assert zero[-1] > zero[0] and const[-1] > const[0]  # errors grow with the horizon
+    lh = doc["long_horizon"]
+    assert set(lh) == {"frames", "seeds", "exploded", "frozen", "speed_ratio_last_1000", "d1nn_per_block",
+                       "seed_clips", "seed_take_speed_ratio", "d1nn_drift", "feet"}
+    assert lh["frames"] == 1000 and lh["seeds"] == 2 and len(lh["speed_ratio_last_1000"]) == 2
+    assert len(lh["seed_clips"]) == len(lh["seed_take_speed_ratio"]) == 2
+    assert set(lh["feet"]) == {"touch_fraction", "floor_offset_cm", "sink_cm"}
+    assert [len(b) for b in lh["d1nn_per_block"]] == [1, 1]
+    dn = doc["denoise"]
+    assert set(dn) == {"std_cm", "mpjpe_cm"} and set(dn["mpjpe_cm"]) == {"strnn", "butterworth_best", "noisy"}
+    assert dn["mpjpe_cm"]["butterworth_best"][0] < dn["mpjpe_cm"]["noisy"][0]  # the filter removes noise
+    assert 4.0 < dn["mpjpe_cm"]["noisy"][0] < 5.6  # |N(0, 3 cm I3)| has mean 4.8 cm
+    for heading in ("Long horizon", "Denoising", "speed / its take", "walk_0.bvh", "as Extend (seam)"):
+        assert heading in printed
+
+
+def test_without_options_only_prediction(walks, tmp_path):
+    out = tmp_path / "eval.json"
+    evaluate.main(["--data", str(walks), "--cache", "", "--json", str(out)])
+    assert set(json.loads(out.read_text())) == {"checkpoint", "data", "clips", "windows", "prediction"}
+
+
+def test_a_denoise_only_checkpoint_is_pointed_to_denoise_checkpoint(walks, tmp_path, capsys):
+    from releases import random_release
+
+    random_release(tmp_path / "dn", m=20, n=1, purpose="denoise")
+    assert evaluate.main(["--data", str(walks), "--cache", "", "--checkpoint", str(tmp_path / "dn")]) == 2
+    assert "pass it as --denoise-checkpoint" in capsys.readouterr().err
+    out = tmp_path / "eval.json"
+    assert evaluate.main(["--data", str(walks), "--cache", "", "--denoise-std", "3", "--denoise-checkpoint",
+                          str(tmp_path / "dn"), "--json", str(out)]) == 0
+    assert f"model {tmp_path / 'dn'}" in capsys.readouterr().out
+    assert set(json.loads(out.read_text())["denoise"]["mpjpe_cm"]) == {"strnn", "butterworth_best", "noisy"}
+
+
+def test_baseline_models_get_their_rows_and_the_ratio_uses_the_best(walks, tmp_path, capsys, baseline_release):
+    pytest.importorskip("torch")
+    simlpe, gru = baseline_release("simlpe"), baseline_release("residual_gru", width=16)
+    out, plain = tmp_path / "eval.json", tmp_path / "plain.json"
+    assert evaluate.main(["--data", str(walks), "--cache", "", "--json", str(plain)]) == 0
+    assert evaluate.main(["--data", str(walks), "--cache", "", "--baseline-model", str(simlpe),
+                          "--baseline-model", str(gru), "--threads", "1", "--json", str(out)]) == 0
+    printed = capsys.readouterr().out
+    doc, before = json.loads(out.read_text()), json.loads(plain.read_text())
+    rows = doc["prediction"]["mpjpe_cm"]
+    assert list(rows) == ["strnn", "zero_velocity", "constant_velocity", "simlpe", "residual_gru", "strnn_as_extend"]
+    assert all(len(v) == 6 for v in rows.values())
+    for name in ("strnn", "zero_velocity", "constant_velocity", "strnn_as_extend"):
+        assert rows[name] == before["prediction"]["mpjpe_cm"][name]  # the baselines change nothing else
+    assert doc["baseline_models"] == {"simlpe": str(simlpe), "residual_gru": str(gru)}
+    best = [min(v) for v in zip(*(rows[k] for k in ("zero_velocity", "constant_velocity", "simlpe", "residual_gru")))]
+    ratio = next(line for line in printed.splitlines() if line.startswith("strnn / best base"))
+    assert ratio.split()[-6:] == [f"{s / b:.2f}" for s, b in zip(rows["strnn"], best)]
+
+
+def test_two_baselines_of_one_architecture_and_a_baseline_as_checkpoint_are_refused(walks, capsys,
+                                                                                      baseline_release):
+    pytest.importorskip("torch")
+    a, b = baseline_release("simlpe"), baseline_release("simlpe", seed=1)
+    assert evaluate.main(["--data", str(walks), "--cache", "", "--baseline-model", str(a),
+                          "--baseline-model", str(b)]) == 2
+    assert "score one per architecture" in capsys.readouterr().err
+    assert evaluate.main(["--data", str(walks), "--cache", "", "--checkpoint", str(a)]) == 2
+    assert "--baseline-model" in capsys.readouterr().err
+
+
+def test_group_scores_every_clip_of_a_held_out_group(tmp_path):
+    root = tmp_path / "data"
+    for i, rel in enumerate(["cmu/iclone/006_01.bvh", "cmu/iclone/006_02.bvh", "cmu/iclone/007_01.bvh"]):
+        (root / rel).parent.mkdir(parents=True, exist_ok=True)
+        write_bvh(root / rel, walking_skeleton(frames=150, speed=1.0 + 0.2 * i, radius=4.0 + i))
+    out = tmp_path / "eval.json"
+    assert evaluate.main(["--data", str(root), "--cache", "", "--group", "actor", "--json", str(out)]) == 0
+    doc = json.loads(out.read_text())
+    assert doc["clips"] == 2 and doc["group"] == "actor"
+    with pytest.raises(SystemExit):
+        evaluate.parse_args(["--data", str(root), "--group", "actor", "--split", "test"])
+    with pytest.raises(SystemExit):
+        evaluate.parse_args(["--data", str(root), "--group", "no_such_group"])

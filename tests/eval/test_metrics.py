@@ -1,0 +1,105 @@
+"""Long-horizon judgement of a rollout (DESIGN.md metrics): explosion, freeze, speed ratio, D_1nn."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from model_core.eval.metrics import feet_report, floor_height, joint_speed, pose_vectors, rollout_report, segments
+from model_core.motion.conventions import UP_AXIS
+from model_core.motion.features import positions_to_features
+from model_core.motion.synthetic import walking_skeleton
+
+
+def _walk(frames: int = 2000):
+    pos = walking_skeleton(frames)
+    feats, _ = positions_to_features(pos)
+    return pos, feats
+
+
+def test_a_real_like_walk_is_neither_exploded_nor_frozen():
+    pos, feats = _walk()
+    speed = float(joint_speed(pos).mean())
+    ref = segments(pose_vectors(feats[:400]))
+    report = rollout_report(feats, pos[:20], speed, ref)
+    assert not report.exploded and not report.frozen
+    assert abs(report.speed_ratio_last_1000 - 1.0) < 0.05
+    assert len(report.d1nn_per_block) == 2 and max(report.d1nn_per_block) < 1e-3  # the same gait as the reference
+
+
+def test_a_held_pose_is_a_freeze_and_a_grown_skeleton_an_explosion():
+    pos, feats = _walk()
+    speed = float(joint_speed(pos).mean())
+    ref = segments(pose_vectors(feats[:400]))
+    still = np.repeat(feats[:1], 200, 0)
+    still[:, 63:66] = 0.0  # no root motion
+    held = rollout_report(still, pos[:20], speed, ref, block=100)
+    assert held.frozen and held.speed_ratio_last_1000 < 0.01
+    grown = feats.copy()
+    grown[:, :63] *= 1.2  # every bone 20 % longer than the seed's
+    assert rollout_report(grown, pos[:20], speed, ref).exploded
+    broken = feats.copy()
+    broken[500, 3] = np.nan
+    report = rollout_report(broken, pos[:20], speed, ref)
+    assert report.exploded and np.isnan(report.speed_ratio_last_1000)
+
+
+def test_freeze_threshold_is_a_tenth_of_the_median_speed():
+    pos, feats = _walk(400)
+    speed = float(joint_speed(pos).mean())
+    ref = segments(pose_vectors(feats[:200]))
+    slow = features_slowed(feats, 0.08)  # moves at 8 % of the walk's speed
+    assert rollout_report(slow, pos[:20], speed, ref, block=100).frozen  # by the mean (the default)
+    assert not rollout_report(slow, pos[:20], speed, ref, block=100, median_speed=0.5 * speed).frozen
+
+
+def features_slowed(feats: np.ndarray, factor: float) -> np.ndarray:
+    """The same motion played ``factor`` times as fast (linear interpolation of the frames)."""
+    t = np.arange(len(feats)) * factor
+    i = np.floor(t).astype(int)
+    w = (t - i)[:, None]
+    out = feats[i] * (1 - w) + feats[np.minimum(i + 1, len(feats) - 1)] * w
+    out[:, 63:66] = feats[i, 63:66] * factor  # root steps scale with the playback speed
+    return out.astype(np.float32)
+
+
+def test_prediction_errors_also_score_the_extend_seam_blend():
+    """Extend's seam blend starts the continuation where the context's last velocity leads: for a
+    stand-in that freezes the last pose (gliding on at the root's speed) it brings the first
+    frames of a walk closer to the truth."""
+    from model_core.eval.metrics import prediction_errors
+
+    class Freeze:
+        def extrapolate(self, feats, frames):
+            return np.repeat(np.asarray(feats)[:, -1:], frames, 1)
+
+    errors, windows = prediction_errors(Freeze(), [walking_skeleton(120, speed=1.2)])
+    assert windows > 0 and set(errors) == {"strnn", "zero_velocity", "constant_velocity", "strnn_seam_blend"}
+    assert errors["strnn_seam_blend"][0] < errors["strnn"][0]
+
+
+def test_feet_report_sees_hovering_sinking_and_gliding():
+    pos = walking_skeleton(300)
+    floor = floor_height(pos)
+    real = feet_report(pos, floor)
+    assert real.touch_fraction == 1.0 and abs(real.floor_offset_cm) < 3 and real.sink_cm < 1
+    lifted = pos.copy()
+    lifted[..., UP_AXIS] += 0.12  # the whole body 12 cm above the floor
+    hover = feet_report(lifted, floor)
+    assert hover.touch_fraction == 0.0 and hover.floor_offset_cm > 9
+    sunk = pos.copy()
+    sunk[..., UP_AXIS] -= 0.07
+    assert feet_report(sunk, floor).sink_cm > 6
+    glide = np.repeat(pos[:1], 300, 0)  # one pose pushed along the ground at 1 m/s, feet in the air
+    glide[..., UP_AXIS] += 0.1
+    glide[..., 2] += np.arange(300)[:, None] / 30.0
+    assert feet_report(glide, floor).touch_fraction == 0.0
+    still = feet_report(np.repeat(pos[:1], 60, 0), floor)
+    assert np.isnan(still.touch_fraction)  # no locomotion: nothing to judge
+
+
+def test_rollout_report_judges_the_feet_of_the_last_block():
+    pos, feats = _walk(1200)
+    speed = float(joint_speed(pos).mean())
+    report = rollout_report(feats, pos[:20], speed, segments(pose_vectors(feats[:400])), floor=floor_height(pos))
+    assert report.feet.touch_fraction == 1.0 and report.feet.sink_cm < 1
+    assert rollout_report(feats, pos[:20], speed, segments(pose_vectors(feats[:400]))).feet is None

@@ -1,0 +1,256 @@
+"""The NumPy inference engine against its torch twin, on small random releases.
+
+Each release is a random width-64 STRNN whose batch-norm statistics and residual filter
+(zero-initialised by the model) are randomised, so that every folded term matters.
+"""
+
+from __future__ import annotations
+
+import pickle
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+torch = pytest.importorskip("torch")
+
+from releases import random_release  # noqa: E402
+
+from model_core.inference.engine import Engine, bone_lengths  # noqa: E402
+from model_core.inference.steps import drive  # noqa: E402
+from model_core.inference.torch_engine import TorchEngine  # noqa: E402
+from model_core.io.checkpoint import DEFAULT_MODEL, REPO, CheckpointError, load_release  # noqa: E402
+from model_core.motion.conventions import LAYOUT  # noqa: E402
+
+C = LAYOUT.size
+VARIANTS = [(s, r) for s in (True, False) for r in (True, False)]  # (spatial, residual)
+
+
+@pytest.fixture
+def release(tmp_path):
+    folder = tmp_path / "release"
+    random_release(folder)
+    return folder
+
+
+def torch_forward(model, raw, mean, std):
+    with torch.no_grad():
+        out = model(torch.from_numpy(((raw - mean) / std).astype(np.float32)))
+    return out.numpy() * std + mean
+
+
+@pytest.mark.parametrize("spatial,residual", VARIANTS)
+@pytest.mark.parametrize("m,n", [(10, 10), (6, 9), (9, 6)])
+def test_numpy_forward_matches_torch(tmp_path, spatial, residual, m, n):
+    model, mean, std = random_release(tmp_path, spatial, residual, m, n)
+    engine = Engine.load(tmp_path)
+    raw = engine.seeds
+    want = torch_forward(model, raw, mean, std)
+    got = engine.forward(raw)
+    assert got.shape == (3, m + n, C)
+    np.testing.assert_allclose(got, want, atol=1e-4, rtol=0)
+    engine.seam_frames = 0  # the raw prediction, without the seam correction
+    np.testing.assert_allclose(engine.predict(raw), want[:, m:], atol=1e-4, rtol=0)
+    np.testing.assert_allclose(TorchEngine.load(tmp_path).forward(raw), want, atol=1e-5, rtol=0)
+
+
+@pytest.mark.parametrize("spatial", [True, False])
+def test_offset_decoder_matches_torch_and_starts_at_the_context(tmp_path, spatial):
+    """With ``offsets`` the frame decoder adds the last context frame: NumPy equals torch, and a
+    decoder that outputs nothing reproduces the last context frame everywhere."""
+    model, mean, std = random_release(tmp_path, spatial, spatial, offsets=True)
+    engine = Engine.load(tmp_path)
+    raw = engine.seeds
+    np.testing.assert_allclose(engine.forward(raw), torch_forward(model, raw, mean, std), atol=1e-4, rtol=0)
+    out = "decode_frame.out" if spatial else "decode_frame"
+    with torch.no_grad():
+        for name, p in model.named_parameters():
+            if name.startswith(out) or name.startswith("decode_frame.root") or name.startswith(
+                    "decode_frame.contacts") or name.startswith("decode_frame.torso"):
+                p.zero_()
+        model.filter = None
+        model.cfg.residual = False
+    window = torch_forward(model, raw, mean, std)
+    np.testing.assert_allclose(window, np.repeat(raw[:, -1:], window.shape[1], 1), atol=1e-5)
+
+
+def test_extrapolate_shapes_and_batch_matches_single(release):
+    engine = Engine.load(release)
+    seeds, frames = engine.seeds, 3 * engine.n + 5  # not a whole number of windows
+    batch = engine.extrapolate(seeds, frames)
+    assert batch.shape == (3, frames, C)
+    for i in range(3):
+        single = engine.extrapolate(seeds[i], frames)
+        assert single.shape == (frames, C)
+        np.testing.assert_allclose(single, batch[i], atol=1e-5, rtol=0)
+    longer = np.concatenate([seeds[0], seeds[1]])  # only the last m frames are context
+    np.testing.assert_array_equal(engine.extrapolate(longer, 7), engine.extrapolate(seeds[1], 7))
+    assert engine.extrapolate(seeds[0], 7, keep_bone_lengths=False).shape == (7, C)
+
+
+def test_torch_engine_extrapolates_like_numpy(release):
+    seeds = Engine.load(release).seeds
+    want = Engine.load(release).extrapolate(seeds, 25)
+    got = TorchEngine.load(release).extrapolate(seeds, 25)
+    assert got.shape == want.shape == (3, 25, C)
+    np.testing.assert_allclose(got, want, atol=1e-4, rtol=0)
+
+
+def test_extrapolate_keeps_seed_bone_lengths(release):
+    engine = Engine.load(release)
+    seed = engine.seeds[0]
+    out = engine.extrapolate(seed, 2 * engine.n)
+    per_frame = bone_lengths(out[:, None])  # [F, J]: T = 1, so the median is the frame's own
+    np.testing.assert_allclose(per_frame, np.broadcast_to(bone_lengths(seed[None]), per_frame.shape),
+                               atol=1e-4, rtol=0)
+    contacts = out[:, LAYOUT.contacts]
+    assert set(np.unique(contacts)) <= {0.0, 1.0}
+
+
+def test_denoise_shape(release):
+    engine = Engine.load(release)
+    rng = np.random.default_rng(1)
+    feats = (engine.mean + engine.std * rng.normal(size=(engine.m * 3 + 1, C))).astype(np.float32)
+    out = engine.denoise(feats)
+    assert out.shape == feats.shape and np.isfinite(out).all()
+    assert TorchEngine.load(release).denoise(feats).shape == feats.shape
+    with pytest.raises(ValueError, match="at least"):
+        engine.denoise(feats[: engine.m - 1])
+
+
+def test_denoise_steps_report_batches_and_give_the_same_result(release):
+    engine = Engine.load(release)
+    rng = np.random.default_rng(2)
+    feats = (engine.mean + engine.std * rng.normal(size=(engine.m * 6, C))).astype(np.float32)
+    fractions = []
+    out = drive(engine.denoise_steps(feats, batch=4), fractions.append)
+    windows = len(range(0, len(feats) - engine.m + 1, max(1, engine.m // 4)))
+    assert fractions == [min(4 * (k + 1), windows) / windows for k in range(-(-windows // 4))]
+    np.testing.assert_allclose(out, engine.denoise(feats), atol=1e-5)
+
+
+def test_a_denoise_only_model_denoises_and_refuses_to_predict(tmp_path):
+    random_release(tmp_path, purpose="denoise")
+    for engine in (Engine.load(tmp_path), TorchEngine.load(tmp_path)):
+        assert engine.ckpt.purpose == "denoise"
+        assert engine.denoise(np.repeat(engine.seeds[0], 3, 0)).shape == (3 * engine.m, C)
+        with pytest.raises(CheckpointError, match="trained for Denoise alone.*strnn_default"):
+            engine.extrapolate(engine.seeds[0], 5)
+    from model_core.ops.follow import PathFollower
+
+    with pytest.raises(CheckpointError, match="cannot follow a path"):
+        PathFollower.load(tmp_path)
+
+
+def test_an_unknown_purpose_is_a_clear_error(tmp_path):
+    random_release(tmp_path, purpose="dance")
+    with pytest.raises(CheckpointError, match="unknown purpose 'dance'"):
+        Engine.load(tmp_path)
+
+
+def test_loading_never_unpickles(release, monkeypatch):
+    def refuse(*args, **kwargs):
+        raise AssertionError("a release must load without pickle")
+
+    monkeypatch.setattr(pickle, "load", refuse)
+    monkeypatch.setattr(pickle, "loads", refuse)
+    monkeypatch.setattr(torch, "load", refuse)
+    Engine.load(release)
+    TorchEngine.load(release)
+    assert sorted(p.name for p in release.iterdir()) == ["model.json", "model.safetensors", "seeds.npz"]
+
+
+def test_pickled_seeds_are_refused(release):
+    with open(release / "seeds.npz", "wb") as f:
+        np.savez(f, features=np.zeros((1, 10, C), np.float32), names=np.array([object()], dtype=object))
+    with pytest.raises(ValueError, match="allow_pickle"):
+        load_release(release)
+
+
+def test_missing_config_is_a_clear_error(release):
+    (release / "model.json").unlink()
+    with pytest.raises(CheckpointError, match="missing model.json"):
+        Engine.load(release)
+    with pytest.raises(CheckpointError, match="missing model.json"):
+        TorchEngine.load(release)
+
+
+def test_config_mismatch_is_a_clear_error(release):
+    doc = (release / "model.json").read_text().replace('"width": 64', '"width": 32')
+    (release / "model.json").write_text(doc)
+    with pytest.raises(CheckpointError, match="do not match its config"):
+        TorchEngine.load(release)
+
+
+def test_numpy_engine_does_not_import_torch():
+    code = "import sys, model_core.inference.engine, model_core.eval.benchmark; sys.exit('torch' in sys.modules)"
+    assert subprocess.run([sys.executable, "-c", code], cwd=REPO).returncode == 0
+
+
+@pytest.mark.skipif(not (DEFAULT_MODEL / "model.safetensors").exists(), reason="no bundled model yet")
+def test_bundled_model():
+    engine, twin = Engine.load(), TorchEngine.load()
+    seeds = engine.seeds
+    assert len(seeds) > 0 and seeds.shape[1:] == (engine.m, C)
+    np.testing.assert_allclose(engine.forward(seeds), twin.forward(seeds), atol=1e-4, rtol=0)
+    out = engine.extrapolate(seeds[:4], 4 * engine.n)
+    assert out.shape == (4, 4 * engine.n, C) and np.isfinite(out).all()
+
+
+def test_numpy_safetensors_reader_matches_the_library(tmp_path):
+    """Blender's Python has no safetensors package: the NumPy reader must give the same arrays."""
+    from safetensors.numpy import load_file, save_file
+
+    from model_core.io.checkpoint import read_safetensors
+
+    arrays = {"a": np.arange(12, dtype=np.float32).reshape(3, 4), "b": np.array([1, -2], dtype=np.int64),
+              "c": np.zeros((0, 5), np.float32)}
+    save_file(arrays, str(tmp_path / "x.safetensors"))
+    ours, lib = read_safetensors(tmp_path / "x.safetensors"), load_file(str(tmp_path / "x.safetensors"))
+    assert ours.keys() == lib.keys()
+    for k in lib:
+        assert ours[k].dtype == lib[k].dtype
+        np.testing.assert_array_equal(ours[k], lib[k])
+
+
+def test_seam_correction_carries_the_context_offset_into_the_prediction(tmp_path):
+    random_release(tmp_path, True, True, 10, 10)
+    engine = Engine.load(tmp_path)
+    raw = engine.seeds
+    window = engine.forward(raw)
+    offset = raw[:, -1, LAYOUT.positions] - window[:, 9, LAYOUT.positions]
+    engine.seam_frames = 4.0
+    pred = engine.predict(raw)
+    np.testing.assert_allclose(pred[:, :, LAYOUT.positions] - window[:, 10:, LAYOUT.positions],
+                               np.exp(-np.arange(1, 11) / 4.0)[None, :, None] * offset[:, None], atol=1e-4)
+    np.testing.assert_allclose(pred[:, :, LAYOUT.velocity], window[:, 10:, LAYOUT.velocity], atol=1e-6)
+
+
+def test_blend_track_keeps_consistent_data_and_takes_the_rates_when_weighted():
+    from model_core.inference.engine import blend_track
+
+    rng = np.random.default_rng(0)
+    track = np.cumsum(rng.normal(size=(50, 2)), 0)
+    steps = np.diff(track, axis=0)
+    for weight in (0.0, 1.0, 1e4):  # data that agree with the rates are kept as they are
+        np.testing.assert_allclose(blend_track(track, steps, weight), track, atol=1e-8)
+    noisy = track + rng.normal(0, 0.5, track.shape)
+    np.testing.assert_allclose(blend_track(noisy, steps, 0.0), noisy)  # weight 0: the noisy track
+    stiff = blend_track(noisy, steps, 1e8)  # a large weight: the rates, placed at the noisy track's mean
+    np.testing.assert_allclose(stiff - stiff.mean(0), track - track.mean(0), atol=1e-4)
+    np.testing.assert_allclose(stiff.mean(0), noisy.mean(0), atol=1e-4)
+
+
+def test_fit_yaw_shift_recovers_a_known_placement():
+    from model_core.inference.engine import fit_yaw_shift
+    from model_core.motion.features import yaw_matrix
+
+    rng = np.random.default_rng(0)
+    body = rng.normal(0, 0.4, (30, 21, 3))
+    yaw = np.linspace(-3.0, 9.0, 30)  # more than a full turn: the fit comes back unwrapped
+    shift = rng.normal(0, 2.0, (30, 3))
+    target = np.einsum("fij,fkj->fki", yaw_matrix(yaw), body) + shift[:, None]
+    got_yaw, got_shift = fit_yaw_shift(body, target)
+    np.testing.assert_allclose(got_yaw - got_yaw[0] + yaw[0], yaw, atol=1e-9)
+    np.testing.assert_allclose(got_shift, shift, atol=1e-9)

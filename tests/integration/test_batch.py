@@ -1,0 +1,197 @@
+"""scripts/strnn_batch.py: the real extension in spawned bpy workers over folders of BVH files."""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+import pytest
+
+from model_core.io.bvh_export import write_bvh
+from model_core.motion.synthetic import walking_skeleton
+
+REPO = Path(__file__).resolve().parents[2]
+sys.path.insert(0, str(REPO / "scripts"))
+
+import strnn_batch  # noqa: E402
+
+
+def frames_of(path: Path) -> int:
+    return next(int(line.split(":")[1]) for line in path.read_text().splitlines() if line.startswith("Frames:"))
+
+
+def snapshot(folder: Path) -> dict[str, bytes]:
+    return {str(p.relative_to(folder)): p.read_bytes() for p in sorted(folder.rglob("*")) if p.is_file()}
+
+
+@pytest.fixture(scope="module")
+def extension(tmp_path_factory) -> Path:
+    pytest.importorskip("bpy")
+    import build_extension
+
+    return build_extension.main(["--out", str(tmp_path_factory.mktemp("dist"))])
+
+
+@pytest.fixture
+def clips(tmp_path) -> Path:
+    """A folder with one good BVH (60 frames) and one cut short in its hierarchy."""
+    folder = tmp_path / "clips"
+    folder.mkdir()
+    good = write_bvh(folder / "walk.bvh", walking_skeleton(60))
+    (folder / "broken.bvh").write_text(good.read_text()[:400])
+    return folder
+
+
+def test_help_documents_every_command(capsys):
+    with pytest.raises(SystemExit) as e:
+        strnn_batch.main(["--help"])
+    assert e.value.code == 0
+    text = capsys.readouterr().out
+    for word in ("extend", "denoise", "footlock", "follow", "--in-place", "--jobs", "Exit status"):
+        assert word in text
+    for command, option in [("extend", "--frames"), ("denoise", "--strength"), ("follow", "--path"),
+                            ("footlock", "--blend")]:
+        with pytest.raises(SystemExit):
+            strnn_batch.main([command, "--help"])
+        text = capsys.readouterr().out
+        assert option in text and "--out" in text and "--jobs" in text
+
+
+def test_good_file_processed_corrupt_one_reported(clips, tmp_path, extension, capsys):
+    before = snapshot(clips)
+    out = tmp_path / "out"
+    code = strnn_batch.main(["extend", "--frames", "20", str(clips), "--out", str(out), "--jobs", "2",
+                             "--extension", str(extension), "--report", str(tmp_path / "report.json")])
+    captured = capsys.readouterr()
+    assert code == 1
+    result = out / "walk.extend.bvh"
+    assert result.is_file() and frames_of(result) == 60 + 20
+    assert sorted(p.name for p in out.iterdir()) == ["walk.extend.bvh"]  # nothing for the broken one
+    assert snapshot(clips) == before  # inputs untouched
+    failures = captured.err.split("failures:")[1]
+    assert "broken.bvh" in failures and "broken BVH" in failures and "walk.bvh" not in failures
+    assert "Traceback" not in captured.out + captured.err
+    table = captured.out.split("file ")[-1]
+    assert "ok" in table and "failed" in table and "1 of 2 files processed" in captured.out
+    report = json.loads((tmp_path / "report.json").read_text())
+    assert report["command"] == "extend" and (report["processed"], report["failed"]) == (1, 1)
+    rows = {Path(r["file"]).name: r for r in report["files"]}
+    assert rows["walk.bvh"]["status"] == "ok" and Path(rows["walk.bvh"]["output"]) == result.resolve()
+    assert rows["broken.bvh"]["status"] == "failed" and "broken BVH" in rows["broken.bvh"]["reason"]
+
+
+def test_importer_errors_and_missing_inputs_have_reasons(tmp_path, extension, capsys):
+    folder = tmp_path / "clips"
+    folder.mkdir()
+    good = write_bvh(folder / "walk.bvh", walking_skeleton(40))
+    text = good.read_text()
+    (folder / "offset.bvh").write_text(text.replace("OFFSET", "OFFSET abc", 1))  # passes the quick check
+    (folder / "empty.bvh").write_text("")
+    out = tmp_path / "out"
+    code = strnn_batch.main(["footlock", str(folder / "offset.bvh"), str(folder / "empty.bvh"), str(good),
+                             str(tmp_path / "missing.bvh"), "--out", str(out), "--extension", str(extension)])
+    err = capsys.readouterr().err
+    assert code == 1
+    assert frames_of(out / "walk.footlock.bvh") == 40
+    assert "offset.bvh: Blender's BVH importer could not read it: ValueError" in err
+    assert "empty.bvh: not a BVH file: it is empty" in err
+    assert "missing.bvh: no such file or folder" in err
+    assert good.read_text() == text
+
+
+def test_in_place_overwrites_only_when_asked(tmp_path, extension, capsys):
+    clip = write_bvh(tmp_path / "walk.bvh", walking_skeleton(40))
+    code = strnn_batch.main(["extend", "--frames", "5", "--in-place", str(clip), "--extension", str(extension)])
+    assert code == 0 and frames_of(clip) == 45
+    assert [p.name for p in tmp_path.iterdir()] == ["walk.bvh"]
+
+
+def test_extend_from_a_frame_replaces_the_tail(tmp_path, extension, capsys):
+    clip = write_bvh(tmp_path / "walk.bvh", walking_skeleton(60))
+    out = tmp_path / "out"
+    code = strnn_batch.main(["extend", "--frames", "10", "--from-frame", "40", str(clip), "--out", str(out),
+                             "--extension", str(extension)])
+    assert code == 0 and frames_of(out / "walk.extend.bvh") == 50  # frames 1-40 kept, 41-50 new, 51-60 gone
+
+
+def test_timeout_kills_the_worker_and_writes_nothing(tmp_path, extension, capsys):
+    clip = write_bvh(tmp_path / "walk.bvh", walking_skeleton(40))
+    before = clip.read_bytes()
+    out = tmp_path / "out"
+    code = strnn_batch.main(["extend", "--frames", "5", str(clip), "--out", str(out), "--timeout", "0.5",
+                             "--extension", str(extension)])
+    err = capsys.readouterr().err
+    assert code == 1
+    assert "walk.bvh: timed out after 0.5 s (--timeout)" in err
+    assert not out.exists() or not any(out.iterdir())
+    assert clip.read_bytes() == before
+
+
+def run_bpy(code: str) -> dict:
+    """Run ``code`` in a fresh Python with the bpy module; it prints one JSON object, which is returned."""
+    import json
+    import subprocess
+
+    done = subprocess.run([sys.executable, "-c", "import bpy, json\n" + code], capture_output=True, text=True,
+                          timeout=120, cwd=REPO)
+    assert done.returncode == 0, done.stderr[-2000:]
+    return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+def test_follow_a_curve_in_a_blend_file_and_blend_to_bvh(tmp_path, extension, capsys):
+    pytest.importorskip("torch")  # follow fine-tunes the model with torch
+    clip = write_bvh(tmp_path / "walk.bvh", walking_skeleton(60))
+    scene = tmp_path / "scene.blend"
+    run_bpy(f"""
+bpy.ops.wm.read_factory_settings(use_empty=True)
+bpy.ops.import_anim.bvh(filepath={str(clip)!r})
+data = bpy.data.curves.new("Path", "CURVE")
+spline = data.splines.new("POLY")
+spline.points.add(1)
+spline.points[0].co = (0.0, 0.0, 0.0, 1.0)
+spline.points[1].co = (0.0, -6.0, 0.0, 1.0)
+bpy.context.scene.collection.objects.link(bpy.data.objects.new("Path", data))
+bpy.ops.wm.save_as_mainfile(filepath={str(scene)!r})
+print(json.dumps({{}}))
+""")
+    before = scene.read_bytes()
+    out = tmp_path / "out"
+    code = strnn_batch.main(["follow", "--curve", "Path", "--frames", "60", str(scene), "--out", str(out),
+                             "--extension", str(extension)])
+    assert code == 0, capsys.readouterr().err
+    result = out / "scene.follow.blend"
+    assert result.is_file() and scene.read_bytes() == before
+    got = run_bpy(f"""
+bpy.ops.wm.open_mainfile(filepath={str(result)!r})
+arm = next(o for o in bpy.data.objects if o.type == "ARMATURE")
+action = arm.animation_data.action
+scene = bpy.context.scene
+end = int(action.frame_range[1])
+scene.frame_set(end)
+hips = arm.matrix_world @ arm.pose.bones[0].head
+print(json.dumps({{"actions": sorted(a.name for a in bpy.data.actions), "active": action.name,
+                  "frames": end - int(action.frame_range[0]) + 1, "hips": list(hips)}}))
+""")
+    assert got["active"] != "walk" and "walk" in got["actions"]  # a new action; the original kept
+    assert got["frames"] >= 60
+    x, y, _ = got["hips"]
+    assert abs(x) < 0.3 and y < -1.0, got["hips"]  # walked down the curve (-Y), staying on it
+
+    code = strnn_batch.main(["denoise", "--format", "bvh", str(scene), "--out", str(out),
+                             "--extension", str(extension)])
+    assert code == 0, capsys.readouterr().err
+    assert frames_of(out / "scene.denoise.bvh") == 60 and scene.read_bytes() == before
+
+    # --denoise-model picks the model Denoise uses: the main model here gives another result
+    code = strnn_batch.main(["denoise", "--format", "bvh", str(scene), "--out", str(out / "main"),
+                             "--denoise-model", str(REPO / "models" / "strnn_default"), "--extension", str(extension)])
+    assert code == 0, capsys.readouterr().err
+    if (REPO / "models" / "strnn_denoise" / "model.json").exists():
+        assert (out / "main" / "scene.denoise.bvh").read_bytes() != (out / "scene.denoise.bvh").read_bytes()
+
+
+def test_a_denoise_model_folder_without_a_model_is_refused(tmp_path, capsys):
+    with pytest.raises(SystemExit) as stop:
+        strnn_batch.main(["denoise", "--denoise-model", str(tmp_path), str(tmp_path / "a.bvh")])
+    assert stop.value.code == 2 and f"--denoise-model {tmp_path}: no model.json" in capsys.readouterr().err

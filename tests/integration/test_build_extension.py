@@ -1,0 +1,78 @@
+"""scripts/build_extension.py --wheel / --split-platforms with tiny wheels made here (no torch)."""
+
+from __future__ import annotations
+
+import sys
+import zipfile
+from pathlib import Path
+
+import pytest
+
+pytest.importorskip("bpy")  # Blender's blender_ext.py comes with the bpy wheel
+
+REPO = Path(__file__).resolve().parents[2]
+sys.path.insert(0, str(REPO / "scripts"))
+
+import build_extension  # noqa: E402
+
+
+def make_wheel(folder: Path, name: str, tag: str) -> Path:
+    path = folder / f"{name}-0.1-{tag}.whl"
+    info = f"{name}-0.1.dist-info"
+    with zipfile.ZipFile(path, "w") as z:
+        z.writestr(f"{name}/__init__.py", "VALUE = 1\n")
+        z.writestr(f"{info}/METADATA", f"Metadata-Version: 2.1\nName: {name}\nVersion: 0.1\n")
+        z.writestr(f"{info}/WHEEL", f"Wheel-Version: 1.0\nGenerator: test\nRoot-Is-Purelib: true\nTag: {tag}\n")
+        z.writestr(f"{info}/RECORD", "")
+    return path
+
+
+def manifest_of(zip_path: Path) -> str:
+    with zipfile.ZipFile(zip_path) as z:
+        return z.read("blender_manifest.toml").decode()
+
+
+def names_of(zip_path: Path) -> set[str]:
+    with zipfile.ZipFile(zip_path) as z:
+        return set(z.namelist())
+
+
+def test_wheel_listed_in_manifest(tmp_path):
+    wheel = make_wheel(tmp_path, "tinypkg", "py3-none-any")
+    out = build_extension.main(["--out", str(tmp_path / "dist"), "--model", str(tmp_path / "none"),
+                                "--wheel", str(wheel)])
+    assert out.name == "strnn_motion-0.1.0.zip"
+    assert 'wheels = ["./wheels/tinypkg-0.1-py3-none-any.whl"]' in manifest_of(out)
+    assert "wheels/tinypkg-0.1-py3-none-any.whl" in names_of(out)
+    assert "LICENSE" in names_of(out) and "GNU GENERAL PUBLIC LICENSE" in zipfile.ZipFile(out).read("LICENSE").decode()
+    assert "wheels" not in (REPO / "blender_manifest.toml").read_text()  # only the staged copy changes
+
+
+def test_split_platforms(tmp_path):
+    pure = make_wheel(tmp_path, "tinypkg", "py3-none-any")
+    linux = make_wheel(tmp_path, "tinyplat", "cp311-cp311-manylinux_2_28_x86_64")
+    outs = build_extension.main(["--out", str(tmp_path / "dist"), "--model", str(tmp_path / "none"),
+                                 "--split-platforms", "--platform", "linux-x64", "--platform", "windows-x64",
+                                 "--wheel", str(pure), "--wheel", str(linux)])
+    assert [p.name for p in outs] == ["strnn_motion-0.1.0-linux_x64.zip", "strnn_motion-0.1.0-windows_x64.zip"]
+    lin, win = (names_of(p) for p in outs)
+    assert f"wheels/{pure.name}" in lin and f"wheels/{linux.name}" in lin
+    assert f"wheels/{pure.name}" in win and f"wheels/{linux.name}" not in win
+    assert 'platforms = ["linux-x64"]' in manifest_of(outs[0])
+
+
+def test_bad_wheel(tmp_path):
+    with pytest.raises(SystemExit, match="not a .whl"):
+        build_extension.main(["--out", str(tmp_path / "dist"), "--model", str(tmp_path / "none"),
+                              "--wheel", str(tmp_path / "missing.whl")])
+
+
+def test_manifest_declares_what_the_extension_reaches():
+    """Blender shows these before install: model folders are read from disk, and Install PyTorch
+    downloads with pip (strnn_addon/torch_install.py)."""
+    import tomllib
+
+    permissions = tomllib.loads((REPO / "blender_manifest.toml").read_text())["permissions"]
+    assert set(permissions) == {"files", "network"}
+    assert "pip" in (REPO / "strnn_addon" / "torch_install.py").read_text()
+    assert all(len(text) <= 64 and not text.endswith(".") for text in permissions.values())

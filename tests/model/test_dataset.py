@@ -1,0 +1,130 @@
+"""Dataset: the split rule, paired takes, the per-folder frame-rate override, windows, Normaliser, caching."""
+
+from __future__ import annotations
+
+import collections
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from model_core.io.bvh_export import write_bvh
+from model_core.model.dataset import (
+    DATA_CONFIG,
+    Clip,
+    DataError,
+    MotionData,
+    Normaliser,
+    fps_override,
+    held_out_group,
+    load_data_config,
+    load_folder,
+    split_of,
+    take_key,
+    window_starts,
+)
+from model_core.motion.conventions import LAYOUT
+from model_core.motion.synthetic import walking_skeleton
+
+
+def test_split_rule_is_fixed():
+    # A snapshot of the committed rule: changing it would silently reshuffle the test split.
+    expected = {"train": ["take_001", "take_003", "take_004"], "validation": ["take_011", "take_039", "take_045"],
+                "test": ["take_000", "take_002", "take_006"]}
+    for split, names in expected.items():
+        for name in names:
+            assert split_of(Path(f"set/{name}.bvh")) == split
+
+
+def test_split_is_deterministic_and_roughly_85_5_10():
+    names = [Path(f"folder/take_{i:04d}.bvh") for i in range(4000)]
+    first = [split_of(n) for n in names]
+    assert first == [split_of(n) for n in names]
+    share = {k: v / len(names) for k, v in collections.Counter(first).items()}
+    assert share["test"] == pytest.approx(0.10, abs=0.02)
+    assert share["validation"] == pytest.approx(0.05, abs=0.02)
+
+
+def test_take_key_is_the_relative_path_without_extension():
+    assert take_key(Path("cmu/iclone/002_03.bvh")) == "cmu/iclone/002_03"
+    assert split_of(Path("cmu/iclone/002_03.bvh")) == split_of(Path("cmu/iclone/002_03.BVH"))
+
+
+def test_salsa_partners_share_a_take_and_a_split():
+    config = load_data_config()
+    for n in range(1, 16):
+        a = Path(f"cmu/acrnn-dance/salsa/{n:02d}.bvh")
+        b = Path(f"cmu/acrnn-dance/salsa/{n + 15:02d}.bvh")
+        assert take_key(a, config) == take_key(b, config)
+        assert split_of(a, config) == split_of(b, config)
+    assert take_key(Path("cmu/acrnn-dance/indian/18.bvh"), config) == "cmu/acrnn-dance/indian/18"
+
+
+def test_fps_override_comes_from_configs_data_toml():
+    assert DATA_CONFIG.name == "data.toml" and DATA_CONFIG.exists()
+    assert fps_override(Path("cmu/acrnn-dance/salsa/01.bvh")) == 60
+    assert fps_override(Path("/any/where/acrnn-dance/salsa/01.bvh")) == 60
+    assert fps_override(Path("acrnn-dance/salsa/01.bvh")) == 60
+    assert fps_override(Path("cmu/acrnn-dance/indian/04.bvh")) is None
+    assert fps_override(Path("cmu/not-acrnn-dance/salsa/01.bvh")) is None  # whole folder names only
+    assert fps_override(Path("x/y.bvh"), {"fps_overrides": {"x": 24}, "paired_takes": {}}) == 24
+
+
+def test_load_folder_applies_the_override_and_caches(tmp_path):
+    walk = walking_skeleton(61)
+    # Both files claim 120 fps in their header; only the salsa folder's override says 60.
+    write_bvh(tmp_path / "data/acrnn-dance/salsa/01.bvh", walk, fps=120)
+    write_bvh(tmp_path / "data/acrnn-dance/indian/01.bvh", walk, fps=120)
+    data = load_folder(tmp_path / "data", cache_dir=tmp_path / "cache", workers=1, progress=False)
+    frames = {c.name: len(c.features) for c in data.clips}
+    assert frames == {"acrnn-dance/indian/01.bvh": 16, "acrnn-dance/salsa/01.bvh": 31}
+    assert data.failures == []
+    assert len(list((tmp_path / "cache").glob("motion-*.npz"))) == 1
+    again = load_folder(tmp_path / "data", cache_dir=tmp_path / "cache", workers=1, progress=False)
+    assert [c.name for c in again.clips] == [c.name for c in data.clips]
+    for a, b in zip(again.clips, data.clips):
+        np.testing.assert_array_equal(a.features, b.features)
+        assert a.split == b.split
+
+
+def test_window_starts_cover_every_full_window():
+    starts = window_starts([45, 10, 41], window=40, stride=5)
+    assert starts.tolist() == [[0, 0], [0, 5], [2, 0]]
+    assert window_starts([5], window=40).shape == (0, 2)
+
+
+def test_normaliser_round_trip_and_contacts_untouched():
+    rng = np.random.default_rng(0)
+    feats = rng.normal(3.0, 2.0, size=(500, LAYOUT.size)).astype(np.float32)
+    feats[:, LAYOUT.contacts] = rng.integers(0, 2, size=(500, 4))
+    const = LAYOUT.velocity.start
+    feats[:, const] = 1.0  # a constant channel: std floored, no division by zero
+    norm = Normaliser.fit(feats)
+    assert norm.mean.shape == norm.std.shape == (LAYOUT.size,)
+    np.testing.assert_array_equal(norm.mean[LAYOUT.contacts], 0.0)
+    np.testing.assert_array_equal(norm.std[LAYOUT.contacts], 1.0)
+    assert norm.std[const] == pytest.approx(0.01)
+    # one std for every position channel, so a centimetre weighs the same on every joint
+    assert np.unique(norm.std[LAYOUT.positions]).size == 1
+    enc = norm.encode(feats)
+    np.testing.assert_array_equal(enc[:, LAYOUT.contacts], feats[:, LAYOUT.contacts])
+    body = [i for i in range(LAYOUT.size) if i != const and i not in range(LAYOUT.contacts.start, LAYOUT.contacts.stop)]
+    np.testing.assert_allclose(enc[:, body].mean(0), 0.0, atol=1e-4)
+    own = [i for i in body if i >= LAYOUT.positions.stop]  # channels with their own std
+    np.testing.assert_allclose(enc[:, own].std(0), 1.0, atol=1e-3)
+    assert enc[:, LAYOUT.positions].std() == pytest.approx(1.0, abs=0.05)
+    np.testing.assert_allclose(norm.decode(enc), feats, atol=1e-5)
+
+
+def test_held_out_groups_come_from_configs_data_toml():
+    config = load_data_config()
+    assert held_out_group("bandai-namco/dataset-2/dataset-2_walk_exhausted_001.bvh", config) == "style"
+    assert held_out_group("cmu/acrnn-dance/martial/03.bvh", config) == "actions"
+    assert held_out_group("bandai-namco/dataset-2/dataset-2_walk_normal_001.bvh", config) is None
+    clips = [Clip(name, "train", np.zeros((1, 21, 3)), np.zeros((1, 70)))
+             for name in ("cmu/acrnn-dance/martial/03.bvh", "cmu/acrnn-dance/salsa/01.bvh")]
+    data = MotionData("root", clips)
+    assert [c.name for c in data.without_held_out(config).clips] == ["cmu/acrnn-dance/salsa/01.bvh"]
+    assert [c.name for c in data.group("actions", config)] == ["cmu/acrnn-dance/martial/03.bvh"]
+    with pytest.raises(DataError, match="no held-out group"):
+        data.group("nothing", config)

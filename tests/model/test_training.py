@@ -1,0 +1,176 @@
+"""Training: the model learns, a resumed run equals an uninterrupted one, and
+data-parallel training runs under torchrun with two CPU processes."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+from safetensors.numpy import load_file
+
+from model_core.io.bvh_export import write_bvh
+from model_core.model.dataset import Normaliser
+from model_core.model.strnn import STRNN, STRNNConfig, smoothness_cost
+from model_core.model.training import Mirror, TrainConfig, rolled_context, rollout_batch, train, window_loss
+from model_core.motion.features import mirror_features
+from model_core.motion.synthetic import walking_skeleton
+
+REPO = Path(__file__).resolve().parents[2]
+
+
+@pytest.fixture(scope="module")
+def walk_folder(tmp_path_factory) -> Path:
+    """A dozen synthetic walking clips written as BVH files."""
+    root = tmp_path_factory.mktemp("walks")
+    for i in range(12):
+        pos = walking_skeleton(frames=90, speed=0.8 + 0.1 * i, radius=3.0 + i)
+        write_bvh(root / f"walk_{i:02d}.bvh", pos)
+    return root
+
+
+def tiny(**kw) -> STRNNConfig:
+    return STRNNConfig(width=16, residual_width=16, **kw)
+
+
+def test_overfits_one_batch():
+    torch.manual_seed(0)
+    model = STRNN(tiny(dropout=0.0))
+    x = torch.randn(8, 40, model.cfg.frame_size) * 0.5
+    opt = torch.optim.Adam(model.parameters(), 3e-3)
+    losses = []
+    for _ in range(150):
+        out = model(x[:, :20])
+        loss = (out - x).pow(2).mean() + 0.1 * smoothness_cost(out)
+        opt.zero_grad()
+        loss.backward()
+        opt.step()
+        losses.append(loss.item())
+    assert losses[-1] < 0.5 * losses[0]
+
+
+def _cfg(folder: Path, out: Path, **kw) -> TrainConfig:
+    args = dict(model=tiny(), steps=8, batch=8, cache="", val_every=4, checkpoint_seconds=1e9) | kw
+    return TrainConfig(data=str(folder), out=str(out), **args)
+
+
+def test_resume_equals_uninterrupted_run(walk_folder, tmp_path):
+    whole = train(_cfg(walk_folder, tmp_path / "whole"), progress=False)
+    cut = _cfg(walk_folder, tmp_path / "cut", max_minutes=1e-9)  # stops, with a checkpoint, after one step
+    train(cut, progress=False)
+    assert not (tmp_path / "cut" / "release").exists()
+    resumed = train(_cfg(walk_folder, tmp_path / "cut"), resume=True, progress=False)
+    assert "resumed at step 1" in (tmp_path / "cut" / "train.log").read_text()
+    a, b = load_file(str(whole / "model.safetensors")), load_file(str(resumed / "model.safetensors"))
+    assert a.keys() == b.keys()
+    for k in a:
+        np.testing.assert_allclose(a[k], b[k], atol=1e-6, err_msg=k)
+
+
+def test_release_has_config_seeds_and_licence(walk_folder, tmp_path):
+    import json
+
+    release = train(_cfg(walk_folder, tmp_path / "run"), progress=False)
+    doc = json.loads((release / "model.json").read_text())
+    assert doc["config"]["width"] == 16 and doc["fps"] == 30.0
+    assert len(doc["normalisation"]["mean"]) == doc["layout"]["size"]
+    assert "CC BY-NC 4.0" in doc["licence"]
+    seeds = np.load(release / "seeds.npz", allow_pickle=False)
+    assert seeds["features"].shape[1:] == (20, doc["layout"]["size"])
+
+
+def test_mirror_flips_only_the_chosen_rows_exactly():
+    rng = np.random.default_rng(0)
+    raw = rng.normal(size=(4, 6, 70)).astype(np.float32)
+    norm = Normaliser(rng.normal(size=70).astype(np.float32), rng.uniform(0.5, 2, 70).astype(np.float32))
+    x = torch.from_numpy(norm.encode(raw).astype(np.float32))
+    rows = np.array([True, False, True, False])
+    out = Mirror(norm)(x, rows).numpy()
+    np.testing.assert_allclose(norm.decode(out[rows]), mirror_features(raw[rows]), atol=1e-5)
+    np.testing.assert_array_equal(out[~rows], x.numpy()[~rows])
+
+
+def test_offsets_model_learns_and_hold_out_trains(walk_folder, tmp_path):
+    cfg = TrainConfig(data=str(walk_folder), out=str(tmp_path / "run"), model=tiny(offsets=True), steps=30,
+                      batch=8, cache=str(tmp_path / "cache"), val_every=1000, mirror=0.5, hold_out=True)
+    release = train(cfg, progress=False)
+    assert json.loads((release / "model.json").read_text())["config"]["offsets"] is True
+
+
+def test_rolled_context_is_the_models_own_open_loop_output():
+    torch.manual_seed(0)
+    model = STRNN(tiny())
+    model.train()
+    x = torch.randn(3, 80, model.cfg.frame_size)
+    ctx = rolled_context(model, x, 2)
+    assert ctx.shape == (3, 20, model.cfg.frame_size) and model.training and not ctx.requires_grad
+    model.eval()
+    with torch.no_grad():
+        first = model(x[:, :20])[:, 20:]
+        again = rolled_context(model, x, 1, seam_frames=1e-6)  # no seam correction: the plain prediction
+    torch.testing.assert_close(again, first)
+    assert not torch.allclose(ctx, x[:, 40:60])  # generated, not the true frames
+
+
+def test_rollout_batch_targets_the_own_context_then_the_truth():
+    torch.manual_seed(0)
+    model = STRNN(tiny())
+    full = torch.randn(2, 80, model.cfg.frame_size)
+    window, context = rollout_batch(model, full, 2)
+    assert window.shape == (2, 40, model.cfg.frame_size)
+    torch.testing.assert_close(window[:, :20], context)  # the decoder reconstructs what it was given
+    torch.testing.assert_close(window[:, 20:], full[:, 60:80])  # the predictor continues with the truth
+
+
+def test_recon_weight_weights_the_decoded_frames():
+    torch.manual_seed(0)
+    model = STRNN(tiny(residual=False))
+    model.eval()
+    x = torch.randn(4, 40, model.cfg.frame_size)
+    base = _cfg(Path("."), Path("."), smooth_weight=0.0)
+    heavy = _cfg(Path("."), Path("."), smooth_weight=0.0, recon_weight=3.0)
+    with torch.no_grad():
+        out = model(x[:, :20])
+        dec, pred = (out[:, :20] - x[:, :20]).pow(2).mean(), (out[:, 20:] - x[:, 20:]).pow(2).mean()
+        torch.testing.assert_close(window_loss(model, x, base, "spatio_temporal", 0.0), (dec + pred) / 2)
+        torch.testing.assert_close(window_loss(model, x, heavy, "spatio_temporal", 0.0), (3 * dec + pred) / 4)
+
+
+def test_rollout_fine_tuning_from_init(walk_folder, tmp_path):
+    first = train(_cfg(walk_folder, tmp_path / "base"), progress=False)
+    tuned = train(_cfg(walk_folder, tmp_path / "tuned", init=str(first), rollout_windows=2, rollout_fraction=1.0),
+                  progress=False)
+    assert "initial weights from" in (tmp_path / "tuned" / "train.log").read_text()
+    import json
+
+    record = json.loads((tuned / "model.json").read_text())["training"]["init"]
+    assert record["from"] == str(first) and record["training"]["steps"] == 8  # the whole recipe is named
+    a, b = load_file(str(first / "model.safetensors")), load_file(str(tuned / "model.safetensors"))
+    assert any(not np.allclose(a[k], b[k]) for k in a)  # trained on from there
+    state = torch.load(tmp_path / "base" / "train_state.pt", weights_only=True)["model"]
+    fresh = train(_cfg(walk_folder, tmp_path / "from_state", init=str(tmp_path / "base" / "train_state.pt"),
+                       steps=0), progress=False)
+    got = load_file(str(fresh / "model.safetensors"))
+    for k in got:
+        np.testing.assert_allclose(got[k], state[k].numpy(), err_msg=k)
+
+
+def test_torchrun_two_cpu_processes(walk_folder, tmp_path):
+    torchrun = Path(sys.executable).parent / "torchrun"
+    if not torchrun.exists():
+        pytest.skip("torchrun is not installed beside this Python")
+    out = tmp_path / "ddp"
+    cmd = [str(torchrun), "--standalone", "--nproc_per_node", "2", str(REPO / "scripts" / "train.py"),
+           "--data", str(walk_folder), "--out", str(out), "--steps", "10", "--batch", "8", "--width", "16",
+           "--residual-width", "16", "--cache", "", "--quiet", "--threads", "1"]
+    env = dict(os.environ, OMP_NUM_THREADS="1")
+    done = subprocess.run(cmd, capture_output=True, text=True, timeout=300, env=env)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert (out / "release" / "model.safetensors").exists()
+    log = (out / "train.log").read_text()
+    assert "phase residual_finetune" in log

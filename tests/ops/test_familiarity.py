@@ -1,0 +1,36 @@
+"""Familiarity: the bundled model knows real takes (its shipped seed windows come from test-split
+takes) and says that a procedural walk, far from any capture, is unlike what it learnt."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from model_core.inference.engine import Engine
+from model_core.motion.features import features_to_positions
+from model_core.motion.synthetic import walking_skeleton
+from model_core.ops import familiarity
+from model_core.ops.familiarity import clip_familiarity
+
+
+def test_real_takes_are_familiar_and_a_procedural_walk_is_not():
+    engine = Engine.load()
+    usual = engine.ckpt.meta[familiarity.KEY]["reconstruction_cm_p90"]
+    real = [familiarity.assess(engine, features_to_positions(seed)) for seed in engine.seeds]
+    assert sum(not f.unfamiliar for f in real) >= 2 * len(real) // 3 and all(f.usual_cm == usual for f in real)
+    assert all(f.note() == "" for f in real if not f.unfamiliar)
+    walk = familiarity.assess(engine, walking_skeleton(120))
+    assert walk.unfamiliar and walk.ratio > 1.5 and "unlike what the model learnt" in walk.note()
+
+
+def test_clip_familiarity_reads_any_rate_and_unit():
+    engine = Engine.load()
+    at30 = clip_familiarity(engine, walking_skeleton(60), 30.0)
+    at60 = clip_familiarity(engine, walking_skeleton(120, fps=60.0) * 100.0, 60.0)  # centimetres at 60 fps
+    assert abs(at30.error_cm - at60.error_cm) < 0.15 * at30.error_cm
+
+
+def test_calibration_percentiles():
+    engine = Engine.load()
+    clips = [features_to_positions(np.concatenate([s, s])) for s in engine.seeds]
+    record = familiarity.calibrate(engine, clips)
+    assert 0 < record["reconstruction_cm_p50"] <= record["reconstruction_cm_p90"] and record["windows"] > 0

@@ -1,0 +1,77 @@
+"""Denoise that trusts the input as much as it deserves: noise level, pops, the banded solve, and
+the bundled denoising model through the product path on a procedural walk at 30 and 60 fps."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from model_core.eval.metrics import add_noise, add_pops, best_butterworth, best_median, mpjpe_cm
+from model_core.inference.engine import Engine
+from model_core.io.checkpoint import DEFAULT_MODEL, default_denoiser
+from model_core.motion.synthetic import walking_skeleton
+from model_core.ops import fusion
+from model_core.ops.denoise import denoise_positions
+
+
+@pytest.fixture(scope="module")
+def denoiser():
+    return Engine.load(default_denoiser(DEFAULT_MODEL))
+
+
+def test_noise_level_reads_white_noise_not_motion():
+    walk = walking_skeleton(300)
+    assert fusion.noise_level(walk).max() < 0.002  # a clean walk reads as (nearly) clean
+    noisy = add_noise(walk, 3.0, np.random.default_rng(0))
+    level = fusion.noise_level(noisy)
+    assert np.all(np.abs(level - 0.03) < 0.006)
+
+
+def test_pops_are_found_and_repaired_and_a_clean_walk_has_none():
+    walk = walking_skeleton(200).astype(np.float64)
+    assert not fusion.repair_pops(walk)[1].any()
+    popped = walk.copy()
+    hits = [(50, 3), (53, 3), (120, 15), (180, 7)]  # two close together on one joint
+    for k, (f, j) in enumerate(hits):
+        popped[f, j] += [0.1, 0.15, -0.2][k % 3]
+    fixed, pops = fusion.repair_pops(popped)
+    assert sorted(zip(*np.nonzero(pops))) == hits
+    assert np.abs(fixed - walk).max() < 0.01
+
+
+def test_solve_smooth_equals_a_dense_solve():
+    rng = np.random.default_rng(1)
+    f, k = 12, 3
+    weights, rhs, lam = rng.uniform(0.5, 2, (f, k)), rng.normal(size=(f, k)), rng.uniform(0.1, 5, k)
+    d = np.diff(np.eye(f), n=2, axis=0)
+    for c in range(k):
+        want = np.linalg.solve(np.diag(weights[:, c]) + lam[c] * d.T @ d, rhs[:, c])
+        np.testing.assert_allclose(fusion.solve_smooth(weights, rhs, lam)[:, c], want, atol=1e-10)
+
+
+def test_running_median_ignores_one_outlier():
+    x = np.ones((30, 2))
+    x[10] = 100.0
+    out = fusion.running_median(x, 3)
+    assert out.shape == x.shape and np.all(out == 1.0)
+
+
+@pytest.mark.parametrize("fps", [30.0, 60.0])
+def test_denoise_leaves_a_clean_take_and_beats_the_filters(denoiser, fps):
+    """Through the product path (scene units, any rate), on a procedural walk far from the motion the
+    model learnt (its reconstruction alone is 6 cm off): a clean walk comes back within a millimetre on
+    average; 3 cm of jitter comes back at under half of it, within 35 % of what the best low-pass
+    filter (its cutoff picked on the truth) leaves; 1 % of pops at under half of what the better of the
+    best low-pass and median filters leaves. On real takes it beats the filter (see the model card)."""
+    walk = walking_skeleton(int(6 * fps), fps=fps) * 100.0  # centimetres, as a user's scene may be
+    assert mpjpe_cm(denoise_positions(denoiser, walk, fps) / 100.0, walk / 100.0).mean() < 0.1
+    rng = np.random.default_rng(0)
+    noisy = add_noise(walk / 100.0, 3.0, rng)
+    out = denoise_positions(denoiser, noisy * 100.0, fps) / 100.0
+    filtered, _ = best_butterworth([walk / 100.0], [noisy], fps=fps)
+    error = mpjpe_cm(out, walk / 100.0).mean()
+    assert error < 0.5 * mpjpe_cm(noisy, walk / 100.0).mean() and error < 1.35 * filtered
+    popped = add_pops(walk / 100.0, 0.01, rng)
+    out = denoise_positions(denoiser, popped * 100.0, fps) / 100.0
+    best = min(best_butterworth([walk / 100.0], [popped], fps=fps)[0], best_median([walk / 100.0], [popped])[0])
+    assert mpjpe_cm(out, walk / 100.0).mean() < 0.5 * best
