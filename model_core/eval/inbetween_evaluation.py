@@ -11,9 +11,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from .features import detect_contacts, yaw_matrix
-from .footlock import foot_lock, foot_skate_cm
-from .inbetween import _root_and_local, _wrap, bend_onto
+from ..motion.features import detect_contacts, yaw_matrix
+from ..ops.footlock import foot_lock, foot_skate_cm
+from ..ops.inbetween import bend_onto, root_and_local, wrap_angle
 from .metrics import extend_batch, mpjpe_cm
 
 CONTEXT = 20
@@ -41,9 +41,9 @@ def interpolate(last: np.ndarray, target: np.ndarray, gap: int, heading: bool = 
     if not heading:
         r0, r1 = last[:1], target[:1]
         return (r0 + s * (r1 - r0)) + (last - r0) + s * ((target - r1) - (last - r0))
-    (a, b) = (_root_and_local(p[None]) for p in (last, target))
+    (a, b) = (root_and_local(p[None]) for p in (last, target))
     root = a[0] + s[:, 0] * (b[0] - a[0])
-    yaw = a[1][0] + s[:, 0, 0] * _wrap(b[1][0] - a[1][0])
+    yaw = a[1][0] + s[:, 0, 0] * wrap_angle(b[1][0] - a[1][0])
     local = a[2] + s * (b[2] - a[2])
     return np.einsum("fij,fkj->fki", yaw_matrix(yaw), local) + root[:, None]
 

@@ -7,11 +7,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from model_core.engine import Engine
-from model_core.features import heading
-from model_core.inbetween import bend_onto, inbetween, inbetween_positions
-from model_core.inbetween_evaluation import evaluate_inbetween, interpolate
-from model_core.synthetic import walking_skeleton
+from model_core.eval.inbetween_evaluation import evaluate_inbetween, interpolate
+from model_core.inference.engine import Engine
+from model_core.motion.features import heading
+from model_core.motion.synthetic import walking_skeleton
+from model_core.ops.inbetween import bend_onto, inbetween, inbetween_positions
 
 
 def test_bend_onto_arrives_at_the_target_and_its_velocity():

@@ -20,14 +20,15 @@ import math
 
 import numpy as np
 
-from .conventions import MODEL_FPS, ROOT, UP_AXIS
-from .features import heading, yaw_matrix
-from .motion_ops import fit_normalisation, sample_at
+from ..motion.conventions import MODEL_FPS, ROOT, UP_AXIS
+from ..motion.features import heading, yaw_matrix
+from ..motion.geometry import interpolate_frames
+from .normalise import fit_normalisation, sample_at
 
 MAX_GAP_S = 4.0  # longest gap the model is asked to bridge (its continuation drifts beyond a few seconds)
 
 
-def _root_and_local(pos: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def root_and_local(pos: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(ground position of the hips ``[F, 3]``, heading ``[F]``, joints in the body's frame ``[F, J, 3]``)."""
     pos = np.asarray(pos, np.float64)
     yaw = heading(pos, sigma=0.0)
@@ -43,7 +44,7 @@ def _hermite(s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return 3 * s ** 2 - 2 * s ** 3, s ** 3 - s ** 2
 
 
-def _wrap(angle: np.ndarray) -> np.ndarray:
+def wrap_angle(angle: np.ndarray) -> np.ndarray:
     return (angle + np.pi) % (2 * np.pi) - np.pi
 
 
@@ -54,14 +55,14 @@ def bend_onto(pred: np.ndarray, start: np.ndarray, target: np.ndarray) -> np.nda
     n1 = len(pred)
     s = np.arange(1, n1 + 1) / n1
     h_end, h_slope = _hermite(s)
-    p_root, p_yaw, p_local = _root_and_local(pred)
-    t_root, t_yaw, t_local = _root_and_local(target)
-    origin = _root_and_local(start[None])[0][0]
+    p_root, p_yaw, p_local = root_and_local(pred)
+    t_root, t_yaw, t_local = root_and_local(target)
+    origin = root_and_local(start[None])[0][0]
     # Heading: turn the continuation's path about the gap's start onto the target's heading.
-    turn = _wrap(t_yaw[0] - p_yaw[-1])
+    turn = wrap_angle(t_yaw[0] - p_yaw[-1])
     turn_slope = 0.0
     if len(target) > 1:  # arrive turning as the target turns on
-        turn_slope = (_wrap(t_yaw[1] - t_yaw[0]) - _wrap(p_yaw[-1] - p_yaw[-2])) * n1
+        turn_slope = (wrap_angle(t_yaw[1] - t_yaw[0]) - wrap_angle(p_yaw[-1] - p_yaw[-2])) * n1
     angle = turn * h_end + turn_slope * h_slope
     rot = yaw_matrix(angle)
     root = origin + np.einsum("fij,fj->fi", rot, p_root - origin)
@@ -111,8 +112,5 @@ def inbetween_positions(engine, before: np.ndarray, after: np.ndarray, fps: floa
     n_model = max(int(round(gap_s * MODEL_FPS)) - 1, 1)
     inner = inbetween(engine, norm.to_model(ctx), norm.to_model(tgt), n_model)
     seq = np.concatenate([ctx[-1:], norm.to_user(inner), tgt[:1]])  # model frames 0 .. n_model + 1
-    times = np.r_[0.0, np.arange(1, n_model + 1) * gap_s / (n_model + 1), gap_s]
-    flat = seq.reshape(len(seq), -1)
-    want = np.arange(1, frames + 1) / fps
-    out = np.stack([np.interp(want, times, flat[:, k]) for k in range(flat.shape[1])], -1)
-    return out.reshape(frames, *seq.shape[1:])
+    # the model's frames are spread evenly over the gap's duration, a little stretched to fit it
+    return interpolate_frames(seq, np.arange(1, frames + 1) / fps * (n_model + 1) / gap_s)
