@@ -18,6 +18,7 @@ from ..model_core.io.checkpoint import DEFAULT_MODEL, default_denoiser
 from ..model_core.ops.denoise import denoise_positions_steps
 from ..model_core.ops.extend import extend_positions
 from ..model_core.ops.familiarity import clip_familiarity
+from ..model_core.ops.inbetween import inbetween_positions
 
 _CACHE: dict[tuple, object] = {}
 
@@ -135,6 +136,12 @@ def bpy_path(path: str) -> str:
 def extend(prefs, positions: np.ndarray, fps: float, frames: int) -> np.ndarray:
     """Continue ``positions`` ``[F, 21, 3]`` (Y-up scene units at ``fps``) by ``frames`` -> ``[frames, 21, 3]``."""
     return extend_positions(generator_from_prefs(prefs), positions, fps, frames)
+
+
+def inbetween(prefs, before: np.ndarray, after: np.ndarray, fps: float, frames: int) -> np.ndarray:
+    """The ``frames`` frames ``[frames, 21, 3]`` between ``before`` and ``after`` ``[F, 21, 3]`` (Y-up
+    scene units at ``fps``), made by the main model."""
+    return inbetween_positions(generator_from_prefs(prefs), before, after, fps, frames)
 
 
 def familiarity(prefs, positions: np.ndarray, fps: float):

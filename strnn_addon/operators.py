@@ -10,11 +10,12 @@ from .props import joint_label
 from .scene import mapping
 from .scene.curves import find_curve
 from .scene.pipeline import UserError, check_object
-from .stages.common import STAGES, report_note, run
+from .stages.common import RECORD, STAGES, report_note, run
 from .stages.denoise import denoise_steps
 from .stages.extend import extend_steps
 from .stages.follow import follow_curve_steps
 from .stages.footlock import foot_lock_steps
+from .stages.inbetween import inbetween_steps
 
 
 class _Staged:
@@ -119,6 +120,36 @@ class STRNN_OT_extend_clip(_Staged, bpy.types.Operator):
             return (f"Continued after frame {bpy.context.scene.frame_current} with {self.frames} new frames in new "
                     f"action {action.name!r}{report_note(action)}")
         return f"Added {self.frames} frames in new action {action.name!r}{report_note(action)}"
+
+
+class STRNN_OT_fill_gap(_Staged, bpy.types.Operator):
+    """Fill the frames between the keys before and after a gap with the motion model; writes a new action"""
+
+    bl_idname = "strnn.inbetween"
+    bl_label = "Fill Gap"
+    bl_options = {"REGISTER", "UNDO"}
+
+    use_range: options.use_range("Fill")
+    frame_start: options.range_start("Fill")
+    frame_end: options.range_end("Fill")
+    foot_lock: options.foot_lock(True)
+
+    @classmethod
+    def poll(cls, context):
+        problem = check_message(context.active_object)
+        if problem:
+            cls.poll_message_set(problem)
+        return not problem
+
+    def steps(self, context):
+        start, end = (self.frame_start, self.frame_end) if self.use_range else (None, None)
+        return inbetween_steps(context, context.active_object, frame_start=start, frame_end=end,
+                               foot_lock=self.foot_lock)
+
+    def done(self, action) -> str:
+        record = action.get(RECORD, {}).get("settings", {})
+        return (f"Filled frames {record.get('frame_start')}-{record.get('frame_end')} in new action "
+                f"{action.name!r}")
 
 
 class STRNN_OT_denoise_action(_Staged, bpy.types.Operator):
@@ -242,5 +273,5 @@ def check_message(obj, need_action: bool = True) -> str:
     return ""
 
 
-classes = (STRNN_OT_extend_clip, STRNN_OT_denoise_action, STRNN_OT_foot_lock, STRNN_OT_follow_curve,
-           STRNN_OT_auto_map, STRNN_OT_clear_map)
+classes = (STRNN_OT_extend_clip, STRNN_OT_fill_gap, STRNN_OT_denoise_action, STRNN_OT_foot_lock,
+           STRNN_OT_follow_curve, STRNN_OT_auto_map, STRNN_OT_clear_map)

@@ -70,6 +70,21 @@ class STRNN_PT_extend(_Sidebar, bpy.types.Panel):
         op.from_current, op.foot_lock = settings.extend_from_current, settings.extend_foot_lock
 
 
+class STRNN_PT_fill_gap(_Sidebar, bpy.types.Panel):
+    bl_label = "Fill Gap"
+    bl_parent_id = "STRNN_PT_main"
+
+    def draw(self, context):
+        settings = context.scene.strnn
+        col = self.layout.column(align=True)
+        col.label(text="The gap around the current frame, or the first", icon="INFO")
+        _frame_range(col, settings, "fill")
+        col.prop(settings, "fill_foot_lock")
+        op = self.layout.operator("strnn.inbetween", icon="IPO_EASE_IN_OUT")
+        _pass_range(op, settings, "fill")
+        op.foot_lock = settings.fill_foot_lock
+
+
 class STRNN_PT_denoise(_Sidebar, bpy.types.Panel):
     bl_label = "Denoise"
     bl_parent_id = "STRNN_PT_main"
@@ -157,6 +172,7 @@ class STRNN_MT_menu(bpy.types.Menu):
     def draw(self, context):
         layout = self.layout
         layout.operator("strnn.extend_clip", icon="TRACKING_FORWARDS")
+        layout.operator("strnn.inbetween", icon="IPO_EASE_IN_OUT")
         layout.operator("strnn.denoise_action", icon="MOD_SMOOTH")
         layout.operator("strnn.foot_lock", icon="SNAP_ON")
         layout.operator("strnn.follow_curve", icon="CURVE_PATH")
@@ -168,19 +184,30 @@ def menu_entry(self, context):
     self.layout.menu("STRNN_MT_menu")
 
 
+def key_menu_entry(self, context):
+    """Fill Gap in the Dope Sheet's and Graph Editor's Key menus, where animators key and time."""
+    self.layout.separator()
+    self.layout.operator("strnn.inbetween", icon="IPO_EASE_IN_OUT")
+
+
 MENUS = ("VIEW3D_MT_object_animation", "VIEW3D_MT_pose")
+KEY_MENUS = ("DOPESHEET_MT_key", "GRAPH_MT_key")
 
 
 def register_menus():
     for name in MENUS:
         getattr(bpy.types, name).append(menu_entry)
+    for name in KEY_MENUS:
+        getattr(bpy.types, name).append(key_menu_entry)
 
 
 def unregister_menus():
     for name in MENUS:
         getattr(bpy.types, name).remove(menu_entry)
+    for name in KEY_MENUS:
+        getattr(bpy.types, name).remove(key_menu_entry)
 
 
-classes = (STRNN_PT_main, STRNN_PT_extend, STRNN_PT_denoise, STRNN_PT_foot_lock, STRNN_PT_follow_curve,
-           STRNN_PT_bone_map, STRNN_MT_menu)
+classes = (STRNN_PT_main, STRNN_PT_extend, STRNN_PT_fill_gap, STRNN_PT_denoise, STRNN_PT_foot_lock,
+           STRNN_PT_follow_curve, STRNN_PT_bone_map, STRNN_MT_menu)
 

@@ -6,8 +6,8 @@ import bpy
 import pytest
 from scenes import build_armature, import_bvh, walk_bvh
 
-PANELS = ("STRNN_PT_main", "STRNN_PT_extend", "STRNN_PT_denoise", "STRNN_PT_foot_lock", "STRNN_PT_follow_curve",
-          "STRNN_PT_bone_map")
+PANELS = ("STRNN_PT_main", "STRNN_PT_extend", "STRNN_PT_fill_gap", "STRNN_PT_denoise", "STRNN_PT_foot_lock",
+          "STRNN_PT_follow_curve", "STRNN_PT_bone_map")
 
 
 class Layout:
@@ -50,6 +50,8 @@ HANDED = {
     "lock_start": ("foot_lock", "frame_start"), "lock_end": ("foot_lock", "frame_end"),
     "curve_frames": ("follow_curve", "frames"), "curve_speed": ("follow_curve", "speed"),
     "curve_foot_lock": ("follow_curve", "foot_lock"),
+    "fill_use_range": ("inbetween", "use_range"), "fill_start": ("inbetween", "frame_start"),
+    "fill_end": ("inbetween", "frame_end"), "fill_foot_lock": ("inbetween", "foot_lock"),
 }
 
 
@@ -67,10 +69,13 @@ def test_registered_in_sidebar_and_menus(addon):
     for name in PANELS:
         cls = getattr(bpy.types, name)
         assert cls.bl_space_type == "VIEW_3D" and cls.bl_region_type == "UI" and cls.bl_category == "STRNN"
-    for op in ("extend_clip", "denoise_action", "foot_lock", "follow_curve", "auto_map"):
+    for op in ("extend_clip", "inbetween", "denoise_action", "foot_lock", "follow_curve", "auto_map"):
         rna = getattr(bpy.ops.strnn, op).get_rna_type()
         assert rna.description, f"{op} has no tooltip"
     assert hasattr(bpy.types, "STRNN_MT_menu")
+    for menu in ("DOPESHEET_MT_key", "GRAPH_MT_key"):  # Fill Gap where animators key and time
+        drawn = [f.__name__ for f in getattr(bpy.types, menu)._dyn_ui_initialize()]
+        assert "key_menu_entry" in drawn, menu
 
 
 @pytest.mark.parametrize("scene", ["empty", "mesh", "bare_armature", "animated"])

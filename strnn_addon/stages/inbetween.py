@@ -1,0 +1,109 @@
+"""Fill Gap (in-betweening): the frames between the keys before and after a gap in an armature's
+action, made by the model, as a stage generator."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ...model_core.ops.inbetween import MAX_GAP_S
+from ...model_core.rig.solve import solve
+from .. import engine_bridge
+from ..scene import pipeline, rig_io
+from ..scene.pipeline import UserError
+from .common import lock, made_by, model_call, noop, prefs, run, write_new
+
+MIN_GAP_FRAMES = 2
+
+
+def fill_gap(context, obj, *, progress=noop, **options):
+    """:func:`inbetween_steps` run to the end; returns the new action."""
+    return run(inbetween_steps(context, obj, **options), progress)
+
+
+def key_frames(clip) -> np.ndarray:
+    """Sorted whole frames ``[K]`` that hold a key on any written (mapped) bone."""
+    names = {clip.rig.names[b] for b in pipeline.written_bones(clip)}
+    frames = set()
+    for (bone, _prop), curves in rig_io.bone_channels(clip.channels.fcurves).items():
+        if bone in names:
+            for fc in curves.values():
+                co = np.empty(2 * len(fc.keyframe_points))
+                fc.keyframe_points.foreach_get("co", co)
+                frames.update(np.round(co[0::2]).astype(int).tolist())
+    return np.array(sorted(frames), dtype=int)
+
+
+def find_gap(clip, keys: np.ndarray, frame_start: int | None, frame_end: int | None,
+             current: int | None) -> tuple[int, int]:
+    """First and last frame to fill: the given range; else the gap between keys around ``current``;
+    else the first run of frames without keys on the mapped bones. A :class:`UserError` says why not."""
+    name = clip.action.name
+    if frame_start is not None and frame_end is not None:
+        if frame_start > frame_end:
+            raise UserError(f"Start {frame_start} is after End {frame_end}: swap them")
+        return int(frame_start), int(frame_end)
+    if len(keys) < 2:
+        raise UserError(f"The mapped bones of {name!r} have keys on {len(keys)} frame(s): key a pose before and "
+                        "after the gap")
+    gaps = [(int(a) + 1, int(b) - 1) for a, b in zip(keys[:-1], keys[1:]) if b - a > 1]
+    if current is not None:
+        around = [g for g in gaps if g[0] <= current <= g[1]]
+        if around:
+            return around[0]
+    if current is not None and current > keys[-1]:
+        raise UserError(f"No key on the mapped bones of {name!r} after frame {keys[-1]}: key a pose after the gap "
+                        "(Extend Clip continues an action past its last key)")
+    if not gaps:
+        raise UserError(f"The mapped bones of {name!r} are keyed on every frame from {keys[0]} to {keys[-1]}: "
+                        "there is no gap to fill (delete the keys of the frames to fill, or give a Frame Range)")
+    return gaps[0]
+
+
+def check_gap(clip, keys: np.ndarray, start: int, end: int) -> None:
+    """A :class:`UserError` unless frames ``start..end`` are a gap the model can fill."""
+    name = clip.action.name
+    if end - start + 1 < MIN_GAP_FRAMES:
+        raise UserError(f"The gap {start}-{end} has {end - start + 1} frame; Fill Gap needs at least "
+                        f"{MIN_GAP_FRAMES} (Blender's own interpolation is as good for one frame)")
+    if not (keys < start).any():
+        raise UserError(f"No key on the mapped bones of {name!r} before frame {start}: key a pose before the gap")
+    if not (keys > end).any():
+        raise UserError(f"No key on the mapped bones of {name!r} after frame {end}: key a pose after the gap")
+    seconds = (end - start + 2) / clip.fps
+    if seconds > MAX_GAP_S:
+        raise UserError(f"The gap {start}-{end} lasts {seconds:.1f} s, longer than the {MAX_GAP_S:g} s the model "
+                        "can bridge: key a pose inside it and fill the two shorter gaps")
+
+
+def inbetween_steps(context, obj, *, frame_start: int | None = None, frame_end: int | None = None,
+                    from_playhead: bool = True, foot_lock: bool = True):
+    """Fill frames ``frame_start..frame_end`` of ``obj``'s action (default: the gap between keys around
+    the current frame when ``from_playhead``, else the first gap) with the model's in-between, feet
+    locked when ``foot_lock``. A generator like :func:`stages.extend.extend_steps`."""
+    clip = pipeline.prepare(context, obj)
+    keys = key_frames(clip)
+    current = context.scene.frame_current if from_playhead else None
+    start, end = find_gap(clip, keys, frame_start, frame_end, current)
+    check_gap(clip, keys, start, end)
+    need = pipeline.min_scene_frames(clip.fps)
+    before = np.arange(max(clip.first, start - need), start, dtype=np.float64)
+    after = np.arange(end + 1, min(clip.last, end + 1 + int(np.ceil(clip.fps / 30.0))) + 1, dtype=np.float64)
+    gap = np.arange(start, end + 1, dtype=np.float64)
+    yield "read"
+    pos_before = pipeline.joint_positions(context, clip, before)
+    pos_after = pipeline.joint_positions(context, clip, after)
+    ref_loc, ref_rot, _ = rig_io.read_local_pose(clip.obj, clip.rig, clip.channels.fcurves, gap)
+    previous = pipeline.raw_rotations(clip, start - 1)
+    yield "model"
+    new_pos = model_call(engine_bridge.inbetween, prefs(context), pos_before, pos_after, clip.fps, len(gap))
+    if foot_lock:
+        seq = np.concatenate([pos_before, new_pos, pos_after])
+        fixed = np.ones(len(seq), bool)
+        fixed[len(before):len(before) + len(gap)] = False
+        new_pos = lock(seq, clip.fps, fixed=fixed)[len(before):len(before) + len(gap)]
+    yield "solve"
+    loc, rot = solve(clip.rig, clip.anchors, pipeline.to_armature(clip, new_pos), ref_loc, ref_rot)
+    yield "write"
+    record = made_by("Fill Gap", clip, engine_bridge.model_used(prefs(context)), frame_start=start, frame_end=end,
+                     foot_lock=foot_lock)
+    return write_new(context, clip, "filled", gap, loc, rot, previous, (start - 0.5, end + 0.5), record)

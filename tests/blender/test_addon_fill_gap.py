@@ -1,0 +1,85 @@
+"""Fill Gap (in-betweening): the frames between the keys before and after a gap, made by the model
+into a new action; the gap from the playhead, a frame range or the first one; bad gaps refused."""
+
+from __future__ import annotations
+
+import bpy
+import numpy as np
+import pytest
+from scenes import action_of, evaluated_joints, fcurves_of, import_bvh, key_snapshot, same_keys, walk_bvh
+
+
+def cut(obj, start: int, end: int) -> None:
+    """Delete every key of ``obj``'s action on frames ``start`` to ``end``."""
+    for fc in fcurves_of(obj):
+        for point in [p for p in fc.keyframe_points if start <= p.co.x <= end][::-1]:
+            fc.keyframe_points.remove(point)
+        fc.update()
+
+
+@pytest.fixture
+def gapped(addon, tmp_path):
+    """A 120-frame walk (keys on every frame) with frames 41-70 cut out, and its true joints."""
+    obj = import_bvh(walk_bvh(tmp_path, frames=120))
+    truth = evaluated_joints(addon, obj, np.arange(1, 121))
+    cut(obj, 41, 70)
+    return obj, truth
+
+
+def test_fill_the_gap_around_the_playhead(addon, real_model, gapped):
+    obj, truth = gapped
+    old, snapshot = action_of(obj), key_snapshot(obj)
+    interpolated = evaluated_joints(addon, obj, np.arange(1, 121))
+    bpy.context.scene.frame_set(55)
+    assert bpy.ops.strnn.inbetween() == {"FINISHED"}
+    new = action_of(obj)
+    assert new is not old and new.name == f"{old.name}.filled" and old.use_fake_user
+    assert same_keys(snapshot, key_snapshot(obj, old))  # the original is kept as it was
+    assert new["strnn"]["operation"] == "Fill Gap" and new["strnn"]["settings"]["frame_start"] == 41
+    out = evaluated_joints(addon, obj, np.arange(1, 121))
+    np.testing.assert_allclose(out[:40], truth[:40], atol=1e-4)  # the frames around the gap stay
+    np.testing.assert_allclose(out[70:], truth[70:], atol=1e-4)
+    step = np.linalg.norm(np.diff(out[35:76], axis=0), axis=-1).max(1)
+    usual = np.linalg.norm(np.diff(truth, axis=0), axis=-1).max(1).max()
+    assert step.max() < 2.0 * usual, "no pop at either end of the gap"
+    moved = np.abs(out[40:70] - interpolated[40:70]).max()
+    assert moved > 0.01 * np.ptp(truth[..., 2]), "the gap holds the model's motion, not the F-curve interpolation"
+
+
+def test_fill_a_frame_range_and_the_first_gap(addon, real_model, gapped):
+    obj, _ = gapped
+    bpy.context.scene.frame_set(1)  # not in a gap: the first gap is filled
+    assert bpy.ops.strnn.inbetween(foot_lock=False) == {"FINISHED"}
+    assert action_of(obj)["strnn"]["settings"].to_dict() == {"frame_start": 41, "frame_end": 70, "foot_lock": False}
+    assert bpy.ops.strnn.inbetween(use_range=True, frame_start=90, frame_end=99) == {"FINISHED"}
+    assert action_of(obj)["strnn"]["settings"]["frame_start"] == 90
+
+
+def refuse(match: str, **kw) -> None:
+    before = {a.name: key_snapshot(bpy.context.active_object, a) for a in bpy.data.actions}
+    with pytest.raises(RuntimeError, match=match):
+        bpy.ops.strnn.inbetween(**kw)
+    after = {a.name: key_snapshot(bpy.context.active_object, a) for a in bpy.data.actions}
+    assert before.keys() == after.keys() and all(same_keys(before[k], after[k]) for k in before)
+
+
+def test_bad_gaps_are_refused_and_change_nothing(addon, real_model, gapped):
+    obj, _ = gapped
+    refuse("at least 2", use_range=True, frame_start=50, frame_end=50)
+    refuse("swap them", use_range=True, frame_start=60, frame_end=50)
+    refuse("longer than the 4 s", use_range=True, frame_start=2, frame_end=119)
+    cut(obj, 71, 120)
+    bpy.context.scene.frame_set(55)
+    refuse("No key on the mapped bones .* after frame 40")
+
+
+def test_nothing_to_fill(addon, real_model, tmp_path):
+    import_bvh(walk_bvh(tmp_path, frames=60))
+    refuse("there is no gap to fill")
+
+
+def test_poll_says_why_on_a_cube(addon):
+    bpy.ops.mesh.primitive_cube_add()
+    assert not bpy.ops.strnn.inbetween.poll()
+    with pytest.raises(RuntimeError, match="not an armature"):
+        bpy.ops.strnn.inbetween()
