@@ -109,6 +109,20 @@ def pick_armature(bpy):
     raise BatchError(f"{len(arms)} armatures and none active; make the one to process active and save")
 
 
+POSE_CHANNELS = ("location", "rotation_euler", "rotation_quaternion", "rotation_axis_angle", "scale")
+
+
+def clear_keys(obj, start: int, end: int) -> None:
+    """Delete the pose bones' keys on frames ``start`` to ``end`` (a gap for Fill Gap to fill)."""
+    for pb in obj.pose.bones:
+        for prop in POSE_CHANNELS:
+            for frame in range(start, end + 1):
+                try:
+                    pb.keyframe_delete(prop, frame=frame)
+                except RuntimeError:  # no key there
+                    pass
+
+
 def run_file(bpy, job: dict) -> None:
     src, dst = Path(job["input"]), Path(job["output"])
     if src.suffix.lower() == ".bvh":
@@ -129,6 +143,8 @@ def run_file(bpy, job: dict) -> None:
     view_layer.objects.active = obj
     obj.select_set(True)
     kwargs = dict(job["kwargs"])
+    if job["operator"] == "inbetween" and kwargs.get("use_range"):
+        clear_keys(obj, kwargs["frame_start"], kwargs["frame_end"])
     if kwargs.get("from_current"):
         bpy.context.scene.frame_set(job["from_frame"])
     if job["operator"] == "follow_curve":

@@ -2,6 +2,7 @@
 
     python scripts/strnn_batch.py extend   --frames 120 data/clips/ --out out/batch
     python scripts/strnn_batch.py denoise  --strength 0.8 a.bvh b.bvh --jobs 4
+    python scripts/strnn_batch.py inbetween --gap 40 70 take.bvh --out out/filled
     python scripts/strnn_batch.py footlock data/clips/ --out out/locked
     python scripts/strnn_batch.py follow   --path figure_eight --frames 300 walk.bvh
 
@@ -9,7 +10,7 @@ Each input file runs in its own worker process (``--jobs N`` at a time) that imp
 module, resets to factory settings, installs and enables the built extension zip (built once
 here with scripts/build_extension.py into dist/ unless dist/ is up to date, or ``--extension``),
 imports the file with Blender's own BVH importer (a .blend is opened), runs the extension's real
-operator (strnn.extend_clip, strnn.denoise_action, strnn.foot_lock, strnn.follow_curve) on the
+operator (strnn.extend_clip, strnn.inbetween, strnn.denoise_action, strnn.foot_lock, strnn.follow_curve) on the
 armature, and writes the result with Blender's own BVH exporter (or saves a .blend) as
 ``OUT/NAME.<command>.bvh``. Folders are searched recursively for *.bvh and *.blend; their
 sub-folders are kept under OUT. An input is never overwritten unless ``--in-place``.
@@ -101,6 +102,14 @@ def build_parser() -> argparse.ArgumentParser:
                         "denoising model bundled in the zip)")
     p.add_argument("--foot-lock", action="store_true", help="also lock the feet")
 
+    p = sub.add_parser("inbetween", parents=[common], help="fill a gap with the model's in-between "
+                       "(strnn.inbetween)", description="Fill a gap in each clip with the motion model. With --gap, "
+                       "the keys of frames START to END are replaced by the model's in-between of the frames "
+                       "around them; without it, the first run of frames without keys is filled.")
+    p.add_argument("--gap", type=int, nargs=2, default=None, metavar=("START", "END"),
+                   help="the frames to fill (their keys are replaced); default: the first gap between keys")
+    p.add_argument("--no-foot-lock", action="store_true", help="do not lock the feet in the gap")
+
     p = sub.add_parser("footlock", parents=[common], help="pin the feet while they touch the ground "
                        "(strnn.foot_lock)", description="Pin the feet on the ground while they touch it (leg IK).")
     p.add_argument("--blend", type=float, default=0.15,
@@ -130,6 +139,10 @@ def operator_call(args) -> tuple[str, dict]:
         return "denoise_action", {"strength": args.strength, "foot_lock": args.foot_lock}
     if args.command == "footlock":
         return "foot_lock", {"blend": args.blend}
+    if args.command == "inbetween":
+        start, end = args.gap or (1, 250)
+        return "inbetween", {"use_range": args.gap is not None, "frame_start": start, "frame_end": end,
+                             "foot_lock": not args.no_foot_lock}
     return "follow_curve", {"frames": args.frames, "speed": args.speed, "steering": args.steering,
                             "foot_lock": not args.no_foot_lock}
 
@@ -143,6 +156,8 @@ def check_args(parser, args) -> None:
         parser.error("--frames must be at least 1")
     if args.command == "denoise" and not 0.0 <= args.strength <= 1.0:
         parser.error("--strength must be between 0 and 1")
+    if args.command == "inbetween" and args.gap and args.gap[1] <= args.gap[0]:
+        parser.error("--gap START END needs at least 2 frames: END after START")
     if args.command == "footlock" and not 0.0 <= args.blend <= 2.0:
         parser.error("--blend must be between 0 and 2 seconds")
     if args.command == "follow" and (args.frames < 0 or args.speed < 0 or args.steering < 0):

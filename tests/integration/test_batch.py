@@ -48,10 +48,10 @@ def test_help_documents_every_command(capsys):
         strnn_batch.main(["--help"])
     assert e.value.code == 0
     text = capsys.readouterr().out
-    for word in ("extend", "denoise", "footlock", "follow", "--in-place", "--jobs", "Exit status"):
+    for word in ("extend", "inbetween", "denoise", "footlock", "follow", "--in-place", "--jobs", "Exit status"):
         assert word in text
     for command, option in [("extend", "--frames"), ("denoise", "--strength"), ("follow", "--path"),
-                            ("footlock", "--blend")]:
+                            ("footlock", "--blend"), ("inbetween", "--gap")]:
         with pytest.raises(SystemExit):
             strnn_batch.main([command, "--help"])
         text = capsys.readouterr().out
@@ -113,6 +113,19 @@ def test_extend_from_a_frame_replaces_the_tail(tmp_path, extension, capsys):
     code = strnn_batch.main(["extend", "--frames", "10", "--from-frame", "40", str(clip), "--out", str(out),
                              "--extension", str(extension)])
     assert code == 0 and frames_of(out / "walk.extend.bvh") == 50  # frames 1-40 kept, 41-50 new, 51-60 gone
+
+
+def test_inbetween_refills_a_gap(tmp_path, extension, capsys):
+    """--gap 30 50: those frames' keys are replaced by the model's in-between; the take keeps its length."""
+    pos = walking_skeleton(80)
+    clip = write_bvh(tmp_path / "walk.bvh", pos)
+    out = tmp_path / "out"
+    code = strnn_batch.main(["inbetween", "--gap", "30", "50", str(clip), "--out", str(out),
+                             "--extension", str(extension)])
+    assert code == 0 and frames_of(out / "walk.inbetween.bvh") == 80
+    with pytest.raises(SystemExit):
+        strnn_batch.main(["inbetween", "--gap", "50", "50", str(clip)])
+    assert "at least 2 frames" in capsys.readouterr().err
 
 
 def test_timeout_kills_the_worker_and_writes_nothing(tmp_path, extension, capsys):
