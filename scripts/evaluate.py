@@ -30,6 +30,7 @@ from model_core.eval.evaluation import (  # noqa: E402
     select_clips,
 )
 from model_core.eval.feet_evaluation import evaluate_feet  # noqa: E402
+from model_core.eval.inbetween_evaluation import evaluate_inbetween  # noqa: E402
 from model_core.inference.engine import Engine  # noqa: E402
 from model_core.io.bvh import BvhError  # noqa: E402
 from model_core.io.checkpoint import DEFAULT_MODEL, CheckpointError, default_denoiser  # noqa: E402
@@ -61,6 +62,9 @@ def parse_args(argv=None):
     p.add_argument("--denoise-pops", type=float, metavar="RATE",
                    help="also score single-frame pops of 10 to 30 cm on this fraction of joint-frames, against "
                         "the best Butterworth and the best median filter")
+    p.add_argument("--inbetween", type=int, nargs="+", metavar="N",
+                   help="in-betweening over gaps of N frames (e.g. 15 30 60): L2P, error at the target, foot "
+                        "skate, beside linear interpolation")
     p.add_argument("--feet", action="store_true",
                    help="feet of extended motion before and after Foot Lock: skate beside the real takes', sink "
                         "below the take's floor, knees left fully straight")
@@ -115,6 +119,8 @@ def print_table(result: dict, extra: dict):
               f"{extra['denoise_checkpoint']}: best Butterworth at {cutoff:g} Hz, best median over {size} frames")
         for name, value in pops["mpjpe_cm"].items():
             print(f"{name:<20}{value:8.2f}")
+    if "inbetween" in result:
+        print_inbetween(result["inbetween"])
     if "feet" in result:
         ft = result["feet"]
         print(f"\nFeet of {ft['frames']} extended frames after each of {ft['clips']} clips' first 20, before -> after "
@@ -123,6 +129,22 @@ def print_table(result: dict, extra: dict):
               f"-> {ft['sink_locked_cm']:.1f} cm, knees left fully straight {100 * ft['straight_knees_locked']:.1f} %")
     if "paths" in result:
         print_paths(result["paths"])
+
+
+def print_inbetween(ib: dict) -> None:
+    """The in-betweening table: one column per gap length."""
+    print(f"\nIn-betweening, 20 context frames, gap of N frames, the frame after it as the target "
+          f"({', '.join(str(w) for w in ib['windows'])} windows)")
+    print(f"{'gap frames':<28}" + "".join(f"{n:>8}" for n in ib["gap_frames"]))
+    rows = [("L2P cm: strnn", ib["l2p_cm"]["strnn"]), ("  interpolation", ib["l2p_cm"]["interpolation"]),
+            ("  interpolation, heading", ib["l2p_cm"]["interpolation_heading"]),
+            ("  strnn / interpolation", [a / b for a, b in zip(ib["l2p_cm"]["strnn"], ib["l2p_cm"]["interpolation"])]),
+            ("target error cm: strnn", ib["target_error_cm"]["strnn"]),
+            ("foot skate cm: strnn", ib["foot_skate_cm"]["strnn"]),
+            ("  strnn, foot-locked", ib["foot_skate_cm"]["strnn_locked"]),
+            ("  interpolation", ib["foot_skate_cm"]["interpolation"]), ("  real takes", ib["foot_skate_cm"]["real"])]
+    for name, row in rows:
+        print(f"{name:<28}" + "".join(f"{v:8.2f}" for v in row))
 
 
 def print_seeds(lh: dict) -> None:
@@ -176,6 +198,8 @@ def run(args) -> dict:
         extra["pops_filters"] = (pops.pop("butterworth_cutoff_hz")[0], pops.pop("median_frames")[0])
         pops.pop("strnn_frames_per_s")
         result["denoise_pops"] = pops
+    if args.inbetween:
+        result["inbetween"] = evaluate_inbetween(engine, clips, args.inbetween)
     if args.feet:
         result["feet"] = evaluate_feet(engine, clips)
     if args.paths:
