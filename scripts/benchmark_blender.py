@@ -1,5 +1,5 @@
-"""Benchmark Extend Clip (or Denoise Action) in Blender on a 60-bone rig: a 1,000-frame clip
-extended by 1,000 frames (or denoised whole).
+"""Benchmark Extend Clip (or Denoise Action, or Fill Gap) in Blender on a 60-bone rig: a
+1,000-frame clip extended by 1,000 frames (or denoised whole, or a 30-frame gap in its middle filled).
 
 Builds the extension, installs it into the bpy module (a temporary user repository, as the
 tests do), builds a 60-bone armature with a 1,000-frame keyed action, runs the operator's
@@ -8,6 +8,7 @@ reading and writing the same keys with bulk ``foreach_get`` / ``foreach_set`` an
 
     python scripts/benchmark_blender.py
     python scripts/benchmark_blender.py --operator denoise   # with the bundled denoising model
+    python scripts/benchmark_blender.py --operator inbetween --gap 30   # Fill Gap of 30 frames
     python scripts/benchmark_blender.py --model runs/default/release --frames 1000 --repeat 3
     python scripts/benchmark_blender.py --untrained   # timing only: a randomly initialised model
 """
@@ -28,6 +29,7 @@ sys.path.insert(0, str(REPO))
 sys.path.insert(0, str(REPO / "scripts"))
 
 import bpy  # noqa: E402
+from batch_worker import clear_keys  # noqa: E402
 
 from model_core.motion.conventions import JOINTS, PARENT_NAMES, yup_to_zup  # noqa: E402
 from model_core.motion.synthetic import _offset  # noqa: E402
@@ -208,26 +210,34 @@ def main(argv: list[str] | None = None) -> dict:
     parser.add_argument("--model", type=Path, default=None, help="release folder (default: bundled or runs/*)")
     parser.add_argument("--untrained", action="store_true", help="use a random model when none is trained")
     parser.add_argument("--repeat", type=int, default=3, help="runs; the fastest is reported (default 3)")
-    parser.add_argument("--operator", choices=("extend", "denoise"), default="extend",
-                        help="Extend Clip (default) or Denoise Action (the extension's denoising model)")
+    parser.add_argument("--operator", choices=("extend", "denoise", "inbetween"), default="extend",
+                        help="Extend Clip (default), Denoise Action (the extension's denoising model) or Fill Gap")
+    parser.add_argument("--gap", type=int, default=30, help="Fill Gap: frames cut out of the clip's middle (30)")
     args = parser.parse_args(argv)
     model = find_model(args)
     package = install(Path(tempfile.mkdtemp()))
     bpy.context.preferences.addons[package].preferences.model_folder = str(model)
     extend = importlib.import_module(package + ".strnn_addon.stages.extend")
     denoise = importlib.import_module(package + ".strnn_addon.stages.denoise")
+    inbetween = importlib.import_module(package + ".strnn_addon.stages.inbetween")
     best: dict = {}
     for _ in range(args.repeat):
         obj = build_scene(args.frames)
         read_floor, write_floor = floor_time(obj, args.frames)
         if args.operator == "extend":
             timings = stage_times(extend.extend_clip, bpy.context, obj, frames=args.frames)
+        elif args.operator == "inbetween":
+            start = args.frames // 2 - args.gap // 2
+            clear_keys(obj, start, start + args.gap - 1)
+            timings = stage_times(inbetween.fill_gap, bpy.context, obj, frame_start=start,
+                                  frame_end=start + args.gap - 1)
         else:
             timings = stage_times(denoise.denoise_action, bpy.context, obj)
         timings.update(floor_read=read_floor, floor_write=write_floor)
         if not best or timings["total"] < best["total"]:
             best = timings
-    done = f"+ {args.frames} new" if args.operator == "extend" else "denoised"
+    done = {"extend": f"+ {args.frames} new", "denoise": "denoised",
+            "inbetween": f"with a gap of {args.gap} frames filled"}[args.operator]
     if args.operator == "denoise":
         bridge = importlib.import_module(package + ".strnn_addon.engine_bridge")
         model = bridge.denoiser_folder(bpy.context.preferences.addons[package].preferences)
