@@ -10,6 +10,8 @@ draws them (matplotlib) into --out:
 - extend.png: the clip (grey) and its continuation (blue), seen from the side and above;
 - denoise.png: a clip with Gaussian jitter of 1.5 degrees on every rotation channel, denoised,
   against the clean clip (a wrist's height over time and the error per frame, measured here);
+- inbetween.png: a 30-frame gap cut out of a take, filled by Blender's own F-curve interpolation
+  and by Fill Gap, beside the true motion;
 - footlock.png: a foot's ground speed and path before and after the lock;
 - follow.png: a walk along a figure-eight curve, from above and from the side;
 - bonemap.png: what Auto-Map Bones finds on BVH imports of three rig families.
@@ -237,6 +239,49 @@ def picture_denoise(bpy, clip: Path, out: Path, seed: int, degrees: float = 1.5)
     return {"clip": clip.name, "noisy_cm": float(err["noisy"].mean()), "denoised_cm": float(err["denoised"].mean())}
 
 
+def picture_inbetween(bpy, clip: Path, out: Path, start: int = 80, gap: int = 30) -> dict:
+    """A gap of ``gap`` frames from ``start`` frames into the take: its keys deleted (Blender then
+    interpolates the F-curves across it), then filled by Fill Gap; both against the true motion."""
+    from batch_worker import clear_keys
+
+    obj = import_bvh(bpy, clip, BANDAI_SCALE)
+    first, last = action_range(obj)
+    a, b = first + start, first + start + gap - 1
+    truth, names = sample(bpy, obj, first, last)
+    clear_keys(obj, a, b)
+    curves, _ = sample(bpy, obj, first, last)
+    bpy.context.scene.frame_set(a + gap // 2)
+    bpy.ops.strnn.inbetween()
+    filled, _ = sample(bpy, obj, first, last)
+    ref = canonical(obj, truth, names)
+    window = slice(a - first - 10, b - first + 11)
+    err = {k: np.linalg.norm(canonical(obj, v, names) - ref, axis=-1).mean(-1)[window] * 100
+           for k, v in (("interpolation", curves), ("Fill Gap", filled))}
+    foot = bone_of(obj, names, "l_foot")
+    t = np.arange(len(truth))[window] / 30.0
+    fig, (h, e) = plt.subplots(1, 2, figsize=(13, 3.8))
+    for label, poses, colour, lw in (("true motion", truth, "k", 1.6),
+                                     ("Blender's F-curve interpolation", curves, "#e08214", 1.3),
+                                     ("Fill Gap", filled, NEW, 1.6)):
+        h.plot(t, poses[window, foot, 0, 2], color=colour, lw=lw, label=label)
+    for ax in (h, e):
+        ax.axvspan(start / 30.0, (start + gap - 1) / 30.0, color="#eeeeee")
+        ax.grid(alpha=0.3)
+        ax.set_xlabel("time (s)")
+    h.set_ylabel("left ankle height (m)")
+    h.legend(fontsize=8)
+    for label, colour in (("interpolation", "#e08214"), ("Fill Gap", NEW)):
+        inside = err[label][10:-10]
+        e.plot(t, err[label], color=colour, label=f"{label}: mean {inside.mean():.1f} cm over the gap")
+    e.set_ylabel("mean joint error vs the true motion (cm)")
+    e.legend(fontsize=8)
+    fig.suptitle(f"Fill Gap on {clip.name} (a test-split take): frames {start + 1}-{start + gap} cut out "
+                 f"(shaded) and filled")
+    finish(fig, out / "inbetween.png")
+    return {"clip": clip.name, "gap": gap, "interpolation_cm": float(err["interpolation"][10:-10].mean()),
+            "fill_gap_cm": float(err["Fill Gap"][10:-10].mean())}
+
+
 def foot_speed(poses: np.ndarray, foot: int) -> np.ndarray:
     return np.r_[0.0, np.linalg.norm(np.diff(poses[:, foot, 0, :2], axis=0), axis=1) * 100]
 
@@ -386,6 +431,7 @@ def main(argv=None) -> int:
         bpy = start_blender(zip_path, tmp / "user")
         figures = {
             "extend": picture_extend(bpy, clips["extend"], args.out),
+            "inbetween": picture_inbetween(bpy, clips["follow"], args.out),
             "denoise": picture_denoise(bpy, clips["denoise"], args.out, args.seed),
             "footlock": picture_footlock(bpy, clips["extend"], args.out),
             "follow": picture_follow(bpy, clips["follow"], args.out),
