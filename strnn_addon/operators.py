@@ -24,6 +24,16 @@ class _Staged:
     bar and Esc to cancel between stages, or between the steps of a stage that yields its fraction
     done as it goes (Follow Curve's model windows). Nothing is written before the last stage."""
 
+    need_action = True  # the active armature must have an action (Follow Curve can start one)
+
+    @classmethod
+    def poll(cls, context):
+        """Greyed out, with the reason, unless the active object is an armature the stage can take."""
+        problem = check_message(context.active_object, cls.need_action)
+        if problem:
+            cls.poll_message_set(problem)
+        return not problem
+
     def steps(self, context):
         raise NotImplementedError
 
@@ -134,13 +144,6 @@ class STRNN_OT_fill_gap(_Staged, bpy.types.Operator):
     frame_end: options.range_end("Fill")
     foot_lock: options.foot_lock(True)
 
-    @classmethod
-    def poll(cls, context):
-        problem = check_message(context.active_object)
-        if problem:
-            cls.poll_message_set(problem)
-        return not problem
-
     def steps(self, context):
         start, end = (self.frame_start, self.frame_end) if self.use_range else (None, None)
         return inbetween_steps(context, context.active_object, frame_start=start, frame_end=end,
@@ -198,6 +201,7 @@ class STRNN_OT_follow_curve(_Staged, bpy.types.Operator):
     """Make the active armature walk along a curve with the motion model (needs PyTorch); writes a new action"""
 
     bl_idname = "strnn.follow_curve"
+    need_action = False
     bl_label = "Follow Curve"
     bl_options = {"REGISTER", "UNDO"}
 
@@ -226,6 +230,14 @@ class STRNN_OT_auto_map(bpy.types.Operator):
     bl_idname = "strnn.auto_map"
     bl_label = "Auto-Map Bones"
     bl_options = {"REGISTER", "UNDO"}
+
+    @classmethod
+    def poll(cls, context):
+        obj = context.active_object
+        if obj is None or obj.type != "ARMATURE":
+            cls.poll_message_set("Select an armature to map its bones")
+            return False
+        return True
 
     def execute(self, context):
         obj = context.active_object

@@ -185,27 +185,39 @@ def menu_entry(self, context):
 
 
 def key_menu_entry(self, context):
-    """Fill Gap in the Dope Sheet's and Graph Editor's Key menus, where animators key and time."""
+    """Extend, Fill Gap and Foot Lock where animators key and time: the Dope Sheet's and Graph
+    Editor's Key menus and the NLA's strip menu."""
+    layout = self.layout
+    layout.separator()
+    layout.operator("strnn.extend_clip", icon="TRACKING_FORWARDS")
+    layout.operator("strnn.inbetween", icon="IPO_EASE_IN_OUT")
+    layout.operator("strnn.foot_lock", icon="SNAP_ON")
+
+
+def smoothing_menu_entry(self, context):
+    """Denoise beside Blender's own smoothing filters (Graph Editor > Key > Smoothing)."""
     self.layout.separator()
-    self.layout.operator("strnn.inbetween", icon="IPO_EASE_IN_OUT")
+    self.layout.operator("strnn.denoise_action", icon="MOD_SMOOTH")
 
 
-MENUS = ("VIEW3D_MT_object_animation", "VIEW3D_MT_pose")
-KEY_MENUS = ("DOPESHEET_MT_key", "GRAPH_MT_key")
+# (menu, entry): the Object/Pose menus, the editors' Key menus, the NLA strip menu (its 4.2 name
+# was NLA_MT_edit) and the Graph Editor's Smoothing menu. A menu a Blender version lacks is skipped.
+MENUS = (("VIEW3D_MT_object_animation", menu_entry), ("VIEW3D_MT_pose", menu_entry),
+         ("DOPESHEET_MT_key", key_menu_entry), ("GRAPH_MT_key", key_menu_entry),
+         ("NLA_MT_strips", key_menu_entry), ("NLA_MT_edit", key_menu_entry),
+         ("GRAPH_MT_key_smoothing", smoothing_menu_entry))
 
 
 def register_menus():
-    for name in MENUS:
-        getattr(bpy.types, name).append(menu_entry)
-    for name in KEY_MENUS:
-        getattr(bpy.types, name).append(key_menu_entry)
+    for name, entry in MENUS:
+        if hasattr(bpy.types, name):
+            getattr(bpy.types, name).append(entry)
 
 
 def unregister_menus():
-    for name in MENUS:
-        getattr(bpy.types, name).remove(menu_entry)
-    for name in KEY_MENUS:
-        getattr(bpy.types, name).remove(key_menu_entry)
+    for name, entry in MENUS:
+        if hasattr(bpy.types, name):
+            getattr(bpy.types, name).remove(entry)
 
 
 classes = (STRNN_PT_main, STRNN_PT_extend, STRNN_PT_fill_gap, STRNN_PT_denoise, STRNN_PT_foot_lock,

@@ -147,3 +147,21 @@ def test_a_model_folder_without_a_model_names_its_preference(addon, tmp_path, op
         refuse(op, f"No model at .*empty.*STRNN Motion > {label}$")
     finally:
         setattr(prefs, setting, "")
+
+
+POLLED = ["extend_clip", "inbetween", "denoise_action", "foot_lock", "follow_curve", "auto_map"]
+
+
+@pytest.mark.parametrize("op", POLLED)
+@pytest.mark.parametrize("scene", ["nothing", "cube", "bare_armature"])
+def test_poll_is_false_with_a_reason(addon, op, scene):
+    """Like Blender's own operators, ours grey out (poll False) and say why, up front."""
+    if scene == "cube":
+        bpy.ops.mesh.primitive_cube_add()
+    elif scene == "bare_armature":
+        build_armature("Bare", [("a", None, (0, 0, 0), (0, 0, 1))])
+    runs = scene == "bare_armature" and op in ("follow_curve", "auto_map")  # these take an armature as it is
+    assert getattr(bpy.ops.strnn, op).poll() == runs
+    if not runs:
+        with pytest.raises(RuntimeError, match="armature|active object|action"):
+            getattr(bpy.ops.strnn, op)()

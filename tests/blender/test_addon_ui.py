@@ -73,9 +73,11 @@ def test_registered_in_sidebar_and_menus(addon):
         rna = getattr(bpy.ops.strnn, op).get_rna_type()
         assert rna.description, f"{op} has no tooltip"
     assert hasattr(bpy.types, "STRNN_MT_menu")
-    for menu in ("DOPESHEET_MT_key", "GRAPH_MT_key"):  # Fill Gap where animators key and time
+    nla = "NLA_MT_strips" if hasattr(bpy.types, "NLA_MT_strips") else "NLA_MT_edit"  # its name in 4.2
+    for menu, entry in (("DOPESHEET_MT_key", "key_menu_entry"), ("GRAPH_MT_key", "key_menu_entry"),
+                        (nla, "key_menu_entry"), ("GRAPH_MT_key_smoothing", "smoothing_menu_entry")):
         drawn = [f.__name__ for f in getattr(bpy.types, menu)._dyn_ui_initialize()]
-        assert "key_menu_entry" in drawn, menu
+        assert entry in drawn, menu
 
 
 @pytest.mark.parametrize("scene", ["empty", "mesh", "bare_armature", "animated"])
