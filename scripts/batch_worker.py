@@ -56,6 +56,20 @@ def check_bvh_text(path: Path) -> None:
         [float(v) for line in rows[:frames] for v in line.split()]
     except ValueError as e:
         raise BatchError(f"broken BVH: a frame line holds a non-number ({e})") from None
+    read_checked(path)
+
+
+def read_checked(path: Path) -> None:
+    """The project's own BVH reader over the whole file, the one check every entry point shares: a
+    Frame Time no capture rate has, non-finite values, a malformed hierarchy (file, line and fix)."""
+    if str(REPO) not in sys.path:
+        sys.path.insert(0, str(REPO))
+    from model_core.io.bvh import BvhError, read_bvh
+
+    try:
+        read_bvh(path)
+    except BvhError as e:
+        raise BatchError(f"broken BVH: {str(e).removeprefix(str(path) + ':')}") from None
 
 
 def blender_error(e: Exception) -> str:

@@ -158,8 +158,9 @@ def read_bvh(path: str | Path, fps: float | None = None) -> Bvh:
     take("Frame")
     take("Time:")
     frame_time = number("Frame Time")
-    if frame_time <= 0:
-        raise _error(path, tokens[pos - 1][0], f"Frame Time must be positive, found {frame_time}")
+    time_line = tokens[pos - 1][0]
+    if fps is None:
+        check_frame_time(path, time_line, frame_time)
     data_line = tokens[pos][0] if pos < len(tokens) else fline + 2
     values = [t for _, t in tokens[pos:]]
     expected = frames * n_channels
@@ -175,14 +176,31 @@ def read_bvh(path: str | Path, fps: float | None = None) -> Bvh:
         bad = next(i for i, v in enumerate(values[:expected]) if not _is_float(v))
         raise _error(path, tokens[pos + bad][0], f"motion value {values[bad]!r} is not a number") from None
     if not np.all(np.isfinite(motion)):
-        row = int(np.where(~np.isfinite(motion).all(axis=1))[0][0])
-        raise _error(path, data_line + row, "motion contains NaN or infinite values")
+        row, col = (int(v[0]) for v in np.nonzero(~np.isfinite(motion)))
+        joint = max(j for j, start in enumerate(bvh.channel_start) if start <= col and bvh.channels[j])
+        channel = bvh.channels[joint][col - bvh.channel_start[joint]]
+        raise _error(path, data_line + row, f"frame {row} has {motion[row, col]} in {bvh.names[joint]}'s "
+                                           f"{channel}: motion values must be finite numbers")
     bvh.parents = np.array(parents, dtype=np.int64)
     bvh.offsets = np.array(offsets, dtype=np.float64)
     bvh.is_end = np.array(is_end, dtype=bool)
     bvh.motion = motion
     bvh.frame_time = 1.0 / fps if fps else frame_time
     return bvh
+
+
+MIN_FRAME_TIME, MAX_FRAME_TIME = 1.0 / 240.0, 1.0 / 10.0  # seconds: the capture rates a header can mean
+
+
+def check_frame_time(path: str, line: int, frame_time: float) -> None:
+    """A :class:`BvhError` unless a header's Frame Time is a plausible capture rate (240 to 10 fps)."""
+    fix = (" fix the header, or give the folder its true rate in configs/data.toml [fps_overrides] (the "
+           "batch CLI and the extension read the header as it is)")
+    if not frame_time > 0:
+        raise _error(path, line, f"Frame Time must be positive, found {frame_time}:" + fix)
+    if not MIN_FRAME_TIME * 0.999 <= frame_time <= MAX_FRAME_TIME * 1.001:
+        raise _error(path, line, f"Frame Time {frame_time:g} s ({1 / frame_time:g} fps) is far from any capture "
+                                 f"rate (1/240 to 1/10 s):" + fix)
 
 
 def _is_float(s: str) -> bool:

@@ -82,6 +82,7 @@ def prepare(context, obj) -> Clip:
     channels = anim.Channels(action, obj.animation_data)
     if not any(fc.data_path.startswith("pose.bones") for fc in channels.fcurves):
         raise UserError(f"The action {action.name!r} animates no bones: key the armature's pose first")
+    check_keys(action, channels.fcurves)
     first, last = (int(round(x)) for x in action.frame_range)
     rig = rig_io.read_rig(obj)
     try:
@@ -90,6 +91,23 @@ def prepare(context, obj) -> Clip:
         raise UserError(str(e)) from e
     return Clip(obj, action, channels, rig, anchors, bone_map, rig_io.world_matrix(obj),
                 scene_fps(context.scene), first, last)
+
+
+def check_keys(action, fcurves) -> None:
+    """A :class:`UserError` naming the bone, channel and frame of the first key that is not a finite
+    number (NaN or infinite, or the largest float that Blender keeps for infinity), before any model
+    runs on it."""
+    for fc in fcurves:
+        co = np.empty(2 * len(fc.keyframe_points), np.float64)
+        fc.keyframe_points.foreach_get("co", co)
+        bad = ~(np.abs(co.reshape(-1, 2)) < 1e30).all(1)  # NaN, or inf (which Blender stores as the largest float)
+        if bad.any():
+            frame, value = co.reshape(-1, 2)[int(np.argmax(bad))]
+            found = rig_io.BONE_PATH.fullmatch(fc.data_path)
+            what = (f"bone {bpy.utils.unescape_identifier(found[1])!r}, {found[2]}[{fc.array_index}]" if found
+                    else f"{fc.data_path}[{fc.array_index}]")
+            raise UserError(f"The action {action.name!r} has a key of {value} at frame {frame:g} ({what}): fix "
+                            "or delete that key in the Graph Editor and run again")
 
 
 def joint_positions(context, clip: Clip, frames: np.ndarray) -> np.ndarray:

@@ -62,14 +62,14 @@ def sample_fcurve(fc, frames: np.ndarray) -> np.ndarray:
     return np.array([fc.evaluate(float(f)) for f in frames])
 
 
-_BONE_PATH = re.compile(r'pose\.bones\["((?:[^"\\]|\\.)*)"\]\.(\w+)')  # pose.bones["name"].prop
+BONE_PATH = re.compile(r'pose\.bones\["((?:[^"\\]|\\.)*)"\]\.(\w+)')  # pose.bones["name"].prop
 
 
 def bone_channels(fcurves) -> dict[tuple[str, str], dict[int, object]]:
     """{(bone, property): {array index: fcurve}} for pose bone channels of an action."""
     out: dict[tuple[str, str], dict[int, object]] = {}
     for fc in fcurves:
-        found = _BONE_PATH.fullmatch(fc.data_path)
+        found = BONE_PATH.fullmatch(fc.data_path)
         if found:
             bone = bpy.utils.unescape_identifier(found[1])  # Blender escapes " and \ in names
             out.setdefault((bone, found[2]), {})[fc.array_index] = fc

@@ -74,7 +74,8 @@ def key_snapshot(obj, action=None) -> dict:
 
 
 def same_keys(a: dict, b: dict) -> bool:
-    return a.keys() == b.keys() and all(np.array_equal(a[k], b[k]) for k in a)
+    """The same F-curves with the same keys (a NaN key equals a NaN key)."""
+    return a.keys() == b.keys() and all(np.array_equal(a[k], b[k], equal_nan=True) for k in a)
 
 
 def _rest_joints() -> dict[str, np.ndarray]:

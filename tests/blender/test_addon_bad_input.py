@@ -6,7 +6,7 @@ from pathlib import Path
 
 import bpy
 import pytest
-from scenes import action_of, build_armature, import_bvh, key_snapshot, same_keys, walk_bvh
+from scenes import action_of, build_armature, fcurves_of, import_bvh, key_snapshot, same_keys, walk_bvh
 
 
 def state() -> tuple:
@@ -165,3 +165,12 @@ def test_poll_is_false_with_a_reason(addon, op, scene):
     if not runs:
         with pytest.raises(RuntimeError, match="armature|active object|action"):
             getattr(bpy.ops.strnn, op)()
+
+
+@pytest.mark.parametrize("op", ACTION_OPS + ["inbetween"])
+@pytest.mark.parametrize("value", [float("nan"), float("inf")], ids=["nan", "inf"])
+def test_a_nan_or_inf_key_is_named_with_its_bone_and_frame(addon, tmp_path, op, value):
+    obj = import_bvh(walk_bvh(tmp_path, frames=40))
+    fc = next(f for f in fcurves_of(obj) if "rotation_euler" in f.data_path)
+    fc.keyframe_points[12].co[1] = value
+    refuse(op, r"has a key of (nan|inf|3\.4\d*e\+38) at frame 13 \(bone '.+', rotation_euler\[\d\]\): fix or delete")

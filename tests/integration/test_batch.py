@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 import sys
 from pathlib import Path
 
@@ -86,15 +87,20 @@ def test_importer_errors_and_missing_inputs_have_reasons(tmp_path, extension, ca
     folder.mkdir()
     good = write_bvh(folder / "walk.bvh", walking_skeleton(40))
     text = good.read_text()
-    (folder / "offset.bvh").write_text(text.replace("OFFSET", "OFFSET abc", 1))  # passes the quick check
+    (folder / "offset.bvh").write_text(text.replace("OFFSET", "OFFSET abc", 1))  # passes the quick text check
+    (folder / "slow.bvh").write_text(re.sub(r"Frame Time: \S+", "Frame Time: 10", text))
+    (folder / "inf.bvh").write_text(re.sub(r"(Frame Time: \S+\n)\S+", r"\1inf", text))
     (folder / "empty.bvh").write_text("")
     out = tmp_path / "out"
     code = strnn_batch.main(["footlock", str(folder / "offset.bvh"), str(folder / "empty.bvh"), str(good),
+                             str(folder / "slow.bvh"), str(folder / "inf.bvh"),
                              str(tmp_path / "missing.bvh"), "--out", str(out), "--extension", str(extension)])
     err = capsys.readouterr().err
     assert code == 1
     assert frames_of(out / "walk.footlock.bvh") == 40
-    assert "offset.bvh: Blender's BVH importer could not read it: ValueError" in err
+    assert re.search(r"offset.bvh: broken BVH: \d+: .*abc", err)
+    assert "slow.bvh: broken BVH" in err and "far from any capture rate" in err and "configs/data.toml" in err
+    assert re.search(r"inf.bvh: broken BVH: \d+: frame \d+ has inf in", err)
     assert "empty.bvh: not a BVH file: it is empty" in err
     assert "missing.bvh: no such file or folder" in err
     assert good.read_text() == text

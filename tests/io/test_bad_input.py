@@ -81,9 +81,26 @@ def test_malformed_offset_and_frame_count(write_text):
     _raises(write_text("zero.bvh", HEADER + "Frames: 0\nFrame Time: 0.03\n"), 12, "declares 0 frames")
 
 
-def test_nan_in_motion(write_text):
+def test_nan_and_inf_in_motion_name_the_frame_and_channel(write_text):
     path = write_text("nan.bvh", HEADER + "Frames: 2\nFrame Time: 0.033333\n0 0 0 0 0 0\n0 nan 0 0 0 0\n")
-    _raises(path, 15, "NaN or infinite")
+    _raises(path, 15, "frame 1 has nan in Hips's Yposition: motion values must be finite")
+    path = write_text("inf.bvh", HEADER + "Frames: 2\nFrame Time: 0.033333\n0 0 0 0 0 inf\n0 0 0 0 0 0\n")
+    _raises(path, 14, "frame 0 has inf in Hips's")
+
+
+@pytest.mark.parametrize("time,what", [("10", "far from any capture rate"), ("0.0001", "far from any capture rate"),
+                                       ("-0.033", "must be positive"), ("0", "must be positive")])
+def test_implausible_frame_times_are_refused_with_the_fix(write_text, time, what):
+    path = write_text("t.bvh", HEADER + f"Frames: 1\nFrame Time: {time}\n0 0 0 0 0 0\n")
+    _raises(path, 13, what)
+    _raises(path, 13, "configs/data.toml")
+    assert read_bvh(path, fps=30.0).fps == 30.0  # a folder override replaces the header
+
+
+def test_capture_rates_from_10_to_240_fps_are_read(write_text):
+    for fps in (10, 24, 30, 60, 120, 240):
+        path = write_text(f"r{fps}.bvh", HEADER + f"Frames: 1\nFrame Time: {1 / fps:.6f}\n0 0 0 0 0 0\n")
+        assert abs(read_bvh(path).fps - fps) < 0.001 * fps
 
 
 def test_bad_channels_and_structure(write_text):
