@@ -8,6 +8,7 @@ the file changes, so a failed run leaves the scene exactly as it was.
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass
 
 import bpy
@@ -134,9 +135,11 @@ def written_bones(clip: Clip) -> list[int]:
 
 
 def new_action_from(clip: Clip, suffix: str):
-    """A copy of the clip's action named after it; the original is kept with a fake user."""
+    """A copy of the clip's action named after it (``walk.extended``; run again on that result:
+    ``walk.extended.001``, not ``walk.extended.extended``); the original is kept with a fake user."""
     new = clip.action.copy()
-    new.name = f"{clip.action.name}.{suffix}"
+    root = re.sub(rf"\.{re.escape(suffix)}(\.\d{{3}})?$", "", clip.action.name)
+    new.name = f"{root}.{suffix}"  # Blender numbers it when the name is taken
     return new
 
 

@@ -20,6 +20,11 @@ def test_auto_map_then_extend(tmp_path, fake_model):
     assert new != old and old.use_fake_user and new.name == "walk.extended"
     assert same_keys(before, key_snapshot(obj, old))
     assert new.frame_range[1] == 120
+    for expected in ("walk.extended.001", "walk.extended.002"):  # run again on the result: numbered
+        assert bpy.ops.strnn.extend_clip(frames=5) == {"FINISHED"}
+        assert action_of(obj).name == expected
+    assert bpy.ops.strnn.denoise_action() == {"FINISHED"}
+    assert action_of(obj).name == "walk.extended.002.denoised"
 
 
 def test_invoke_without_a_window_runs_at_once(tmp_path, fake_model):
