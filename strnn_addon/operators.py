@@ -34,6 +34,18 @@ class _Staged:
             cls.poll_message_set(problem)
         return not problem
 
+    def range_from_scene(self, context) -> None:
+        """A Frame Range nobody set starts as the scene's preview range, or else its frame range,
+        as Blender's Bake Action does (F3, menus and scripts; the sidebar hands its own, and the
+        redo panel keeps the last run's)."""
+        props = self.properties
+        if "frame_start" not in props.bl_rna.properties or props.is_property_set("frame_start"):
+            return
+        scene = context.scene
+        preview = scene.use_preview_range
+        self.frame_start = scene.frame_preview_start if preview else scene.frame_start
+        self.frame_end = scene.frame_preview_end if preview else scene.frame_end
+
     def steps(self, context):
         raise NotImplementedError
 
@@ -41,6 +53,7 @@ class _Staged:
         raise NotImplementedError
 
     def execute(self, context):
+        self.range_from_scene(context)
         wm = context.window_manager
         wm.progress_begin(0, len(STAGES))
         try:
@@ -54,6 +67,7 @@ class _Staged:
         return {"FINISHED"}
 
     def invoke(self, context, event):
+        self.range_from_scene(context)
         if context.window is None:
             return self.execute(context)
         self._steps, self._stage = self.steps(context), "read"

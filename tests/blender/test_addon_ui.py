@@ -140,3 +140,29 @@ def test_follow_curve_panel_says_when_pytorch_is_missing(addon, monkeypatch):
         monkeypatch.setattr(inst, "torch_available", lambda available=available: available)
         texts = [text for text, _ in panel_labels("STRNN_PT_follow_curve", bpy.context)]
         assert any(t.startswith("Needs PyTorch: Preferences > Add-ons") for t in texts) is not available
+
+
+def test_an_unset_frame_range_comes_from_the_preview_or_scene_range(addon, tmp_path):
+    """Run from F3, a menu or a script, Frame Range starts as the scene's preview range (else its
+    range); a range handed to the operator (as the sidebar does) is kept. (Headless Blender runs
+    execute directly, the path scripts take; a window's invoke goes through the same method.)"""
+    import_bvh(walk_bvh(tmp_path, frames=60))
+    scene = bpy.context.scene
+    scene.frame_start, scene.frame_end = 5, 50
+    seen = []
+    cls = bpy.types.STRNN_OT_denoise_action
+    original = cls.steps
+
+    def spy(self, context):
+        seen.append((self.frame_start, self.frame_end))
+        return original(self, context)
+
+    cls.steps = spy
+    try:
+        bpy.ops.strnn.denoise_action("INVOKE_DEFAULT", use_range=True)
+        scene.use_preview_range, scene.frame_preview_start, scene.frame_preview_end = True, 10, 30
+        bpy.ops.strnn.denoise_action("INVOKE_DEFAULT", use_range=True)
+        bpy.ops.strnn.denoise_action("INVOKE_DEFAULT", use_range=True, frame_start=2, frame_end=40)
+    finally:
+        cls.steps = original
+    assert seen == [(5, 50), (10, 30), (2, 40)]
