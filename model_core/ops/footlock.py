@@ -175,23 +175,28 @@ def lock_offsets(x: np.ndarray, mask: np.ndarray, blend: float, fixed: np.ndarra
 
 
 def ankle_targets(pos: np.ndarray, contacts: np.ndarray, blend: float, fixed: np.ndarray | None = None,
-                  limit: float = np.inf, rest: np.ndarray | None = None, tolerance: float = 0.0) -> np.ndarray:
-    """Where each ankle should be ``[F, 2, 3]`` (left, right). Heels first: each heel span pins the
+                  limit: float = np.inf, rest: np.ndarray | None = None,
+                  tolerance: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    """Where each ankle and each toe should be, ``[F, 2, 3]`` each (left, right). Heels first: each heel span pins the
     ankle. Then toes, on the heel-locked foot (kept at its orientation): each toe span pins the
-    toe, moving the ankle with it, so a heel lifting off rolls the foot about a planted toe.
+    toe, moving the ankle with it, so a heel lifting off rolls the foot about a planted toe; where
+    the heel is held too, the heel stays and the foot turns about it to reach the planted toe
+    (the toe target is returned beside the ankle's), so a flat foot slides at neither end.
     ``rest`` ``[4]``: the height of each contact joint (l_heel, l_toe, r_heel, r_toe) standing on
     the floor; contacts further than ``tolerance`` from it are brought to it and no heel or toe goes
     further than that below it (None: heights unchanged)."""
     mask = np.asarray(contacts) > 0.5
     ankle = pos[:, _ANKLE]
     foot = pos[:, _TOE] - ankle  # [F, 2, 3] ankle-to-toe, kept
-    pull, _ = lock_offsets(ankle, mask[:, _HEEL_CHANNELS], blend, fixed, limit)
+    pull, held = lock_offsets(ankle, mask[:, _HEEL_CHANNELS], blend, fixed, limit)
     ankle = ankle + pull
     pull, _ = lock_offsets(ankle + foot, mask[:, _TOE_CHANNELS], blend, fixed, limit)
-    ankle = ankle + pull
+    toe = ankle + foot + pull  # where the toe is pinned
+    ankle = ankle + (1.0 - held)[..., None] * pull  # a held heel stays where it is
     if rest is not None:
-        ankle = ankle + _height_pull(ankle, foot, mask, blend, fixed, rest, tolerance)
-    return ankle
+        lift = _height_pull(ankle, foot, mask, blend, fixed, rest, tolerance)
+        ankle, toe = ankle + lift, toe + lift
+    return ankle, toe
 
 
 def _height_pull(ankle: np.ndarray, foot: np.ndarray, mask: np.ndarray, blend: float, fixed: np.ndarray | None,
@@ -339,11 +344,14 @@ def foot_lock(pos: np.ndarray, fps: float = MODEL_FPS, contacts: np.ndarray | No
         pos = pos.copy()
         drop = body_drop(pos, mask, cfg.blend_s * fps, fixed if fixed.any() else None, rest, tolerance)
         pos[..., UP_AXIS] += drop[:, None]
-    target = ankle_targets(pos, mask, cfg.blend_s * fps, fixed if fixed.any() else None, limit, rest, tolerance)
+    target, toe = ankle_targets(pos, mask, cfg.blend_s * fps, fixed if fixed.any() else None, limit, rest,
+                                tolerance)
     fwd = body_forward(pos)[:, None].repeat(2, 1)
     knee, ankle = two_bone_ik(pos[:, _HIP], pos[:, _KNEE], pos[:, _ANKLE], target, cfg.softness, fwd)
     out = pos.copy()
-    out[:, _TOE] = ankle + (pos[:, _TOE] - pos[:, _ANKLE])  # the foot keeps its orientation
+    # The foot points at its toe target with its own length (its orientation where the toe is free).
+    length = np.linalg.norm(pos[:, _TOE] - pos[:, _ANKLE], axis=-1, keepdims=True)
+    out[:, _TOE] = ankle + _unit(toe - target)[0] * length
     out[:, _KNEE], out[:, _ANKLE] = knee, ankle
     out[fixed] = pos[fixed]
     return out.astype(np.float32)
