@@ -17,7 +17,7 @@ import torch
 from ..io.checkpoint import save_release
 from .baselines import MODELS, ResidualGRUConfig, SiMLPeConfig
 from .dataset import Normaliser, load_folder
-from .training import LICENCE, Mirror, Windows, _atomic_save, _progress, _setup_logging, data_record, pick_seeds
+from .training import Mirror, Progress, Windows, atomic_save, data_record, licence_of, pick_seeds, setup_logging
 
 
 @dataclass
@@ -77,7 +77,7 @@ def prepare(cfg: BaselineTrainConfig):
 
 
 def save_state(path: Path, model, opt, step: int, history: list, rng: np.random.Generator, cfg):
-    _atomic_save({"model": model.state_dict(), "optimizer": opt.state_dict(), "step": step,
+    atomic_save({"model": model.state_dict(), "optimizer": opt.state_dict(), "step": step,
                   "history": json.dumps(history), "torch_rng": torch.get_rng_state(),
                   "numpy_rng": json.dumps(rng.bit_generator.state), "config": json.dumps(asdict(cfg))}, path)
 
@@ -108,7 +108,7 @@ def train_step(model, opt, cfg: BaselineTrainConfig, window: torch.Tensor, step:
 def train_baseline(cfg: BaselineTrainConfig, resume: bool = False, progress: bool = True) -> Path:
     """Train, checkpointing to ``cfg.out/train_state.pt``; writes ``cfg.out/release`` and returns it."""
     out, state_path = Path(cfg.out), Path(cfg.out) / "train_state.pt"
-    log = _setup_logging(out, 0)
+    log = setup_logging(out, 0)
     torch.manual_seed(cfg.seed)
     rng = np.random.default_rng(cfg.seed)
     data, norm, train_w, val_w = prepare(cfg)
@@ -121,7 +121,7 @@ def train_baseline(cfg: BaselineTrainConfig, resume: bool = False, progress: boo
     log.info("config %s", json.dumps(asdict(cfg) | {"arch": cfg.arch}))
     log.info("%s: %d parameters; %d training windows, %d clips (%s)", cfg.arch, n_params(model), len(train_w),
              len(data.clips), {s: len(data.split(s)) for s in ("train", "validation", "test")})
-    mirror, bar = Mirror(norm), _progress(cfg.steps, step, enabled=progress)
+    mirror, bar = Mirror(norm), Progress(cfg.steps, step, enabled=progress)
     started = last_ckpt = time.time()
     out_of_time = False
     while step < cfg.steps and not out_of_time:
@@ -175,6 +175,6 @@ def write_baseline_release(model, cfg: BaselineTrainConfig, data, norm: Normalis
                      "lr": cfg.lr, "lr_final": cfg.lr_final, "weight_decay": cfg.weight_decay, "batch": cfg.batch,
                      "mirror": cfg.mirror, "hold_out": cfg.hold_out, "final": history[-1] if history else None},
         "data": data_record(data),
-        "licence": LICENCE,
+        "licence": licence_of(data),
     }
     return save_release(folder, weights, cfg.model.to_dict(), norm.mean, norm.std, meta, seeds, names)

@@ -246,11 +246,11 @@ def validate(model: STRNN, val: Windows, cfg: TrainConfig, limit: int = 1024) ->
     return total / (len(idx) * cfg.model.predict_len * w.shape[-1])
 
 
-def _atomic_save(obj, path: Path):
+def atomic_save(obj, path: Path):
     write_atomic(path, lambda tmp: torch.save(obj, tmp))
 
 
-def _setup_logging(out: Path, rank: int) -> logging.Logger:
+def setup_logging(out: Path, rank: int) -> logging.Logger:
     log = logging.getLogger(f"strnn.train.{out}")
     log.setLevel(logging.INFO)
     if rank == 0 and not log.handlers:
@@ -273,7 +273,7 @@ def train(cfg: TrainConfig, resume: bool = False, progress: bool = True) -> Path
     ``cfg.out/release`` at the end and returns it."""
     rank, world = _dist_env()
     out = Path(cfg.out)
-    log = _setup_logging(out, rank)
+    log = setup_logging(out, rank)
     torch.manual_seed(cfg.seed + rank)
     rng = np.random.default_rng(cfg.seed + rank)
     data = load_folder(cfg.data, cache_dir=cfg.cache, progress=rank == 0 and progress)
@@ -306,7 +306,7 @@ def train(cfg: TrainConfig, resume: bool = False, progress: bool = True) -> Path
     per_rank = max(1, cfg.batch // world)
     mirror = Mirror(norm)
     started, last_ckpt = time.time(), time.time()
-    bar = _progress(cfg.steps, step, enabled=rank == 0 and progress)
+    bar = Progress(cfg.steps, step, enabled=rank == 0 and progress)
     net = model
     while step < cfg.steps:
         now = phase_at(cfg, step)
@@ -358,7 +358,7 @@ def train(cfg: TrainConfig, resume: bool = False, progress: bool = True) -> Path
             log.info(json.dumps(entry))
         out_of_time = cfg.max_minutes and time.time() - started > 60 * cfg.max_minutes
         if rank == 0 and (time.time() - last_ckpt > cfg.checkpoint_seconds or step == cfg.steps or out_of_time):
-            _atomic_save({"model": model.state_dict(), "optimizer": opt.state_dict(), "step": step, "phase": phase,
+            atomic_save({"model": model.state_dict(), "optimizer": opt.state_dict(), "step": step, "phase": phase,
                           "history": json.dumps(history), "torch_rng": torch.get_rng_state(),
                           "numpy_rng": json.dumps(rng.bit_generator.state), "config": json.dumps(asdict(cfg))},
                          state_path)
@@ -377,7 +377,7 @@ def train(cfg: TrainConfig, resume: bool = False, progress: bool = True) -> Path
     return release
 
 
-class _progress:
+class Progress:
     """A small progress bar with loss and ETA on stderr (no extra dependency)."""
 
     def __init__(self, total: int, start: int, enabled: bool):
@@ -406,7 +406,7 @@ def pick_seeds(data: MotionData, length: int, count: int = 12) -> tuple[np.ndarr
     seen, seeds, names = set(), [], []
     for clip in sorted(data.split("test"), key=lambda c: c.name):
         parts = Path(clip.name).stem.split("_")
-        label = parts[1] if clip.name.startswith("bandai") and len(parts) > 2 else str(Path(clip.name).parent)
+        label = parts[1] if len(parts) > 2 else str(Path(clip.name).parent)  # "take_action_style_NNN" names
         start = min(30, len(clip.features) - length)
         if label in seen or start < 0:
             continue
@@ -429,9 +429,22 @@ def init_record(init: str | Path) -> dict:
     return record
 
 
-LICENCE = ("CC BY-NC 4.0 (trained on the Bandai Namco Research Motion Dataset, credit Bandai Namco "
-           "Research Inc.) and CMU Graphics Lab Motion Capture Database terms (data obtained from "
-           "mocap.cs.cmu.edu; the database was created with funding from NSF EIA-0196217)")
+LICENCES = {  # the terms a release inherits from each library it was trained on (top folder of the data)
+    "bandai-namco": "CC BY-NC 4.0 (trained on the Bandai Namco Research Motion Dataset, credit Bandai Namco "
+                    "Research Inc.)",
+    "cmu": "CMU Graphics Lab Motion Capture Database terms (data obtained from mocap.cs.cmu.edu; the database "
+           "was created with funding from NSF EIA-0196217)",
+}
+
+
+def licence_of(data: MotionData) -> str:
+    """The licence a release trained on ``data`` carries: the terms of each known library among its
+    clips, and a reminder for clips from anywhere else."""
+    tops = {c.name.split("/")[0] if "/" in c.name else Path(data.root).name for c in data.clips}
+    terms = [text for top, text in LICENCES.items() if top in tops]
+    if tops - set(LICENCES):
+        terms.append("the terms of the other training data (" + ", ".join(sorted(tops - set(LICENCES))) + ")")
+    return " and ".join(terms)
 
 
 def data_record(data: MotionData) -> dict:
@@ -450,7 +463,7 @@ def write_release(model: STRNN, cfg: TrainConfig, data: MotionData, norm: Normal
                      "final": history[-1] if history else None,
                      **({"init": init_record(cfg.init)} if cfg.init else {})},
         "data": data_record(data),
-        "licence": LICENCE,
+        "licence": licence_of(data),
     }
     save_release(folder, weights, cfg.model.to_dict(), norm.mean, norm.std, meta, seeds, names)
 

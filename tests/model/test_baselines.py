@@ -92,7 +92,7 @@ def test_train_py_writes_a_release_the_engine_loads(walk_folder, tmp_path, arch)
             "--cache", "", "--quiet", "--threads", "1", "--mirror", "0.5", "--hold-out", *TINY[arch]]
     assert train_script.main(argv) == 0
     doc = json.loads((out / "release" / "model.json").read_text())
-    assert doc["architecture"] == arch and doc["purpose"] == "generate" and "CC BY-NC 4.0" in doc["licence"]
+    assert doc["architecture"] == arch and doc["purpose"] == "generate" and "other training data" in doc["licence"]
     assert doc["training"]["steps_done"] == 6 and doc["training"]["command"].startswith("python scripts/train.py")
     assert len(doc["normalisation"]["mean"]) == C and doc["data"]["clips"]["train"] > 0
     log = (out / "train.log").read_text()

@@ -79,7 +79,7 @@ def test_release_has_config_seeds_and_licence(walk_folder, tmp_path):
     doc = json.loads((release / "model.json").read_text())
     assert doc["config"]["width"] == 16 and doc["fps"] == 30.0
     assert len(doc["normalisation"]["mean"]) == doc["layout"]["size"]
-    assert "CC BY-NC 4.0" in doc["licence"]
+    assert "CC BY-NC" not in doc["licence"] and "other training data" in doc["licence"]  # not Bandai data
     seeds = np.load(release / "seeds.npz", allow_pickle=False)
     assert seeds["features"].shape[1:] == (20, doc["layout"]["size"])
 
@@ -93,6 +93,17 @@ def test_mirror_flips_only_the_chosen_rows_exactly():
     out = Mirror(norm)(x, rows).numpy()
     np.testing.assert_allclose(norm.decode(out[rows]), mirror_features(raw[rows]), atol=1e-5)
     np.testing.assert_array_equal(out[~rows], x.numpy()[~rows])
+
+
+def test_the_licence_follows_the_libraries_trained_on():
+    from model_core.model.dataset import Clip, MotionData
+    from model_core.model.training import licence_of
+
+    clip = lambda name: Clip(name, "train", np.zeros((1, 21, 3)), np.zeros((1, 70)))  # noqa: E731
+    both = MotionData("mocap", [clip("bandai-namco/dataset-2/a.bvh"), clip("cmu/iclone/001_01.bvh")])
+    assert "CC BY-NC 4.0" in licence_of(both) and "mocap.cs.cmu.edu" in licence_of(both)
+    assert "CC BY-NC" not in licence_of(MotionData("mocap", [clip("cmu/iclone/001_01.bvh")]))
+    assert licence_of(MotionData("studio", [clip("take.bvh")])) == "the terms of the other training data (studio)"
 
 
 def test_offsets_model_learns_and_hold_out_trains(walk_folder, tmp_path):
