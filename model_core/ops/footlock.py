@@ -180,7 +180,7 @@ def ankle_targets(pos: np.ndarray, contacts: np.ndarray, blend: float, fixed: np
     """Where each ankle and each toe should be, ``[F, 2, 3]`` each (left, right). Heels first: each heel span pins the
     ankle. Then toes, on the heel-locked foot (kept at its orientation): each toe span pins the
     toe, moving the ankle with it, so a heel lifting off rolls the foot about a planted toe; where
-    the heel is held too, the heel stays and the foot turns about it to reach the planted toe
+    the heel is held too, the heel stays and the foot turns about it to point at the planted toe
     (the toe target is returned beside the ankle's), so a flat foot slides at neither end.
     ``rest`` ``[4]``: the height of each contact joint (l_heel, l_toe, r_heel, r_toe) standing on
     the floor; contacts further than ``tolerance`` from it are brought to it and no heel or toe goes
@@ -316,6 +316,18 @@ def two_bone_ik(hip: np.ndarray, knee: np.ndarray, ankle: np.ndarray, target: np
     return new_knee, hip + axis * d[..., None]
 
 
+def face_along(foot: np.ndarray, towards: np.ndarray) -> np.ndarray:
+    """``foot`` ``[..., 3]`` turned about the up axis so that its ground part points like ``towards``'s
+    (length and height kept; unchanged where either has no ground part)."""
+    ground = list(GROUND_AXES)
+    f, t = foot[..., ground], towards[..., ground]
+    fn, tn = np.linalg.norm(f, axis=-1, keepdims=True), np.linalg.norm(t, axis=-1, keepdims=True)
+    ok = (fn > 1e-9) & (tn > 1e-9)
+    out = foot.copy()
+    out[..., ground] = np.where(ok, t / np.maximum(tn, 1e-12) * fn, f)
+    return out
+
+
 def body_forward(pos: np.ndarray) -> np.ndarray:
     """Horizontal facing direction ``[F, 3]`` (unit) from the hips and shoulders (Y-up): :func:`features.facing`."""
     return _unit(facing(pos))[0]
@@ -349,9 +361,14 @@ def foot_lock(pos: np.ndarray, fps: float = MODEL_FPS, contacts: np.ndarray | No
     fwd = body_forward(pos)[:, None].repeat(2, 1)
     knee, ankle = two_bone_ik(pos[:, _HIP], pos[:, _KNEE], pos[:, _ANKLE], target, cfg.softness, fwd)
     out = pos.copy()
-    # The foot points at its toe target with its own length (its orientation where the toe is free).
-    length = np.linalg.norm(pos[:, _TOE] - pos[:, _ANKLE], axis=-1, keepdims=True)
-    out[:, _TOE] = ankle + _unit(toe - target)[0] * length
+    # The foot points at its toe target with its own length (its orientation where the toe is free);
+    # where that would put the toe below the floor, it only turns about the vertical to face it.
+    foot = pos[:, _TOE] - pos[:, _ANKLE]
+    aimed = _unit(toe - target)[0] * np.linalg.norm(foot, axis=-1, keepdims=True)
+    if rest is not None:
+        low = (ankle + aimed)[..., UP_AXIS] < rest[_TOE_CHANNELS] - tolerance
+        aimed = np.where(low[..., None], face_along(foot, toe - target), aimed)
+    out[:, _TOE] = ankle + aimed
     out[:, _KNEE], out[:, _ANKLE] = knee, ankle
     out[fixed] = pos[fixed]
     return out.astype(np.float32)
