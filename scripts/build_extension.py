@@ -29,6 +29,11 @@ REPO = Path(__file__).resolve().parent.parent
 PACKAGES = ("strnn_addon", "model_core")
 FILES = ("blender_manifest.toml", "__init__.py", "README.md", "LICENSE")
 IGNORE = shutil.ignore_patterns("__pycache__", "*.pyc", "*.tmp")
+# model_core modules the extension never imports (training, evaluation, writing BVH, test data):
+# they stay out of the zip (a test walks the extension's imports to keep this list honest).
+NOT_SHIPPED = ("model_core/eval", "model_core/model/training.py", "model_core/model/baseline_training.py",
+               "model_core/model/baselines.py", "model_core/model/dataset.py", "model_core/io/bvh_export.py",
+               "model_core/motion/synthetic.py")
 DEFAULT_PLATFORMS = ("linux-x64", "macos-arm64", "windows-x64")
 
 
@@ -51,6 +56,9 @@ def stage(dest: Path, model: Path | None, denoiser: Path | None = None) -> None:
             shutil.copy2(REPO / name, dest / name)
     for pkg in PACKAGES:
         shutil.copytree(REPO / pkg, dest / pkg, ignore=IGNORE)
+    for rel in NOT_SHIPPED:
+        path = dest / rel
+        shutil.rmtree(path) if path.is_dir() else path.unlink()
     model = model or REPO / "models" / "strnn_default"
     if (model / "model.json").exists():
         shutil.copytree(model, dest / "models" / "strnn_default", ignore=IGNORE)

@@ -76,3 +76,22 @@ def test_manifest_declares_what_the_extension_reaches():
     assert set(permissions) == {"files", "network"}
     assert "pip" in (REPO / "strnn_addon" / "torch_install.py").read_text()
     assert all(len(text) <= 64 and not text.endswith(".") for text in permissions.values())
+
+
+def test_the_zip_holds_only_what_the_extension_imports(tmp_path):
+    """Every model_core module the extension's code imports (directly or through others) is in the
+    zip, and none of the modules left out is imported by anything that is in it."""
+    import ast
+
+    out = build_extension.main(["--out", str(tmp_path / "dist"), "--model", str(tmp_path / "none")])
+    names = names_of(out)
+    shipped = {n for n in names if n.endswith(".py")}
+    for rel in build_extension.NOT_SHIPPED:
+        assert not any(n.startswith(rel) for n in names), rel
+    for name in shipped:
+        tree = ast.parse(zipfile.ZipFile(out).read(name).decode())
+        package = name.split("/")[:-1]
+        for node in ast.walk(tree):
+            if isinstance(node, ast.ImportFrom) and node.level and node.module:
+                target = "/".join(package[:len(package) - node.level + 1] + node.module.split("."))
+                assert f"{target}.py" in shipped or f"{target}/__init__.py" in shipped, f"{name} imports {target}"
