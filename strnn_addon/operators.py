@@ -133,17 +133,18 @@ class STRNN_OT_extend_clip(_Staged, bpy.types.Operator):
     context_frames: options.context_frames()
     from_current: options.from_current()
     foot_lock: options.foot_lock(False)
+    scene_range: options.scene_range()
 
     def steps(self, context):
         start = context.scene.frame_current if self.from_current else None
         return extend_steps(context, context.active_object, frames=self.frames, context_frames=self.context_frames,
-                            foot_lock=self.foot_lock, from_frame=start)
+                            foot_lock=self.foot_lock, from_frame=start, scene_range=self.scene_range)
 
     def done(self, action) -> str:
         if self.from_current:
             return (f"Continued after frame {bpy.context.scene.frame_current} with {self.frames} new frames in new "
-                    f"action {action.name!r}{report_note(action)}")
-        return f"Added {self.frames} frames in new action {action.name!r}{report_note(action)}"
+                    f"action {action.name!r}{range_note(action)}{report_note(action)}")
+        return f"Added {self.frames} frames in new action {action.name!r}{range_note(action)}{report_note(action)}"
 
 
 class STRNN_OT_fill_gap(_Staged, bpy.types.Operator):
@@ -224,18 +225,21 @@ class STRNN_OT_follow_curve(_Staged, bpy.types.Operator):
     frames: options.curve_frames()
     speed: options.curve_speed()
     foot_lock: options.foot_lock(True)
+    scene_range: options.scene_range()
     steering: IntProperty(name="Steering Steps", default=4, min=0, soft_max=20,
                           description="Fine-tuning steps per 20-frame window that pull the motion onto the curve")
 
     def steps(self, context):
         return follow_curve_steps(context, context.active_object, curve=self.curve, frames=self.frames,
-                                  speed=self.speed, foot_lock=self.foot_lock, steps=self.steering)
+                                  speed=self.speed, foot_lock=self.foot_lock, steps=self.steering,
+                                  scene_range=self.scene_range)
 
     def done(self, action) -> str:
         curve = find_curve(bpy.context, self.curve)
         others = len(curve.data.splines) - 1
         note = f" (it followed the first of the curve's {others + 1} splines)" if others else ""
-        return f"Walked the curve {curve.name!r} into new action {action.name!r}{note}{report_note(action)}"
+        return (f"Walked the curve {curve.name!r} into new action {action.name!r}{note}{range_note(action)}"
+                f"{report_note(action)}")
 
 
 class STRNN_OT_auto_map(bpy.types.Operator):
@@ -287,6 +291,16 @@ class STRNN_OT_clear_map(bpy.types.Operator):
     def execute(self, context):
         mapping.store_map(context.active_object.data, {})
         return {"FINISHED"}
+
+
+def range_note(action) -> str:
+    """What happened to the scene's range: widened to the new action's end, or left short of it."""
+    scene, last = bpy.context.scene, int(round(action.frame_range[1]))
+    if scene.frame_end == last:
+        return f"; the scene now ends at frame {last}"
+    if scene.frame_end < last:
+        return f"; the scene still ends at frame {scene.frame_end} (the new action runs to {last})"
+    return ""
 
 
 def check_message(obj, need_action: bool = True) -> str:

@@ -35,6 +35,12 @@ def from_current():
                                     "the mapped bones' keys after it")
 
 
+def scene_range():
+    return BoolProperty(name="Extend Scene Range", default=True,
+                        description="Move the scene's end frame to the new action's end when it goes beyond it "
+                                    "(the report says so either way)")
+
+
 def foot_lock(default: bool):
     return BoolProperty(name="Foot Lock", default=default, description=FOOT_LOCK_TIP)
 

@@ -205,13 +205,14 @@ def raw_rotations(clip: Clip, frame: float) -> dict:
     return out
 
 
-def finish(context, clip: Clip, new_action) -> None:
-    """Keep the original action (fake user) and assign the new one on the same slot."""
+def finish(context, clip: Clip, new_action, scene_range: bool = True) -> None:
+    """Keep the original action (fake user) and assign the new one on the same slot; with
+    ``scene_range``, widen the scene's frame range to the new action's end."""
     slot = anim.slot_of(clip.obj)
     if mapping.stored_map(clip.obj.data) != clip.mapping:  # keep the auto-map that was used, for the panel
         mapping.store_map(clip.obj.data, clip.mapping, clip.obj.data.strnn_map.family)
     clip.action.use_fake_user = True
     anim.assign_action(clip.obj, new_action, slot.identifier if slot else None)
     first, last = (int(round(x)) for x in new_action.frame_range)
-    if context.scene.frame_end < last:
+    if scene_range and context.scene.frame_end < last:
         context.scene.frame_end = last

@@ -125,14 +125,15 @@ def report_note(action) -> str:
     return f". {note}" if note else ""
 
 
-def write_new(context, clip, suffix, frames, loc, rot, previous, replace, record: dict, bones=None):
+def write_new(context, clip, suffix, frames, loc, rot, previous, replace, record: dict, bones=None,
+              scene_range: bool = True):
     """Create the new action, key it (``bones``: only these), label it with ``record`` and assign
-    it; on failure remove it again."""
+    it (widening the scene's range to it with ``scene_range``); on failure remove it again."""
     action = pipeline.new_action_from(clip, suffix)
     try:
         action[RECORD] = record
         pipeline.write_pose(clip, action, frames, loc, rot, previous, replace, bones)
-        pipeline.finish(context, clip, action)
+        pipeline.finish(context, clip, action, scene_range)
     except Exception:
         bpy.data.actions.remove(action)
         raise

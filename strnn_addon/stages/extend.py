@@ -35,12 +35,13 @@ def context_range(clip, context_frames: int, frames: int, end: int) -> np.ndarra
 
 
 def extend_steps(context, obj, *, frames: int = 120, context_frames: int = 0, foot_lock: bool = False,
-                 from_frame: int | None = None):
+                 from_frame: int | None = None, scene_range: bool = True):
     """Continue ``obj``'s action by ``frames`` scene frames from its last ``context_frames``
     (0: just enough for the model's 20-frame context), feet locked on the new frames when
     ``foot_lock``. ``from_frame``: continue after this frame instead of the action's last, the
-    written bones' keys after it replaced. A generator: yields each stage's name before running
-    it (so a caller can report progress or stop), returns the new action."""
+    written bones' keys after it replaced. ``scene_range``: widen the scene's range to the new
+    end. A generator: yields each stage's name before running it (so a caller can report
+    progress or stop), returns the new action."""
     clip = pipeline.prepare(context, obj)
     end = clip.last if from_frame is None else int(from_frame)
     ctx_frames = context_range(clip, context_frames, frames, end)
@@ -62,4 +63,5 @@ def extend_steps(context, obj, *, frames: int = 120, context_frames: int = 0, fo
                      context_frames=len(ctx_frames), foot_lock=foot_lock, from_frame=from_frame)
     record.update(familiarity_record(model_call(engine_bridge.familiarity, prefs(context), pos, clip.fps)))
     replace = None if end == clip.last else (end + 0.5, float("inf"))  # the old tail goes
-    return write_new(context, clip, "extended", new_frames, loc, rot, previous, replace, record)
+    return write_new(context, clip, "extended", new_frames, loc, rot, previous, replace, record,
+                     scene_range=scene_range)

@@ -20,7 +20,7 @@ from .common import RECORD, familiarity_record, lock, made_by, model_steps, pref
 
 
 def follow_curve_steps(context, obj, *, curve: str = "", frames: int = 0, speed: float = 0.0, foot_lock: bool = True,
-                       steps: int = 4):
+                       steps: int = 4, scene_range: bool = True):
     """Walk ``obj`` along a curve object (``curve``: its name; '' = the selected curve) for ``frames``
     scene frames (0: until the curve ends) at ``speed`` scene units per second (0: the motion's
     own), feet locked when ``foot_lock``; ``steps`` fine-tuning steps per model window.
@@ -65,8 +65,9 @@ def follow_curve_steps(context, obj, *, curve: str = "", frames: int = 0, speed:
     if context_pos is not None:
         record.update(familiarity_record(engine_bridge.familiarity(prefs(context), context_pos, clip.fps)))
     if clip.action is not None:
-        return write_new(context, clip, "curve", new_frames, loc, rot, previous, None, record)
-    return _write_fresh(context, clip, new_frames, loc, rot, record)
+        return write_new(context, clip, "curve", new_frames, loc, rot, previous, None, record,
+                         scene_range=scene_range)
+    return _write_fresh(context, clip, new_frames, loc, rot, record, scene_range)
 
 
 def _prepare(context, obj) -> pipeline.Clip:
@@ -90,8 +91,9 @@ def _rest_joints(clip: pipeline.Clip, loc: np.ndarray, rot: np.ndarray) -> np.nd
     return zup_to_yup(local @ clip.world[:3, :3].T + clip.world[:3, 3])
 
 
-def _write_fresh(context, clip, frames, loc, rot, record: dict):
-    """A new action for an armature that had none: keyed, assigned, the scene's range widened."""
+def _write_fresh(context, clip, frames, loc, rot, record: dict, scene_range: bool = True):
+    """A new action for an armature that had none: keyed, assigned, the scene's range widened
+    (with ``scene_range``)."""
     action = bpy.data.actions.new(f"{clip.obj.name}.curve")
     clip.first, clip.last = int(frames[0]), int(frames[-1])  # no static keys outside the new frames
     try:
@@ -104,5 +106,6 @@ def _write_fresh(context, clip, frames, loc, rot, record: dict):
     except Exception:
         bpy.data.actions.remove(action)
         raise
-    context.scene.frame_end = max(context.scene.frame_end, clip.last)
+    if scene_range:
+        context.scene.frame_end = max(context.scene.frame_end, clip.last)
     return action

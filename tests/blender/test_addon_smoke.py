@@ -31,3 +31,19 @@ def test_invoke_without_a_window_runs_at_once(tmp_path, fake_model):
     obj = import_bvh(walk_bvh(tmp_path))
     assert bpy.ops.strnn.denoise_action("INVOKE_DEFAULT") == {"FINISHED"}
     assert action_of(obj).name == "walk.denoised"
+
+
+def test_scene_range_is_widened_only_when_asked_and_reported(tmp_path, fake_model, addon):
+    import importlib
+
+    operators = importlib.import_module(addon.__name__ + ".strnn_addon.operators")
+    import_bvh(walk_bvh(tmp_path))  # 90 frames
+    scene = bpy.context.scene
+    scene.frame_end = 90
+    assert bpy.ops.strnn.extend_clip(frames=10, scene_range=False) == {"FINISHED"}
+    assert scene.frame_end == 90
+    assert operators.range_note(action_of(bpy.context.active_object)) == \
+        "; the scene still ends at frame 90 (the new action runs to 100)"
+    assert bpy.ops.strnn.extend_clip(frames=10) == {"FINISHED"}
+    assert scene.frame_end == 110
+    assert operators.range_note(action_of(bpy.context.active_object)) == "; the scene now ends at frame 110"
