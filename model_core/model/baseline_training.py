@@ -17,7 +17,17 @@ import torch
 from ..io.checkpoint import save_release
 from .baselines import MODELS, ResidualGRUConfig, SiMLPeConfig
 from .dataset import Normaliser, load_folder
-from .training import Mirror, Progress, Windows, atomic_save, data_record, licence_of, pick_seeds, setup_logging
+from .training import (
+    Mirror,
+    Progress,
+    Windows,
+    atomic_save,
+    data_record,
+    licence_of,
+    pick_seeds,
+    setup_logging,
+    validation_mse,
+)
 
 
 @dataclass
@@ -53,16 +63,7 @@ def lr_scale(cfg: BaselineTrainConfig, step: int) -> float:
 
 def validate(model, val: Windows, m: int, limit: int = 1024) -> float:
     """Mean squared error of the normalised prediction on fixed validation windows."""
-    was = model.training
-    model.eval()
-    idx = np.linspace(0, len(val) - 1, min(limit, len(val))).astype(int)
-    total = 0.0
-    with torch.no_grad():
-        for chunk in np.array_split(idx, max(1, len(idx) // 256)):
-            w = val.batch(chunk)
-            total += (model(w[:, :m]) - w[:, m:]).pow(2).sum().item()
-    model.train(was)
-    return total / (len(idx) * (val.span.size - m) * w.shape[-1])
+    return validation_mse(model, model, val, m, limit)
 
 
 def prepare(cfg: BaselineTrainConfig):

@@ -233,6 +233,13 @@ def make_optimizer(cfg: TrainConfig, params):
 
 def validate(model: STRNN, val: Windows, cfg: TrainConfig, limit: int = 1024) -> float:
     """Mean squared error of the full model's prediction on fixed validation windows."""
+    m = cfg.model.encode_len
+    return validation_mse(model, lambda context: model(context)[:, m:], val, m, limit)
+
+
+def validation_mse(model, predict, val: Windows, m: int, limit: int = 1024) -> float:
+    """Mean squared error of ``predict(context (B, m, C)) -> (B, T - m, C)`` (``model`` in eval mode
+    meanwhile) on up to ``limit`` fixed, evenly spread validation windows."""
     was = model.training
     model.eval()
     idx = np.linspace(0, len(val) - 1, min(limit, len(val))).astype(int)
@@ -240,10 +247,9 @@ def validate(model: STRNN, val: Windows, cfg: TrainConfig, limit: int = 1024) ->
     with torch.no_grad():
         for chunk in np.array_split(idx, max(1, len(idx) // 256)):
             w = val.batch(chunk)
-            out = model(w[:, : cfg.model.encode_len])
-            total += (out[:, cfg.model.encode_len:] - w[:, cfg.model.encode_len:]).pow(2).sum().item()
+            total += (predict(w[:, :m]) - w[:, m:]).pow(2).sum().item()
     model.train(was)
-    return total / (len(idx) * cfg.model.predict_len * w.shape[-1])
+    return total / (len(idx) * (val.span.size - m) * w.shape[-1])
 
 
 def atomic_save(obj, path: Path):
