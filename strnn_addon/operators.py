@@ -182,11 +182,12 @@ class STRNN_OT_denoise_action(_Staged, bpy.types.Operator):
     frame_start: options.range_start("Denoise")
     frame_end: options.range_end("Denoise")
     foot_lock: options.foot_lock(False)
+    only_selected: options.only_selected()
 
     def steps(self, context):
         start, end = (self.frame_start, self.frame_end) if self.use_range else (None, None)
         return denoise_steps(context, context.active_object, frame_start=start, frame_end=end,
-                             strength=self.strength, foot_lock=self.foot_lock)
+                             strength=self.strength, foot_lock=self.foot_lock, only_selected=self.only_selected)
 
     def done(self, action) -> str:
         return f"Denoised into new action {action.name!r}"
@@ -203,10 +204,12 @@ class STRNN_OT_foot_lock(_Staged, bpy.types.Operator):
     use_range: options.use_range("Lock")
     frame_start: options.range_start("Lock")
     frame_end: options.range_end("Lock")
+    only_selected: options.only_selected()
 
     def steps(self, context):
         start, end = (self.frame_start, self.frame_end) if self.use_range else (None, None)
-        return foot_lock_steps(context, context.active_object, frame_start=start, frame_end=end, blend=self.blend)
+        return foot_lock_steps(context, context.active_object, frame_start=start, frame_end=end, blend=self.blend,
+                               only_selected=self.only_selected)
 
     def done(self, action) -> str:
         return f"Locked the feet into new action {action.name!r}"

@@ -41,6 +41,11 @@ def scene_range():
                                     "(the report says so either way)")
 
 
+def only_selected():
+    return BoolProperty(name="Only Selected Bones", default=False,
+                        description="Write new keys only on the selected bones; the others keep their keys exactly")
+
+
 def foot_lock(default: bool):
     return BoolProperty(name="Foot Lock", default=default, description=FOOT_LOCK_TIP)
 

@@ -62,6 +62,7 @@ class FootLockSettings:
     softness: float = 0.03  # fraction of the leg's reach over which an unreachable target eases out
     max_offset: float = 0.35  # legs' lengths: a span needing a bigger correction is no contact, left alone
     floor_tolerance: float = 0.01  # metres (for a standard body): contacts this close to the floor stay
+    lower_body: bool = True  # after fixed frames, a body whose feet hover may come down as a whole
 
 
 def contacts_from_features(feats: np.ndarray) -> np.ndarray:
@@ -352,7 +353,7 @@ def foot_lock(pos: np.ndarray, fps: float = MODEL_FPS, contacts: np.ndarray | No
     limit = cfg.max_offset * leg_length(pos)
     rest = rest_heights(pos, mask, fixed if fixed.any() else None)
     tolerance = cfg.floor_tolerance * leg_length(pos) / STANDARD_LEG_LENGTH
-    if rest is not None and fixed.any():  # below the frames kept, a hovering body comes down first
+    if rest is not None and fixed.any() and cfg.lower_body:  # after the frames kept, a hovering body comes down
         pos = pos.copy()
         drop = body_drop(pos, mask, cfg.blend_s * fps, fixed if fixed.any() else None, rest, tolerance)
         pos[..., UP_AXIS] += drop[:, None]

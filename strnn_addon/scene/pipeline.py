@@ -143,6 +143,25 @@ def new_action_from(clip: Clip, suffix: str):
     return new
 
 
+def selected_bones(clip: Clip, among: list[int]) -> list[int]:
+    """The bones of ``among`` selected in the armature (pose selection; Blender 5 keeps it on the pose
+    bone, 4.x on the bone)."""
+    def selected(b: int) -> bool:
+        pb = clip.obj.pose.bones[clip.rig.names[b]]
+        return bool(pb.select if hasattr(pb, "select") else pb.bone.select)
+
+    return [b for b in among if selected(b)]
+
+
+def only_selected(clip: Clip, among: list[int], what: str) -> list[int]:
+    """:func:`selected_bones`, or a :class:`UserError` saying what to select when none is."""
+    chosen = selected_bones(clip, among)
+    if not chosen:
+        raise UserError(f"No bone that {what} is selected in {clip.obj.name!r}: select them in Pose Mode, or turn "
+                        "off Only Selected Bones")
+    return chosen
+
+
 def leg_bones(clip: Clip) -> list[int]:
     """The written bones from each upper leg down (what a foot lock changes)."""
     uplegs = [int(clip.anchors.bone[JOINT_INDEX[j]]) for j in ("l_upleg", "r_upleg")]

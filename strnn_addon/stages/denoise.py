@@ -17,11 +17,13 @@ def denoise_action(context, obj, *, progress=noop, **options):
 
 
 def denoise_steps(context, obj, *, frame_start: int | None = None, frame_end: int | None = None,
-                  strength: float = 1.0, foot_lock: bool = False):
+                  strength: float = 1.0, foot_lock: bool = False, only_selected: bool = False):
     """Denoise ``obj``'s action over [frame_start, frame_end] (default: the whole action),
-    blending the model's output by ``strength``, then lock the feet when ``foot_lock``.
+    blending the model's output by ``strength``, then lock the feet when ``foot_lock``; with
+    ``only_selected`` only the selected bones get new keys (the others keep theirs exactly).
     A generator like :func:`.extend.extend_steps`."""
     clip = pipeline.prepare(context, obj)
+    bones = pipeline.only_selected(clip, pipeline.written_bones(clip), "Denoise writes") if only_selected else None
     need = pipeline.min_scene_frames(clip.fps)
     a, b = frame_range(clip, frame_start, frame_end, need, f"denoising needs at least {need} at {clip.fps:g} fps")
     frames = np.arange(a, b + 1, dtype=np.float64)
@@ -38,5 +40,5 @@ def denoise_steps(context, obj, *, frame_start: int | None = None, frame_end: in
     loc, rot = solve(clip.rig, clip.anchors, pipeline.to_armature(clip, clean), ref_loc, ref_rot)
     yield "write"
     record = made_by("Denoise Action", clip, engine_bridge.model_used(prefs(context), "denoise"), frame_start=a,
-                     frame_end=b, strength=float(strength), foot_lock=foot_lock)
-    return write_new(context, clip, "denoised", frames, loc, rot, previous, (a, b), record)
+                     frame_end=b, strength=float(strength), foot_lock=foot_lock, only_selected=only_selected)
+    return write_new(context, clip, "denoised", frames, loc, rot, previous, (a, b), record, bones=bones)

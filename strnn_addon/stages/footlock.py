@@ -14,11 +14,14 @@ MIN_LOCK_FRAMES = 3
 
 
 def foot_lock_steps(context, obj, *, frame_start: int | None = None, frame_end: int | None = None,
-                    blend: float = footlock.FootLockSettings.blend_s):
+                    blend: float = footlock.FootLockSettings.blend_s, only_selected: bool = False):
     """Pin the feet of ``obj``'s action on the ground while they touch it, over [frame_start,
     frame_end] (default: the whole action), fading locks in and out over ``blend`` seconds.
-    Only the leg bones get new keys. A generator like :func:`.extend.extend_steps`."""
+    Only the leg bones get new keys (with ``only_selected``, only the selected ones). A generator
+    like :func:`.extend.extend_steps`."""
     clip = pipeline.prepare(context, obj)
+    legs = pipeline.leg_bones(clip)
+    bones = pipeline.only_selected(clip, legs, "Foot Lock writes (the legs)") if only_selected else legs
     a, b = frame_range(clip, frame_start, frame_end, MIN_LOCK_FRAMES, f"foot lock needs at least {MIN_LOCK_FRAMES}")
     frames = np.arange(max(a - 1, clip.first), min(b + 1, clip.last) + 1, dtype=np.float64)
     inside = (frames >= a) & (frames <= b)  # plus one untouched frame either side to continue from
@@ -31,10 +34,10 @@ def foot_lock_steps(context, obj, *, frame_start: int | None = None, frame_end: 
     if not contacts[inside].any():
         raise UserError(f"No foot touches the ground in frames {a}-{b} of {clip.action.name!r} (feet near their "
                         "lowest height and slower than 0.6 m/s): nothing to lock")
-    locked = lock(pos, clip.fps, contacts=contacts, fixed=~inside, blend=blend)
+    locked = lock(pos, clip.fps, contacts=contacts, fixed=~inside, blend=blend, lower_body=False)
     yield "solve"
     loc, rot = solve(clip.rig, clip.anchors, pipeline.to_armature(clip, locked), ref_loc, ref_rot)
     yield "write"
-    record = made_by("Foot Lock", clip, frame_start=a, frame_end=b, blend=float(blend))
+    record = made_by("Foot Lock", clip, frame_start=a, frame_end=b, blend=float(blend), only_selected=only_selected)
     return write_new(context, clip, "footlocked", frames[inside], loc[inside], rot[inside], previous, (a, b),
-                      record, bones=pipeline.leg_bones(clip))
+                     record, bones=bones)

@@ -152,3 +152,31 @@ def test_denoise_model_folder_preference_picks_the_denoiser(real_model, addon, t
     assert np.isfinite(outputs[1]).all()
     if expected != Path(real_model):
         assert np.abs(outputs[0] - outputs[1]).max() > 1e-3  # a different model gave a different result
+
+
+def select(obj, names: set) -> None:
+    """Select exactly the pose bones ``names`` (Blender 5 keeps pose selection on the pose bone, 4.x on the bone)."""
+    for pb in obj.pose.bones:
+        if hasattr(pb, "select"):
+            pb.select = pb.name in names
+        else:
+            pb.bone.select = pb.name in names
+
+
+def test_only_selected_bones_get_new_keys(real_model, addon, tmp_path):
+    """Only Selected Bones: the selected bones are denoised, every other F-curve keeps its keys
+    exactly; with nothing of the map selected, the operator says what to select and changes nothing."""
+    obj = import_bvh(walk_bvh(tmp_path, frames=60))
+    shake(obj)
+    before = key_snapshot(obj)
+    chosen = {"LeftUpLeg", "LeftLeg"}
+    select(obj, chosen)
+    assert bpy.ops.strnn.denoise_action(only_selected=True) == {"FINISHED"}
+    after = key_snapshot(obj)
+    changed = {path.split('"')[1] for path, _ in before if not np.array_equal(before[path, _], after[path, _])}
+    assert changed and changed <= chosen
+    select(obj, set())
+    snapshot = key_snapshot(obj)
+    with pytest.raises(RuntimeError, match="No bone that Denoise writes is selected"):
+        bpy.ops.strnn.denoise_action(only_selected=True)
+    assert same_keys(snapshot, key_snapshot(obj))

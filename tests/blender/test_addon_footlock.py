@@ -143,3 +143,19 @@ def test_too_short_range_is_refused(addon, tmp_path):
 def test_clip_without_contacts_is_refused(addon, tmp_path):
     import_bvh(write_bvh(tmp_path / "run.bvh", walking_skeleton(40, speed=4.0)))  # the feet never rest
     refused("No foot touches the ground")
+
+
+def test_only_selected_bones_lock_only_those_legs(addon, tmp_path):
+    """With Only Selected Bones and the left leg selected, only left-leg keys change."""
+    obj = import_sliding(tmp_path)
+    left = {pb.name for pb in obj.pose.bones if pb.name.startswith(("LeftUpLeg", "LeftLeg", "LeftFoot"))}
+    assert left
+    for pb in obj.pose.bones:
+        if hasattr(pb, "select"):  # Blender 5 keeps pose selection on the pose bone, 4.x on the bone
+            pb.select = pb.name in left
+        else:
+            pb.bone.select = pb.name in left
+    old, new = lock(only_selected=True)
+    old_keys, new_keys = key_snapshot(obj, old), key_snapshot(obj, new)
+    changed = {key[0].split('"')[1] for key, co in old_keys.items() if not np.array_equal(co, new_keys[key])}
+    assert changed and changed <= left

@@ -31,8 +31,10 @@ def test_extend_then_denoise_then_lock(addon, tmp_path, real_model):
     denoised = record(obj)
     assert denoised["operation"] == "Denoise Action" and denoised["source_action"] == extended
     assert denoised["model"].endswith("strnn_denoise")  # the bundled denoising model
-    assert denoised["settings"] == {"frame_start": 5, "frame_end": 70, "strength": 0.5, "foot_lock": False}
+    assert denoised["settings"] == {"frame_start": 5, "frame_end": 70, "strength": 0.5, "foot_lock": False,
+                                    "only_selected": False}
     assert bpy.ops.strnn.foot_lock(blend=0.2) == {"FINISHED"}
     locked = record(obj)
     assert locked["operation"] == "Foot Lock" and "model" not in locked
-    assert locked["settings"] == {"frame_start": 1, "frame_end": 90, "blend": pytest.approx(0.2)}
+    assert locked["settings"] == {"frame_start": 1, "frame_end": 90, "blend": pytest.approx(0.2),
+                                  "only_selected": False}
