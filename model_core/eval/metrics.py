@@ -9,7 +9,7 @@ import numpy as np
 from scipy.signal import butter, filtfilt
 
 from ..motion.conventions import CONTACT_JOINTS, LAYOUT, MODEL_FPS, PARENTS, ROOT, UP_AXIS
-from ..motion.features import RootStart, features_to_positions, integrate_root, positions_to_features
+from ..motion.features import continue_positions, features_to_positions, positions_to_features
 from ..ops.seam import blend_seam
 
 HORIZONS_MS = (80, 160, 320, 400, 560, 1000)
@@ -41,16 +41,12 @@ def prediction_windows(clips: list[np.ndarray], horizon: int, context: int = CON
 
 
 def extend_batch(engine, contexts: np.ndarray, frames: int) -> np.ndarray:
-    """Continue each context ``[W, m, J, 3]`` by ``frames``: ``[W, frames, J, 3]``. Features are
-    computed from the context alone (nothing of the future leaks in)."""
+    """Continue each context ``[W, m, J, 3]`` by ``frames``: ``[W, frames, J, 3]``, as
+    :meth:`Engine.extend` does one, in one batch. Features are computed from the context alone
+    (nothing of the future leaks in)."""
     feats, starts = zip(*(positions_to_features(c) for c in contexts))
     new = engine.extrapolate(np.stack(feats), frames)
-    out = np.empty((len(contexts), frames) + contexts.shape[2:], np.float32)
-    for i, (f, s) in enumerate(zip(feats, starts)):
-        root, yaw = integrate_root(f, s)
-        joined = np.concatenate([f[-1:], new[i]])
-        out[i] = features_to_positions(joined, RootStart(root[-1], float(yaw[-1])))[1:]
-    return out
+    return np.stack([continue_positions(f, s, n) for f, s, n in zip(feats, starts, new)]).astype(np.float32)
 
 
 def prediction_errors(engine, clips: list[np.ndarray], horizons_ms=HORIZONS_MS,

@@ -16,7 +16,14 @@ import numpy as np
 
 from ..io.checkpoint import Checkpoint, load_release
 from ..motion.conventions import LAYOUT, PARENTS
-from ..motion.features import RootStart, features_to_positions, integrate_root, positions_to_features, yaw_matrix
+from ..motion.features import (
+    RootStart,
+    continue_positions,
+    features_to_positions,
+    integrate_root,
+    positions_to_features,
+    yaw_matrix,
+)
 from ..ops.seam import PREDICT_SEAM_FRAMES, seam_fade
 from .spatial_fold import fold_spatial
 from .steps import drive
@@ -205,10 +212,7 @@ class Engine:
         """Continue global positions ``[F, 21, 3]`` (metres, Y-up, 30 fps, F >= m) by
         ``frames`` new frames ``[frames, 21, 3]``, root motion continuing."""
         feats, start = positions_to_features(positions)
-        root, yaw = integrate_root(feats, start)
-        new = self.extrapolate(feats[-self.m:], frames, **kw)
-        joined = np.concatenate([feats[-1:], new])
-        return features_to_positions(joined, RootStart(root[-1], float(yaw[-1])))[1:]
+        return continue_positions(feats, start, self.extrapolate(feats[-self.m:], frames, **kw))
 
     def denoise_positions(self, positions: np.ndarray, root_weight: float = 3.0,
                           yaw_weight: float = 10.0) -> np.ndarray:

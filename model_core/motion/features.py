@@ -124,6 +124,15 @@ def features_to_positions(feats: np.ndarray, start: RootStart | None = None) -> 
     return (np.einsum("fij,fkj->fki", yaw_matrix(yaw), local) + root[:, None]).astype(np.float32)
 
 
+def continue_positions(feats: np.ndarray, start: RootStart, new: np.ndarray) -> np.ndarray:
+    """Global positions ``[N, 21, 3]`` of new feature frames ``new`` ``[N, C]`` that follow a clip's
+    features ``feats`` ``[F, C]`` (integrated from ``start``): the root goes on from where the clip's
+    last frame has it, as the clip's last velocity and yaw rate lead."""
+    root, yaw = integrate_root(feats, start)
+    joined = np.concatenate([feats[-1:], new])
+    return features_to_positions(joined, RootStart(root[-1], float(yaw[-1])))[1:]
+
+
 def _mirror_map() -> tuple[np.ndarray, np.ndarray]:
     """(source channel ``[C]``, sign ``[C]``) of the left-right mirror of a feature frame."""
     swap = {"l_": "r_", "r_": "l_"}

@@ -41,6 +41,7 @@ from ..io.checkpoint import Checkpoint, load_release, walk_seed_index
 from ..motion.conventions import CONTACT_JOINTS, LAYOUT, MODEL_FPS, PARENTS, UP_AXIS
 from ..motion.features import (
     RootStart,
+    continue_positions,
     features_to_positions,
     heading,
     integrate_root,
@@ -301,9 +302,7 @@ def follow_path_steps(follower: PathFollower, seed: np.ndarray, path: Path, fram
     seed = align_to_path(seed, path) if align else np.asarray(seed, np.float32)
     feats, start = positions_to_features(seed)
     new = yield from follower.follow_steps(feats, start, path, frames)
-    root, yaw = integrate_root(feats, start)
-    joined = np.concatenate([feats[-1:], new])
-    return features_to_positions(joined, RootStart(root[-1], float(yaw[-1])))[1:], new
+    return continue_positions(feats, start, new), new
 
 
 def walk_seed(ckpt: Checkpoint) -> np.ndarray:

@@ -99,3 +99,11 @@ def test_salsa_header_frame_rate_is_overridden(mocap_root, smallest_bvh):
     assert fps_override(path.relative_to(mocap_root)) == 60
     pos = load_clip(path, fps=60)
     assert len(pos) == (header.frames - 1) // 2 + 1  # 60 -> 30 fps keeps every second frame
+
+
+def test_continue_positions_goes_on_from_the_last_frame():
+    from model_core.motion.features import continue_positions
+
+    pos = walking_skeleton(120, radius=4.0)
+    feats, start = positions_to_features(pos)  # the clip's features: the first 60 frames, then the rest
+    np.testing.assert_allclose(continue_positions(feats[:60], start, feats[60:]), pos[60:], atol=1e-4)
