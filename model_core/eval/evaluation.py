@@ -9,7 +9,7 @@ import numpy as np
 
 from ..model.dataset import MotionData
 from ..motion.conventions import MODEL_FPS
-from ..motion.features import positions_to_features
+from ..motion.features import floor_height, positions_to_features
 from ..ops.denoise import denoise_positions
 from .metrics import (
     HORIZONS_MS,
@@ -17,7 +17,6 @@ from .metrics import (
     add_pops,
     best_butterworth,
     best_median,
-    floor_height,
     joint_speed,
     mpjpe_cm,
     pose_vectors,

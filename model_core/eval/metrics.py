@@ -8,8 +8,14 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.signal import butter, filtfilt
 
-from ..motion.conventions import CONTACT_JOINTS, LAYOUT, MODEL_FPS, PARENTS, ROOT, UP_AXIS
-from ..motion.features import continue_positions, features_to_positions, positions_to_features
+from ..motion.conventions import LAYOUT, MODEL_FPS, PARENTS, ROOT
+from ..motion.features import (
+    continue_positions,
+    features_to_positions,
+    lowest_foot,
+    positions_to_features,
+)
+from ..ops.fusion import running_median
 from ..ops.seam import blend_seam
 
 HORIZONS_MS = (80, 160, 320, 400, 560, 1000)
@@ -113,16 +119,6 @@ class FeetReport:
     sink_cm: float  # how far the lowest foot goes below the floor (99th percentile over frames, >= 0)
 
 
-def lowest_foot(pos: np.ndarray) -> np.ndarray:
-    """Height ``[F]`` of the lowest heel or toe joint of positions ``[F, J, 3]``."""
-    return pos[:, CONTACT_JOINTS, UP_AXIS].min(1)
-
-
-def floor_height(pos: np.ndarray) -> float:
-    """The floor a take stands on: the 5th percentile of its lowest foot joint's height."""
-    return float(np.percentile(lowest_foot(pos), 5))
-
-
 def feet_report(pos: np.ndarray, floor: float, fps: float = MODEL_FPS) -> FeetReport:
     """Grounding of positions ``[F, J, 3]`` against a ``floor`` height (metres)."""
     height = lowest_foot(pos) - floor
@@ -200,9 +196,7 @@ def add_pops(pos: np.ndarray, rate: float, rng: np.random.Generator, low_m: floa
 
 def median_filter(pos: np.ndarray, size: int) -> np.ndarray:
     """Running median along time of ``[F, ...]`` over ``size`` (odd) frames, the ends repeated."""
-    r = size // 2
-    padded = np.concatenate([np.repeat(pos[:1], r, 0), pos, np.repeat(pos[-1:], r, 0)])
-    return np.median(np.stack([padded[k:k + len(pos)] for k in range(size)]), 0).astype(np.float32)
+    return running_median(np.asarray(pos), size // 2).astype(np.float32)
 
 
 def best_median(clean: list[np.ndarray], noisy: list[np.ndarray], sizes=(3, 5, 7, 9)) -> tuple[float, int]:

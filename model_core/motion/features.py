@@ -23,12 +23,18 @@ CONTACT_SPEED = 0.6  # metres per second
 HEADING_SIGMA_FRAMES = 3.0
 
 
+def gaussian_taps(sigma: float) -> np.ndarray:
+    """The normalised taps ``[2 r + 1]`` of :func:`gaussian_smooth` (radius ``r`` = 4 sigma, rounded)."""
+    radius = int(4.0 * sigma + 0.5)
+    taps = np.exp(-0.5 * (np.arange(-radius, radius + 1) / sigma) ** 2)
+    return taps / taps.sum()
+
+
 def gaussian_smooth(x: np.ndarray, sigma: float) -> np.ndarray:
     """Gaussian filter along axis 0 with edge padding; equals ``scipy.ndimage.gaussian_filter1d``
     (mode ``nearest``, truncate 4). NumPy only, because Blender's Python has no SciPy."""
-    radius = int(4.0 * sigma + 0.5)
-    taps = np.exp(-0.5 * (np.arange(-radius, radius + 1) / sigma) ** 2)
-    taps /= taps.sum()
+    taps = gaussian_taps(sigma)
+    radius = len(taps) // 2
     padded = np.concatenate([np.repeat(x[:1], radius, 0), x, np.repeat(x[-1:], radius, 0)])
     return sum(w * padded[k:k + len(x)] for k, w in enumerate(taps))
 
@@ -63,6 +69,16 @@ def heading(pos: np.ndarray, sigma: float = HEADING_SIGMA_FRAMES) -> np.ndarray:
     if sigma > 0 and len(fwd) > 1:
         fwd = gaussian_smooth(fwd, sigma)
     return np.unwrap(np.arctan2(fwd[:, 0], fwd[:, 2]))
+
+
+def lowest_foot(pos: np.ndarray) -> np.ndarray:
+    """Height ``[F]`` of the lowest heel or toe joint of positions ``[F, J, 3]``."""
+    return np.asarray(pos)[:, CONTACT_JOINTS, UP_AXIS].min(1)
+
+
+def floor_height(pos: np.ndarray) -> float:
+    """The floor a clip stands on: the 5th percentile of its lowest foot joint's height."""
+    return float(np.percentile(lowest_foot(pos), 5))
 
 
 def detect_contacts(pos: np.ndarray, fps: float = MODEL_FPS) -> np.ndarray:

@@ -32,12 +32,12 @@ def denoise_positions_steps(engine, pos: np.ndarray, fps: float, strength: float
     fixed, found = fusion.assess(np.asarray(pos, np.float64))
     # Scale and ground from a smoothed clip: noise lengthens the legs and lowers the lowest foot.
     norm = fit_normalisation(gaussian_smooth(fixed, fps / 15.0) if len(fixed) > 1 else fixed)
-    x, fixed = norm.to_model(pos).astype(np.float64), norm.to_model(fixed).astype(np.float64)
+    fixed = norm.to_model(fixed).astype(np.float64)
     found = fusion.Assessment(found.noise_m * norm.scale, found.pops)
     frames = np.arange(len(pos)) / fps
     phases = [k / fps for k in range(max(1, int(round(fps / MODEL_FPS))))]
     phases = [p for p in phases if len(_model_times(duration, p)) >= engine.m] or [0.0]
-    prior = np.zeros_like(x)
+    prior = np.zeros_like(fixed)
     for i, phase in enumerate(phases):
         times = _model_times(duration, phase)
         clean = yield from _scaled(engine.denoise_positions_steps(sample_at(fixed, fps, times).astype(np.float32)),
@@ -60,13 +60,11 @@ def _model_times(duration: float, phase: float) -> np.ndarray:
 
 def _scaled(steps, start: float, share: float):
     """Re-yield a step generator's fractions as ``start + share * fraction``; return its value."""
-    value = yield from ((start + share * f) for f in ())  # keeps this a generator when steps is empty
     try:
         while True:
             yield start + share * next(steps)
     except StopIteration as stop:
-        value = stop.value
-    return value
+        return stop.value
 
 
 def _sample_times(x: np.ndarray, src_times: np.ndarray, times: np.ndarray) -> np.ndarray:

@@ -22,7 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..motion.features import gaussian_smooth
+from ..motion.features import gaussian_smooth, gaussian_taps
 
 D4_NOISE_GAIN = np.sqrt(70.0)  # std of the 4th difference of unit white noise
 POP_FLOOR_M = 0.05  # a pop moves a joint at least this far from where its neighbours put it
@@ -31,8 +31,7 @@ POP_FILL_ERROR_M = 0.005  # how far a repaired pop may be from the truth
 POP_SPEED_SHARE = 0.5  # ... and half the distance the joint travels per frame around it
 MODEL_ERROR_FLOOR_M = 0.003  # the model is never trusted beyond this accuracy
 NOISE_FLOOR_M = 0.0001  # nor the input beyond this one (clean capture reads as clean: it is kept)
-ORDER = 2  # the prior penalises this difference in time (2: acceleration, 3: jerk)
-NOISE_GAIN = {2: 6.0, 3: 20.0}  # variance of that difference of unit white noise
+D2_NOISE_GAIN = 6.0  # variance of the 2nd difference of unit white noise
 BIAS_WINDOW_S = 0.1  # sigma of the low-pass that separates the model's error from the input's noise
 TRUST_WINDOW_S = 0.25  # sigma of the window over which the model's error is measured
 
@@ -75,9 +74,12 @@ def _extrapolated(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 def repair_pops(pos: np.ndarray, rounds: int = 3) -> tuple[np.ndarray, np.ndarray]:
     """(positions with pops replaced by their neighbours' cubic, pops ``bool [F, J]``).
 
-    A pop is a joint-frame whose distance from that cubic is a local maximum in time and above
-    both :data:`POP_FLOOR_M` and :data:`POP_FACTOR` times the joint's median distance. Repeated
-    ``rounds`` times, so that pops next to each other are found one after the other."""
+    A pop is a joint-frame off the lines through the two frames before it and the two after it,
+    on both sides and the same way (a sudden stop is off only one of them), by a distance that is
+    a local maximum in time and above :data:`POP_FLOOR_M`, :data:`POP_FACTOR` times the joint's
+    median and :data:`POP_SPEED_SHARE` of its distance per frame. The first and last two frames
+    are left to :func:`fuse`. Repeated ``rounds`` times, so that pops near each other are found
+    one after the other."""
     x = np.array(pos, np.float64)
     pops = np.zeros(x.shape[:2], bool)
     if len(x) < 5:
@@ -110,18 +112,18 @@ def assess(pos: np.ndarray) -> tuple[np.ndarray, Assessment]:
 def fuse(pos: np.ndarray, model: np.ndarray, found: Assessment, fps: float) -> np.ndarray:
     """The motion ``[F, J, 3]`` that weighs the pop-repaired input ``pos`` by its noise (less at the
     repaired pops) and the model's estimate ``model`` by its measured error, with a penalty on
-    acceleration.
+    acceleration, solved exactly (:func:`solve_smooth`).
 
-    The model's error is the running median, over :data:`TRUST_WINDOW_S` on each side, of its
-    squared distance from the input less the input's noise: a median, so that one bad frame does
-    not make the model look wrong around it. The first and last two frames, where pops cannot be
-    told from their neighbours, count as pops when the input is far from the model there."""
+    The model's error comes from :func:`model_error2`. The first and last two frames, where pops
+    cannot be told from their neighbours, count as pops when the input is more than five sigma
+    from the model there."""
     x = np.asarray(pos, np.float64)
     m = np.asarray(model, np.float64)
     f, j = x.shape[:2]
     sigma2 = found.noise_m ** 2  # (J,)
-    gap2 = ((x - m) ** 2).sum(-1)  # (F, J)
-    tau2 = model_error2(x - m, sigma2, fps)
+    gap = x - m
+    gap2 = (gap ** 2).sum(-1)  # (F, J)
+    tau2 = model_error2(gap, sigma2, fps)
     pops = found.pops.copy()
     edge = np.r_[:min(2, f), max(f - 2, 0):f]
     pops[edge] |= gap2[edge] > np.maximum(POP_FLOOR_M ** 2, 25.0 * 3.0 * (sigma2 + tau2[edge]))
@@ -132,8 +134,8 @@ def fuse(pos: np.ndarray, model: np.ndarray, found: Assessment, fps: float) -> n
     # The prior's strength: the acceleration the motion itself has, the larger of what the input shows
     # beyond its noise and what the model's (noise-free) estimate shows.
     if f > 2:
-        q = np.maximum((np.diff(x, n=ORDER, axis=0) ** 2).mean((0, 2)) - NOISE_GAIN[ORDER] * sigma2,
-                       (np.diff(m, n=ORDER, axis=0) ** 2).mean((0, 2)))
+        q = np.maximum((np.diff(x, n=2, axis=0) ** 2).mean((0, 2)) - D2_NOISE_GAIN * sigma2,
+                       (np.diff(m, n=2, axis=0) ** 2).mean((0, 2)))
     else:
         q = np.ones(j)
     lam = 1.0 / np.maximum(q, 1e-10)
@@ -149,9 +151,8 @@ def model_error2(gap: np.ndarray, sigma2: np.ndarray, fps: float) -> np.ndarray:
     over :data:`TRUST_WINDOW_S` on each side so that one bad frame does not make the model look
     wrong around it."""
     sigma = max(1.0, BIAS_WINDOW_S * fps)
-    radius = int(4.0 * sigma + 0.5)
-    taps = np.exp(-0.5 * (np.arange(-radius, radius + 1) / sigma) ** 2)
-    left = (taps / taps.sum()) @ (taps / taps.sum())  # share of white noise variance left after the filter
+    taps = gaussian_taps(sigma)
+    left = taps @ taps  # share of white noise variance left after the filter
     bias2 = (gaussian_smooth(gap, sigma) ** 2).sum(-1) / 3.0 - left * sigma2
     # The noise is white and the acceleration prior removes most of it, the model's error is slow and
     # stays: it is weighed against the input's noise as it is after the low-pass, not as it is raw.

@@ -15,11 +15,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..motion.conventions import JOINT_INDEX, MODEL_FPS, STANDARD_LEG_LENGTH, UP_AXIS
+from ..motion.conventions import MODEL_FPS, STANDARD_LEG_LENGTH, UP_AXIS
+from ..motion.features import floor_height
 from ..motion.geometry import interpolate_frames
 from ..rig.rigs import leg_length
-
-FEET = [JOINT_INDEX[j] for j in ("l_foot", "l_toe", "r_foot", "r_toe")]
 
 
 @dataclass
@@ -45,8 +44,7 @@ def fit_normalisation(pos: np.ndarray) -> Normalisation:
     legs = leg_length(pos)
     if not np.isfinite(legs) or legs <= 1e-9:
         raise ValueError("the mapped legs have zero length; check the hip, knee and foot bones of the bone map")
-    ground = float(np.percentile(np.asarray(pos)[:, FEET, UP_AXIS].min(axis=1), 5))
-    return Normalisation(STANDARD_LEG_LENGTH / legs, ground)
+    return Normalisation(STANDARD_LEG_LENGTH / legs, floor_height(pos))
 
 
 def sample_at(x: np.ndarray, fps: float, times: np.ndarray) -> np.ndarray:

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from model_core.eval.metrics import feet_report, floor_height, joint_speed, pose_vectors, rollout_report, segments
+from model_core.eval.metrics import feet_report, joint_speed, pose_vectors, rollout_report, segments
 from model_core.motion.conventions import UP_AXIS
-from model_core.motion.features import positions_to_features
+from model_core.motion.features import floor_height, positions_to_features
 from model_core.motion.synthetic import walking_skeleton
 
 
