@@ -83,3 +83,15 @@ def baseline_release(tmp_path):
         return folder
 
     return make
+
+
+@pytest.fixture(scope="session")
+def walk_folder(tmp_path_factory) -> Path:
+    """A dozen synthetic walking clips written as BVH files (the training tests' data folder)."""
+    from model_core.io.bvh_export import write_bvh
+    from model_core.motion.synthetic import walking_skeleton
+
+    root = tmp_path_factory.mktemp("walks")
+    for i in range(12):
+        write_bvh(root / f"walk_{i:02d}.bvh", walking_skeleton(frames=90, speed=0.8 + 0.1 * i, radius=3.0 + i))
+    return root

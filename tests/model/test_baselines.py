@@ -15,7 +15,6 @@ torch = pytest.importorskip("torch")
 
 from model_core.inference.engine import Engine  # noqa: E402
 from model_core.inference.torch_engine import TorchEngine  # noqa: E402
-from model_core.io.bvh_export import write_bvh  # noqa: E402
 from model_core.io.checkpoint import DEFAULT_MODEL, CheckpointError  # noqa: E402
 from model_core.model.baseline_training import BaselineTrainConfig, lr_scale, train_baseline  # noqa: E402
 from model_core.model.baselines import (  # noqa: E402
@@ -28,7 +27,6 @@ from model_core.model.baselines import (  # noqa: E402
     dct_matrix,
 )
 from model_core.motion.conventions import LAYOUT  # noqa: E402
-from model_core.motion.synthetic import walking_skeleton  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(REPO / "scripts"))
@@ -37,15 +35,6 @@ import train as train_script  # noqa: E402
 
 C = LAYOUT.size
 TINY = {"simlpe": ["--blocks", "2"], "residual_gru": ["--width", "16"]}
-
-
-@pytest.fixture(scope="module")
-def walk_folder(tmp_path_factory) -> Path:
-    """A dozen synthetic walking clips written as BVH files."""
-    root = tmp_path_factory.mktemp("walks")
-    for i in range(12):
-        write_bvh(root / f"walk_{i:02d}.bvh", walking_skeleton(frames=90, speed=0.8 + 0.1 * i, radius=3.0 + i))
-    return root
 
 
 def test_dct_is_orthonormal():

@@ -14,24 +14,12 @@ import pytest
 import torch
 from safetensors.numpy import load_file
 
-from model_core.io.bvh_export import write_bvh
 from model_core.model.dataset import Normaliser
 from model_core.model.strnn import STRNN, STRNNConfig, smoothness_cost
 from model_core.model.training import Mirror, TrainConfig, rolled_context, rollout_batch, train, window_loss
 from model_core.motion.features import mirror_features
-from model_core.motion.synthetic import walking_skeleton
 
 REPO = Path(__file__).resolve().parents[2]
-
-
-@pytest.fixture(scope="module")
-def walk_folder(tmp_path_factory) -> Path:
-    """A dozen synthetic walking clips written as BVH files."""
-    root = tmp_path_factory.mktemp("walks")
-    for i in range(12):
-        pos = walking_skeleton(frames=90, speed=0.8 + 0.1 * i, radius=3.0 + i)
-        write_bvh(root / f"walk_{i:02d}.bvh", pos)
-    return root
 
 
 def tiny(**kw) -> STRNNConfig:
