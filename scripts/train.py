@@ -56,6 +56,9 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--smooth-weight", type=float, default=1.0, help="weight of the long-horizon cost")
     p.add_argument("--recon-weight", type=float, default=1.0,
                    help="weight of the reconstructed context frames against the predicted frames in the MSE")
+    p.add_argument("--velocity-weight", type=float, default=TrainConfig.velocity_weight,
+                   help="weight of the error of the joints' frame-to-frame motion from the context's last frame "
+                        "through the prediction (0: off)")
     p.add_argument("--rollout-windows", type=int, default=0,
                    help="train on contexts the model generated itself, open loop for up to this many windows "
                         "(0: off)")
@@ -111,7 +114,7 @@ def strnn_run(args, argv):
                         offsets=args.offsets, **VARIANTS[args.variant])
     cfg = TrainConfig(data=args.data, out=args.out, model=model, steps=args.steps, batch=args.batch,
                       optimizer=args.optimizer, lr=learning_rate(args), smooth_weight=args.smooth_weight,
-                      recon_weight=args.recon_weight, init=args.init,
+                      recon_weight=args.recon_weight, velocity_weight=args.velocity_weight, init=args.init,
                       rollout_windows=args.rollout_windows, rollout_fraction=args.rollout_fraction,
                       denoise_fraction=args.denoise_fraction,
                       noise_start=args.noise_start, seed=args.seed, cache=args.cache, max_minutes=args.max_minutes,

@@ -48,6 +48,9 @@ class TrainConfig:
     rollout_windows: int = 0
     rollout_fraction: float = 0.5
     recon_weight: float = 1.0  # weight of the decoded (reconstructed) frames against the predicted ones in the MSE
+    # Weight of the error of the joints' frame-to-frame motion (normalised positions), from the last context frame
+    # on through the prediction: the first predicted frames must move on from where the context ends, at its pace.
+    velocity_weight: float = 0.0
     noise_start: float = 0.1  # input-noise std at step 0 (normalised units)
     noise_zero_at: float = 0.5  # fraction of the first phase at which the noise reaches 0
     residual_noise: float = 0.05  # input noise while pre-training the filter on ground truth
@@ -166,7 +169,19 @@ def window_loss(model: STRNN, window: torch.Tensor, cfg: TrainConfig, phase: str
     w = torch.ones(out.shape[1], dtype=out.dtype)
     w[:m] = cfg.recon_weight  # decoded frames against predicted ones
     mse = ((out - window).pow(2).mean((0, 2)) * w).sum() / w.sum()
-    return mse + cfg.smooth_weight * smoothness_cost(out)
+    loss = mse + cfg.smooth_weight * smoothness_cost(out)
+    if cfg.velocity_weight:
+        loss = loss + cfg.velocity_weight * velocity_error(out[:, m:], window[:, m - 1:])
+    return loss
+
+
+def velocity_error(predicted: torch.Tensor, truth: torch.Tensor) -> torch.Tensor:
+    """Mean squared error of the joints' per-frame motion of ``predicted`` ``(B, n, C)`` continuing the true
+    frame ``truth[:, 0]`` against ``truth`` ``(B, n + 1, C)``: a prediction that starts off the context's
+    last frame, or moves at another pace, pays here even where its poses are close."""
+    pos = LAYOUT.positions
+    moved = torch.diff(torch.cat([truth[:, :1, pos], predicted[..., pos]], 1), dim=1)
+    return (moved - torch.diff(truth[..., pos], dim=1)).pow(2).mean()
 
 
 def rolled_context(model: STRNN, window: torch.Tensor, k: int,

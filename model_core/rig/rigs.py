@@ -74,6 +74,14 @@ RIG_FAMILIES: dict[str, dict[str, list[str]]] = {
         "{s}_wrist": ["{S}Hand"],
         "{s}_fingertip": ["{S}HandMiddle4", "{S}HandMiddle3_end", "{S}HandMiddle3"],
     }, ("Left", ""), ("Right", "")),
+    # A generated Rigify rig: its ORG bones follow the controls rigidly (model_core/rig/controls.py).
+    "rigify": _sided({
+        "hips": ["ORG-spine"], "spine": ["ORG-spine.001"], "spine1": ["ORG-spine.003"],
+        "neck": ["ORG-spine.004"], "head": ["ORG-spine.006"],
+        "{s}_upleg": ["ORG-thigh.{S}"], "{s}_knee": ["ORG-shin.{S}"], "{s}_foot": ["ORG-foot.{S}"],
+        "{s}_toe": ["ORG-toe.{S}"], "{s}_arm": ["ORG-upper_arm.{S}"], "{s}_elbow": ["ORG-forearm.{S}"],
+        "{s}_wrist": ["ORG-hand.{S}"], "{s}_fingertip": ["ORG-f_middle.03.{S}_end", "ORG-f_middle.03.{S}"],
+    }, ("L", ""), ("R", "")),
     "rigify_deform": _sided({
         "hips": ["DEF-spine"], "spine": ["DEF-spine.001"], "spine1": ["DEF-spine.003"],
         "neck": ["DEF-spine.004"], "head": ["DEF-spine.006"],

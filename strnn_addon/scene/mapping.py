@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from ...model_core.motion.conventions import JOINTS
-from ...model_core.rig import bonemap
+from ...model_core.rig import bonemap, controls
 from ...model_core.rig.solve import Anchors, Rig, SolveError
 from ..props import TAIL_JOINTS, joint_label
 
@@ -51,8 +51,10 @@ def effective_map(arm) -> bonemap.Mapping:
     return {**guess, **stored}
 
 
-def resolve(arm, rig: Rig) -> tuple[Anchors, bonemap.Mapping]:
-    """Anchors of the canonical joints on ``rig``; raises :class:`MapError` naming what is wrong."""
+def resolve(arm, rig: Rig, joint_skeleton: bool = False) -> tuple[Anchors, bonemap.Mapping, Rig]:
+    """(anchors of the canonical joints, mapping, the rig they are on): ``rig`` itself, or with
+    ``joint_skeleton`` (a control rig) its joint skeleton (:func:`controls.joint_rig`). Raises
+    :class:`MapError` naming what is wrong."""
     mapping = effective_map(arm)
     absent = [j for j in JOINTS if j in mapping and mapping[j][0] not in rig.names]
     if absent:
@@ -64,6 +66,8 @@ def resolve(arm, rig: Rig) -> tuple[Anchors, bonemap.Mapping]:
         raise MapError(f"Cannot map the rig: no bone found for {', '.join(joint_label(j) for j in missing)}. "
                        "Pick them in the sidebar's STRNN > Bone Map panel")
     try:
-        return Anchors.from_map(rig, mapping), mapping
+        if joint_skeleton:
+            rig = controls.joint_rig(rig, mapping)
+        return Anchors.from_map(rig, mapping), mapping, rig
     except SolveError as e:
         raise MapError(f"Bone map does not fit the hierarchy: {e}; fix it in STRNN > Bone Map") from e

@@ -16,8 +16,9 @@ import numpy as np
 
 from ...model_core.motion import rotations
 from ...model_core.motion.conventions import JOINT_INDEX, MODEL_FPS, yup_to_zup, zup_to_yup
-from ...model_core.rig.solve import Anchors, Rig, anchor_positions, solved_bones
-from . import anim, mapping, rig_io
+from ...model_core.rig.controls import ControlSet, visual_local
+from ...model_core.rig.solve import Anchors, Rig, anchor_positions, fk, solved_bones
+from . import anim, controls, mapping, rig_io
 
 MIN_MODEL_FRAMES = 20
 
@@ -40,6 +41,7 @@ class Clip:
     fps: float
     first: int
     last: int
+    controls: ControlSet | None = None  # a control rig's: ``rig`` is then its joint skeleton, written by a bake
 
 
 def scene_fps(scene) -> float:
@@ -85,13 +87,25 @@ def prepare(context, obj) -> Clip:
         raise UserError(f"The action {action.name!r} animates no bones: key the armature's pose first")
     check_keys(action, channels.fcurves)
     first, last = (int(round(x)) for x in action.frame_range)
+    return clip_of(context, obj, action, channels, first, last)
+
+
+def clip_of(context, obj, action, channels, first: int, last: int) -> Clip:
+    """The :class:`Clip` of a checked armature: its rig (a control rig's joint skeleton), bone map
+    and controls; raises :class:`UserError` when the bone map or the controls do not fit."""
     rig = rig_io.read_rig(obj)
+    found = controls.control_set(obj)
+    if found is not None:
+        absent = found.missing(set(rig.names))
+        if absent:
+            raise UserError(f"The controls set for {obj.name!r} name bones it does not have ({', '.join(absent)}): "
+                            "fix them in STRNN > Bone Map > Controls")
     try:
-        anchors, bone_map = mapping.resolve(obj.data, rig)
+        anchors, bone_map, rig = mapping.resolve(obj.data, rig, joint_skeleton=found is not None)
     except mapping.MapError as e:
         raise UserError(str(e)) from e
     return Clip(obj, action, channels, rig, anchors, bone_map, rig_io.world_matrix(obj),
-                scene_fps(context.scene), first, last)
+                scene_fps(context.scene), first, last, found)
 
 
 def check_keys(action, fcurves) -> None:
@@ -123,6 +137,16 @@ def joint_positions(context, clip: Clip, frames: np.ndarray) -> np.ndarray:
     return zup_to_yup(pos)
 
 
+def reference_pose(context, clip: Clip, frames: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The local pose ``loc`` ``[F, B, 3]``, ``rot`` ``[F, B, 3, 3]`` the solve starts from at scene
+    ``frames``: the keyed channels, or on a control rig the evaluated (visual) pose of its joint skeleton."""
+    if clip.controls is not None:
+        pose, _ = rig_io.pose_matrices_evaluated(context, clip.obj, clip.rig, frames)
+        return visual_local(clip.rig, pose)
+    loc, rot, _ = rig_io.read_local_pose(clip.obj, clip.rig, clip.channels.fcurves if clip.channels else [], frames)
+    return loc, rot
+
+
 def to_armature(clip: Clip, pos_yup: np.ndarray) -> np.ndarray:
     """World Y-up positions ``[F, 21, 3]`` -> armature space (Blender axes)."""
     inv = np.linalg.inv(clip.world)
@@ -132,6 +156,12 @@ def to_armature(clip: Clip, pos_yup: np.ndarray) -> np.ndarray:
 def written_bones(clip: Clip) -> list[int]:
     """Bones whose rotation the solve sets (mapped bones and the unmapped ones just above a joint)."""
     return solved_bones(clip.rig, clip.anchors)
+
+
+def keyed_controls(clip: Clip, bones: list[int] | None = None) -> list:
+    """The controls of a control rig that drive the written ``bones`` (default: all written bones)."""
+    names = {clip.rig.names[b] for b in (written_bones(clip) if bones is None else bones)}
+    return [c for c in clip.controls.controls if c.drives in names]
 
 
 def new_action_from(clip: Clip, suffix: str):
@@ -146,11 +176,12 @@ def new_action_from(clip: Clip, suffix: str):
 def selected_bones(clip: Clip, among: list[int]) -> list[int]:
     """The bones of ``among`` selected in the armature (pose selection; Blender 5 keeps it on the pose
     bone, 4.x on the bone)."""
-    def selected(b: int) -> bool:
-        pb = clip.obj.pose.bones[clip.rig.names[b]]
+    def selected(name: str) -> bool:
+        pb = clip.obj.pose.bones[name]
         return bool(pb.select if hasattr(pb, "select") else pb.bone.select)
 
-    return [b for b in among if selected(b)]
+    control = {c.drives: c.bone for c in clip.controls.controls} if clip.controls is not None else {}
+    return [b for b in among if selected(control.get(clip.rig.names[b], clip.rig.names[b]))]
 
 
 def only_selected(clip: Clip, among: list[int], what: str) -> list[int]:
@@ -168,14 +199,18 @@ def leg_bones(clip: Clip) -> list[int]:
     return [b for b in written_bones(clip) if any(clip.rig.is_ancestor(u, b) for u in uplegs)]
 
 
-def write_pose(clip: Clip, action, frames: np.ndarray, loc: np.ndarray, rot: np.ndarray,
-               previous: dict, replace: tuple[float, float] | None, bones: list[int] | None = None) -> None:
-    """Key the solved rotations of mapped bones (and the hips bone's location) at ``frames``.
+def write_pose(context, clip: Clip, action, frames: np.ndarray, loc: np.ndarray, rot: np.ndarray,
+               previous: dict, replace: tuple[float, float] | None, bones: list[int] | None = None) -> float:
+    """Key the solved rotations of mapped bones (and the hips bone's location) at ``frames``; on a
+    control rig, key its controls by a visual bake instead (:func:`write_controls`). Returns how far
+    (armature units) a written bone ends up from the solve at worst (0 when keyed directly).
 
     ``loc`` ``[F, B, 3]``, ``rot`` ``[F, B, 3, 3]``; ``previous`` {bone: raw channel values} keeps
     Euler angles and quaternion signs continuous with the keys before; ``bones``: only these
     (default: all :func:`written_bones`)."""
     channels = anim.Channels(action, clip.obj.animation_data, ensure=True)
+    if clip.controls is not None:
+        return write_controls(context, clip, channels, frames, loc, rot, previous, replace, bones)
     hips = int(clip.anchors.bone[JOINT_INDEX["hips"]])
     for b in written_bones(clip) if bones is None else bones:
         pb = clip.obj.pose.bones[clip.rig.names[b]]
@@ -183,6 +218,27 @@ def write_pose(clip: Clip, action, frames: np.ndarray, loc: np.ndarray, rot: np.
         _key_property(clip, channels, pb, prop, frames, values, replace)
         if b == hips:
             _key_property(clip, channels, pb, "location", frames, loc[:, b], replace)
+    return 0.0
+
+
+def write_controls(context, clip: Clip, channels: anim.Channels, frames: np.ndarray, loc: np.ndarray,
+                   rot: np.ndarray, previous: dict, replace: tuple[float, float] | None,
+                   bones: list[int] | None) -> float:
+    """Key a control rig's controls (and switches) so that its joint skeleton takes the solved pose."""
+    pose = fk(clip.rig, loc, rot)
+    chosen = keyed_controls(clip, bones)
+    index = {n: b for b, n in enumerate(clip.rig.names)}
+    targets = {c.drives: pose[:, index[c.drives]] for c in chosen}
+    baked = controls.bake(context, clip.obj, clip.controls, frames, targets)
+    for k, c in enumerate(chosen):
+        pb = clip.obj.pose.bones[c.bone]
+        prop, values = encode_rotation(pb.rotation_mode, baked.rot[:, k], previous.get(pb.name))
+        _key_property(clip, channels, pb, prop, frames, values, replace)
+        if c.location:
+            _key_property(clip, channels, pb, "location", frames, baked.loc[:, k], replace)
+    edges = np.array([f for f in (frames[0] - 1, frames[-1] + 1) if clip.first <= f <= clip.last])
+    controls.key_switches(channels, clip.obj, clip.controls, frames, edges)
+    return baked.error
 
 
 def _key_property(clip: Clip, channels: anim.Channels, pb, prop: str, frames: np.ndarray, values: np.ndarray,
@@ -218,8 +274,10 @@ def raw_rotations(clip: Clip, frame: float) -> dict:
     """{bone: rotation channel values} of the written bones at one scene frame."""
     chans = rig_io.bone_channels(clip.channels.fcurves)
     out = {}
-    for b in written_bones(clip):
-        pb = clip.obj.pose.bones[clip.rig.names[b]]
+    names = ([c.bone for c in keyed_controls(clip)] if clip.controls is not None
+             else [clip.rig.names[b] for b in written_bones(clip)])
+    for name in names:
+        pb = clip.obj.pose.bones[name]
         out[pb.name] = rig_io.rotation_values(chans, pb, np.array([float(frame)]))[0]
     return out
 

@@ -16,6 +16,7 @@ import tomllib
 from pathlib import Path
 
 import bpy
+import numpy as np
 
 from ...model_core.inference.steps import drive
 from ...model_core.ops import footlock
@@ -126,14 +127,21 @@ def report_note(action) -> str:
     return f". {note}" if note else ""
 
 
+def world_scale(clip) -> float:
+    """Scene units per armature unit (the armature object's scale)."""
+    return float(abs(np.linalg.det(clip.world[:3, :3])) ** (1 / 3))
+
+
 def write_new(context, clip, suffix, frames, loc, rot, previous, replace, record: dict, bones=None,
               scene_range: bool = True):
     """Create the new action, key it (``bones``: only these), label it with ``record`` and assign
     it (widening the scene's range to it with ``scene_range``); on failure remove it again."""
     action = pipeline.new_action_from(clip, suffix)
     try:
+        error = pipeline.write_pose(context, clip, action, frames, loc, rot, previous, replace, bones)
+        if clip.controls is not None:
+            record["controls"] = {"set": clip.controls.name, "max_error_cm": round(100 * error * world_scale(clip), 2)}
         action[RECORD] = record
-        pipeline.write_pose(clip, action, frames, loc, rot, previous, replace, bones)
         pipeline.finish(context, clip, action, scene_range)
     except Exception:
         bpy.data.actions.remove(action)

@@ -7,7 +7,7 @@ import numpy as np
 from ...model_core.ops.seam import fade_edges
 from ...model_core.rig.solve import solve
 from .. import engine_bridge
-from ..scene import pipeline, rig_io
+from ..scene import pipeline
 from .common import frame_range, lock, made_by, model_steps, noop, prefs, run, write_new
 
 
@@ -29,7 +29,7 @@ def denoise_steps(context, obj, *, frame_start: int | None = None, frame_end: in
     frames = np.arange(a, b + 1, dtype=np.float64)
     yield "read"
     pos = pipeline.joint_positions(context, clip, frames)
-    ref_loc, ref_rot, _ = rig_io.read_local_pose(clip.obj, clip.rig, clip.channels.fcurves, frames)
+    ref_loc, ref_rot = pipeline.reference_pose(context, clip, frames)
     previous = pipeline.raw_rotations(clip, a)
     yield "model"
     clean = yield from model_steps(engine_bridge.denoise_steps(prefs(context), pos, clip.fps, float(strength)))

@@ -6,7 +6,7 @@ import numpy as np
 
 from ...model_core.rig.solve import solve
 from .. import engine_bridge
-from ..scene import pipeline, rig_io
+from ..scene import pipeline
 from ..scene.pipeline import UserError
 from .common import familiarity_record, lock, made_by, model_call, noop, prefs, run, write_new
 
@@ -47,7 +47,7 @@ def extend_steps(context, obj, *, frames: int = 120, context_frames: int = 0, fo
     ctx_frames = context_range(clip, context_frames, frames, end)
     yield "read"
     pos = pipeline.joint_positions(context, clip, ctx_frames)
-    held_loc, held_rot, _ = rig_io.read_local_pose(clip.obj, clip.rig, clip.channels.fcurves, ctx_frames[-1:])
+    held_loc, held_rot = pipeline.reference_pose(context, clip, ctx_frames[-1:])
     previous = pipeline.raw_rotations(clip, end)
     yield "model"
     new_pos = model_call(engine_bridge.extend, prefs(context), pos, clip.fps, frames)

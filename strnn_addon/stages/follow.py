@@ -14,7 +14,7 @@ import numpy as np
 from ...model_core.motion.conventions import zup_to_yup
 from ...model_core.rig.solve import anchor_positions, fk, solve
 from .. import engine_bridge
-from ..scene import anim, curves, mapping, pipeline, rig_io
+from ..scene import anim, curves, pipeline
 from ..scene.pipeline import UserError
 from .common import RECORD, familiarity_record, lock, made_by, model_steps, prefs, write_new
 
@@ -41,10 +41,10 @@ def follow_curve_steps(context, obj, *, curve: str = "", frames: int = 0, speed:
                             "start from the model's own walk)")
         ctx = np.arange(clip.last - need + 1, clip.last + 1, dtype=np.float64)
         context_pos, rest = pipeline.joint_positions(context, clip, ctx), None
-        held_loc, held_rot, _ = rig_io.read_local_pose(clip.obj, clip.rig, clip.channels.fcurves, ctx[-1:])
+        held_loc, held_rot = pipeline.reference_pose(context, clip, ctx[-1:])
         previous = pipeline.raw_rotations(clip, clip.last)
     else:
-        held_loc, held_rot, _ = rig_io.read_local_pose(clip.obj, clip.rig, [], np.zeros(1))
+        held_loc, held_rot = pipeline.reference_pose(context, clip, np.array([float(context.scene.frame_current)]))
         context_pos, rest, previous = None, _rest_joints(clip, held_loc, held_rot), {}
     yield "model"
     new_pos = yield from model_steps(engine_bridge.follow_curve_steps(
@@ -75,14 +75,8 @@ def _prepare(context, obj) -> pipeline.Clip:
     if obj is not None and obj.type == "ARMATURE" and obj.animation_data and obj.animation_data.action:
         return pipeline.prepare(context, obj)
     pipeline.check_object(obj, need_action=False)
-    rig = rig_io.read_rig(obj)
-    try:
-        anchors, bone_map = mapping.resolve(obj.data, rig)
-    except mapping.MapError as e:
-        raise UserError(str(e)) from e
     frame = context.scene.frame_start
-    return pipeline.Clip(obj, None, None, rig, anchors, bone_map, rig_io.world_matrix(obj),
-                         pipeline.scene_fps(context.scene), frame, frame)
+    return pipeline.clip_of(context, obj, None, None, frame, frame)
 
 
 def _rest_joints(clip: pipeline.Clip, loc: np.ndarray, rot: np.ndarray) -> np.ndarray:
@@ -98,7 +92,7 @@ def _write_fresh(context, clip, frames, loc, rot, record: dict, scene_range: boo
     clip.first, clip.last = int(frames[0]), int(frames[-1])  # no static keys outside the new frames
     try:
         action[RECORD] = record
-        pipeline.write_pose(clip, action, frames, loc, rot, {}, None)
+        pipeline.write_pose(context, clip, action, frames, loc, rot, {}, None)
         anim.assign_action(clip.obj, action, None)
         ad = clip.obj.animation_data
         if getattr(ad, "action_slot", True) is None and len(action.slots):

@@ -6,7 +6,7 @@ import numpy as np
 
 from ...model_core.ops import footlock
 from ...model_core.rig.solve import solve
-from ..scene import pipeline, rig_io
+from ..scene import pipeline
 from ..scene.pipeline import UserError
 from .common import frame_range, lock, made_by, write_new
 
@@ -27,7 +27,7 @@ def foot_lock_steps(context, obj, *, frame_start: int | None = None, frame_end: 
     inside = (frames >= a) & (frames <= b)  # plus one untouched frame either side to continue from
     yield "read"
     pos = pipeline.joint_positions(context, clip, frames)
-    ref_loc, ref_rot, _ = rig_io.read_local_pose(clip.obj, clip.rig, clip.channels.fcurves, frames)
+    ref_loc, ref_rot = pipeline.reference_pose(context, clip, frames)
     previous = pipeline.raw_rotations(clip, a)
     yield "model"
     contacts = lock(pos, clip.fps, detect_only=True)

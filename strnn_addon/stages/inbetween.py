@@ -92,7 +92,7 @@ def inbetween_steps(context, obj, *, frame_start: int | None = None, frame_end: 
     yield "read"
     pos_before = pipeline.joint_positions(context, clip, before)
     pos_after = pipeline.joint_positions(context, clip, after)
-    ref_loc, ref_rot, _ = rig_io.read_local_pose(clip.obj, clip.rig, clip.channels.fcurves, gap)
+    ref_loc, ref_rot = pipeline.reference_pose(context, clip, gap)
     previous = pipeline.raw_rotations(clip, start - 1)
     yield "model"
     new_pos = model_call(engine_bridge.inbetween, prefs(context), pos_before, pos_after, clip.fps, len(gap))

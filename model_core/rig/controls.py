@@ -1,0 +1,139 @@
+"""Control rigs (no bpy): the skeleton the solve works on, and which controls drive it.
+
+On a rig whose deform or mechanism bones follow controls through constraints (Rigify's
+generated rigs, Auto-Rig Pro-style rigs), the mapped bones do not form a plain chain:
+Rigify's ``ORG-thigh.L`` hangs below ``ORG-spine`` while ``ORG-spine.001`` hangs below a
+tweak bone, and keys written on them would not show, because their constraints override
+them. Such a rig is read by its evaluated pose and solved on a *joint skeleton*
+(:func:`joint_rig`): the mapped bones with their rest matrices, each parented to the bone of
+its canonical parent joint (through the real bones in between where the rig has them, such
+as a clavicle). The solved pose is then written on the controls by a visual bake (the
+Blender side, ``strnn_addon/scene/controls.py``): each :class:`Control` is turned until the
+bone it drives sits where the solve put it.
+
+:data:`PRESETS` holds the control sets that ship (Rigify's FK controls); any other rig gets
+its controls from the Bone Map panel.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..motion.conventions import JOINTS, PARENT_NAMES
+from .solve import Rig, SolveError
+
+
+@dataclass(frozen=True)
+class Control:
+    """A control bone and the mapped (or bridge) bone it drives; ``location``: it also moves
+    (the body's root control), otherwise it only turns."""
+
+    bone: str
+    drives: str
+    location: bool = False
+
+
+@dataclass(frozen=True)
+class Switch:
+    """A custom property keyed to ``value`` on the written frames (e.g. Rigify's IK/FK switch to FK)."""
+
+    bone: str
+    prop: str
+    value: float
+
+
+@dataclass
+class ControlSet:
+    """What a rig's results are keyed on: its controls and the switches that make them act."""
+
+    name: str
+    controls: list[Control] = field(default_factory=list)
+    switches: list[Switch] = field(default_factory=list)
+
+    def missing(self, names: set[str]) -> list[str]:
+        """Bones this set names that the rig lacks."""
+        wanted = [c.bone for c in self.controls] + [c.drives for c in self.controls] + [s.bone for s in self.switches]
+        return sorted({b for b in wanted if b not in names})
+
+
+def _sides(pairs: list[tuple], *more: tuple) -> list[tuple]:
+    """Each ``{S}`` template in ``pairs`` for both sides (``.L``, ``.R``), after ``more``."""
+    return list(more) + [tuple(x.format(S=s) if isinstance(x, str) else x for x in p) for s in "LR" for p in pairs]
+
+
+# Rigify (Blender's bundled rig generator, human metarig): joints on the ORG bones, which copy the
+# FK controls' transforms once the limbs' IK_FK switch is 1 (FK); torso carries the body.
+_RIGIFY_CONTROLS = _sides(
+    [("shoulder.{S}", "ORG-shoulder.{S}", False), ("upper_arm_fk.{S}", "ORG-upper_arm.{S}", False),
+     ("forearm_fk.{S}", "ORG-forearm.{S}", False), ("hand_fk.{S}", "ORG-hand.{S}", False),
+     ("thigh_fk.{S}", "ORG-thigh.{S}", False), ("shin_fk.{S}", "ORG-shin.{S}", False),
+     ("foot_fk.{S}", "ORG-foot.{S}", False), ("toe_fk.{S}", "ORG-toe.{S}", False)],
+    ("torso", "ORG-spine", True), ("chest", "ORG-spine.003", False), ("neck", "ORG-spine.004", False),
+    ("head", "ORG-spine.006", False))
+PRESETS: dict[str, ControlSet] = {
+    "rigify": ControlSet(
+        "rigify",
+        [Control(*c) for c in _RIGIFY_CONTROLS],
+        [Switch(*s) for s in _sides([("thigh_parent.{S}", "IK_FK", 1.0), ("upper_arm_parent.{S}", "IK_FK", 1.0)])]),
+}
+
+
+def preset_for(names: list[str] | set[str]) -> ControlSet | None:
+    """The shipped control set whose every bone the rig has (None if none fits)."""
+    names = set(names)
+    return next((p for p in PRESETS.values() if not p.missing(names)), None)
+
+
+def _ancestors(rig: Rig, b: int) -> list[int]:
+    out = []
+    b = int(rig.parents[b])
+    while b >= 0:
+        out.append(b)
+        b = int(rig.parents[b])
+    return out
+
+
+def joint_rig(rig: Rig, mapping: dict[str, tuple[str, bool]]) -> Rig:
+    """The joint skeleton of ``rig`` under ``mapping`` (see the module's docstring): the mapped
+    bones, parents first from the hips bone, each below the bone of its canonical parent joint, with
+    the real bones in between where that bone is a real ancestor (a clavicle between chest and upper
+    arm). Raises :class:`SolveError` when a joint has no bone on ``rig``."""
+    index = {n: i for i, n in enumerate(rig.names)}
+    missing = [j for j in JOINTS if j not in mapping or mapping[j][0] not in index]
+    if missing:
+        raise SolveError(f"no bone mapped for: {', '.join(missing)}")
+    order: list[int] = []
+    parent_of: dict[int, int] = {}
+    for joint in JOINTS:  # parents first
+        b = index[mapping[joint][0]]
+        if b in parent_of:  # a tail on a bone already placed (a foot's tail as the toe)
+            continue
+        if PARENT_NAMES[joint] is None:
+            parent_of[b] = -1
+            order.append(b)
+            continue
+        top = index[mapping[PARENT_NAMES[joint]][0]]
+        up = _ancestors(rig, b)
+        between = up[:up.index(top)] if top in up else []
+        above = top
+        for x in [x for x in reversed(between) if x not in parent_of] + [b]:
+            parent_of[x] = above
+            order.append(x)
+            above = x
+    new = {b: k for k, b in enumerate(order)}
+    parents = np.array([new[parent_of[b]] if parent_of[b] >= 0 else -1 for b in order])
+    return Rig([rig.names[b] for b in order], parents, rig.rest[order], rig.lengths[order])
+
+
+def visual_local(rig: Rig, pose: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Local ``loc`` ``[F, B, 3]`` and rotation ``[F, B, 3, 3]`` that reproduce pose matrices
+    ``pose`` ``[F, B, 4, 4]`` (armature space) under ``rig``'s parents (Blender's visual transform)."""
+    parent = np.where((rig.parents < 0)[None, :, None, None], np.eye(4),
+                      pose[:, np.maximum(rig.parents, 0)])
+    local = np.linalg.inv(parent @ rig.rel_rest) @ pose
+    rot = local[..., :3, :3]
+    u, _, vt = np.linalg.svd(rot)  # the nearest rotation: drops scale and shear
+    rot = u @ vt
+    return local[..., :3, 3], rot

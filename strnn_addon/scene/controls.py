@@ -1,0 +1,171 @@
+"""Write a solved pose on a control rig's controls: a visual bake (see ``model_core/rig/controls.py``).
+
+For each frame the rig is evaluated by Blender, and each control is turned (the body's root
+control also moved) by the correction that takes the bone it drives from where it is to where
+the solve put it. Controls are set in waves: a control waits for the controls that move its
+driven bone (found once per bake by nudging each control, so that constraints count as well as
+parents), and the rig is evaluated once per wave. The result is read back off the controls'
+local transforms and keyed; the controls and switches are put back as they were, so until the
+new action is assigned nothing in the file has changed.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import bpy
+import numpy as np
+from mathutils import Matrix
+
+from ...model_core.rig import controls as rig_controls
+from ...model_core.rig.controls import ControlSet
+from . import anim
+
+TOLERANCE = 1e-3  # metres-ish (armature units): a frame whose driven bones are further off is baked again
+MAX_SWEEPS = 3
+
+
+@dataclass
+class Baked:
+    """Local transforms of each control over the frames: ``loc`` ``[F, K, 3]``, ``rot`` ``[F, K, 3, 3]``,
+    and the largest distance of a driven bone's head or tail from its target (armature units)."""
+
+    names: list[str]
+    loc: np.ndarray
+    rot: np.ndarray
+    error: float
+
+
+def control_set(obj) -> ControlSet | None:
+    """The controls of ``obj``: those set in its Bone Map panel, else the shipped preset its bones fit."""
+    stored = getattr(obj, "strnn_controls", None)
+    if stored is not None and len(stored):
+        return ControlSet("custom", [rig_controls.Control(c.bone, c.drives, c.location) for c in stored],
+                          [rig_controls.Switch(s.bone, s.prop, s.value) for s in getattr(obj, "strnn_switches", ())])
+    return rig_controls.preset_for(obj.pose.bones.keys())
+
+
+def _matrix(pb) -> np.ndarray:
+    return np.array(pb.matrix, dtype=np.float64)
+
+
+def _waves(obj, chosen: list, update) -> list[list]:
+    """``chosen`` controls grouped so that no control's driven bone moves with a control of its own
+    or a later wave (found by nudging each control once at the current frame)."""
+    bones = obj.pose.bones
+    update()
+    before = {c.drives: _matrix(bones[c.drives]) for c in chosen}
+    moves: dict[int, set[str]] = {}
+    for k, c in enumerate(chosen):
+        pb = bones[c.bone]
+        keep = pb.matrix_basis.copy()
+        pb.matrix_basis = keep @ Matrix.Rotation(0.3, 4, "X") @ Matrix.Translation((0.0, 0.01 * c.location, 0.0))
+        update()
+        moves[k] = {d for d, m in before.items() if np.abs(_matrix(bones[d]) - m).max() > 1e-6}
+        pb.matrix_basis = keep
+    update()
+    depth = [0] * len(chosen)
+    for _ in range(len(chosen)):  # longest chain of "moves the bone I drive" above each control
+        for k, c in enumerate(chosen):
+            above = [depth[j] + 1 for j in range(len(chosen)) if j != k and c.drives in moves[j]]
+            depth[k] = max([0] + above)
+    return [[c for k, c in enumerate(chosen) if depth[k] == d] for d in range(max(depth) + 1)]
+
+
+def _error(obj, chosen: list, targets: dict[str, np.ndarray]) -> float:
+    """Largest distance of a driven bone's head or tail from its target."""
+    worst = 0.0
+    for c in chosen:
+        pb = obj.pose.bones[c.drives]
+        now, want = _matrix(pb), targets[c.drives]
+        tip = np.array([0.0, pb.bone.length, 0.0, 1.0])
+        worst = max(worst, float(np.linalg.norm(now[:3, 3] - want[:3, 3])),
+                    float(np.linalg.norm((now @ tip - want @ tip)[:3])))
+    return worst
+
+
+def _place(obj, c, target: np.ndarray) -> None:
+    """Turn (and, for a root control, move) control ``c`` so its driven bone goes to ``target``,
+    taking the rig as last evaluated."""
+    bones = obj.pose.bones
+    pb = bones[c.bone]
+    delta = target @ np.linalg.inv(_matrix(bones[c.drives]))
+    now = _matrix(pb)
+    if c.location:
+        want = delta @ now
+    else:
+        want = now.copy()
+        want[:3, :3] = delta[:3, :3] @ now[:3, :3]
+    pb.matrix_basis = obj.convert_space(pose_bone=pb, matrix=Matrix(want.tolist()), from_space="POSE",
+                                        to_space="LOCAL")
+
+
+def bake(context, obj, control_set_: ControlSet, frames: np.ndarray, targets: dict[str, np.ndarray],
+         progress=None) -> Baked:
+    """The controls' local transforms that put each driven bone on ``targets`` {bone: ``[F, 4, 4]``
+    armature-space pose matrices} at scene ``frames``, with the switches on. Only controls whose
+    driven bone is in ``targets`` move. ``progress(fraction)`` is called as frames are done."""
+    scene, bones = context.scene, obj.pose.bones
+    chosen = [c for c in control_set_.controls if c.drives in targets]
+    switches = [s for s in control_set_.switches if s.bone in bones and s.prop in bones[s.bone]]
+    keep_frame = (scene.frame_current, scene.frame_subframe)
+    keep_basis = {c.bone: bones[c.bone].matrix_basis.copy() for c in chosen}
+    keep_switch = {(s.bone, s.prop): bones[s.bone].get(s.prop) for s in switches}
+    layer = context.view_layer
+
+    def switch_on():
+        for s in switches:
+            bones[s.bone][s.prop] = s.value
+
+    loc = np.zeros((len(frames), len(chosen), 3))
+    rot = np.zeros((len(frames), len(chosen), 3, 3))
+    worst = 0.0
+    try:
+        scene.frame_set(int(frames[0]))
+        switch_on()
+        waves = _waves(obj, chosen, layer.update)
+        for i, f in enumerate(frames):
+            scene.frame_set(int(np.floor(f)), subframe=float(f - np.floor(f)))
+            switch_on()
+            want = {d: m[i] for d, m in targets.items()}
+            for _ in range(MAX_SWEEPS):
+                for wave in waves:
+                    layer.update()
+                    for c in wave:
+                        _place(obj, c, want[c.drives])
+                layer.update()
+                err = _error(obj, chosen, want)
+                if err < TOLERANCE:
+                    break
+            worst = max(worst, err)
+            for k, c in enumerate(chosen):
+                basis = np.array(bones[c.bone].matrix_basis, dtype=np.float64)
+                loc[i, k], rot[i, k] = basis[:3, 3], basis[:3, :3]
+            if progress is not None:
+                progress((i + 1) / len(frames))
+    finally:
+        for name, basis in keep_basis.items():
+            bones[name].matrix_basis = basis
+        for (bone, prop), value in keep_switch.items():
+            bones[bone][prop] = value
+        scene.frame_set(keep_frame[0], subframe=keep_frame[1])
+    u, _, vt = np.linalg.svd(rot)
+    return Baked([c.bone for c in chosen], loc, u @ vt, worst)
+
+
+def key_switches(channels: anim.Channels, obj, control_set_: ControlSet, frames: np.ndarray, edges: np.ndarray):
+    """Key each switch at its value on ``frames`` with constant interpolation, and at its present value on
+    ``edges`` (frames just outside, inside the action) when the action did not animate it yet."""
+    for s in control_set_.switches:
+        pb = obj.pose.bones.get(s.bone)
+        if pb is None or s.prop not in pb:
+            continue
+        path = f'pose.bones["{bpy.utils.escape_identifier(s.bone)}"]["{s.prop}"]'
+        fc = channels.find(path, 0)
+        if fc is None:
+            fc = channels.ensure(path, 0, s.bone)
+            if len(edges):
+                anim.write_keys(fc, edges, np.full(len(edges), float(pb[s.prop])))
+        anim.write_keys(fc, frames, np.full(len(frames), float(s.value)))
+        for point in fc.keyframe_points:
+            point.interpolation = "CONSTANT"
