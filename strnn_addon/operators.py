@@ -16,6 +16,7 @@ from .stages.extend import extend_steps
 from .stages.follow import follow_curve_steps
 from .stages.footlock import foot_lock_steps
 from .stages.inbetween import inbetween_steps
+from .stages.transfer import transfer_steps
 
 
 class _Staged:
@@ -245,6 +246,31 @@ class STRNN_OT_follow_curve(_Staged, bpy.types.Operator):
                 f"{report_note(action)}")
 
 
+class STRNN_OT_transfer_motion(_Staged, bpy.types.Operator):
+    """Move the motion of the other selected armature onto the active one (its proportions, feet on the floor);
+    writes a new action"""
+
+    bl_idname = "strnn.transfer_motion"
+    need_action = False
+    bl_label = "Transfer Motion"
+    bl_options = {"REGISTER", "UNDO"}
+
+    source: StringProperty(name="Source", default="",
+                           description="Name of the armature to take the motion from; empty: the other selected "
+                                       "armature")
+    foot_lock: options.foot_lock(True)
+    scene_range: options.scene_range()
+
+    def steps(self, context):
+        return transfer_steps(context, context.active_object, source=self.source, foot_lock=self.foot_lock,
+                              scene_range=self.scene_range)
+
+    def done(self, action) -> str:
+        record = action.get(RECORD, {}).get("settings", {})
+        return (f"Moved the motion of {record.get('source')!r} onto {record.get('target')!r} in new action "
+                f"{action.name!r}{range_note(action)}")
+
+
 class STRNN_OT_auto_map(bpy.types.Operator):
     """Map the active armature's bones to the model's 21 joints from their names and hierarchy"""
 
@@ -317,4 +343,4 @@ def check_message(obj, need_action: bool = True) -> str:
 
 
 classes = (STRNN_OT_extend_clip, STRNN_OT_fill_gap, STRNN_OT_denoise_action, STRNN_OT_foot_lock,
-           STRNN_OT_follow_curve, STRNN_OT_auto_map, STRNN_OT_clear_map)
+           STRNN_OT_follow_curve, STRNN_OT_transfer_motion, STRNN_OT_auto_map, STRNN_OT_clear_map)

@@ -195,6 +195,11 @@ class STRNN_PG_settings(bpy.types.PropertyGroup):
     curve_frames: curve_frames()
     curve_speed: curve_speed()
     curve_foot_lock: foot_lock(True)
+    transfer_source: PointerProperty(name="Source", type=bpy.types.Object,
+                                     poll=lambda self, obj: obj.type == "ARMATURE",
+                                     description="The armature to take the motion from; empty: the other selected "
+                                                 "armature")
+    transfer_foot_lock: foot_lock(True)
 
 
 classes = (STRNN_PG_bone_map, STRNN_PG_settings, STRNN_AP_preferences)

@@ -133,6 +133,23 @@ class STRNN_PT_follow_curve(_Sidebar, bpy.types.Panel):
         op.frames, op.speed, op.foot_lock = settings.curve_frames, settings.curve_speed, settings.curve_foot_lock
 
 
+class STRNN_PT_transfer(_Sidebar, bpy.types.Panel):
+    bl_label = "Transfer Motion"
+    bl_parent_id = "STRNN_PT_main"
+    bl_options = {"DEFAULT_CLOSED"}
+
+    def draw(self, context):
+        settings = context.scene.strnn
+        col = self.layout.column(align=True)
+        col.prop(settings, "transfer_source")
+        if settings.transfer_source is None:
+            col.label(text="Or select the source, then the target", icon="INFO")
+        col.prop(settings, "transfer_foot_lock")
+        op = self.layout.operator("strnn.transfer_motion", icon="ARMATURE_DATA")
+        op.source = settings.transfer_source.name if settings.transfer_source else ""
+        op.foot_lock = settings.transfer_foot_lock
+
+
 class STRNN_PT_bone_map(_Sidebar, bpy.types.Panel):
     bl_label = "Bone Map"
     bl_parent_id = "STRNN_PT_main"
@@ -176,6 +193,7 @@ class STRNN_MT_menu(bpy.types.Menu):
         layout.operator("strnn.denoise_action", icon="MOD_SMOOTH")
         layout.operator("strnn.foot_lock", icon="SNAP_ON")
         layout.operator("strnn.follow_curve", icon="CURVE_PATH")
+        layout.operator("strnn.transfer_motion", icon="ARMATURE_DATA")
         layout.separator()
         layout.operator("strnn.auto_map", icon="AUTOMERGE_ON")
 
@@ -221,5 +239,5 @@ def unregister_menus():
 
 
 classes = (STRNN_PT_main, STRNN_PT_extend, STRNN_PT_fill_gap, STRNN_PT_denoise, STRNN_PT_foot_lock,
-           STRNN_PT_follow_curve, STRNN_PT_bone_map, STRNN_MT_menu)
+           STRNN_PT_follow_curve, STRNN_PT_transfer, STRNN_PT_bone_map, STRNN_MT_menu)
 

@@ -70,7 +70,7 @@ _RIGIFY_CONTROLS = _sides(
      ("forearm_fk.{S}", "ORG-forearm.{S}", False), ("hand_fk.{S}", "ORG-hand.{S}", False),
      ("thigh_fk.{S}", "ORG-thigh.{S}", False), ("shin_fk.{S}", "ORG-shin.{S}", False),
      ("foot_fk.{S}", "ORG-foot.{S}", False), ("toe_fk.{S}", "ORG-toe.{S}", False)],
-    ("torso", "ORG-spine", True), ("chest", "ORG-spine.003", False), ("neck", "ORG-spine.004", False),
+    ("torso", "ORG-spine", True), ("chest", "ORG-spine.003", True), ("neck", "ORG-spine.004", False),
     ("head", "ORG-spine.006", False))
 PRESETS: dict[str, ControlSet] = {
     "rigify": ControlSet(

@@ -21,7 +21,7 @@ from ...model_core.rig import controls as rig_controls
 from ...model_core.rig.controls import ControlSet
 from . import anim
 
-TOLERANCE = 1e-3  # metres-ish (armature units): a frame whose driven bones are further off is baked again
+TOLERANCE = 2e-3  # armature units (metres on most rigs): a frame whose driven bones are further off is baked again
 MAX_SWEEPS = 3
 
 
@@ -51,7 +51,8 @@ def _matrix(pb) -> np.ndarray:
 
 def _waves(obj, chosen: list, update) -> list[list]:
     """``chosen`` controls grouped so that no control's driven bone moves with a control of its own
-    or a later wave (found by nudging each control once at the current frame)."""
+    or a later wave (found by nudging each control once at the current frame); where two controls
+    move each other's bones, the one lower in the hierarchy waits, and a second sweep settles them."""
     bones = obj.pose.bones
     update()
     before = {c.drives: _matrix(bones[c.drives]) for c in chosen}
@@ -64,12 +65,21 @@ def _waves(obj, chosen: list, update) -> list[list]:
         moves[k] = {d for d, m in before.items() if np.abs(_matrix(bones[d]) - m).max() > 1e-6}
         pb.matrix_basis = keep
     update()
+    rank = [(_depth(bones[c.bone]), k) for k, c in enumerate(chosen)]  # a cycle (neck and head) is cut here
     depth = [0] * len(chosen)
-    for _ in range(len(chosen)):  # longest chain of "moves the bone I drive" above each control
-        for k, c in enumerate(chosen):
-            above = [depth[j] + 1 for j in range(len(chosen)) if j != k and c.drives in moves[j]]
-            depth[k] = max([0] + above)
-    return [[c for k, c in enumerate(chosen) if depth[k] == d] for d in range(max(depth) + 1)]
+    for k in sorted(range(len(chosen)), key=lambda k: rank[k]):
+        above = [depth[j] + 1 for j in range(len(chosen)) if rank[j] < rank[k] and chosen[k].drives in moves[j]]
+        depth[k] = max([0] + above)
+    return [wave for d in range(max(depth, default=0) + 1)
+            if (wave := [c for k, c in enumerate(chosen) if depth[k] == d])]
+
+
+def _depth(pb) -> int:
+    """How many parents a pose bone has."""
+    n = 0
+    while pb.parent is not None:
+        pb, n = pb.parent, n + 1
+    return n
 
 
 def _error(obj, chosen: list, targets: dict[str, np.ndarray]) -> float:

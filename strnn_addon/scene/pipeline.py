@@ -90,6 +90,15 @@ def prepare(context, obj) -> Clip:
     return clip_of(context, obj, action, channels, first, last)
 
 
+def prepare_any(context, obj) -> Clip:
+    """:func:`prepare`, or for an armature without an action the same minus the action."""
+    if obj is not None and obj.type == "ARMATURE" and obj.animation_data and obj.animation_data.action:
+        return prepare(context, obj)
+    check_object(obj, need_action=False)
+    frame = context.scene.frame_start
+    return clip_of(context, obj, None, None, frame, frame)
+
+
 def clip_of(context, obj, action, channels, first: int, last: int) -> Clip:
     """The :class:`Clip` of a checked armature: its rig (a control rig's joint skeleton), bone map
     and controls; raises :class:`UserError` when the bone map or the controls do not fit."""
@@ -147,6 +156,12 @@ def reference_pose(context, clip: Clip, frames: np.ndarray) -> tuple[np.ndarray,
     return loc, rot
 
 
+def pose_joints(clip: Clip, loc: np.ndarray, rot: np.ndarray) -> np.ndarray:
+    """World canonical joints ``[F, 21, 3]`` (Y-up) of the rig in the local pose ``loc``, ``rot`` ``[F, B, ...]``."""
+    local = anchor_positions(clip.rig, clip.anchors, fk(clip.rig, loc, rot))
+    return zup_to_yup(local @ clip.world[:3, :3].T + clip.world[:3, 3])
+
+
 def to_armature(clip: Clip, pos_yup: np.ndarray) -> np.ndarray:
     """World Y-up positions ``[F, 21, 3]`` -> armature space (Blender axes)."""
     inv = np.linalg.inv(clip.world)
@@ -156,6 +171,13 @@ def to_armature(clip: Clip, pos_yup: np.ndarray) -> np.ndarray:
 def written_bones(clip: Clip) -> list[int]:
     """Bones whose rotation the solve sets (mapped bones and the unmapped ones just above a joint)."""
     return solved_bones(clip.rig, clip.anchors)
+
+
+def keyed_names(clip: Clip) -> list[str]:
+    """Names of the bones that get keys: the written bones, or on a control rig their controls."""
+    if clip.controls is not None:
+        return [c.bone for c in keyed_controls(clip)]
+    return [clip.rig.names[b] for b in written_bones(clip)]
 
 
 def keyed_controls(clip: Clip, bones: list[int] | None = None) -> list:
@@ -274,9 +296,7 @@ def raw_rotations(clip: Clip, frame: float) -> dict:
     """{bone: rotation channel values} of the written bones at one scene frame."""
     chans = rig_io.bone_channels(clip.channels.fcurves)
     out = {}
-    names = ([c.bone for c in keyed_controls(clip)] if clip.controls is not None
-             else [clip.rig.names[b] for b in written_bones(clip)])
-    for name in names:
+    for name in keyed_names(clip):
         pb = clip.obj.pose.bones[name]
         out[pb.name] = rig_io.rotation_values(chans, pb, np.array([float(frame)]))[0]
     return out

@@ -22,7 +22,7 @@ from ...model_core.inference.steps import drive
 from ...model_core.ops import footlock
 from .. import engine_bridge
 from ..props import preferences
-from ..scene import pipeline
+from ..scene import anim, pipeline
 from ..scene.pipeline import UserError
 
 STAGES = ("read", "model", "solve", "write")
@@ -132,6 +132,13 @@ def world_scale(clip) -> float:
     return float(abs(np.linalg.det(clip.world[:3, :3])) ** (1 / 3))
 
 
+def with_bake(record: dict, clip, error: float) -> dict:
+    """``record``, with on a control rig how far (cm) the bake left a driven bone from the solve at worst."""
+    if clip.controls is not None:
+        record["controls"] = {"set": clip.controls.name, "max_error_cm": round(100 * error * world_scale(clip), 2)}
+    return record
+
+
 def write_new(context, clip, suffix, frames, loc, rot, previous, replace, record: dict, bones=None,
               scene_range: bool = True):
     """Create the new action, key it (``bones``: only these), label it with ``record`` and assign
@@ -139,11 +146,32 @@ def write_new(context, clip, suffix, frames, loc, rot, previous, replace, record
     action = pipeline.new_action_from(clip, suffix)
     try:
         error = pipeline.write_pose(context, clip, action, frames, loc, rot, previous, replace, bones)
-        if clip.controls is not None:
-            record["controls"] = {"set": clip.controls.name, "max_error_cm": round(100 * error * world_scale(clip), 2)}
-        action[RECORD] = record
+        action[RECORD] = with_bake(record, clip, error)
         pipeline.finish(context, clip, action, scene_range)
     except Exception:
         bpy.data.actions.remove(action)
         raise
+    return action
+
+
+def write_fresh(context, clip, name: str, frames, loc, rot, record: dict, scene_range: bool = True):
+    """A new action ``name`` holding only the new frames: keyed, labelled, assigned,
+    the scene's range widened (with ``scene_range``); an action the armature had is kept (fake user)."""
+    action = bpy.data.actions.new(name)
+    clip.first, clip.last = int(frames[0]), int(frames[-1])  # no static keys outside the new frames
+    old = clip.obj.animation_data.action if clip.obj.animation_data else None
+    try:
+        error = pipeline.write_pose(context, clip, action, frames, loc, rot, {}, None)
+        action[RECORD] = with_bake(record, clip, error)
+        anim.assign_action(clip.obj, action, None)
+        ad = clip.obj.animation_data
+        if getattr(ad, "action_slot", True) is None and len(action.slots):
+            ad.action_slot = action.slots[0]
+    except Exception:
+        bpy.data.actions.remove(action)
+        raise
+    if old is not None:
+        old.use_fake_user = True
+    if scene_range:
+        context.scene.frame_end = max(context.scene.frame_end, clip.last)
     return action

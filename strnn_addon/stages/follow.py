@@ -8,15 +8,14 @@ the new action is made, so a failure or a cancel changes nothing.
 
 from __future__ import annotations
 
-import bpy
 import numpy as np
 
 from ...model_core.motion.conventions import zup_to_yup
-from ...model_core.rig.solve import anchor_positions, fk, solve
+from ...model_core.rig.solve import solve
 from .. import engine_bridge
-from ..scene import anim, curves, pipeline
+from ..scene import curves, pipeline
 from ..scene.pipeline import UserError
-from .common import RECORD, familiarity_record, lock, made_by, model_steps, prefs, write_new
+from .common import familiarity_record, lock, made_by, model_steps, prefs, write_fresh, write_new
 
 
 def follow_curve_steps(context, obj, *, curve: str = "", frames: int = 0, speed: float = 0.0, foot_lock: bool = True,
@@ -26,7 +25,7 @@ def follow_curve_steps(context, obj, *, curve: str = "", frames: int = 0, speed:
     own), feet locked when ``foot_lock``; ``steps`` fine-tuning steps per model window.
     A generator: yields each stage's name before running it, and the fraction of the model
     stage done after each model window; returns the new action."""
-    clip = _prepare(context, obj)
+    clip = pipeline.prepare_any(context, obj)
     curve_obj = curves.find_curve(context, curve)
     points, cyclic = curves.curve_points(context, curve_obj)
     points = zup_to_yup(points)
@@ -45,7 +44,7 @@ def follow_curve_steps(context, obj, *, curve: str = "", frames: int = 0, speed:
         previous = pipeline.raw_rotations(clip, clip.last)
     else:
         held_loc, held_rot = pipeline.reference_pose(context, clip, np.array([float(context.scene.frame_current)]))
-        context_pos, rest, previous = None, _rest_joints(clip, held_loc, held_rot), {}
+        context_pos, rest, previous = None, pipeline.pose_joints(clip, held_loc, held_rot)[0], {}
     yield "model"
     new_pos = yield from model_steps(engine_bridge.follow_curve_steps(
         prefs(context), points, cyclic, clip.fps, frames or None, speed or None, steps, context_pos, rest))
@@ -67,39 +66,6 @@ def follow_curve_steps(context, obj, *, curve: str = "", frames: int = 0, speed:
     if clip.action is not None:
         return write_new(context, clip, "curve", new_frames, loc, rot, previous, None, record,
                          scene_range=scene_range)
-    return _write_fresh(context, clip, new_frames, loc, rot, record, scene_range)
+    return write_fresh(context, clip, f"{clip.obj.name}.curve", new_frames, loc, rot, record, scene_range)
 
 
-def _prepare(context, obj) -> pipeline.Clip:
-    """:func:`pipeline.prepare`, or for an armature without an action the same minus the action."""
-    if obj is not None and obj.type == "ARMATURE" and obj.animation_data and obj.animation_data.action:
-        return pipeline.prepare(context, obj)
-    pipeline.check_object(obj, need_action=False)
-    frame = context.scene.frame_start
-    return pipeline.clip_of(context, obj, None, None, frame, frame)
-
-
-def _rest_joints(clip: pipeline.Clip, loc: np.ndarray, rot: np.ndarray) -> np.ndarray:
-    """World canonical joints ``[21, 3]`` (Y-up) of the rig in its current pose ``loc``, ``rot`` ``[1, B, ...]``."""
-    local = anchor_positions(clip.rig, clip.anchors, fk(clip.rig, loc, rot))[0]
-    return zup_to_yup(local @ clip.world[:3, :3].T + clip.world[:3, 3])
-
-
-def _write_fresh(context, clip, frames, loc, rot, record: dict, scene_range: bool = True):
-    """A new action for an armature that had none: keyed, assigned, the scene's range widened
-    (with ``scene_range``)."""
-    action = bpy.data.actions.new(f"{clip.obj.name}.curve")
-    clip.first, clip.last = int(frames[0]), int(frames[-1])  # no static keys outside the new frames
-    try:
-        action[RECORD] = record
-        pipeline.write_pose(context, clip, action, frames, loc, rot, {}, None)
-        anim.assign_action(clip.obj, action, None)
-        ad = clip.obj.animation_data
-        if getattr(ad, "action_slot", True) is None and len(action.slots):
-            ad.action_slot = action.slots[0]
-    except Exception:
-        bpy.data.actions.remove(action)
-        raise
-    if scene_range:
-        context.scene.frame_end = max(context.scene.frame_end, clip.last)
-    return action

@@ -21,8 +21,9 @@ def fill_gap(context, obj, *, progress=noop, **options):
 
 
 def key_frames(clip) -> np.ndarray:
-    """Sorted whole frames ``[K]`` that hold a key on any written (mapped) bone."""
-    names = {clip.rig.names[b] for b in pipeline.written_bones(clip)}
+    """Sorted whole frames ``[K]`` that hold a key on any written (mapped) bone, or on a control rig
+    on any of their controls."""
+    names = set(pipeline.keyed_names(clip))
     frames = set()
     for (bone, _prop), curves in rig_io.bone_channels(clip.channels.fcurves).items():
         if bone in names:

@@ -235,7 +235,7 @@ def evaluated_joints(addon, obj, frames) -> np.ndarray:
     pipeline = addon_module(addon, "strnn_addon.scene.pipeline")
     rig_io = addon_module(addon, "strnn_addon.scene.rig_io")
     solve = addon_module(addon, "model_core.rig.solve")
-    clip = pipeline.prepare(bpy.context, obj)
+    clip = pipeline.prepare_any(bpy.context, obj)
     pose, world = rig_io.pose_matrices_evaluated(bpy.context, obj, clip.rig, np.asarray(frames, dtype=np.float64))
     local = solve.anchor_positions(clip.rig, clip.anchors, pose)
     return np.einsum("fij,fkj->fki", world[:, :3, :3], local) + world[:, None, :3, 3]

@@ -11,7 +11,18 @@ import addon_utils
 import bpy
 import numpy as np
 import pytest
-from scenes import action_of, evaluated_joints, fcurves_of, key_snapshot, key_walk, same_keys
+from scenes import (
+    action_of,
+    addon_module,
+    evaluated_joints,
+    fcurves_of,
+    find_mocap,
+    import_bvh,
+    key_snapshot,
+    key_walk,
+    same_keys,
+    walk_bvh,
+)
 
 LIMB_SWITCHES = ("thigh_parent.L", "thigh_parent.R", "upper_arm_parent.L", "upper_arm_parent.R")
 # Deform bones whose heads sit on canonical joints (DEF-spine: the hips), in the joints' order below.
@@ -46,6 +57,50 @@ def rig(rigify_file):
         obj.pose.bones[bone]["IK_FK"] = 1.0  # animate the limbs in FK
     key_walk(obj, 60, "torso", ("thigh_fk.L", "thigh_fk.R"), ("shin_fk.L", "shin_fk.R"),
              ("upper_arm_fk.L", "upper_arm_fk.R"), step=0.02)
+    bpy.context.scene.frame_set(1)
+    return obj
+
+
+WALK = "bandai-namco/dataset-2/dataset-2_walk_normal_001.bvh"  # a real take where the data is unpacked
+
+
+def import_walk(folder):
+    """A walk imported with Blender's BVH importer (real motion capture when unpacked) 2 m left of the rig."""
+    mocap = find_mocap()
+    path = mocap / WALK if mocap is not None and (mocap / WALK).exists() else walk_bvh(folder, frames=120)
+    obj = import_bvh(path, update_scene_fps=True, update_scene_duration=True)
+    obj.location.x = -2.0
+    return obj
+
+
+@pytest.fixture
+def walk_source(rig, tmp_path):
+    return import_walk(tmp_path)
+
+
+@pytest.fixture(scope="module")
+def walking_file(rigify_file, tmp_path_factory):
+    """The generated rig walking: a walk moved onto it with Transfer Motion (feet locked), saved once."""
+    folder = tmp_path_factory.mktemp("walking")
+    bpy.ops.wm.open_mainfile(filepath=str(rigify_file))
+    rig = bpy.data.objects["rig"]
+    source = import_walk(folder)
+    for obj in bpy.context.view_layer.objects:
+        obj.select_set(obj in (source, rig))
+    bpy.context.view_layer.objects.active = rig
+    assert bpy.ops.strnn.transfer_motion(foot_lock=True) == {"FINISHED"}
+    bpy.data.objects.remove(source)
+    path = folder / "walking.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(path))
+    return path
+
+
+@pytest.fixture
+def walking_rig(walking_file):
+    bpy.ops.wm.open_mainfile(filepath=str(walking_file))
+    obj = bpy.data.objects["rig"]
+    bpy.context.view_layer.objects.active = obj
+    obj.select_set(True)
     bpy.context.scene.frame_set(1)
     return obj
 
@@ -95,8 +150,116 @@ def test_extend_keys_the_controls_and_the_deform_bones_follow(rig, addon, fake_m
     want = last[-1] + (last[-1, 0] - last[-2, 0]) * np.arange(1, 31)[:, None, None]
     idx = [joints[j] for j in DEFORM_JOINTS.values()]
     err = np.linalg.norm(deform_heads(rig, range(61, 91)) - want[:, idx], axis=-1)
-    print('ERR', err.max(), record)
     assert err.max() < 0.01, err.max()
     for bone in LIMB_SWITCHES:  # FK on the new frames
         bpy.context.scene.frame_set(75)
         assert rig.pose.bones[bone]["IK_FK"] == pytest.approx(1.0)
+
+
+def run_on_rig(rig, op: str, after: float, **kw):
+    """Run ``bpy.ops.strnn.<op>`` on the rig; (old action, new action) after checking that the original is
+    untouched and that the new keys after frame ``after`` are on controls only, each following the solve."""
+    old = action_of(rig)
+    before = key_snapshot(rig) if old is not None else None
+    assert getattr(bpy.ops.strnn, op)(**kw) == {"FINISHED"}
+    new = action_of(rig)
+    assert new is not old
+    if old is not None:
+        assert old.use_fake_user and same_keys(before, key_snapshot(rig, old))
+    written = keyed_bones(new, rig, after)
+    assert written and not {b for b in written if b.startswith(("DEF-", "ORG-", "MCH-"))}, written
+    record = new["strnn"].to_dict()
+    assert record["controls"]["max_error_cm"] < 1.0, record
+    return old, new
+
+
+def joint_speed(joints: np.ndarray) -> float:
+    """Mean speed (units per frame) of the joints relative to the hips ``[F, 21, 3]`` plus the hips'."""
+    rel = joints - joints[:, :1]
+    return float(np.linalg.norm(np.diff(rel, axis=0), axis=-1).mean() + np.linalg.norm(np.diff(joints[:, 0], axis=0),
+                                                                                      axis=-1).mean())
+
+
+def test_extend_with_the_model_stays_alive(walking_rig, addon, real_model):
+    rig = walking_rig
+    last = int(action_of(rig).frame_range[1])
+    run_on_rig(rig, "extend_clip", last, frames=60)
+    before = joint_speed(evaluated_joints(addon, rig, np.arange(last - 29, last + 1)))
+    after = joint_speed(evaluated_joints(addon, rig, np.arange(last + 1, last + 61)))
+    assert 0.3 < after / before < 3.0, (before, after)
+
+
+@pytest.mark.parametrize("op, kw", [("denoise_action", {}), ("foot_lock", {}),
+                                    ("inbetween", {"use_range": True, "frame_start": 25, "frame_end": 40})],
+                         ids=["denoise", "foot_lock", "fill_gap"])
+def test_operators_key_the_controls(walking_rig, addon, real_model, op, kw):
+    run_on_rig(walking_rig, op, 0, **kw)
+
+
+def test_follow_curve_keys_the_controls(walking_rig, addon, real_model):
+    pytest.importorskip("torch")
+    bpy.ops.curve.primitive_nurbs_path_add()
+    path = bpy.context.active_object
+    bpy.context.view_layer.objects.active = walking_rig
+    last = int(action_of(walking_rig).frame_range[1])
+    run_on_rig(walking_rig, "follow_curve", last, curve=path.name, frames=60)
+
+
+def transfer(source, target, **kw):
+    for obj in bpy.context.view_layer.objects:
+        obj.select_set(obj in (source, target))
+    bpy.context.view_layer.objects.active = target
+    return run_on_rig(target, "transfer_motion", 0, **kw)
+
+
+def knee_bend_forward(joints: np.ndarray, side: str) -> np.ndarray:
+    """How far ``[F]`` each knee sits in front of its hip-ankle line, along the body's forward direction."""
+    names = addon_joint_index()
+    hip, knee, ankle = (joints[:, names[f"{side}_{n}"]] for n in ("upleg", "knee", "foot"))
+    across = joints[:, names["l_upleg"]] - joints[:, names["r_upleg"]]
+    forward = np.cross(across, np.array([0.0, 0.0, 1.0]))  # Blender: Z up; left x up = forward
+    forward /= np.linalg.norm(forward, axis=-1, keepdims=True)
+    t = np.sum((knee - hip) * (ankle - hip), -1) / np.sum((ankle - hip) ** 2, -1)
+    off = knee - (hip + t[:, None] * (ankle - hip))
+    return np.sum(off * forward, -1)
+
+
+def addon_joint_index() -> dict:
+    import importlib
+    import sys
+
+    name = next(m for m in sys.modules if m.endswith("model_core.motion.conventions"))
+    return importlib.import_module(name).JOINT_INDEX
+
+
+def test_transfer_motion_from_a_bvh_onto_the_rig(rig, addon, walk_source):
+    rig.animation_data.action = None  # a rig with no action yet: it stands in its rest pose
+    rest = evaluated_joints(addon, rig, [1])
+    _, new = transfer(walk_source, rig, foot_lock=False)
+    frames = np.arange(int(new.frame_range[0]), int(new.frame_range[1]) + 1)
+    src = evaluated_joints(addon, walk_source, frames)
+    got = evaluated_joints(addon, rig, frames)
+    transfer_core = addon_module(addon, "model_core.ops.transfer")
+    conventions = addon_module(addon, "model_core.motion.conventions")
+    want = conventions.yup_to_zup(transfer_core.retarget(conventions.zup_to_yup(src),
+                                                        conventions.zup_to_yup(rest)))
+    # the rig's joints follow the source's motion on its own proportions
+    err = np.linalg.norm(got - want, axis=-1)
+    print(f"transfer: mean {100 * err.mean():.2f} cm, max {100 * err.max():.2f} cm over {len(frames)} frames")
+    assert err.mean() < 0.03, err.mean()
+    for side in "lr":
+        assert knee_bend_forward(got, side).min() > -0.02  # no knee bends backwards
+    speed = np.linalg.norm(np.diff(got[:, 0, :2], axis=0), axis=-1).mean()
+    assert speed > 0.005  # it walks
+
+
+def test_transfer_with_foot_lock_keeps_feet_on_the_floor(walking_rig, addon):
+    rig = walking_rig  # made by Transfer Motion with Foot Lock
+    new = action_of(rig)
+    assert new["strnn"]["operation"] == "Transfer Motion" and new["strnn"]["controls"]["max_error_cm"] < 1.0
+    frames = np.arange(int(new.frame_range[0]), int(new.frame_range[1]) + 1)
+    got = evaluated_joints(addon, rig, frames)
+    names = addon_joint_index()
+    feet = got[:, [names[n] for n in ("l_foot", "l_toe", "r_foot", "r_toe")], 2]
+    lowest = feet.min(1)
+    assert np.percentile(lowest, 5) > -0.03 and np.percentile(lowest, 50) < 0.05, np.percentile(lowest, [5, 50])

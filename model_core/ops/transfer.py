@@ -1,0 +1,90 @@
+"""Transfer Motion: a take's canonical joints put on another body's proportions (no bpy).
+
+The source's motion is kept as directions: every canonical bone (joint to parent joint) points
+where the source's does, with the target's own length, built outwards from the hips. The pelvis
+and the shoulders are rigid in a body: the upper legs and upper arms keep the target's own
+offsets from the hips and the chest, turned as the source's pelvis and chest turn. The root
+path is scaled by the ratio of leg lengths and starts where the target stands; the body is then
+raised or lowered frame by frame so that its lowest foot is as high above the target's floor as
+the source's is above its own (scaled), so feet neither sink nor float where the source's touch.
+The rig solve then turns the target's bones onto these joints.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..motion.conventions import GROUND_AXES, JOINT_INDEX, JOINTS, PARENTS, UP_AXIS
+from ..motion.features import floor_height, lowest_foot
+from ..motion.geometry import unit
+from ..rig.rigs import leg_length
+
+
+def bone_lengths(pos: np.ndarray) -> np.ndarray:
+    """Median length ``[21]`` of each canonical bone (joint to its parent; 0 for the hips) over
+    frames ``[F, 21, 3]``."""
+    pos = np.asarray(pos, dtype=np.float64)
+    out = np.zeros(len(JOINTS))
+    child = PARENTS >= 0
+    out[child] = np.median(np.linalg.norm(pos[:, child] - pos[:, PARENTS[child]], axis=-1), axis=0)
+    return out
+
+
+# Rigid parts: (parent joint, (left, right) joints that span it, the torso joint above it).
+_RIGID = {"hips": (("l_upleg", "r_upleg"), "spine"), "spine1": (("l_arm", "r_arm"), "neck")}
+
+
+def part_frames(pos: np.ndarray, parent: str) -> np.ndarray:
+    """Orientation ``[F, 3, 3]`` (columns: across to the left, up the torso, their cross) of the rigid
+    part at joint ``parent`` (:data:`_RIGID`) in joints ``[F, 21, 3]``."""
+    (left, right), up = _RIGID[parent]
+    x = pos[:, JOINT_INDEX[left]] - pos[:, JOINT_INDEX[right]]
+    y = pos[:, JOINT_INDEX[up]] - pos[:, JOINT_INDEX[parent]]
+    x = unit(x)
+    y = unit(y - np.sum(y * x, -1, keepdims=True) * x)
+    return np.stack([x, y, np.cross(x, y)], -1)
+
+
+def with_lengths(pos: np.ndarray, rest: np.ndarray, hips: np.ndarray) -> np.ndarray:
+    """Joints ``[F, 21, 3]`` moving like ``pos`` on the body of ``rest`` ``[21, 3]``: each bone points like
+    ``pos``'s with ``rest``'s length, except that the joints of a rigid part (:data:`_RIGID`) keep their
+    offsets in ``rest`` turned with ``pos``'s part; the hips at ``hips`` ``[F, 3]``."""
+    pos = np.asarray(pos, dtype=np.float64)
+    lengths = bone_lengths(rest[None])
+    turn = {}
+    for parent, ((left, right), _) in _RIGID.items():
+        spin = part_frames(pos, parent) @ part_frames(rest[None], parent)[0].T  # rest part -> each frame's
+        for j in (left, right):
+            turn[JOINT_INDEX[j]] = np.einsum("fij,j->fi", spin, rest[JOINT_INDEX[j]] - rest[JOINT_INDEX[parent]])
+    out = np.empty_like(pos)
+    out[:, 0] = hips
+    for j in range(1, len(JOINTS)):  # parents first
+        p = PARENTS[j]
+        if j in turn:
+            out[:, j] = out[:, p] + turn[j]
+            continue
+        out[:, j] = out[:, p] + unit(pos[:, j] - pos[:, p]) * lengths[j]
+    return out
+
+
+def retarget(source: np.ndarray, target_rest: np.ndarray) -> np.ndarray:
+    """The motion of ``source`` ``[F, 21, 3]`` on the body of ``target_rest`` (the target's joints in
+    its reference pose, ``[21, 3]`` or ``[K, 21, 3]``), both in one world (Y up, same units).
+
+    Returns ``[F, 21, 3]``: the target's bone lengths, the source's bone directions, the root path
+    scaled by the leg-length ratio from where the target stands, feet as high above the target's
+    floor as the source's (scaled) above its own."""
+    source = np.asarray(source, dtype=np.float64)
+    rest = np.asarray(target_rest, dtype=np.float64).reshape(-1, len(JOINTS), 3)
+    if len(source) == 0:
+        raise ValueError("the source has no frames to transfer")
+    scale = leg_length(rest) / max(leg_length(source), 1e-9)
+    floor_s, floor_t = floor_height(source), float(np.min(lowest_foot(rest)))
+    hips = np.empty((len(source), 3))
+    ground = list(GROUND_AXES)
+    hips[:, ground] = rest[0, 0, ground] + scale * (source[:, 0, ground] - source[0, 0, ground])
+    hips[:, UP_AXIS] = floor_t + scale * (source[:, 0, UP_AXIS] - floor_s)
+    out = with_lengths(source, rest[0], hips)
+    lift = floor_t + scale * (lowest_foot(source) - floor_s) - lowest_foot(out)
+    out[..., UP_AXIS] += lift[:, None]
+    return out

@@ -1,0 +1,65 @@
+"""Transfer Motion: move another armature's motion onto the active one, as a stage generator."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ...model_core.ops.transfer import retarget
+from ...model_core.rig.solve import solve
+from ..scene import pipeline
+from ..scene.pipeline import UserError
+from .common import lock, made_by, noop, run, write_fresh
+
+
+def transfer_motion(context, obj, *, progress=noop, **options):
+    """:func:`transfer_steps` run to the end; returns the new action."""
+    return run(transfer_steps(context, obj, **options), progress)
+
+
+def find_source(context, target, name: str = ""):
+    """The armature to take the motion from: the one named ``name``, else the other selected armature
+    with an action; a :class:`UserError` saying what to select otherwise."""
+    if name:
+        obj = context.scene.objects.get(name)
+        if obj is None or obj.type != "ARMATURE":
+            raise UserError(f"No armature named {name!r} in the scene: give the name of the armature to take the "
+                            "motion from")
+    else:
+        others = [o for o in context.selected_objects if o is not target and o.type == "ARMATURE"]
+        if len(others) != 1:
+            found = "none" if not others else ", ".join(repr(o.name) for o in others)
+            raise UserError("Select the armature to take the motion from, then the one to put it on (active); "
+                            f"other selected armatures: {found}")
+        obj = others[0]
+    if obj is target:
+        raise UserError(f"{obj.name!r} is both source and target: the motion comes from another armature")
+    return obj
+
+
+def transfer_steps(context, obj, *, source: str = "", foot_lock: bool = True, scene_range: bool = True):
+    """Put the motion of ``source`` (default: the other selected armature) on armature ``obj`` over the
+    source action's frames: the target's proportions, the source's root path scaled from where the target
+    stands, feet on the floor (locked during contacts with ``foot_lock``), into a new action on ``obj``
+    (its own action, if any, is kept). A generator like :func:`.extend.extend_steps`."""
+    target = pipeline.prepare_any(context, obj)
+    src = pipeline.prepare(context, find_source(context, obj, source))
+    if abs(src.fps - target.fps) > 1e-6:  # one scene: never
+        raise UserError("Source and target play at different frame rates")
+    frames = np.arange(src.first, src.last + 1, dtype=np.float64)
+    if len(frames) < 2:
+        raise UserError(f"The action {src.action.name!r} has {len(frames)} frame: transfer needs at least 2")
+    yield "read"
+    pos = pipeline.joint_positions(context, src, frames)
+    ref_loc, ref_rot = pipeline.reference_pose(context, target, np.array([float(context.scene.frame_current)]))
+    rest = pipeline.pose_joints(target, ref_loc, ref_rot)
+    yield "model"
+    new_pos = retarget(pos, rest)
+    if foot_lock:
+        new_pos = lock(new_pos, src.fps)
+    yield "solve"
+    n = len(frames)
+    loc, rot = solve(target.rig, target.anchors, pipeline.to_armature(target, new_pos), np.repeat(ref_loc, n, 0),
+                     np.repeat(ref_rot, n, 0))
+    yield "write"
+    record = made_by("Transfer Motion", src, source=src.obj.name, target=obj.name, foot_lock=foot_lock)
+    return write_fresh(context, target, f"{src.action.name}.transfer", frames, loc, rot, record, scene_range)
