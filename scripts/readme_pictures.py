@@ -134,7 +134,7 @@ def filmstrip(ax, joints: np.ndarray, frames: list[int], spacing: float, colour=
 
 def joints_z_up(obj, poses: np.ndarray, names: list[str]) -> np.ndarray:
     """The 21 canonical joints ``[F, 21, 3]`` in Blender's axes (Z-up) through the extension's bone map."""
-    bone_map = obj.data.strnn_map
+    bone_map = obj.strnn_map
     cols = [(names.index(getattr(bone_map, j)), int(getattr(bone_map, f"{j}_tail", False))) for j in JOINTS]
     return np.stack([poses[:, b, end] for b, end in cols], 1)
 
@@ -151,7 +151,7 @@ def canonical(obj, poses: np.ndarray, names: list[str]) -> np.ndarray:
 
 def bone_of(obj, names: list[str], joint: str) -> int:
     """Index in ``names`` of the bone the extension's bone map (filled by the operators) gives ``joint``."""
-    return names.index(getattr(obj.data.strnn_map, joint))
+    return names.index(getattr(obj.strnn_map, joint))
 
 
 def finish(fig, path: Path):
@@ -392,7 +392,7 @@ def picture_bone_map(bpy, data: Path, out: Path) -> dict:
                          for p in (bones, joints))
         for head, tail in bones:
             ax.plot([head[0], tail[0]], [head[2], tail[2]], color="#c8c8c8", lw=2, solid_capstyle="round")
-        bone_map = obj.data.strnn_map
+        bone_map = obj.strnn_map
         left, right = [], []
         for j, (joint, p) in enumerate(zip(JOINTS, joints)):
             ax.plot(p[0], p[2], "o", ms=4.5, color=COLOURS[j])

@@ -49,6 +49,11 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--residual-width", type=int, default=512, help="hidden units of the residual filter")
     p.add_argument("--dropout", type=float, default=0.0, help="dropout after each spatial layer (paper: 0.1)")
     p.add_argument("--steps", type=int, default=5000, help="optimiser steps over all phases")
+    p.add_argument("--phase-split", type=float, nargs=3, default=TrainConfig.phase_split,
+                   metavar=("NET", "FILTER_PRETRAIN", "FILTER_FINETUNE"),
+                   help="share of the steps for the spatio-temporal net, the residual filter's pre-training on "
+                        "ground truth and its fine-tuning on the frozen net's output (e.g. 0 0 1 after --init: "
+                        "only the filter, which starts afresh where --residual-width differs)")
     p.add_argument("--batch", type=int, default=128, help="windows per step")
     p.add_argument("--optimizer", choices=("adam", "adadelta"), default="adam")
     p.add_argument("--lr", type=float, default=None,
@@ -113,6 +118,7 @@ def strnn_run(args, argv):
                         predict_len=args.predict_len, residual_width=args.residual_width, dropout=args.dropout,
                         offsets=args.offsets, **VARIANTS[args.variant])
     cfg = TrainConfig(data=args.data, out=args.out, model=model, steps=args.steps, batch=args.batch,
+                      phase_split=tuple(args.phase_split),
                       optimizer=args.optimizer, lr=learning_rate(args), smooth_weight=args.smooth_weight,
                       recon_weight=args.recon_weight, velocity_weight=args.velocity_weight, init=args.init,
                       rollout_windows=args.rollout_windows, rollout_fraction=args.rollout_fraction,

@@ -7,9 +7,10 @@ from bpy.props import IntProperty, StringProperty
 
 from . import props as options
 from .props import joint_label
-from .scene import mapping
+from .scene import controls, mapping
 from .scene.curves import find_curve
 from .scene.pipeline import UserError, check_object
+from .scene.rig_io import read_rig
 from .stages.common import RECORD, STAGES, report_note, run
 from .stages.denoise import denoise_steps
 from .stages.extend import extend_steps
@@ -291,17 +292,25 @@ class STRNN_OT_auto_map(bpy.types.Operator):
         if obj is None or obj.type != "ARMATURE":
             self.report({"ERROR"}, "Select an armature to map its bones")
             return {"CANCELLED"}
-        if obj.data.library is not None:
-            self.report({"ERROR"}, f"The armature {obj.data.name!r} is linked: make it local to store a bone map")
+        if obj.library is not None:
+            self.report({"ERROR"}, f"The object {obj.name!r} is linked: add a library override (Object > Library "
+                                   "Override > Make) to store a bone map")
             return {"CANCELLED"}
-        family, found = mapping.auto_map(obj.data)
-        mapping.store_map(obj.data, found, family)
+        family, found = mapping.auto_map(obj)
+        mapping.store_map(obj, found, family)
         missing = [joint_label(j) for j in mapping.bonemap.missing(found)]
         if missing:
             self.report({"WARNING"}, f"Mapped {21 - len(missing)} of 21 joints; pick these by hand: "
                                      + ", ".join(missing))
-        else:
-            self.report({"INFO"}, f"Mapped all 21 joints ({family} rig)")
+            return {"FINISHED"}
+        found_controls = controls.control_set(obj)
+        try:
+            mapping.resolve(obj, read_rig(obj), joint_skeleton=found_controls is not None)
+        except mapping.MapError as e:
+            self.report({"WARNING"}, f"Mapped all 21 joints ({family} rig), but the map does not fit: {e}")
+            return {"FINISHED"}
+        keyed = f"; results are keyed on its {found_controls.name} controls" if found_controls else ""
+        self.report({"INFO"}, f"Mapped all 21 joints ({family} rig){keyed}")
         return {"FINISHED"}
 
 
@@ -315,10 +324,79 @@ class STRNN_OT_clear_map(bpy.types.Operator):
     @classmethod
     def poll(cls, context):
         obj = context.active_object
-        return obj is not None and obj.type == "ARMATURE" and obj.data.library is None
+        return obj is not None and obj.type == "ARMATURE" and obj.library is None
 
     def execute(self, context):
-        mapping.store_map(context.active_object.data, {})
+        mapping.store_map(context.active_object, {})
+        return {"FINISHED"}
+
+
+class _EditControls:
+    bl_options = {"REGISTER", "UNDO"}
+
+    @classmethod
+    def poll(cls, context):
+        obj = context.active_object
+        if obj is None or obj.type != "ARMATURE" or obj.library is not None:
+            cls.poll_message_set("Select an armature (local, or a library override)")
+            return False
+        return True
+
+
+class STRNN_OT_control_add(_EditControls, bpy.types.Operator):
+    """Add a control: a bone the animator keys and the mapped bone it drives"""
+
+    bl_idname = "strnn.control_add"
+    bl_label = "Add Control"
+
+    def execute(self, context):
+        obj = context.active_object
+        item = obj.strnn_controls.add()
+        active = context.active_pose_bone
+        item.bone = active.name if active is not None and active.id_data is obj else ""
+        obj.strnn_control_index = len(obj.strnn_controls) - 1
+        return {"FINISHED"}
+
+
+class STRNN_OT_control_remove(_EditControls, bpy.types.Operator):
+    """Remove the selected control from the list"""
+
+    bl_idname = "strnn.control_remove"
+    bl_label = "Remove Control"
+
+    def execute(self, context):
+        obj = context.active_object
+        if not 0 <= obj.strnn_control_index < len(obj.strnn_controls):
+            self.report({"ERROR"}, "No control is selected in the list")
+            return {"CANCELLED"}
+        obj.strnn_controls.remove(obj.strnn_control_index)
+        obj.strnn_control_index = max(0, obj.strnn_control_index - 1)
+        return {"FINISHED"}
+
+
+class STRNN_OT_controls_from_preset(_EditControls, bpy.types.Operator):
+    """Fill the control list (and switches) from the shipped preset this rig fits, to edit it"""
+
+    bl_idname = "strnn.controls_from_preset"
+    bl_label = "Controls from Preset"
+
+    def execute(self, context):
+        obj = context.active_object
+        preset = controls.rig_controls.preset_for(obj.pose.bones.keys())
+        if preset is None:
+            self.report({"ERROR"}, f"No shipped preset fits {obj.name!r} (presets: "
+                                   f"{', '.join(controls.rig_controls.PRESETS)}): add its controls one by one")
+            return {"CANCELLED"}
+        obj.strnn_controls.clear()
+        obj.strnn_switches.clear()
+        for c in preset.controls:
+            item = obj.strnn_controls.add()
+            item.bone, item.drives, item.location = c.bone, c.drives, c.location
+        for sw in preset.switches:
+            item = obj.strnn_switches.add()
+            item.bone, item.prop, item.value = sw.bone, sw.prop, sw.value
+        self.report({"INFO"}, f"{len(preset.controls)} controls and {len(preset.switches)} switches from the "
+                              f"{preset.name} preset")
         return {"FINISHED"}
 
 
@@ -343,4 +421,5 @@ def check_message(obj, need_action: bool = True) -> str:
 
 
 classes = (STRNN_OT_extend_clip, STRNN_OT_fill_gap, STRNN_OT_denoise_action, STRNN_OT_foot_lock,
-           STRNN_OT_follow_curve, STRNN_OT_transfer_motion, STRNN_OT_auto_map, STRNN_OT_clear_map)
+           STRNN_OT_follow_curve, STRNN_OT_transfer_motion, STRNN_OT_auto_map, STRNN_OT_control_add,
+           STRNN_OT_control_remove, STRNN_OT_controls_from_preset, STRNN_OT_clear_map)

@@ -1,11 +1,20 @@
-"""Properties: the bone map stored on the armature data, and the add-on preferences."""
+"""Properties: the bone map and controls stored on the armature object, the sidebar settings and
+the add-on preferences."""
 
 from __future__ import annotations
 
 import textwrap
 
 import bpy
-from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, PointerProperty, StringProperty
+from bpy.props import (
+    BoolProperty,
+    CollectionProperty,
+    EnumProperty,
+    FloatProperty,
+    IntProperty,
+    PointerProperty,
+    StringProperty,
+)
 
 from ..model_core.motion.conventions import JOINTS
 from . import engine_bridge
@@ -94,19 +103,41 @@ def joint_label(joint: str) -> str:
 def _map_annotations() -> dict:
     ann = {}
     for joint in JOINTS:
-        ann[joint] = StringProperty(name=joint_label(joint),
+        ann[joint] = StringProperty(name=joint_label(joint), override={"LIBRARY_OVERRIDABLE"},
                                     description=f"Bone whose head is the canonical {joint_label(joint)} joint")
     for joint in TAIL_JOINTS:
         ann[f"{joint}_tail"] = BoolProperty(
-            name="Tail", description=f"The {joint_label(joint)} joint is the bone's tail, not its head")
-    ann["family"] = StringProperty(name="Rig Family", description="The rig family the last auto-map recognised")
+            name="Tail", description=f"The {joint_label(joint)} joint is the bone's tail, not its head",
+            override={"LIBRARY_OVERRIDABLE"})
+    ann["family"] = StringProperty(name="Rig Family", description="The rig family the last auto-map recognised",
+                                   override={"LIBRARY_OVERRIDABLE"})
     return ann
 
 
 STRNN_PG_bone_map = type("STRNN_PG_bone_map", (bpy.types.PropertyGroup,), {
     "__annotations__": _map_annotations(),
-    "__doc__": "Which bone carries each of the 21 canonical joints (saved with the armature)",
+    "__doc__": "Which bone carries each of the 21 canonical joints (saved with the armature object)",
 })
+
+
+class STRNN_PG_control(bpy.types.PropertyGroup):
+    """A control bone and the mapped bone it drives (results are keyed on the control)"""
+
+    bone: StringProperty(name="Control", description="The bone the animator keys", override={"LIBRARY_OVERRIDABLE"})
+    drives: StringProperty(name="Drives", override={"LIBRARY_OVERRIDABLE"},
+                           description="The mapped bone (or the bone between two mapped ones) that follows it")
+    location: BoolProperty(name="Moves", default=False, override={"LIBRARY_OVERRIDABLE"},
+                           description="Also key the control's location (the body's root control)")
+
+
+class STRNN_PG_switch(bpy.types.PropertyGroup):
+    """A custom property keyed to a value on the written frames (e.g. an IK/FK switch set to FK)"""
+
+    bone: StringProperty(name="Bone", description="The bone holding the property", override={"LIBRARY_OVERRIDABLE"})
+    prop: StringProperty(name="Property", description="The custom property's name, e.g. IK_FK",
+                         override={"LIBRARY_OVERRIDABLE"})
+    value: FloatProperty(name="Value", default=1.0, override={"LIBRARY_OVERRIDABLE"},
+                         description="The value it is keyed to on the written frames")
 
 
 def _engines(self, context):
@@ -202,14 +233,24 @@ class STRNN_PG_settings(bpy.types.PropertyGroup):
     transfer_foot_lock: foot_lock(True)
 
 
-classes = (STRNN_PG_bone_map, STRNN_PG_settings, STRNN_AP_preferences)
+classes = (STRNN_PG_bone_map, STRNN_PG_control, STRNN_PG_switch, STRNN_PG_settings, STRNN_AP_preferences)
 
 
 def register_properties():
-    bpy.types.Armature.strnn_map = PointerProperty(type=STRNN_PG_bone_map)
+    bpy.types.Object.strnn_map = PointerProperty(type=STRNN_PG_bone_map, override={"LIBRARY_OVERRIDABLE"})
+    bpy.types.Object.strnn_controls = CollectionProperty(
+        type=STRNN_PG_control, override={"LIBRARY_OVERRIDABLE", "USE_INSERTION"},
+        description="The controls results are keyed on (empty: the shipped preset the rig fits, if any)")
+    bpy.types.Object.strnn_switches = CollectionProperty(
+        type=STRNN_PG_switch, override={"LIBRARY_OVERRIDABLE", "USE_INSERTION"},
+        description="Custom properties keyed on the written frames so that the controls act")
+    bpy.types.Object.strnn_control_index = IntProperty(default=0, override={"LIBRARY_OVERRIDABLE"})
     bpy.types.Scene.strnn = PointerProperty(type=STRNN_PG_settings)
 
 
 def unregister_properties():
     del bpy.types.Scene.strnn
-    del bpy.types.Armature.strnn_map
+    del bpy.types.Object.strnn_control_index
+    del bpy.types.Object.strnn_switches
+    del bpy.types.Object.strnn_controls
+    del bpy.types.Object.strnn_map

@@ -8,6 +8,7 @@ from ..model_core.motion.conventions import JOINTS
 from . import torch_install
 from .operators import check_message
 from .props import TAIL_JOINTS, joint_label
+from .scene import controls
 
 
 class _Sidebar:
@@ -161,8 +162,9 @@ class STRNN_PT_bone_map(_Sidebar, bpy.types.Panel):
         return super().poll(context) and obj is not None and obj.type == "ARMATURE"
 
     def draw(self, context):
-        arm = context.active_object.data
-        props = arm.strnn_map
+        obj = context.active_object
+        arm = obj.data
+        props = obj.strnn_map
         layout = self.layout
         row = layout.row(align=True)
         row.operator("strnn.auto_map", icon="AUTOMERGE_ON")
@@ -179,6 +181,54 @@ class STRNN_PT_bone_map(_Sidebar, bpy.types.Panel):
             row.prop_search(props, joint, arm, "bones", text=joint_label(joint))
             if joint in TAIL_JOINTS:
                 row.prop(props, f"{joint}_tail", text="", icon="BONE_DATA", toggle=True)
+
+
+class STRNN_UL_controls(bpy.types.UIList):
+    """Control bone -> the mapped bone it drives, with its Moves toggle."""
+
+    def draw_item(self, context, layout, data, item, icon, active_data, active_property, index=0, flt_flag=0):
+        arm = data.data
+        row = layout.row(align=True)
+        row.prop_search(item, "bone", arm, "bones", text="")
+        row.label(icon="FORWARD")
+        row.prop_search(item, "drives", arm, "bones", text="")
+        row.prop(item, "location", text="", icon="ORIENTATION_GLOBAL", toggle=True)
+
+
+class STRNN_PT_controls(_Sidebar, bpy.types.Panel):
+    """Which bones results are keyed on, for rigs whose mapped bones follow controls."""
+
+    bl_label = "Controls"
+    bl_parent_id = "STRNN_PT_bone_map"
+    bl_options = {"DEFAULT_CLOSED"}
+
+    @classmethod
+    def poll(cls, context):
+        obj = context.active_object
+        return super().poll(context) and obj is not None and obj.type == "ARMATURE"
+
+    def draw(self, context):
+        obj = context.active_object
+        layout = self.layout
+        found = controls.control_set(obj)
+        if not len(obj.strnn_controls):
+            text = (f"Keys go on the {found.name} preset's {len(found.controls)} controls" if found
+                    else "No controls: keys go on the mapped bones")
+            layout.label(text=text, icon="INFO")
+        row = layout.row()
+        row.template_list("STRNN_UL_controls", "", obj, "strnn_controls", obj, "strnn_control_index", rows=3)
+        col = row.column(align=True)
+        col.operator("strnn.control_add", text="", icon="ADD")
+        col.operator("strnn.control_remove", text="", icon="REMOVE")
+        layout.operator("strnn.controls_from_preset", icon="PRESET")
+        if len(obj.strnn_switches):
+            box = layout.box()
+            box.label(text="Switches keyed on the new frames")
+            for sw in obj.strnn_switches:
+                row = box.row(align=True)
+                row.prop(sw, "bone", text="")
+                row.prop(sw, "prop", text="")
+                row.prop(sw, "value", text="")
 
 
 class STRNN_MT_menu(bpy.types.Menu):
@@ -239,5 +289,6 @@ def unregister_menus():
 
 
 classes = (STRNN_PT_main, STRNN_PT_extend, STRNN_PT_fill_gap, STRNN_PT_denoise, STRNN_PT_foot_lock,
-           STRNN_PT_follow_curve, STRNN_PT_transfer, STRNN_PT_bone_map, STRNN_MT_menu)
+           STRNN_PT_follow_curve, STRNN_PT_transfer, STRNN_PT_bone_map, STRNN_UL_controls, STRNN_PT_controls,
+           STRNN_MT_menu)
 

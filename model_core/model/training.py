@@ -228,16 +228,27 @@ def trainable(model: STRNN, phase: str) -> list[torch.nn.Parameter]:
     return [p for p in model.parameters() if p.requires_grad]
 
 
-def initial_weights(path: str | Path) -> dict[str, torch.Tensor]:
-    """Model weights of a training state (``train_state.pt``) or a release folder, for ``--init``."""
+def initial_weights(path: str | Path, model: STRNN) -> dict[str, torch.Tensor]:
+    """``model``'s weights taken from a training state (``train_state.pt``) or a release folder, for
+    ``--init``; the residual filter keeps its fresh weights where its width differs (a new filter on a
+    trained net). Any other difference is an error that names it."""
     path = Path(path)
     if path.is_dir():
         release = load_release(path)
         release.require_strnn()
-        fresh = STRNN(STRNNConfig(**release.config)).state_dict()
-        return {k: torch.from_numpy(np.asarray(release.weights[k])) if k in release.weights else v
-                for k, v in fresh.items()}
-    return torch.load(path, weights_only=True)["model"]
+        found = {k: torch.from_numpy(np.asarray(v)) for k, v in release.weights.items()}
+    else:
+        found = torch.load(path, weights_only=True)["model"]
+    out = {}
+    for k, v in model.state_dict().items():
+        w = found.get(k, v)
+        if w.shape != v.shape:
+            if not k.startswith("filter."):
+                raise ValueError(f"--init {path}: {k} has shape {tuple(w.shape)}, this model's {tuple(v.shape)}: "
+                                 "start from a model of the same width and frame size")
+            w = v
+        out[k] = w
+    return out
 
 
 def make_optimizer(cfg: TrainConfig, params):
@@ -318,7 +329,7 @@ def train(cfg: TrainConfig, resume: bool = False, progress: bool = True) -> Path
     elif resume:
         log.info("no state at %s; starting from scratch", state_path)
     if saved is None and cfg.init:
-        model.load_state_dict(initial_weights(cfg.init))
+        model.load_state_dict(initial_weights(cfg.init, model))
         log.info("initial weights from %s", cfg.init)
     if rank == 0:
         log.info("config %s", json.dumps(asdict(cfg)))

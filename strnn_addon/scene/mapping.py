@@ -1,4 +1,9 @@
-"""The bone map on an armature: read, write, auto-map, and resolve into solve anchors."""
+"""The bone map of an armature object: read, write, auto-map, and resolve into solve anchors.
+
+The map lives on the object (``Object.strnn_map``), which a library override can hold even
+where the armature data stays linked; files saved when it lived on the armature data are read
+from there until the map is stored again.
+"""
 
 from __future__ import annotations
 
@@ -12,20 +17,22 @@ class MapError(ValueError):
     """The armature's bones cannot be mapped; the message says what is missing and how to fix it."""
 
 
-def stored_map(arm) -> bonemap.Mapping:
-    """The mapping saved on armature data ``arm``: {joint: (bone, use_tail)} for joints set."""
-    props = arm.strnn_map
-    out = {}
-    for joint in JOINTS:
-        bone = getattr(props, joint)
-        if bone:
-            out[joint] = (bone, bool(getattr(props, f"{joint}_tail", False)))
-    return out
+def stored_map(obj) -> bonemap.Mapping:
+    """The mapping saved on armature object ``obj``: {joint: (bone, use_tail)} for joints set (or, from
+    an older file, on its armature data)."""
+    props = obj.strnn_map
+    bones = {j: getattr(props, j) for j in JOINTS}
+    tails = {j: getattr(props, f"{j}_tail") for j in TAIL_JOINTS}
+    legacy = obj.data.get("strnn_map")  # the ID properties an older version left on the armature data
+    if not any(bones.values()) and legacy is not None:
+        bones = {j: str(legacy.get(j, "")) for j in JOINTS}
+        tails = {j: bool(legacy.get(f"{j}_tail", False)) for j in TAIL_JOINTS}
+    return {j: (bone, bool(tails.get(j, False))) for j, bone in bones.items() if bone}
 
 
-def store_map(arm, mapping: bonemap.Mapping, family: str = "") -> None:
-    """Save ``mapping`` on armature data ``arm`` (joints absent from it are cleared)."""
-    props = arm.strnn_map
+def store_map(obj, mapping: bonemap.Mapping, family: str = "") -> None:
+    """Save ``mapping`` on armature object ``obj`` (joints absent from it are cleared)."""
+    props = obj.strnn_map
     for joint in JOINTS:
         bone, tail = mapping.get(joint, ("", False))
         setattr(props, joint, bone)
@@ -34,28 +41,29 @@ def store_map(arm, mapping: bonemap.Mapping, family: str = "") -> None:
     props.family = family
 
 
-def auto_map(arm) -> tuple[str, bonemap.Mapping]:
-    """(family, mapping) guessed from armature data ``arm``'s bone names and hierarchy."""
-    names = [b.name for b in arm.bones]
+def auto_map(obj) -> tuple[str, bonemap.Mapping]:
+    """(family, mapping) guessed from armature object ``obj``'s bone names and hierarchy."""
+    bones = obj.data.bones
+    names = [b.name for b in bones]
     index = {n: i for i, n in enumerate(names)}
-    parents = [index[b.parent.name] if b.parent else -1 for b in arm.bones]
+    parents = [index[b.parent.name] if b.parent else -1 for b in bones]
     return bonemap.auto_map(names, parents)
 
 
-def effective_map(arm) -> bonemap.Mapping:
+def effective_map(obj) -> bonemap.Mapping:
     """The stored mapping, completed by auto-mapping where it leaves joints open."""
-    stored = stored_map(arm)
+    stored = stored_map(obj)
     if len(stored) == len(JOINTS):
         return stored
-    _, guess = auto_map(arm)
+    _, guess = auto_map(obj)
     return {**guess, **stored}
 
 
-def resolve(arm, rig: Rig, joint_skeleton: bool = False) -> tuple[Anchors, bonemap.Mapping, Rig]:
+def resolve(obj, rig: Rig, joint_skeleton: bool = False) -> tuple[Anchors, bonemap.Mapping, Rig]:
     """(anchors of the canonical joints, mapping, the rig they are on): ``rig`` itself, or with
     ``joint_skeleton`` (a control rig) its joint skeleton (:func:`controls.joint_rig`). Raises
     :class:`MapError` naming what is wrong."""
-    mapping = effective_map(arm)
+    mapping = effective_map(obj)
     absent = [j for j in JOINTS if j in mapping and mapping[j][0] not in rig.names]
     if absent:
         bones = ", ".join(f"{joint_label(j)} -> {mapping[j][0]!r}" for j in absent)

@@ -60,18 +60,15 @@ def check_object(obj, need_action: bool = True) -> None:
         raise UserError("No active object: select an armature with an action in the 3D Viewport")
     if obj.type != "ARMATURE":
         raise UserError(f"{obj.name!r} is a {obj.type.lower()}, not an armature: select an armature")
-    for what, data in (("object", obj), ("armature data", obj.data)):
-        if data.library is not None:
-            raise UserError(f"The {what} {data.name!r} is linked from {data.library.filepath!r} and cannot be "
-                            "changed: make it local (Object > Relations > Make Local) or add a library override")
+    if obj.library is not None:  # an override is local (its armature data may stay linked: only read)
+        raise UserError(f"The object {obj.name!r} is linked from {obj.library.filepath!r} and cannot be animated "
+                        "here: add a library override (Object > Library Override > Make) or make it local")
     if obj.animation_data and obj.animation_data.use_tweak_mode:
         raise UserError(f"{obj.name!r} is in NLA tweak mode, so its action cannot be swapped for a new one: "
                         "leave it (NLA Editor > Edit > Stop Tweaking Strip Actions, or Tab there) and try again")
     action = obj.animation_data.action if obj.animation_data else None
     if action is None and need_action:
         raise UserError(f"{obj.name!r} has no action: assign one in the Action Editor, or import a BVH")
-    if action is not None and action.library is not None:
-        raise UserError(f"The action {action.name!r} is linked from a library: make it local first")
     world = np.array(obj.matrix_world)[:3, :3]
     if min(obj.scale) <= 0 or np.linalg.det(world) <= 1e-12:
         raise UserError(f"{obj.name!r} has zero or negative scale {tuple(round(s, 3) for s in obj.scale)}: "
@@ -110,11 +107,30 @@ def clip_of(context, obj, action, channels, first: int, last: int) -> Clip:
             raise UserError(f"The controls set for {obj.name!r} name bones it does not have ({', '.join(absent)}): "
                             "fix them in STRNN > Bone Map > Controls")
     try:
-        anchors, bone_map, rig = mapping.resolve(obj.data, rig, joint_skeleton=found is not None)
+        anchors, bone_map, rig = mapping.resolve(obj, rig, joint_skeleton=found is not None)
     except mapping.MapError as e:
         raise UserError(str(e)) from e
+    if found is None:
+        check_not_driven(obj, [rig.names[b] for b in solved_bones(rig, anchors)])
     return Clip(obj, action, channels, rig, anchors, bone_map, rig_io.world_matrix(obj),
                 scene_fps(context.scene), first, last, found)
+
+
+# Constraints that set a bone's transform outright (keys on the bone would not show); limits and the like pass.
+OVERRIDING = {"COPY_TRANSFORMS", "COPY_ROTATION", "CHILD_OF", "DAMPED_TRACK", "TRACK_TO", "LOCKED_TRACK",
+              "STRETCH_TO", "ARMATURE", "TRANSFORM", "IK", "SPLINE_IK"}
+
+
+def check_not_driven(obj, bones: list[str]) -> None:
+    """A :class:`UserError` when a bone that would be keyed follows a constraint that overrides its keys,
+    saying to key its controls instead."""
+    for name in bones:
+        for con in obj.pose.bones[name].constraints:
+            if con.type in OVERRIDING and not con.mute and con.influence > 0:
+                target = getattr(con, "subtarget", "") or getattr(getattr(con, "target", None), "name", "")
+                raise UserError(f"Bone {name!r} follows a {con.type} constraint{f' ({target!r})' if target else ''}, "
+                                "so keys written on it would not show: set the bones the animator keys in STRNN > "
+                                "Bone Map > Controls (Controls from Preset fills them for a known rig)")
 
 
 def check_keys(action, fcurves) -> None:
@@ -306,8 +322,8 @@ def finish(context, clip: Clip, new_action, scene_range: bool = True) -> None:
     """Keep the original action (fake user) and assign the new one on the same slot; with
     ``scene_range``, widen the scene's frame range to the new action's end."""
     slot = anim.slot_of(clip.obj)
-    if mapping.stored_map(clip.obj.data) != clip.mapping:  # keep the auto-map that was used, for the panel
-        mapping.store_map(clip.obj.data, clip.mapping, clip.obj.data.strnn_map.family)
+    if mapping.stored_map(clip.obj) != clip.mapping:  # keep the auto-map that was used, for the panel
+        mapping.store_map(clip.obj, clip.mapping, clip.obj.strnn_map.family)
     clip.action.use_fake_user = True
     anim.assign_action(clip.obj, new_action, slot.identifier if slot else None)
     first, last = (int(round(x)) for x in new_action.frame_range)

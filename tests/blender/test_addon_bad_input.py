@@ -13,7 +13,7 @@ def state() -> tuple:
     """Everything an operator could change: actions with their keys, assignments, scene range."""
     keys = {a.name: (a.use_fake_user, key_snapshot_of(a)) for a in bpy.data.actions}
     assigned = {o.name: (action_of(o).name if action_of(o) else None) for o in bpy.data.objects}
-    maps = {a.name: a.strnn_map.hips for a in bpy.data.armatures}
+    maps = {o.name: o.strnn_map.hips for o in bpy.data.objects if o.type == "ARMATURE"}
     return keys, assigned, maps, bpy.context.scene.frame_end
 
 

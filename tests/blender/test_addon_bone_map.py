@@ -23,7 +23,7 @@ UNREAL = [("pelvis", None), ("spine_01", "pelvis"), ("spine_02", "spine_01"), ("
 
 
 def stored(obj) -> dict:
-    return {j: getattr(obj.data.strnn_map, j) for j in JOINTS}
+    return {j: getattr(obj.strnn_map, j) for j in JOINTS}
 
 
 def auto_map(obj) -> dict:
@@ -36,7 +36,7 @@ def test_mixamo_armature_maps_fully(addon):
     found = auto_map(build_armature("Mixamo", mixamo_bones()))
     assert found["l_upleg"] == "mixamorig:LeftUpLeg" and found["spine1"] == "mixamorig:Spine2"
     assert found["l_fingertip"] == "mixamorig:LeftHandMiddle4"
-    assert bpy.context.active_object.data.strnn_map.family == "mixamo"
+    assert bpy.context.active_object.strnn_map.family == "mixamo"
 
 
 def test_rigify_deform_bones_map_fully(addon):
@@ -44,7 +44,7 @@ def test_rigify_deform_bones_map_fully(addon):
     found = auto_map(obj)
     assert found["hips"] == "DEF-spine" and found["head"] == "DEF-spine.006"
     assert found["r_knee"] == "DEF-shin.R" and found["r_wrist"] == "DEF-hand.R"
-    assert obj.data.strnn_map.family == "rigify_deform"
+    assert obj.strnn_map.family == "rigify_deform"
 
 
 def test_generic_left_right_heuristic_maps_unreal_names(addon):
@@ -56,13 +56,13 @@ def test_generic_left_right_heuristic_maps_unreal_names(addon):
     assert (found["hips"], found["spine"], found["spine1"], found["neck"]) == ("pelvis", "spine_01", "spine_03",
                                                                                "neck_01")
     assert (found["l_knee"], found["r_toe"], found["l_arm"]) == ("calf_l", "ball_r", "upperarm_l")
-    assert found["l_fingertip"] == "hand_l" and obj.data.strnn_map.l_fingertip_tail
+    assert found["l_fingertip"] == "hand_l" and obj.strnn_map.l_fingertip_tail
 
 
 def test_unmappable_rig_lists_missing_joints(addon):
     obj = build_armature("Blob", [("a", None, (0, 0, 0), (0, 0, 1)), ("b", "a", (0, 0, 1), (0, 0, 2))])
     bpy.ops.strnn.auto_map()
-    assert not obj.data.strnn_map.l_knee
+    assert not obj.strnn_map.l_knee
 
 
 def test_bvh_fixture_maps_and_map_is_saved_in_blend(addon, tmp_path):
@@ -70,12 +70,12 @@ def test_bvh_fixture_maps_and_map_is_saved_in_blend(addon, tmp_path):
     name = obj.name
     found = auto_map(obj)
     assert all(found.values())
-    obj.data.strnn_map.l_wrist = "LeftForeArm"  # a hand edit must survive save and reload
+    obj.strnn_map.l_wrist = "LeftForeArm"  # a hand edit must survive save and reload
     path = tmp_path / "mapped.blend"
     bpy.ops.wm.save_as_mainfile(filepath=str(path))
     bpy.ops.wm.read_homefile(use_empty=True)
     bpy.ops.wm.open_mainfile(filepath=str(path))
-    arm = bpy.data.objects[name].data
+    arm = bpy.data.objects[name]
     assert arm.strnn_map.l_wrist == "LeftForeArm"
     assert arm.strnn_map.l_upleg == found["l_upleg"]
 
@@ -88,4 +88,4 @@ def test_bvh_imports_of_every_rig_family_map_fully(addon, family):
     obj = import_bvh(root / FAMILY_CLIPS[family])
     found = auto_map(obj)
     assert all(found.values()), [k for k, v in found.items() if not v]
-    assert obj.data.strnn_map.family == family
+    assert obj.strnn_map.family == family

@@ -78,7 +78,7 @@ def test_extend_built_armatures_follows_the_model(fake_model, addon, make):
     pos = evaluated_joints(addon, obj, np.arange(59, 91))
     err = np.linalg.norm(pos[2:] - expected_constant_velocity(pos[:2], 30), axis=-1)
     assert err.max() < 1e-3, err.max()
-    hips = obj.data.strnn_map.hips
+    hips = obj.strnn_map.hips
     loc_keys = [fc for fc in fcurves_of(obj) if fc.data_path == f'pose.bones["{hips}"].location']
     assert loc_keys and all(fc.keyframe_points[-1].co[0] == 90 for fc in loc_keys)  # root motion continues
     for fc in fcurves_of(obj):  # bones outside the map keep their keys
@@ -90,9 +90,9 @@ def test_bone_names_with_quotes_and_backslashes(fake_model, addon):
     """Blender escapes " and \\ in F-curve paths; such bones must be read and written like any other."""
     obj = mixamo_walk(60)
     assert bpy.ops.strnn.auto_map() == {"FINISHED"}
-    bone = obj.data.bones[obj.data.strnn_map.l_knee]  # a keyed bone
+    bone = obj.data.bones[obj.strnn_map.l_knee]  # a keyed bone
     bone.name = 'Sh"in\\L'  # Blender renames the action's F-curve paths with it
-    obj.data.strnn_map.l_knee = bone.name
+    obj.strnn_map.l_knee = bone.name
     assert any('Sh\\"in\\\\L' in fc.data_path for fc in fcurves_of(obj))
     bpy.context.scene.frame_set(1)  # a bone whose keys were missed would be read in its frame-1 pose
     old, new, before = extend(30)
@@ -172,7 +172,7 @@ def test_from_current_frame_replaces_the_tail(fake_model, addon):
     pos = evaluated_joints(addon, obj, np.arange(59, 81))
     err = np.linalg.norm(pos[2:] - expected_constant_velocity(pos[:2], 20), axis=-1)
     assert err.max() < 1e-3, err.max()
-    hips = obj.data.strnn_map.hips
+    hips = obj.strnn_map.hips
     assert any(finger.name in fc.data_path for fc in fcurves_of(obj))
     for fc in fcurves_of(obj):
         last = fc.keyframe_points[-1].co[0]

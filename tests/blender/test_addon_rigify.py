@@ -127,8 +127,8 @@ def keyed_bones(action, obj, after: float) -> set[str]:
 
 def test_auto_map_maps_the_org_bones_and_checks_them(rig, addon):
     assert bpy.ops.strnn.auto_map() == {"FINISHED"}
-    assert rig.data.strnn_map.family == "rigify"
-    assert rig.data.strnn_map.l_knee == "ORG-shin.L" and rig.data.strnn_map.hips == "ORG-spine"
+    assert rig.strnn_map.family == "rigify"
+    assert rig.strnn_map.l_knee == "ORG-shin.L" and rig.strnn_map.hips == "ORG-spine"
 
 
 def test_extend_keys_the_controls_and_the_deform_bones_follow(rig, addon, fake_model):

@@ -7,7 +7,7 @@ import pytest
 from scenes import build_armature, import_bvh, walk_bvh
 
 PANELS = ("STRNN_PT_main", "STRNN_PT_extend", "STRNN_PT_fill_gap", "STRNN_PT_denoise", "STRNN_PT_foot_lock",
-          "STRNN_PT_follow_curve", "STRNN_PT_bone_map")
+          "STRNN_PT_follow_curve", "STRNN_PT_transfer", "STRNN_PT_bone_map", "STRNN_PT_controls")
 
 
 class Layout:
@@ -52,6 +52,7 @@ HANDED = {
     "curve_foot_lock": ("follow_curve", "foot_lock"),
     "fill_use_range": ("inbetween", "use_range"), "fill_start": ("inbetween", "frame_start"),
     "fill_end": ("inbetween", "frame_end"), "fill_foot_lock": ("inbetween", "foot_lock"),
+    "transfer_foot_lock": ("transfer_motion", "foot_lock"),
 }
 
 
@@ -97,7 +98,7 @@ def test_panels_draw(addon, tmp_path, scene):
 def test_sidebar_settings_agree_with_their_operators(addon):
     """A setting and the operator option it feeds have one name, default, range and tooltip."""
     settings = bpy.context.scene.strnn.bl_rna.properties
-    assert set(HANDED) == {p.identifier for p in settings} - {"rna_type", "name", "curve"}
+    assert set(HANDED) == {p.identifier for p in settings} - {"rna_type", "name", "curve", "transfer_source"}
     for setting, (op, option) in HANDED.items():
         a, b = settings[setting], getattr(bpy.ops.strnn, op).get_rna_type().properties[option]
         for attr in ("type", "name", "description", "default", "subtype", "unit", "hard_min", "hard_max",

@@ -1,0 +1,76 @@
+"""A Mixamo-style rig whose deform bones follow a control chain through COPY_TRANSFORMS
+constraints (how many game and studio rigs are built): with no controls set, keys written on the
+deform bones would not show, so the operators refuse and say what to set; with the controls set in
+the Bone Map panel's Controls list, results are keyed on the controls and the deform bones follow."""
+
+from __future__ import annotations
+
+import bpy
+import numpy as np
+import pytest
+from scenes import (
+    action_of,
+    build_armature,
+    evaluated_joints,
+    fcurves_of,
+    key_snapshot,
+    key_walk,
+    mixamo_bones,
+    same_keys,
+)
+
+CTRL = "CTRL_"
+
+
+def control_rig(frames: int = 60):
+    """Deform bones (``mixamorig:``) copying the transforms of a parallel control chain (``CTRL_``),
+    with a walk keyed on the controls."""
+    deform = mixamo_bones()
+    controls = [(CTRL + n.split(":")[1], p and CTRL + p.split(":")[1], h, t) for n, p, h, t in deform]
+    obj = build_armature("ControlRig", deform + controls)
+    for name, *_ in deform:
+        con = obj.pose.bones[name].constraints.new("COPY_TRANSFORMS")
+        con.target, con.subtarget = obj, CTRL + name.split(":")[1]
+    pair = lambda bone: (CTRL + "Left" + bone, CTRL + "Right" + bone)  # noqa: E731
+    key_walk(obj, frames, CTRL + "Hips", pair("UpLeg"), pair("Leg"), pair("Arm"))
+    return obj
+
+
+def set_controls(obj) -> None:
+    """Every mapped deform bone driven by its control, through the panel's operators."""
+    assert bpy.ops.strnn.auto_map() == {"FINISHED"}
+    mapped = {getattr(obj.strnn_map, j) for j in obj.strnn_map.bl_rna.properties.keys()
+              if j not in ("rna_type", "name", "family") and not j.endswith("_tail")} - {""}
+    bridges = {"mixamorig:LeftShoulder", "mixamorig:RightShoulder", "mixamorig:Spine1"}
+    for bone in sorted(mapped | bridges):
+        assert bpy.ops.strnn.control_add() == {"FINISHED"}
+        item = obj.strnn_controls[obj.strnn_control_index]
+        item.bone, item.drives, item.location = CTRL + bone.split(":")[1], bone, bone.endswith("Hips")
+
+
+def test_without_controls_the_operators_say_what_to_set(addon):
+    control_rig()
+    obj = bpy.context.active_object
+    before = key_snapshot(obj)
+    with pytest.raises(RuntimeError, match="follows.*constraint.*Controls"):
+        bpy.ops.strnn.extend_clip(frames=10)
+    assert same_keys(before, key_snapshot(obj))
+
+
+def test_with_controls_extend_keys_them_and_the_deform_bones_follow(addon, fake_model):
+    obj = control_rig()
+    set_controls(obj)
+    original = evaluated_joints(addon, obj, np.arange(1, 61))
+    old = action_of(obj)
+    before = key_snapshot(obj)
+    assert bpy.ops.strnn.extend_clip(frames=30) == {"FINISHED"}
+    new = action_of(obj)
+    assert new is not old and same_keys(before, key_snapshot(obj, old))
+    assert np.abs(evaluated_joints(addon, obj, np.arange(1, 61)) - original).max() < 1e-5
+    paths = {fc.data_path for fc in fcurves_of(obj, new)}
+    assert not [p for p in paths if "mixamorig:" in p], paths  # nothing keyed on the deform bones
+    pos = evaluated_joints(addon, obj, np.arange(59, 91))
+    want = pos[1] + (pos[1, 0] - pos[0, 0]) * np.arange(1, 31)[:, None, None]
+    err = np.linalg.norm(pos[2:] - want, axis=-1)
+    assert err.max() < 0.01, err.max()
+    assert new["strnn"]["controls"]["set"] == "custom"
