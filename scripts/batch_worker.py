@@ -137,8 +137,27 @@ def clear_keys(obj, start: int, end: int) -> None:
                     pass
 
 
+def open_target(bpy, job: dict):
+    """For ``transfer``: open the character .blend and return its rig (``--rig``, or the one to pick)."""
+    try:
+        bpy.ops.wm.open_mainfile(filepath=job["target"], load_ui=False)
+    except RuntimeError as e:
+        raise BatchError(f"Blender could not open --target {job['target']}: {blender_error(e)}") from None
+    if job["rig"]:
+        rig = bpy.data.objects.get(job["rig"])
+        if rig is None or rig.type != "ARMATURE":
+            raise BatchError(f"no armature named {job['rig']!r} in --target for --rig")
+        return rig
+    return pick_armature(bpy)
+
+
 def run_file(bpy, job: dict) -> None:
     src, dst = Path(job["input"]), Path(job["output"])
+    target = None
+    if job["operator"] == "transfer_motion":
+        if src.suffix.lower() != ".bvh":
+            raise BatchError("transfer takes BVH takes; a .blend is a target (--target), not a take")
+        target = open_target(bpy, job)
     if src.suffix.lower() == ".bvh":
         check_bvh_text(src)
         try:
@@ -154,6 +173,10 @@ def run_file(bpy, job: dict) -> None:
     view_layer = bpy.context.view_layer
     for other in view_layer.objects:
         other.select_set(False)
+    source = None
+    if target is not None:  # the import is the source, selected; the rig is the active target
+        source, obj = obj, target
+        source.select_set(True)
     view_layer.objects.active = obj
     obj.select_set(True)
     kwargs = dict(job["kwargs"])
@@ -173,6 +196,8 @@ def run_file(bpy, job: dict) -> None:
         getattr(bpy.ops.strnn, job["operator"])(**kwargs)
     except RuntimeError as e:
         raise BatchError(f"strnn.{job['operator']} refused: {blender_error(e)}") from None
+    if source is not None:
+        bpy.data.objects.remove(source)  # the result file holds the character alone
     action = obj.animation_data.action if obj.animation_data else None
     if action is None:
         raise BatchError(f"strnn.{job['operator']} left the armature without an action")

@@ -5,15 +5,18 @@
     python scripts/strnn_batch.py inbetween --gap 40 70 take.bvh --out out/filled
     python scripts/strnn_batch.py footlock data/clips/ --out out/locked
     python scripts/strnn_batch.py follow   --path figure_eight --frames 300 walk.bvh
+    python scripts/strnn_batch.py transfer --target hero.blend data/clips/ --out out/hero
 
 Each input file runs in its own worker process (``--jobs N`` at a time) that imports the ``bpy``
 module, resets to factory settings, installs and enables the built extension zip (built once
 here with scripts/build_extension.py into dist/ unless dist/ is up to date, or ``--extension``),
 imports the file with Blender's own BVH importer (a .blend is opened), runs the extension's real
-operator (strnn.extend_clip, strnn.inbetween, strnn.denoise_action, strnn.foot_lock, strnn.follow_curve) on the
-armature, and writes the result with Blender's own BVH exporter (or saves a .blend) as
-``OUT/NAME.<command>.bvh``. Folders are searched recursively for *.bvh and *.blend; their
-sub-folders are kept under OUT. An input is never overwritten unless ``--in-place``.
+operator (strnn.extend_clip, strnn.inbetween, strnn.denoise_action, strnn.foot_lock,
+strnn.follow_curve) on the armature, and writes the result with Blender's own BVH exporter (or
+saves a .blend) as ``OUT/NAME.<command>.bvh``. Folders are searched recursively for *.bvh and *.blend; their
+sub-folders are kept under OUT. An input is never overwritten unless ``--in-place``. ``transfer``
+opens the character .blend (--target) instead, imports each take beside its rig, runs
+strnn.transfer_motion from the take onto the rig, removes the take and saves a copy of the .blend.
 
 One progress line per finished file, then a summary table (file, status, seconds, reason). A
 file whose worker runs past ``--timeout`` seconds (default 900) is killed and reported as failed.
@@ -127,6 +130,16 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--speed", type=float, default=0.0, help="walking speed in m/s; 0: the motion's own (default)")
     p.add_argument("--steering", type=int, default=4, help="steering steps per 20-frame window (default: 4)")
     p.add_argument("--no-foot-lock", action="store_true", help="do not lock the feet")
+    p = sub.add_parser("transfer", parents=[common], help="move each take onto a character "
+                       "(strnn.transfer_motion)", description="Move the motion of each BVH take onto the rig of "
+                       "a character .blend (its proportions, feet on the floor), one new action per take, saved "
+                       "as a copy of that .blend (or, with --format bvh, the rig exported as BVH).")
+    p.add_argument("--target", type=Path, required=True, metavar="RIG.blend",
+                   help="the .blend holding the character's armature (never changed; each result is a copy)")
+    p.add_argument("--rig", default="", metavar="NAME",
+                   help="the armature object in --target to put the motion on (default: its active armature, "
+                        "or its only one)")
+    p.add_argument("--no-foot-lock", action="store_true", help="do not lock the feet during contacts")
     return parser
 
 
@@ -143,6 +156,8 @@ def operator_call(args) -> tuple[str, dict]:
         start, end = args.gap or (1, 250)
         return "inbetween", {"use_range": args.gap is not None, "frame_start": start, "frame_end": end,
                              "foot_lock": not args.no_foot_lock}
+    if args.command == "transfer":
+        return "transfer_motion", {"foot_lock": not args.no_foot_lock}
     return "follow_curve", {"frames": args.frames, "speed": args.speed, "steering": args.steering,
                             "foot_lock": not args.no_foot_lock}
 
@@ -162,6 +177,10 @@ def check_args(parser, args) -> None:
         parser.error("--blend must be between 0 and 2 seconds")
     if args.command == "follow" and (args.frames < 0 or args.speed < 0 or args.steering < 0):
         parser.error("--frames, --speed and --steering must not be negative")
+    if args.command == "transfer" and (args.target.suffix.lower() != ".blend" or not args.target.is_file()):
+        parser.error(f"--target {args.target}: not a .blend file")
+    if args.command == "transfer" and args.in_place:
+        parser.error("--in-place is not for transfer: the results go beside the takes in --out")
     if args.extension is not None and not args.extension.is_file():
         parser.error(f"--extension {args.extension}: no such file")
     for option in ("model", "denoise_model"):
@@ -197,7 +216,8 @@ def collect(inputs: list[Path]) -> tuple[list[tuple[Path, Path]], list[tuple[str
 def output_path(path: Path, rel: Path, args) -> Path:
     if args.in_place:
         return path
-    fmt = args.format if args.format != "auto" else path.suffix.lower().lstrip(".")
+    own = "blend" if args.command == "transfer" else path.suffix.lower().lstrip(".")  # a transfer: the character
+    fmt = args.format if args.format != "auto" else own
     return args.out / rel.parent / f"{rel.stem}.{args.command}.{fmt}"
 
 
@@ -331,6 +351,8 @@ def main(argv: list[str] | None = None) -> int:
                      "output": str(out.resolve()), "shown_output": str(out), "operator": op, "kwargs": kwargs,
                      "path": getattr(args, "path", None), "curve": getattr(args, "curve", ""),
                      "from_frame": getattr(args, "from_frame", None),
+                     "target": str(args.target.resolve()) if getattr(args, "target", None) else "",
+                     "rig": getattr(args, "rig", ""),
                      "model": str(args.model.resolve()) if args.model else "",
                      "denoise_model": str(args.denoise_model.resolve()) if getattr(args, "denoise_model", None)
                      else "", "verbose": args.verbose})

@@ -214,3 +214,39 @@ def test_a_denoise_model_folder_without_a_model_is_refused(tmp_path, capsys):
     with pytest.raises(SystemExit) as stop:
         strnn_batch.main(["denoise", "--denoise-model", str(tmp_path), str(tmp_path / "a.bvh")])
     assert stop.value.code == 2 and f"--denoise-model {tmp_path}: no model.json" in capsys.readouterr().err
+
+
+def test_transfer_takes_onto_a_character(tmp_path, extension, capsys):
+    """Each take is moved onto the rig of a character .blend (a smaller Mixamo-named body): one copy of the
+    .blend per take with the new action on the rig; the character file is never changed."""
+    clip = write_bvh(tmp_path / "walk.bvh", walking_skeleton(60))
+    small = write_bvh(tmp_path / "small.bvh", walking_skeleton(2) * 0.8)
+    hero = tmp_path / "hero.blend"
+    run_bpy(f"""
+bpy.ops.wm.read_factory_settings(use_empty=True)
+bpy.ops.import_anim.bvh(filepath={str(small)!r})
+rig = bpy.context.active_object
+rig.name = "Hero"
+rig.animation_data_clear()
+bpy.data.objects.new("Prop", None)
+bpy.ops.wm.save_as_mainfile(filepath={str(hero)!r})
+print(json.dumps({{}}))
+""")
+    before = hero.read_bytes()
+    out = tmp_path / "out"
+    code = strnn_batch.main(["transfer", "--target", str(hero), "--rig", "Hero", str(clip), "--out", str(out),
+                             "--extension", str(extension)])
+    assert code == 0, capsys.readouterr().err
+    assert hero.read_bytes() == before
+    got = run_bpy(f"""
+bpy.ops.wm.open_mainfile(filepath={str(out / "walk.transfer.blend")!r})
+rig = bpy.data.objects["Hero"]
+action = rig.animation_data.action
+print(json.dumps({{"armatures": [o.name for o in bpy.data.objects if o.type == "ARMATURE"],
+                  "action": action.name, "frames": int(action.frame_range[1] - action.frame_range[0]) + 1,
+                  "record": action["strnn"]["operation"]}}))
+""")
+    assert got["armatures"] == ["Hero"] and got["record"] == "Transfer Motion" and got["frames"] == 60
+    with pytest.raises(SystemExit):
+        strnn_batch.main(["transfer", "--target", str(clip), str(clip)])
+    assert "not a .blend file" in capsys.readouterr().err
