@@ -48,6 +48,9 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--predict-len", type=int, default=20, help="predicted frames n")
     p.add_argument("--residual-width", type=int, default=512, help="hidden units of the residual filter")
     p.add_argument("--dropout", type=float, default=0.0, help="dropout after each spatial layer (paper: 0.1)")
+    p.add_argument("--spatial-norm", choices=("batch", "none"), default="batch",
+                   help="normalisation after each spatial layer: the paper's batch norm, or none (trains and "
+                        "runs alike; see the model card)")
     p.add_argument("--steps", type=int, default=5000, help="optimiser steps over all phases")
     p.add_argument("--phase-split", type=float, nargs=3, default=TrainConfig.phase_split,
                    metavar=("NET", "FILTER_PRETRAIN", "FILTER_FINETUNE"),
@@ -116,7 +119,7 @@ def baseline_run(args, argv):
 def strnn_run(args, argv):
     model = STRNNConfig(width=args.width or DEFAULT_WIDTH["strnn"], encode_len=args.encode_len,
                         predict_len=args.predict_len, residual_width=args.residual_width, dropout=args.dropout,
-                        offsets=args.offsets, **VARIANTS[args.variant])
+                        offsets=args.offsets, spatial_norm=args.spatial_norm, **VARIANTS[args.variant])
     cfg = TrainConfig(data=args.data, out=args.out, model=model, steps=args.steps, batch=args.batch,
                       phase_split=tuple(args.phase_split),
                       optimizer=args.optimizer, lr=learning_rate(args), smooth_weight=args.smooth_weight,

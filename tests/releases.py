@@ -14,12 +14,13 @@ from model_core.motion.conventions import LAYOUT
 C = LAYOUT.size
 
 
-def random_release(folder, spatial=True, residual=True, m=10, n=10, seed=0, purpose=None, offsets=False):
+def random_release(folder, spatial=True, residual=True, m=10, n=10, seed=0, purpose=None, offsets=False,
+                   spatial_norm="batch"):
     """Save a random STRNN as a release in ``folder``; return (eval-mode model, mean [C], std [C])."""
     torch.manual_seed(seed)
     rng = np.random.default_rng(seed)
     cfg = STRNNConfig(width=64, encode_len=m, predict_len=n, spatial=spatial, residual=residual,
-                      residual_width=32, offsets=offsets)
+                      residual_width=32, offsets=offsets, spatial_norm=spatial_norm)
     model = STRNN(cfg)
     with torch.no_grad():
         for mod in model.modules():

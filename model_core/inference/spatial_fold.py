@@ -19,6 +19,11 @@ Array = np.ndarray
 
 
 def _bn(w: dict, prefix: str) -> tuple[Array, Array]:
+    """Scale and shift ``(a, s)`` of the batch norm at ``prefix`` in eval mode (identity for a model
+    trained without spatial norms, whose weights have none)."""
+    if f"{prefix}.running_var" not in w:
+        n = len(w[prefix.rsplit(".", 1)[0] + ".0.bias"])
+        return np.ones(n, np.float32), np.zeros(n, np.float32)
     a = w[f"{prefix}.weight"] / np.sqrt(w[f"{prefix}.running_var"] + _EPS)
     return a, w[f"{prefix}.bias"] - w[f"{prefix}.running_mean"] * a
 

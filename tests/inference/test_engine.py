@@ -21,6 +21,7 @@ from model_core.inference.engine import Engine, bone_lengths  # noqa: E402
 from model_core.inference.steps import drive  # noqa: E402
 from model_core.inference.torch_engine import TorchEngine  # noqa: E402
 from model_core.io.checkpoint import DEFAULT_MODEL, REPO, CheckpointError, load_release  # noqa: E402
+from model_core.model.strnn import STRNNConfig  # noqa: E402
 from model_core.motion.conventions import LAYOUT  # noqa: E402
 
 C = LAYOUT.size
@@ -53,6 +54,22 @@ def test_numpy_forward_matches_torch(tmp_path, spatial, residual, m, n):
     engine.seam_frames = 0  # the raw prediction, without the seam correction
     np.testing.assert_allclose(engine.predict(raw), want[:, m:], atol=1e-4, rtol=0)
     np.testing.assert_allclose(TorchEngine.load(tmp_path).forward(raw), want, atol=1e-5, rtol=0)
+
+
+def test_a_model_without_spatial_norms_runs_the_same_in_numpy_and_torch(tmp_path):
+    """``spatial_norm="none"``: no batch norm to fold; the NumPy engine still equals torch."""
+    model, mean, std = random_release(tmp_path, offsets=True, spatial_norm="none")
+    assert not any(isinstance(mod, torch.nn.BatchNorm1d) for mod in model.modules())
+    engine = Engine.load(tmp_path)
+    raw = engine.seeds
+    np.testing.assert_allclose(engine.forward(raw), torch_forward(model, raw, mean, std), atol=1e-4, rtol=0)
+    np.testing.assert_allclose(TorchEngine.load(tmp_path).forward(raw), torch_forward(model, raw, mean, std),
+                               atol=1e-5, rtol=0)
+
+
+def test_spatial_norm_is_checked():
+    with pytest.raises(ValueError, match="spatial_norm"):
+        STRNNConfig(spatial_norm="layer")
 
 
 @pytest.mark.parametrize("spatial", [True, False])
