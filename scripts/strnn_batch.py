@@ -30,6 +30,7 @@ import argparse
 import multiprocessing
 import multiprocessing.connection as mp_connection
 import shutil
+import signal
 import sys
 import tempfile
 import time
@@ -189,6 +190,22 @@ def check_args(parser, args) -> None:
             parser.error(f"--{option.replace('_', '-')} {folder}: no model.json in it")
 
 
+def check_writable(parser, args) -> None:
+    """The output folder and the report's folder can be written (found before the first file, not after)."""
+    places = [] if args.in_place else [("--out", args.out)]
+    if args.report is not None:
+        places.append(("--report", args.report.parent if str(args.report.parent) else Path(".")))
+    for option, folder in places:
+        try:
+            folder.mkdir(parents=True, exist_ok=True)
+            with tempfile.NamedTemporaryFile(dir=folder, prefix=".strnn_write_check_"):
+                pass
+        except OSError as e:
+            parser.error(f"{option} {folder}: cannot write there ({e.strerror or e}); pick a writable folder")
+    if args.report is not None and args.report.is_dir():
+        parser.error(f"--report {args.report}: is a folder; give a file name")
+
+
 def collect(inputs: list[Path]) -> tuple[list[tuple[Path, Path]], list[tuple[str, str]]]:
     """(file, path relative to the output folder) for each input file; problems as (name, reason)."""
     found, problems, seen = [], [], set()
@@ -267,8 +284,22 @@ def summary(results: list[dict]) -> str:
     return "\n".join(lines)
 
 
+class Interrupted(Exception):
+    """The batch was asked to stop (Ctrl-C or SIGTERM); ``signum`` says which."""
+
+    def __init__(self, signum: int):
+        super().__init__(signal.Signals(signum).name)
+        self.signum = signum
+
+
+def _raise_interrupted(signum, frame):
+    raise Interrupted(signum)
+
+
 def _worker(job: dict, conn) -> None:
-    """Spawned process: process one file and send its result back."""
+    """Spawned process: process one file and send its result back. Ctrl-C in the terminal reaches
+    every process of the group: the parent alone decides, and stops the workers itself."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     conn.send(process_file(job))
     conn.close()
 
@@ -281,17 +312,41 @@ def _failed(file: str, reason: str, seconds: float = 0.0) -> dict:
 def _discard_partial(job: dict) -> None:
     """Remove what a killed worker may have left: its half-written output and its Blender user folder."""
     dst = Path(job["output"])
-    dst.with_name(dst.stem + ".tmp" + dst.suffix).unlink(missing_ok=True)
+    tmp = dst.with_name(dst.stem + ".tmp" + dst.suffix)
+    tmp.unlink(missing_ok=True)
+    tmp.with_name(tmp.name + "@").unlink(missing_ok=True)  # Blender's own temporary name while saving a .blend
     shutil.rmtree(job["user_dir"], ignore_errors=True)
 
 
-def run_pool(jobs: list[dict], workers: int, report, timeout: float = 0.0) -> list[dict]:
+def run_pool(jobs: list[dict], workers: int, report, timeout: float = 0.0) -> tuple[list[dict], int]:
     """Run ``jobs`` with at most ``workers`` at a time, each in a fresh spawned process (its own bpy).
 
     A worker that runs past ``timeout`` seconds (0: no limit) is killed and its file reported as
-    failed, as is one whose process dies; neither affects the other files."""
+    failed, as is one whose process dies; neither affects the other files. On Ctrl-C or SIGTERM the
+    running workers are killed and their partial files removed, and every file not done is reported
+    as interrupted. Returns (the results in job order, the signal that stopped the batch or 0)."""
     ctx = multiprocessing.get_context("spawn")
     pending, running, results = list(jobs), {}, {}
+    try:
+        _loop(ctx, pending, running, results, workers, report, timeout)
+        stopped = 0
+    except (Interrupted, KeyboardInterrupt) as e:
+        stopped = getattr(e, "signum", signal.SIGINT)
+        now = time.perf_counter()
+        for conn, (proc, job, started) in list(running.items()):
+            proc.kill()
+            proc.join()
+            conn.close()
+            _discard_partial(job)
+            results[job["index"]] = _failed(job["display"], "interrupted while it ran; nothing written for it",
+                                            now - started)
+        for job in pending:
+            results[job["index"]] = _failed(job["display"], "interrupted before it started")
+    return [results[i] for i in sorted(results)], stopped
+
+
+def _loop(ctx, pending: list, running: dict, results: dict, workers: int, report, timeout: float) -> None:
+    """The body of :func:`run_pool`: start, collect and time out workers until every job is done."""
 
     def finish(conn, result):
         proc, job, _ = running.pop(conn)
@@ -325,13 +380,13 @@ def run_pool(jobs: list[dict], workers: int, report, timeout: float = 0.0) -> li
                 proc.kill()
                 finish(conn, _failed(job["display"], f"timed out after {timeout:g} s (--timeout); nothing "
                                                      "written for it", now - started))
-    return [results[i] for i in sorted(results)]
 
 
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     check_args(parser, args)
+    check_writable(parser, args)
     files, problems = collect(args.inputs)
     op, kwargs = operator_call(args)
     results: list[dict] = [_failed(name, reason) for name, reason in problems]
@@ -362,6 +417,7 @@ def main(argv: list[str] | None = None) -> int:
     for n, r in enumerate(results, 1):
         print(progress_line(n, total, r), flush=True)
     start = time.perf_counter()
+    stopped = 0
     if jobs:
         try:
             zip_path = extension_zip(args.extension)
@@ -378,13 +434,18 @@ def main(argv: list[str] | None = None) -> int:
             print(progress_line(done, total, result), flush=True)
 
         order = {job["display"]: job["index"] for job in jobs}
-        processed = run_pool(jobs, min(args.jobs, len(jobs)), report, args.timeout)
+        handlers = {sig: signal.signal(sig, _raise_interrupted) for sig in (signal.SIGINT, signal.SIGTERM)}
+        try:
+            processed, stopped = run_pool(jobs, min(args.jobs, len(jobs)), report, args.timeout)
+        finally:
+            for sig, handler in handlers.items():
+                signal.signal(sig, handler)
         results += sorted(processed, key=lambda r: order.get(r["file"], 0))
     wall = time.perf_counter() - start
     failed = [r for r in results if r["status"] != "ok"]
     if args.report:
         write_json(args.report, {"command": args.command, "seconds": wall, "processed": len(results) - len(failed),
-                                 "failed": len(failed), "files": results})
+                                 "failed": len(failed), "interrupted": bool(stopped), "files": results})
     print()
     print(summary(results))
     print(f"\n{len(results) - len(failed)} of {len(results)} files processed in {wall:.1f} s "
@@ -393,8 +454,11 @@ def main(argv: list[str] | None = None) -> int:
         print("\nfailures:", file=sys.stderr)
         for r in failed:
             print(f"  {r['file']}: {r['reason']}", file=sys.stderr)
-        return 1
-    return 0
+    if stopped:
+        print(f"\nstopped by {signal.Signals(stopped).name}: the files above marked interrupted were not processed",
+              file=sys.stderr)
+        return 128 + int(stopped)
+    return 1 if failed else 0
 
 
 if __name__ == "__main__":

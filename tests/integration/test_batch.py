@@ -4,7 +4,11 @@ from __future__ import annotations
 
 import json
 import re
+import signal
+import subprocess
 import sys
+import tempfile
+import time
 from pathlib import Path
 
 import pytest
@@ -250,3 +254,42 @@ print(json.dumps({{"armatures": [o.name for o in bpy.data.objects if o.type == "
     with pytest.raises(SystemExit):
         strnn_batch.main(["transfer", "--target", str(clip), str(clip)])
     assert "not a .blend file" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("sig, code", [(signal.SIGINT, 130), (signal.SIGTERM, 143)], ids=["ctrl-c", "sigterm"])
+def test_interrupting_a_batch_stops_cleanly(tmp_path, extension, sig, code):
+    """Stopped after the first file: exit 130 / 143, the summary and the report say what finished and what
+    did not, no temporary or partial file is left, and nothing is written afterwards."""
+    takes = [write_bvh(tmp_path / f"walk{i}.bvh", walking_skeleton(40)) for i in range(4)]
+    out, report = tmp_path / "out", tmp_path / "report.json"
+    before = {p.name for p in Path(tempfile.gettempdir()).glob("strnn_batch_*")}
+    proc = subprocess.Popen([sys.executable, str(REPO / "scripts" / "strnn_batch.py"), "extend", "--frames", "5",
+                             *map(str, takes), "--out", str(out), "--report", str(report), "--extension",
+                             str(extension)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    first = proc.stdout.readline()  # the first file's progress line
+    assert "walk0" in first, first
+    time.sleep(1.0)  # the second worker is under way
+    proc.send_signal(sig)
+    stdout, stderr = proc.communicate(timeout=120)
+    assert proc.returncode == code, stderr[-2000:]
+    assert "interrupted" in stdout and signal.Signals(sig).name in stderr
+    assert "Traceback" not in stdout + stderr
+    done = json.loads(report.read_text())
+    assert done["interrupted"] and done["processed"] >= 1
+    assert sorted(p.name for p in out.rglob("*") if ".tmp" in p.name) == []
+    assert {p.name for p in Path(tempfile.gettempdir()).glob("strnn_batch_*")} <= before
+    written = sorted(p.name for p in out.rglob("*.bvh"))
+    time.sleep(3.0)
+    assert sorted(p.name for p in out.rglob("*.bvh")) == written  # no worker writes after the batch exited
+
+
+def test_unwritable_outputs_are_found_before_any_work(tmp_path, capsys):
+    take = write_bvh(tmp_path / "walk.bvh", walking_skeleton(40))
+    blocked = tmp_path / "file"
+    blocked.write_text("")
+    with pytest.raises(SystemExit):
+        strnn_batch.main(["extend", str(take), "--out", str(blocked / "out")])
+    assert "--out" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        strnn_batch.main(["extend", str(take), "--out", str(tmp_path / "o"), "--report", str(blocked / "r.json")])
+    assert "--report" in capsys.readouterr().err
