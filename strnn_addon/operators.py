@@ -7,7 +7,7 @@ from bpy.props import IntProperty, StringProperty
 
 from . import props as options
 from .props import joint_label
-from .scene import controls, mapping
+from .scene import anim, controls, mapping
 from .scene.curves import find_curve
 from .scene.pipeline import UserError, check_object
 from .scene.rig_io import read_rig
@@ -54,6 +54,13 @@ class _Staged:
     def done(self, action) -> str:
         raise NotImplementedError
 
+    def finished(self, context, action) -> str:
+        """Deliver the new action as asked (``output``) and say what was done."""
+        if getattr(self, "output", "ACTION") == "NLA":
+            track = as_nla_strip(context.active_object, action)
+            return f"{self.done(action)}; put on NLA track {track.name!r}, the active action unchanged"
+        return self.done(action)
+
     def execute(self, context):
         self.range_from_scene(context)
         wm = context.window_manager
@@ -65,7 +72,7 @@ class _Staged:
             return {"CANCELLED"}
         finally:
             wm.progress_end()
-        self.report({"INFO"}, self.done(action))
+        self.report({"INFO"}, self.finished(context, action))
         return {"FINISHED"}
 
     def invoke(self, context, event):
@@ -96,7 +103,7 @@ class _Staged:
             stage = next(self._steps)
         except StopIteration as stop:
             self._stop(context)
-            self.report({"INFO"}, self.done(stop.value))
+            self.report({"INFO"}, self.finished(context, stop.value))
             return {"FINISHED"}
         except UserError as e:
             self._stop(context)
@@ -136,6 +143,7 @@ class STRNN_OT_extend_clip(_Staged, bpy.types.Operator):
     from_current: options.from_current()
     foot_lock: options.foot_lock(False)
     scene_range: options.scene_range()
+    output: options.output()
 
     def steps(self, context):
         start = context.scene.frame_current if self.from_current else None
@@ -160,6 +168,7 @@ class STRNN_OT_fill_gap(_Staged, bpy.types.Operator):
     frame_start: options.range_start("Fill")
     frame_end: options.range_end("Fill")
     foot_lock: options.foot_lock(True)
+    output: options.output()
 
     def steps(self, context):
         start, end = (self.frame_start, self.frame_end) if self.use_range else (None, None)
@@ -185,6 +194,7 @@ class STRNN_OT_denoise_action(_Staged, bpy.types.Operator):
     frame_end: options.range_end("Denoise")
     foot_lock: options.foot_lock(False)
     only_selected: options.only_selected()
+    output: options.output()
 
     def steps(self, context):
         start, end = (self.frame_start, self.frame_end) if self.use_range else (None, None)
@@ -207,6 +217,7 @@ class STRNN_OT_foot_lock(_Staged, bpy.types.Operator):
     frame_start: options.range_start("Lock")
     frame_end: options.range_end("Lock")
     only_selected: options.only_selected()
+    output: options.output()
 
     def steps(self, context):
         start, end = (self.frame_start, self.frame_end) if self.use_range else (None, None)
@@ -233,6 +244,7 @@ class STRNN_OT_follow_curve(_Staged, bpy.types.Operator):
     scene_range: options.scene_range()
     steering: IntProperty(name="Steering Steps", default=4, min=0, soft_max=20,
                           description="Fine-tuning steps per 20-frame window that pull the motion onto the curve")
+    output: options.output()
 
     def steps(self, context):
         return follow_curve_steps(context, context.active_object, curve=self.curve, frames=self.frames,
@@ -261,6 +273,7 @@ class STRNN_OT_transfer_motion(_Staged, bpy.types.Operator):
                                        "armature")
     foot_lock: options.foot_lock(True)
     scene_range: options.scene_range()
+    output: options.output()
 
     def steps(self, context):
         return transfer_steps(context, context.active_object, source=self.source, foot_lock=self.foot_lock,
@@ -398,6 +411,24 @@ class STRNN_OT_controls_from_preset(_EditControls, bpy.types.Operator):
         self.report({"INFO"}, f"{len(preset.controls)} controls and {len(preset.switches)} switches from the "
                               f"{preset.name} preset")
         return {"FINISHED"}
+
+
+def as_nla_strip(obj, action):
+    """Put ``action`` (just assigned to ``obj``) on a new NLA track as a strip at its first frame, and
+    make the action it was made from active again (none for a result that started from none)."""
+    ad = obj.animation_data
+    source = bpy.data.actions.get(action.get(RECORD, {}).get("source_action", ""))
+    slot = getattr(ad, "action_slot", None)
+    identifier = slot.identifier if slot is not None else None
+    ad.action = None
+    track = ad.nla_tracks.new()
+    track.name = action.name
+    strip = track.strips.new(action.name, int(round(action.frame_range[0])), action)
+    if identifier and hasattr(strip, "action_slot"):
+        strip.action_slot = next((s for s in action.slots if s.identifier == identifier), strip.action_slot)
+    if source is not None and source is not action:
+        anim.assign_action(obj, source, identifier)
+    return track
 
 
 def range_note(action) -> str:

@@ -64,6 +64,15 @@ def strength():
                          description="Blend between the original (0) and the model's output (1)")
 
 
+def output():
+    return EnumProperty(name="Result", default="ACTION",
+                        items=[("ACTION", "New Action", "Assign the result as a new action in place of the active one "
+                                "(which is kept)"),
+                               ("NLA", "NLA Strip", "Put the result on a new NLA track as a strip; the active action "
+                                "stays active and unchanged")],
+                        description="Where the result goes")
+
+
 def use_range(verb: str):
     """``verb``: what the operator does to the frames, e.g. "Denoise"."""
     return BoolProperty(name="Frame Range", default=False,
@@ -231,6 +240,7 @@ class STRNN_PG_settings(bpy.types.PropertyGroup):
                                      description="The armature to take the motion from; empty: the other selected "
                                                  "armature")
     transfer_foot_lock: foot_lock(True)
+    output: output()
 
 
 classes = (STRNN_PG_bone_map, STRNN_PG_control, STRNN_PG_switch, STRNN_PG_settings, STRNN_AP_preferences)

@@ -52,7 +52,7 @@ HANDED = {
     "curve_foot_lock": ("follow_curve", "foot_lock"),
     "fill_use_range": ("inbetween", "use_range"), "fill_start": ("inbetween", "frame_start"),
     "fill_end": ("inbetween", "frame_end"), "fill_foot_lock": ("inbetween", "foot_lock"),
-    "transfer_foot_lock": ("transfer_motion", "foot_lock"),
+    "transfer_foot_lock": ("transfer_motion", "foot_lock"), "output": ("extend_clip", "output"),
 }
 
 
