@@ -255,11 +255,16 @@ def register_properties():
         type=STRNN_PG_switch, override={"LIBRARY_OVERRIDABLE", "USE_INSERTION"},
         description="Custom properties keyed on the written frames so that the controls act")
     bpy.types.Object.strnn_control_index = IntProperty(default=0, override={"LIBRARY_OVERRIDABLE"})
+    bpy.types.Object.strnn_keys_per_second = FloatProperty(
+        name="Keys per Second", default=0.0, min=0.0, soft_max=240.0, override={"LIBRARY_OVERRIDABLE"},
+        description="How many of the action's frames make one second of its motion, when it differs from the "
+                    "scene's frame rate (a 60 fps take imported at 24 fps: 60); 0: the scene's rate")
     bpy.types.Scene.strnn = PointerProperty(type=STRNN_PG_settings)
 
 
 def unregister_properties():
     del bpy.types.Scene.strnn
+    del bpy.types.Object.strnn_keys_per_second
     del bpy.types.Object.strnn_control_index
     del bpy.types.Object.strnn_switches
     del bpy.types.Object.strnn_controls

@@ -53,6 +53,7 @@ class STRNN_PT_main(_Sidebar, bpy.types.Panel):
         action = obj.animation_data.action
         first, last = (int(round(f)) for f in action.frame_range)
         col.label(text=f"{obj.name}: {action.name} (frames {first}-{last})", icon="ACTION")
+        col.prop(obj, "strnn_keys_per_second")
         self.layout.row().prop(context.scene.strnn, "output", expand=True)
 
 

@@ -48,6 +48,12 @@ def scene_fps(scene) -> float:
     return scene.render.fps / scene.render.fps_base
 
 
+def keys_per_second(context, obj) -> float:
+    """How many of the action's frames make one second of its motion: the armature's Keys per Second
+    (a take imported at another rate than it was captured), else the scene's frame rate."""
+    return float(getattr(obj, "strnn_keys_per_second", 0.0) or scene_fps(context.scene))
+
+
 def min_scene_frames(fps: float) -> int:
     """Scene frames needed to span :data:`MIN_MODEL_FRAMES` frames at the model's rate."""
     return max(MIN_MODEL_FRAMES, int(math.ceil((MIN_MODEL_FRAMES - 1) * fps / MODEL_FPS - 1e-6)) + 1)
@@ -113,7 +119,7 @@ def clip_of(context, obj, action, channels, first: int, last: int) -> Clip:
     if found is None:
         check_not_driven(obj, [rig.names[b] for b in solved_bones(rig, anchors)])
     return Clip(obj, action, channels, rig, anchors, bone_map, rig_io.world_matrix(obj),
-                scene_fps(context.scene), first, last, found)
+                keys_per_second(context, obj), first, last, found)
 
 
 # Constraints that set a bone's transform outright (keys on the bone would not show); limits and the like pass.

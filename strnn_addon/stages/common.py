@@ -106,6 +106,7 @@ def made_by(operation: str, clip, model: str = "", **settings) -> dict:
               "source_action": clip.action.name if clip.action is not None else ""}
     if model:
         record["model"] = model
+    record["keys_per_second"] = float(clip.fps)
     record["settings"] = {k: v for k, v in settings.items() if v is not None}
     return record
 

@@ -1,9 +1,10 @@
-"""Where a result goes: a new action (the default) or, with Result = NLA Strip, a strip on a new
-NLA track, the active action staying active and unchanged."""
+"""The pace of the keys (Keys per Second), and where a result goes: a new action (the default) or,
+with Result = NLA Strip, a strip on a new NLA track, the active action staying active and unchanged."""
 
 from __future__ import annotations
 
 import bpy
+import numpy as np
 import pytest
 from scenes import action_of, import_bvh, key_snapshot, same_keys, walk_bvh
 
@@ -31,3 +32,35 @@ def test_new_action_output_is_the_default(addon, tmp_path, real_model):
     old = action_of(obj)
     assert bpy.ops.strnn.extend_clip(frames=10) == {"FINISHED"}
     assert action_of(obj) is not old and not obj.animation_data.nla_tracks
+
+
+def hips_speed(addon, obj, frames) -> float:
+    """Mean ground speed of the hips per frame over ``frames``."""
+    from scenes import evaluated_joints
+
+    hips = evaluated_joints(addon, obj, frames)[:, 0, :2]
+    return float(np.linalg.norm(np.diff(hips, axis=0), axis=-1).mean())
+
+
+def extended_pace(addon, path, scene_fps: int, keys_per_second: float, native: bool) -> float:
+    """Hips ground speed per frame of 120 frames Extend adds to the take at ``path``."""
+    bpy.ops.wm.read_homefile(use_empty=True)
+    bpy.context.scene.render.fps = scene_fps
+    obj = import_bvh(path, update_scene_fps=native)
+    obj.strnn_keys_per_second = keys_per_second
+    last = int(action_of(obj).frame_range[1])
+    assert bpy.ops.strnn.extend_clip(frames=120) == {"FINISHED"}
+    assert action_of(obj)["strnn"]["keys_per_second"] == (keys_per_second or bpy.context.scene.render.fps)
+    return hips_speed(addon, obj, range(last + 1, last + 121))
+
+
+def test_keys_per_second_reads_a_60_fps_take_imported_at_24_fps_at_its_own_pace(addon, tmp_path, real_model):
+    """Blender's BVH importer leaves the scene at 24 fps by default: with Keys per Second 60 the extension
+    moves as it does for the same take imported at 60 fps; read at 24 keys per second it does not."""
+    path = walk_bvh(tmp_path, frames=240, fps=60.0)
+    native = extended_pace(addon, path, 60, 0.0, True)
+    fixed = extended_pace(addon, path, 24, 60.0, False)
+    wrong = extended_pace(addon, path, 24, 0.0, False)
+    print(f"hips speed per frame: imported at 60 fps {native:.4f}, at 24 with 60 keys/s {fixed:.4f}, at 24 {wrong:.4f}")
+    assert abs(fixed / native - 1.0) < 0.1
+    assert abs(wrong / native - 1.0) > 0.2
