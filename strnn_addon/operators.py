@@ -11,6 +11,7 @@ from .scene import anim, controls, mapping
 from .scene.curves import find_curve
 from .scene.pipeline import UserError, check_object
 from .scene.rig_io import read_rig
+from .scene.simplify import simplify_keys
 from .stages.common import RECORD, STAGES, report_note, run
 from .stages.denoise import denoise_steps
 from .stages.extend import extend_steps
@@ -55,11 +56,14 @@ class _Staged:
         raise NotImplementedError
 
     def finished(self, context, action) -> str:
-        """Deliver the new action as asked (``output``) and say what was done."""
+        """Thin the keys (``simplify``), deliver the new action as asked (``output``), say what was done."""
+        said = self.done(action)
+        if getattr(self, "simplify", 0.0) > 0.0:
+            said += simplified(context, action, self.simplify)
         if getattr(self, "output", "ACTION") == "NLA":
             track = as_nla_strip(context.active_object, action)
-            return f"{self.done(action)}; put on NLA track {track.name!r}, the active action unchanged"
-        return self.done(action)
+            said += f"; put on NLA track {track.name!r}, the active action unchanged"
+        return said
 
     def execute(self, context):
         self.range_from_scene(context)
@@ -144,6 +148,7 @@ class STRNN_OT_extend_clip(_Staged, bpy.types.Operator):
     foot_lock: options.foot_lock(False)
     scene_range: options.scene_range()
     output: options.output()
+    simplify: options.simplify()
 
     def steps(self, context):
         start = context.scene.frame_current if self.from_current else None
@@ -169,6 +174,7 @@ class STRNN_OT_fill_gap(_Staged, bpy.types.Operator):
     frame_end: options.range_end("Fill")
     foot_lock: options.foot_lock(True)
     output: options.output()
+    simplify: options.simplify()
 
     def steps(self, context):
         start, end = (self.frame_start, self.frame_end) if self.use_range else (None, None)
@@ -195,6 +201,7 @@ class STRNN_OT_denoise_action(_Staged, bpy.types.Operator):
     foot_lock: options.foot_lock(False)
     only_selected: options.only_selected()
     output: options.output()
+    simplify: options.simplify()
 
     def steps(self, context):
         start, end = (self.frame_start, self.frame_end) if self.use_range else (None, None)
@@ -218,6 +225,7 @@ class STRNN_OT_foot_lock(_Staged, bpy.types.Operator):
     frame_end: options.range_end("Lock")
     only_selected: options.only_selected()
     output: options.output()
+    simplify: options.simplify()
 
     def steps(self, context):
         start, end = (self.frame_start, self.frame_end) if self.use_range else (None, None)
@@ -245,6 +253,7 @@ class STRNN_OT_follow_curve(_Staged, bpy.types.Operator):
     steering: IntProperty(name="Steering Steps", default=4, min=0, soft_max=20,
                           description="Fine-tuning steps per 20-frame window that pull the motion onto the curve")
     output: options.output()
+    simplify: options.simplify()
 
     def steps(self, context):
         return follow_curve_steps(context, context.active_object, curve=self.curve, frames=self.frames,
@@ -274,6 +283,7 @@ class STRNN_OT_transfer_motion(_Staged, bpy.types.Operator):
     foot_lock: options.foot_lock(True)
     scene_range: options.scene_range()
     output: options.output()
+    simplify: options.simplify()
 
     def steps(self, context):
         return transfer_steps(context, context.active_object, source=self.source, foot_lock=self.foot_lock,
@@ -411,6 +421,20 @@ class STRNN_OT_controls_from_preset(_EditControls, bpy.types.Operator):
         self.report({"INFO"}, f"{len(preset.controls)} controls and {len(preset.switches)} switches from the "
                               f"{preset.name} preset")
         return {"FINISHED"}
+
+
+def simplified(context, action, tolerance_cm: float) -> str:
+    """Simplify the keys ``action`` got (its record's ``frames_written``) and say how it went."""
+    first, last = action[RECORD]["frames_written"]
+    try:
+        found = simplify_keys(context, context.active_object, int(first), int(last), tolerance_cm)
+    except UserError as e:
+        return f"; keys not simplified ({e})"
+    if found is None:
+        return "; keys not simplified: this rig is keyed on its controls, which keep a key on every frame"
+    action[RECORD]["simplify"] = {"tolerance_cm": tolerance_cm, **found}
+    return (f"; simplified to {found['keys']:,} of {found['full']:,} keys, joints within "
+            f"{found['max_error_cm']:.2f} cm of the full result")
 
 
 def as_nla_strip(obj, action):

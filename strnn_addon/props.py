@@ -73,6 +73,12 @@ def output():
                         description="Where the result goes")
 
 
+def simplify():
+    return FloatProperty(name="Simplify Keys", default=0.0, min=0.0, soft_max=5.0, precision=2,
+                         description="Keep only the keys that hold every joint within this many centimetres of the "
+                                     "full result (Clean Curves measured on the joints); 0: a key on every frame")
+
+
 def use_range(verb: str):
     """``verb``: what the operator does to the frames, e.g. "Denoise"."""
     return BoolProperty(name="Frame Range", default=False,
@@ -241,6 +247,7 @@ class STRNN_PG_settings(bpy.types.PropertyGroup):
                                                  "armature")
     transfer_foot_lock: foot_lock(True)
     output: output()
+    simplify: simplify()
 
 
 classes = (STRNN_PG_bone_map, STRNN_PG_control, STRNN_PG_switch, STRNN_PG_settings, STRNN_AP_preferences)

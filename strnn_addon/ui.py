@@ -55,6 +55,7 @@ class STRNN_PT_main(_Sidebar, bpy.types.Panel):
         col.label(text=f"{obj.name}: {action.name} (frames {first}-{last})", icon="ACTION")
         col.prop(obj, "strnn_keys_per_second")
         self.layout.row().prop(context.scene.strnn, "output", expand=True)
+        self.layout.prop(context.scene.strnn, "simplify")
 
 
 class STRNN_PT_extend(_Sidebar, bpy.types.Panel):
@@ -69,7 +70,7 @@ class STRNN_PT_extend(_Sidebar, bpy.types.Panel):
         col.prop(settings, "extend_from_current")
         col.prop(settings, "extend_foot_lock")
         op = self.layout.operator("strnn.extend_clip", icon="TRACKING_FORWARDS")
-        op.output = settings.output
+        op.output, op.simplify = settings.output, settings.simplify
         op.frames, op.context_frames = settings.extend_frames, settings.context_frames
         op.from_current, op.foot_lock = settings.extend_from_current, settings.extend_foot_lock
 
@@ -85,7 +86,7 @@ class STRNN_PT_fill_gap(_Sidebar, bpy.types.Panel):
         _frame_range(col, settings, "fill")
         col.prop(settings, "fill_foot_lock")
         op = self.layout.operator("strnn.inbetween", icon="IPO_EASE_IN_OUT")
-        op.output = settings.output
+        op.output, op.simplify = settings.output, settings.simplify
         _pass_range(op, settings, "fill")
         op.foot_lock = settings.fill_foot_lock
 
@@ -101,7 +102,7 @@ class STRNN_PT_denoise(_Sidebar, bpy.types.Panel):
         _frame_range(col, settings, "denoise")
         col.prop(settings, "denoise_foot_lock")
         op = self.layout.operator("strnn.denoise_action", icon="MOD_SMOOTH")
-        op.output = settings.output
+        op.output, op.simplify = settings.output, settings.simplify
         _pass_range(op, settings, "denoise")
         op.strength, op.foot_lock = settings.denoise_strength, settings.denoise_foot_lock
 
@@ -116,7 +117,7 @@ class STRNN_PT_foot_lock(_Sidebar, bpy.types.Panel):
         col.prop(settings, "lock_blend")
         _frame_range(col, settings, "lock")
         op = self.layout.operator("strnn.foot_lock", icon="SNAP_ON")
-        op.output = settings.output
+        op.output, op.simplify = settings.output, settings.simplify
         _pass_range(op, settings, "lock")
         op.blend = settings.lock_blend
 
@@ -136,7 +137,7 @@ class STRNN_PT_follow_curve(_Sidebar, bpy.types.Panel):
         col.prop(settings, "curve_speed")
         col.prop(settings, "curve_foot_lock")
         op = self.layout.operator("strnn.follow_curve", icon="CURVE_PATH")
-        op.output = settings.output
+        op.output, op.simplify = settings.output, settings.simplify
         op.curve = settings.curve.name if settings.curve else ""
         op.frames, op.speed, op.foot_lock = settings.curve_frames, settings.curve_speed, settings.curve_foot_lock
 
@@ -154,7 +155,7 @@ class STRNN_PT_transfer(_Sidebar, bpy.types.Panel):
             col.label(text="Or select the source, then the target", icon="INFO")
         col.prop(settings, "transfer_foot_lock")
         op = self.layout.operator("strnn.transfer_motion", icon="ARMATURE_DATA")
-        op.output = settings.output
+        op.output, op.simplify = settings.output, settings.simplify
         op.source = settings.transfer_source.name if settings.transfer_source else ""
         op.foot_lock = settings.transfer_foot_lock
 

@@ -86,13 +86,15 @@ def _read_keys(fc) -> dict[str, np.ndarray]:
     return out
 
 
-def write_keys(fc, frames: np.ndarray, values: np.ndarray, replace: tuple[float, float] | None = None) -> None:
+def write_keys(fc, frames: np.ndarray, values: np.ndarray, replace: tuple[float, float] | None = None,
+               interpolation: str = "") -> None:
     """Key ``values`` ``[F]`` at ``frames`` ``[F]`` in bulk.
 
     Existing keys stay, except those in the closed frame range ``replace`` (and any at the
-    new frames). New keys take the interpolation of the curve's last key (linear if none).
+    new frames). New keys take ``interpolation`` (e.g. ``"LINEAR"``), else that of the curve's
+    last key (linear if none).
     """
-    if replace is None and _append(fc, frames, values):
+    if replace is None and not interpolation and _append(fc, frames, values):
         return
     old = _read_keys(fc)
     x = old["co"][:, 0]
@@ -101,6 +103,8 @@ def write_keys(fc, frames: np.ndarray, values: np.ndarray, replace: tuple[float,
         drop |= (x >= replace[0] - 1e-3) & (x <= replace[1] + 1e-3)
     keep = {k: v[~drop] for k, v in old.items()}
     interp = int(old["interpolation"][-1]) if len(x) else 1  # 1 = LINEAR
+    if interpolation:
+        interp = bpy.types.Keyframe.bl_rna.properties["interpolation"].enum_items[interpolation].value
     co = np.stack([frames, values], -1).astype(np.float32)
     new = {"co": co, "handle_left": co, "handle_right": co,
            "interpolation": np.full(len(frames), interp, np.int32),

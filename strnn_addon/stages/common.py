@@ -133,8 +133,10 @@ def world_scale(clip) -> float:
     return float(abs(np.linalg.det(clip.world[:3, :3])) ** (1 / 3))
 
 
-def with_bake(record: dict, clip, error: float) -> dict:
-    """``record``, with on a control rig how far (cm) the bake left a driven bone from the solve at worst."""
+def with_bake(record: dict, clip, error: float, frames) -> dict:
+    """``record``, with the first and last frame written and, on a control rig, how far (cm) the bake left a
+    driven bone from the solve at worst."""
+    record["frames_written"] = [int(frames[0]), int(frames[-1])]
     if clip.controls is not None:
         record["controls"] = {"set": clip.controls.name, "max_error_cm": round(100 * error * world_scale(clip), 2)}
     return record
@@ -147,7 +149,7 @@ def write_new(context, clip, suffix, frames, loc, rot, previous, replace, record
     action = pipeline.new_action_from(clip, suffix)
     try:
         error = pipeline.write_pose(context, clip, action, frames, loc, rot, previous, replace, bones)
-        action[RECORD] = with_bake(record, clip, error)
+        action[RECORD] = with_bake(record, clip, error, frames)
         pipeline.finish(context, clip, action, scene_range)
     except Exception:
         bpy.data.actions.remove(action)
@@ -163,7 +165,7 @@ def write_fresh(context, clip, name: str, frames, loc, rot, record: dict, scene_
     old = clip.obj.animation_data.action if clip.obj.animation_data else None
     try:
         error = pipeline.write_pose(context, clip, action, frames, loc, rot, {}, None)
-        action[RECORD] = with_bake(record, clip, error)
+        action[RECORD] = with_bake(record, clip, error, frames)
         anim.assign_action(clip.obj, action, None)
         ad = clip.obj.animation_data
         if getattr(ad, "action_slot", True) is None and len(action.slots):

@@ -64,3 +64,30 @@ def test_keys_per_second_reads_a_60_fps_take_imported_at_24_fps_at_its_own_pace(
     print(f"hips speed per frame: imported at 60 fps {native:.4f}, at 24 with 60 keys/s {fixed:.4f}, at 24 {wrong:.4f}")
     assert abs(fixed / native - 1.0) < 0.1
     assert abs(wrong / native - 1.0) > 0.2
+
+
+def test_simplify_keys_keeps_the_joints_within_the_tolerance(addon, tmp_path, real_model):
+    """Denoise of a real take (the procedural walk without the data), once keyed on every frame and once
+    simplified at 0.5 cm: the joints Blender evaluates stay within 0.5 cm of the full result, with at
+    least 3 x fewer keys."""
+    from scenes import evaluated_joints, fcurves_of, find_mocap
+
+    mocap = find_mocap()
+    take = mocap / "bandai-namco/dataset-2/dataset-2_walk_normal_001.bvh" if mocap else walk_bvh(tmp_path, 200)
+    results = {}
+    for tol in (0.0, 0.5):
+        bpy.ops.wm.read_homefile(use_empty=True)
+        obj = import_bvh(take, global_scale=0.01 if mocap else 1.0, update_scene_fps=True)
+        assert bpy.ops.strnn.denoise_action(simplify=tol) == {"FINISHED"}
+        new = action_of(obj)
+        first, last = (int(f) for f in new.frame_range)
+        keys = sum(len(fc.keyframe_points) for fc in fcurves_of(obj, new))
+        results[tol] = (evaluated_joints(addon, obj, np.arange(first, last + 1)), keys, new["strnn"].to_dict())
+    full, simple = results[0.0], results[0.5]
+    err = np.linalg.norm(simple[0] - full[0], axis=-1).max()
+    record = simple[2]["simplify"]
+    print(f"simplify 0.5 cm: {record['keys']} of {record['full']} keys on the written channels ({full[1]} -> "
+          f"{simple[1]} in the action), joints within {100 * err:.2f} cm")
+    assert err <= 0.005 + 1e-4 and record["max_error_cm"] <= 0.5
+    assert full[1] - simple[1] == record["full"] - record["keys"]  # the keys the record says went, went
+    assert record["full"] >= 3 * record["keys"]

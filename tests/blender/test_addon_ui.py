@@ -53,6 +53,7 @@ HANDED = {
     "fill_use_range": ("inbetween", "use_range"), "fill_start": ("inbetween", "frame_start"),
     "fill_end": ("inbetween", "frame_end"), "fill_foot_lock": ("inbetween", "foot_lock"),
     "transfer_foot_lock": ("transfer_motion", "foot_lock"), "output": ("extend_clip", "output"),
+    "simplify": ("denoise_action", "simplify"),
 }
 
 
