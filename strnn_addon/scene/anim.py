@@ -36,7 +36,7 @@ class Channels:
         if ensure:
             if slot is None:
                 slot = action.slots.new(id_type="OBJECT", name="STRNN")
-            self.channelbag = anim_utils.action_ensure_channelbag_for_slot(action, slot)
+            self.channelbag = ensure_channelbag(action, slot)
         else:
             self.channelbag = anim_utils.action_get_channelbag_for_slot(action, slot) if slot else None
         self.fcurves = self.channelbag.fcurves if self.channelbag else ()
@@ -55,6 +55,18 @@ class Channels:
         grp = self.channelbag.groups.get(group) or self.channelbag.groups.new(group)
         fc.group = grp
         return fc
+
+
+def ensure_channelbag(action, slot):
+    """The channelbag of ``slot`` in ``action``'s first keyframe strip, made if missing (Blender 5.0 has
+    ``anim_utils.action_ensure_channelbag_for_slot``; 4.4 and 4.5 have the layer and strip API only)."""
+    from bpy_extras import anim_utils
+
+    if hasattr(anim_utils, "action_ensure_channelbag_for_slot"):
+        return anim_utils.action_ensure_channelbag_for_slot(action, slot)
+    layer = action.layers[0] if len(action.layers) else action.layers.new("Layer")
+    strip = layer.strips[0] if len(layer.strips) else layer.strips.new(type="KEYFRAME")
+    return strip.channelbag(slot, ensure=True)
 
 
 def slot_of(obj):
