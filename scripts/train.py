@@ -52,6 +52,9 @@ def parse_args(argv=None) -> argparse.Namespace:
                    help="normalisation after each spatial layer: the paper's batch norm, or none (trains and "
                         "runs alike; see the model card)")
     p.add_argument("--steps", type=int, default=5000, help="optimiser steps over all phases")
+    p.add_argument("--recalibrate-batches", type=int, default=TrainConfig.recalibrate_batches, metavar="N",
+                   help="before writing the release, recompute the batch norms' running statistics over N "
+                        "training batches (with --init and --steps 0: fix a trained model's statistics)")
     p.add_argument("--phase-split", type=float, nargs=3, default=TrainConfig.phase_split,
                    metavar=("NET", "FILTER_PRETRAIN", "FILTER_FINETUNE"),
                    help="share of the steps for the spatio-temporal net, the residual filter's pre-training on "
@@ -121,7 +124,7 @@ def strnn_run(args, argv):
                         predict_len=args.predict_len, residual_width=args.residual_width, dropout=args.dropout,
                         offsets=args.offsets, spatial_norm=args.spatial_norm, **VARIANTS[args.variant])
     cfg = TrainConfig(data=args.data, out=args.out, model=model, steps=args.steps, batch=args.batch,
-                      phase_split=tuple(args.phase_split),
+                      phase_split=tuple(args.phase_split), recalibrate_batches=args.recalibrate_batches,
                       optimizer=args.optimizer, lr=learning_rate(args), smooth_weight=args.smooth_weight,
                       recon_weight=args.recon_weight, velocity_weight=args.velocity_weight, init=args.init,
                       rollout_windows=args.rollout_windows, rollout_fraction=args.rollout_fraction,

@@ -66,6 +66,9 @@ class TrainConfig:
     init: str = ""  # start from the weights of this training state or release folder (fine-tuning)
     purpose: str = PURPOSES[0]  # recorded in the release: "denoise" marks a model whose predictions are not for use
     mirror: float = 0.0  # share of training windows mirrored left to right (augmentation)
+    # Before the release is written, recompute the batch norms' running statistics as the plain average
+    # over this many training batches of the whole model's forward pass (0: keep them as trained).
+    recalibrate_batches: int = 0
     hold_out: bool = False  # keep the held-out groups of configs/data.toml out of training and validation
 
 
@@ -212,6 +215,31 @@ def rollout_batch(model: STRNN, full: torch.Tensor, k: int) -> tuple[torch.Tenso
     m, n = model.cfg.encode_len, model.cfg.predict_len
     context = rolled_context(model, full, k)
     return torch.cat([context, full[:, k * n + m:k * n + m + n]], 1), context
+
+
+def recalibrate_batch_norms(model: STRNN, windows: Windows, batches: int, size: int,
+                            rng: np.random.Generator) -> None:
+    """Running statistics of every batch norm as the plain average over ``batches`` random training
+    batches of the model's forward pass (its training-mode statistics, without a gradient). Training
+    leaves them as a moving average of the last calls: the predictor's and decoder's steps late in the
+    last batches, which the context's frames at inference do not match (see STRNNConfig.spatial_norm)."""
+    norms = [m for m in model.modules() if isinstance(m, torch.nn.BatchNorm1d)]
+    if not norms:
+        return
+    modes = [m.training for m in model.modules()]
+    keep = [n.momentum for n in norms]
+    for n in norms:
+        n.reset_running_stats()
+        n.momentum = None  # cumulative average
+    model.train()
+    with torch.no_grad():
+        m = model.cfg.encode_len
+        for _ in range(batches):
+            model(windows.batch(rng.integers(0, len(windows), size))[:, :m])
+    for n, momentum in zip(norms, keep):
+        n.momentum = momentum
+    for mod, mode in zip(model.modules(), modes):
+        mod.training = mode
 
 
 def phase_progress(cfg: TrainConfig, step: int) -> float:
@@ -401,6 +429,9 @@ def train(cfg: TrainConfig, resume: bool = False, progress: bool = True) -> Path
     bar.close()
     release = out / "release"
     if rank == 0 and step >= cfg.steps:
+        if cfg.recalibrate_batches:
+            recalibrate_batch_norms(model, train_w, cfg.recalibrate_batches, cfg.batch, rng)
+            log.info("batch norm statistics recomputed over %d training batches", cfg.recalibrate_batches)
         write_release(model, cfg, data, norm, history, release)
         log.info("release checkpoint written to %s", release)
     if world > 1:
