@@ -181,6 +181,8 @@ def joint_speed(joints: np.ndarray) -> float:
 
 
 def test_extend_with_the_model_stays_alive(walking_rig, addon, real_model):
+    if find_mocap() is None:
+        pytest.skip("needs a real walk (../shared/mocap unpacked): the procedural walk is not motion the model learnt")
     rig = walking_rig
     last = int(action_of(rig).frame_range[1])
     run_on_rig(rig, "extend_clip", last, frames=60)
@@ -247,8 +249,10 @@ def test_transfer_motion_from_a_bvh_onto_the_rig(rig, addon, walk_source):
     err = np.linalg.norm(got - want, axis=-1)
     print(f"transfer: mean {100 * err.mean():.2f} cm, max {100 * err.max():.2f} cm over {len(frames)} frames")
     assert err.mean() < 0.03, err.mean()
-    for side in "lr":
-        assert knee_bend_forward(got, side).min() > -0.02  # no knee bends backwards
+    for side in "lr":  # no knee flips: each knee bends to the side the source's does
+        src_bend, got_bend = knee_bend_forward(src, side), knee_bend_forward(got, side)
+        bent = np.abs(src_bend) > 0.02
+        assert bent.any() and (np.sign(got_bend[bent]) == np.sign(src_bend[bent])).all()
     speed = np.linalg.norm(np.diff(got[:, 0, :2], axis=0), axis=-1).mean()
     assert speed > 0.005  # it walks
 
