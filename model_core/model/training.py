@@ -465,9 +465,18 @@ class Progress:
 
 
 def pick_seeds(data: MotionData, length: int, count: int = 12) -> tuple[np.ndarray, list[str]]:
-    """One ``length``-frame window per action label from test-split clips: ``[K, length, C]``."""
+    """One ``length``-frame window per action label from test-split clips (from the validation, then the
+    training split when the folder has no test take long enough): ``[K, length, C]``."""
+    for split in ("test", "validation", "train"):
+        seeds, names = _seeds_of(data.split(split), length, count)
+        if seeds:
+            return np.stack(seeds), names
+    raise ValueError(f"{data.root}: no clip has {length} frames at 30 fps to keep as a seed; add longer takes")
+
+
+def _seeds_of(clips, length: int, count: int) -> tuple[list[np.ndarray], list[str]]:
     seen, seeds, names = set(), [], []
-    for clip in sorted(data.split("test"), key=lambda c: c.name):
+    for clip in sorted(clips, key=lambda c: c.name):
         parts = Path(clip.name).stem.split("_")
         label = parts[1] if len(parts) > 2 else str(Path(clip.name).parent)  # "take_action_style_NNN" names
         start = min(30, len(clip.features) - length)
@@ -478,7 +487,7 @@ def pick_seeds(data: MotionData, length: int, count: int = 12) -> tuple[np.ndarr
         names.append(f"{clip.name}@{start}")
         if len(seeds) == count:
             break
-    return np.stack(seeds), names
+    return seeds, names
 
 
 def init_record(init: str | Path) -> dict:

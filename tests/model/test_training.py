@@ -173,3 +173,19 @@ def test_torchrun_two_cpu_processes(walk_folder, tmp_path):
     assert (out / "release" / "model.safetensors").exists()
     log = (out / "train.log").read_text()
     assert "phase residual_finetune" in log
+
+
+def test_seeds_come_from_another_split_when_the_folder_has_no_test_take(walk_folder):
+    """A folder whose takes all fall in the training split still gets seeds (a release needs them)."""
+    import dataclasses
+
+    from model_core.model.dataset import MotionData, load_folder
+    from model_core.model.training import pick_seeds
+
+    data = load_folder(walk_folder, cache_dir=None, progress=False)
+    only_train = MotionData(data.root, [dataclasses.replace(c, split="train") for c in data.clips])
+    seeds, names = pick_seeds(only_train, 20)
+    assert len(seeds) >= 1 and seeds.shape[1] == 20 and len(names) == len(seeds)
+    short = MotionData(data.root, [dataclasses.replace(c, features=c.features[:5]) for c in data.clips])
+    with pytest.raises(ValueError, match="no clip has 20 frames"):
+        pick_seeds(short, 20)
