@@ -86,3 +86,22 @@ def real_model(addon):
     prefs.model_folder = str(release_folder())
     yield release_folder()
     prefs.model_folder = ""
+
+
+# bpy 4.5 can hang at process exit: its delayed-file-close thread and a static destructor wait on each
+# other (seen with bpy 4.5.15 after this suite: every test done, the summary printed, the process never
+# ends). Under that version the session ends the process itself once pytest has reported everything.
+_EXIT_STATUS = {}
+
+
+def pytest_sessionfinish(session, exitstatus):
+    _EXIT_STATUS["status"] = int(exitstatus)
+
+
+def pytest_unconfigure(config):
+    if bpy.app.version[:2] == (4, 5) and "status" in _EXIT_STATUS:
+        import os
+
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(_EXIT_STATUS["status"])
