@@ -160,15 +160,20 @@ class STRNN_PT_transfer(_Sidebar, bpy.types.Panel):
         op.foot_lock = settings.transfer_foot_lock
 
 
-class STRNN_PT_bone_map(_Sidebar, bpy.types.Panel):
-    bl_label = "Bone Map"
-    bl_parent_id = "STRNN_PT_main"
-    bl_options = {"DEFAULT_CLOSED"}
+class _ArmatureSidebar(_Sidebar):
+    """A sidebar panel shown for an active armature."""
 
     @classmethod
     def poll(cls, context):
         obj = context.active_object
         return super().poll(context) and obj is not None and obj.type == "ARMATURE"
+
+
+class STRNN_PT_bone_map(_ArmatureSidebar, bpy.types.Panel):
+    bl_label = "Bone Map"
+    bl_parent_id = "STRNN_PT_main"
+    bl_options = {"DEFAULT_CLOSED"}
+
 
     def draw(self, context):
         obj = context.active_object
@@ -204,17 +209,13 @@ class STRNN_UL_controls(bpy.types.UIList):
         row.prop(item, "location", text="", icon="ORIENTATION_GLOBAL", toggle=True)
 
 
-class STRNN_PT_controls(_Sidebar, bpy.types.Panel):
+class STRNN_PT_controls(_ArmatureSidebar, bpy.types.Panel):
     """Which bones results are keyed on, for rigs whose mapped bones follow controls."""
 
     bl_label = "Controls"
     bl_parent_id = "STRNN_PT_bone_map"
     bl_options = {"DEFAULT_CLOSED"}
 
-    @classmethod
-    def poll(cls, context):
-        obj = context.active_object
-        return super().poll(context) and obj is not None and obj.type == "ARMATURE"
 
     def draw(self, context):
         obj = context.active_object

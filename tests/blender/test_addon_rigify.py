@@ -45,14 +45,21 @@ def rigify_file(addon, tmp_path_factory):
     return path
 
 
+def open_rig(path):
+    """Open the .blend at ``path`` and make its rig the active, only selected object."""
+    bpy.ops.wm.open_mainfile(filepath=str(path))
+    obj = bpy.data.objects["rig"]
+    for other in bpy.context.view_layer.objects:
+        other.select_set(other is obj)
+    bpy.context.view_layer.objects.active = obj
+    bpy.context.scene.frame_set(1)
+    return obj
+
+
 @pytest.fixture
 def rig(rigify_file):
-    """The generated rig, active in Pose Mode's object, with a walk keyed on its FK controls."""
-    bpy.ops.wm.open_mainfile(filepath=str(rigify_file))
-    obj = bpy.data.objects["rig"]
-    for obj_ in bpy.context.view_layer.objects:
-        obj_.select_set(obj_ is obj)
-    bpy.context.view_layer.objects.active = obj
+    """The generated rig, active, with a walk keyed on its FK controls."""
+    obj = open_rig(rigify_file)
     for bone in LIMB_SWITCHES:
         obj.pose.bones[bone]["IK_FK"] = 1.0  # animate the limbs in FK
     key_walk(obj, 60, "torso", ("thigh_fk.L", "thigh_fk.R"), ("shin_fk.L", "shin_fk.R"),
@@ -97,12 +104,7 @@ def walking_file(rigify_file, tmp_path_factory):
 
 @pytest.fixture
 def walking_rig(walking_file):
-    bpy.ops.wm.open_mainfile(filepath=str(walking_file))
-    obj = bpy.data.objects["rig"]
-    bpy.context.view_layer.objects.active = obj
-    obj.select_set(True)
-    bpy.context.scene.frame_set(1)
-    return obj
+    return open_rig(walking_file)
 
 
 def deform_heads(obj, frames) -> np.ndarray:
