@@ -129,6 +129,10 @@ def main(argv: list[str] | None = None) -> Path:
     parser.add_argument("--platform", action="append", default=[], metavar="NAME",
                         help="a platform for the manifest (repeatable), e.g. linux-x64; with --split-platforms "
                              f"the default is {', '.join(DEFAULT_PLATFORMS)}")
+    parser.add_argument("--repository", type=Path, default=None, metavar="DIR",
+                        help="also put the zip(s) in DIR and write its index (Blender's server-generate: "
+                             "index.json and index.html), a static extension repository: host DIR and add its "
+                             "index.json URL in Preferences > Get Extensions > Repositories to install and update")
     args = parser.parse_args(argv)
     tool = args.blender_ext or find_blender_ext()
     args.out.mkdir(parents=True, exist_ok=True)
@@ -153,7 +157,21 @@ def main(argv: list[str] | None = None) -> Path:
         if not args.no_validate:
             run_tool(tool, "validate", str(path))
         print(path)
+    if args.repository is not None:
+        publish(tool, zips, args.repository)
     return zips if args.split_platforms else zips[0]
+
+
+def publish(tool: Path, zips: list[Path], repository: Path) -> Path:
+    """Copy ``zips`` into ``repository`` and (re)write its index; returns the index.json path."""
+    repository.mkdir(parents=True, exist_ok=True)
+    for path in zips:
+        shutil.copy2(path, repository / path.name)
+    run_tool(tool, "server-generate", "--repo-dir", str(repository), "--html")
+    index = repository / "index.json"
+    if not index.is_file():
+        raise SystemExit(f"blender_ext server-generate did not write {index}")
+    return index
 
 
 if __name__ == "__main__":

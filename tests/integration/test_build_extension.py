@@ -95,3 +95,43 @@ def test_the_zip_holds_only_what_the_extension_imports(tmp_path):
             if isinstance(node, ast.ImportFrom) and node.level and node.module:
                 target = "/".join(package[:len(package) - node.level + 1] + node.module.split("."))
                 assert f"{target}.py" in shipped or f"{target}/__init__.py" in shipped, f"{name} imports {target}"
+
+
+INSTALL_FROM_URL = """
+import bpy, json, pathlib, sys, tempfile
+bpy.ops.wm.read_factory_settings(use_empty=True)
+prefs = bpy.context.preferences
+prefs.system.use_online_access = True  # installing from a repository URL asks for it, even for file://
+repo = prefs.extensions.repos.new(name="local", module="local_repo", custom_directory=tempfile.mkdtemp(),
+                                  remote_url=sys.argv[1], source="USER")
+index = list(prefs.extensions.repos).index(repo)
+synced = bpy.ops.extensions.repo_sync(repo_directory=repo.directory, repo_index=index)
+done = bpy.ops.extensions.package_install(repo_directory=repo.directory, repo_index=index, pkg_id="strnn_motion",
+                                          enable_on_install=True)
+import bl_ext.local_repo.strnn_motion as ext
+model = pathlib.Path(ext.__file__).parent / "models" / "strnn_default" / "model.json"
+print(json.dumps({"synced": list(synced), "installed": list(done),
+                  "enabled": "bl_ext.local_repo.strnn_motion" in prefs.addons,
+                  "operators": bpy.ops.strnn.extend_clip.idname() == "STRNN_OT_extend_clip",
+                  "model": model.is_file()}))
+"""
+
+
+def test_a_built_repository_installs_the_extension_from_its_url(tmp_path):
+    """--repository writes a static extension repository (Blender's server-generate); Blender installs and
+    enables the extension from its index.json URL."""
+    import json
+    import subprocess
+
+    repo = tmp_path / "repo"
+    build_extension.main(["--out", str(tmp_path / "dist"), "--repository", str(repo)])
+    index = json.loads((repo / "index.json").read_text())
+    [entry] = index["data"]
+    assert entry["id"] == "strnn_motion" and (repo / entry["archive_url"]).is_file()
+    assert (repo / "index.html").is_file()
+    done = subprocess.run([sys.executable, "-c", INSTALL_FROM_URL, (repo / "index.json").as_uri()],
+                          capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr[-2000:]
+    got = json.loads(done.stdout.strip().splitlines()[-1])
+    assert got == {"synced": ["FINISHED"], "installed": ["FINISHED"], "enabled": True, "operators": True,
+                   "model": True}
