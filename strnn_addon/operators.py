@@ -9,8 +9,7 @@ from . import props as options
 from .props import joint_label
 from .scene import anim, controls, mapping
 from .scene.curves import find_curve
-from .scene.pipeline import UserError, check_object
-from .scene.rig_io import read_rig
+from .scene.pipeline import UserError, check_object, rig_of
 from .scene.simplify import simplify_keys
 from .stages.common import RECORD, STAGES, report_note, run
 from .stages.denoise import denoise_steps
@@ -326,11 +325,10 @@ class STRNN_OT_auto_map(bpy.types.Operator):
             self.report({"WARNING"}, f"Mapped {21 - len(missing)} of 21 joints; pick these by hand: "
                                      + ", ".join(missing))
             return {"FINISHED"}
-        found_controls = controls.control_set(obj)
         try:
-            mapping.resolve(obj, read_rig(obj), joint_skeleton=found_controls is not None)
-        except mapping.MapError as e:
-            self.report({"WARNING"}, f"Mapped all 21 joints ({family} rig), but the map does not fit: {e}")
+            found_controls = rig_of(obj)[3]
+        except UserError as e:
+            self.report({"WARNING"}, f"Mapped all 21 joints ({family} rig), but: {e}")
             return {"FINISHED"}
         keyed = f"; results are keyed on its {found_controls.name} controls" if found_controls else ""
         self.report({"INFO"}, f"Mapped all 21 joints ({family} rig){keyed}")

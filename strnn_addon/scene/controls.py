@@ -30,7 +30,6 @@ class Baked:
     """Local transforms of each control over the frames: ``loc`` ``[F, K, 3]``, ``rot`` ``[F, K, 3, 3]``,
     and the largest distance of a driven bone's head or tail from its target (armature units)."""
 
-    names: list[str]
     loc: np.ndarray
     rot: np.ndarray
     error: float
@@ -110,11 +109,10 @@ def _place(obj, c, target: np.ndarray) -> None:
                                         to_space="LOCAL")
 
 
-def bake(context, obj, control_set_: ControlSet, frames: np.ndarray, targets: dict[str, np.ndarray],
-         progress=None) -> Baked:
+def bake(context, obj, control_set_: ControlSet, frames: np.ndarray, targets: dict[str, np.ndarray]) -> Baked:
     """The controls' local transforms that put each driven bone on ``targets`` {bone: ``[F, 4, 4]``
     armature-space pose matrices} at scene ``frames``, with the switches on. Only controls whose
-    driven bone is in ``targets`` move. ``progress(fraction)`` is called as frames are done."""
+    driven bone is in ``targets`` move (in the order of ``control_set_.controls``)."""
     scene, bones = context.scene, obj.pose.bones
     chosen = [c for c in control_set_.controls if c.drives in targets]
     switches = [s for s in control_set_.switches if s.bone in bones and s.prop in bones[s.bone]]
@@ -151,8 +149,6 @@ def bake(context, obj, control_set_: ControlSet, frames: np.ndarray, targets: di
             for k, c in enumerate(chosen):
                 basis = np.array(bones[c.bone].matrix_basis, dtype=np.float64)
                 loc[i, k], rot[i, k] = basis[:3, 3], basis[:3, :3]
-            if progress is not None:
-                progress((i + 1) / len(frames))
     finally:
         for name, basis in keep_basis.items():
             bones[name].matrix_basis = basis
@@ -160,7 +156,7 @@ def bake(context, obj, control_set_: ControlSet, frames: np.ndarray, targets: di
             bones[bone][prop] = value
         scene.frame_set(keep_frame[0], subframe=keep_frame[1])
     u, _, vt = np.linalg.svd(rot)
-    return Baked([c.bone for c in chosen], loc, u @ vt, worst)
+    return Baked(loc, u @ vt, worst)
 
 
 def key_switches(channels: anim.Channels, obj, control_set_: ControlSet, frames: np.ndarray, edges: np.ndarray):
@@ -175,7 +171,5 @@ def key_switches(channels: anim.Channels, obj, control_set_: ControlSet, frames:
         if fc is None:
             fc = channels.ensure(path, 0, s.bone)
             if len(edges):
-                anim.write_keys(fc, edges, np.full(len(edges), float(pb[s.prop])))
-        anim.write_keys(fc, frames, np.full(len(frames), float(s.value)))
-        for point in fc.keyframe_points:
-            point.interpolation = "CONSTANT"
+                anim.write_keys(fc, edges, np.full(len(edges), float(pb[s.prop])), interpolation="CONSTANT")
+        anim.write_keys(fc, frames, np.full(len(frames), float(s.value)), interpolation="CONSTANT")

@@ -103,8 +103,16 @@ def prepare_any(context, obj) -> Clip:
 
 
 def clip_of(context, obj, action, channels, first: int, last: int) -> Clip:
-    """The :class:`Clip` of a checked armature: its rig (a control rig's joint skeleton), bone map
-    and controls; raises :class:`UserError` when the bone map or the controls do not fit."""
+    """The :class:`Clip` of a checked armature (see :func:`rig_of`)."""
+    rig, anchors, bone_map, found = rig_of(obj)
+    return Clip(obj, action, channels, rig, anchors, bone_map, rig_io.world_matrix(obj),
+                keys_per_second(context, obj), first, last, found)
+
+
+def rig_of(obj) -> tuple[Rig, Anchors, dict, ControlSet | None]:
+    """(rig, anchors, bone map, controls) of an armature: its rig (a control rig's joint skeleton) with the
+    canonical joints on it; raises :class:`UserError` when the bone map or the controls do not fit, or
+    keys on the mapped bones would not show."""
     rig = rig_io.read_rig(obj)
     found = controls.control_set(obj)
     if found is not None:
@@ -118,8 +126,7 @@ def clip_of(context, obj, action, channels, first: int, last: int) -> Clip:
         raise UserError(str(e)) from e
     if found is None:
         check_not_driven(obj, [rig.names[b] for b in solved_bones(rig, anchors)])
-    return Clip(obj, action, channels, rig, anchors, bone_map, rig_io.world_matrix(obj),
-                keys_per_second(context, obj), first, last, found)
+    return rig, anchors, bone_map, found
 
 
 # Constraints that set a bone's transform outright (keys on the bone would not show); limits and the like pass.
@@ -182,6 +189,11 @@ def pose_joints(clip: Clip, loc: np.ndarray, rot: np.ndarray) -> np.ndarray:
     """World canonical joints ``[F, 21, 3]`` (Y-up) of the rig in the local pose ``loc``, ``rot`` ``[F, B, ...]``."""
     local = anchor_positions(clip.rig, clip.anchors, fk(clip.rig, loc, rot))
     return zup_to_yup(local @ clip.world[:3, :3].T + clip.world[:3, 3])
+
+
+def world_scale(clip: Clip) -> float:
+    """Scene units per armature unit (the armature object's scale)."""
+    return float(abs(np.linalg.det(clip.world[:3, :3])) ** (1 / 3))
 
 
 def to_armature(clip: Clip, pos_yup: np.ndarray) -> np.ndarray:

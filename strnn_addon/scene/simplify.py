@@ -30,8 +30,7 @@ class _Channels:
         for col, (b, prop, i) in enumerate(self.slots):
             if prop in ROTATIONS:
                 pb = clip.obj.pose.bones[clip.rig.names[b]]
-                entry = self.rotation.setdefault(b, (pb.rotation_mode, rig_io.rotation_values(
-                    rig_io.bone_channels(clip.channels.fcurves), pb, frames), {}))
+                entry = self.rotation.setdefault(b, (pb.rotation_mode, rig_io.rotation_values(chans, pb, frames), {}))
                 entry[2][i] = col
 
     def values(self) -> np.ndarray:
@@ -80,7 +79,7 @@ def simplify_keys(context, obj, first: int, last: int, tolerance_cm: float) -> d
     chans = _Channels(clip, frames)
     if not chans.curves or len(frames) < 3:
         return {"keys": len(frames) * len(chans.curves), "full": len(frames) * len(chans.curves), "max_error_cm": 0.0}
-    per_cm = 0.01 / float(abs(np.linalg.det(clip.world[:3, :3])) ** (1 / 3))  # armature units per cm
+    per_cm = 0.01 / pipeline.world_scale(clip)  # armature units per cm
     tol = tolerance_cm * per_cm
     full = chans.values()
     everything = np.arange(len(frames))

@@ -16,7 +16,6 @@ import tomllib
 from pathlib import Path
 
 import bpy
-import numpy as np
 
 from ...model_core.inference.steps import drive
 from ...model_core.ops import footlock
@@ -128,17 +127,13 @@ def report_note(action) -> str:
     return f". {note}" if note else ""
 
 
-def world_scale(clip) -> float:
-    """Scene units per armature unit (the armature object's scale)."""
-    return float(abs(np.linalg.det(clip.world[:3, :3])) ** (1 / 3))
-
-
 def with_bake(record: dict, clip, error: float, frames) -> dict:
     """``record``, with the first and last frame written and, on a control rig, how far (cm) the bake left a
     driven bone from the solve at worst."""
     record["frames_written"] = [int(frames[0]), int(frames[-1])]
     if clip.controls is not None:
-        record["controls"] = {"set": clip.controls.name, "max_error_cm": round(100 * error * world_scale(clip), 2)}
+        worst_cm = round(100 * error * pipeline.world_scale(clip), 2)
+        record["controls"] = {"set": clip.controls.name, "max_error_cm": worst_cm}
     return record
 
 
