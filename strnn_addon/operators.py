@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import bpy
-from bpy.props import IntProperty, StringProperty
+from bpy.props import IntProperty
 
 from . import props as options
 from .props import joint_label
@@ -37,11 +37,15 @@ class _Staged:
         return not problem
 
     def range_from_scene(self, context) -> None:
-        """A Frame Range nobody set starts as the scene's preview range, or else its frame range,
-        as Blender's Bake Action does (F3, menus and scripts; the sidebar hands its own, and the
-        redo panel keeps the last run's)."""
+        """With Frame Range off, or a Start nobody set (a script's call), Start and End are the scene's
+        preview range, or else its frame range, as Blender's Bake Action takes them: turning Frame Range
+        on (redo panel, sidebar) starts from the range the animator works in. A range set with Frame
+        Range on is kept: handed by a script, or remembered (the sidebar's), which Blender hands to a run
+        from a button, F3 or a menu."""
         props = self.properties
-        if "frame_start" not in props.bl_rna.properties or props.is_property_set("frame_start"):
+        if "frame_start" not in props.bl_rna.properties:
+            return
+        if self.use_range and props.is_property_set("frame_start"):
             return
         scene = context.scene
         preview = scene.use_preview_range
@@ -54,15 +58,16 @@ class _Staged:
     def done(self, action) -> str:
         raise NotImplementedError
 
-    def finished(self, context, action) -> str:
-        """Thin the keys (``simplify``), deliver the new action as asked (``output``), say what was done."""
-        said = self.done(action)
+    def finished(self, context, action) -> None:
+        """Thin the keys (``simplify``), deliver the new action as asked (``output``), report what was done
+        (a warning when the take's pace suggests its keys are read at another rate than captured)."""
+        said = self.done(action) + report_note(action)
         if getattr(self, "simplify", 0.0) > 0.0:
             said += simplified(context, action, self.simplify)
         if getattr(self, "output", "ACTION") == "NLA":
             track = as_nla_strip(context.active_object, action)
             said += f"; put on NLA track {track.name!r}, the active action unchanged"
-        return said
+        self.report({"WARNING"} if "note" in action.get(RECORD, {}).get("pace", {}) else {"INFO"}, said)
 
     def execute(self, context):
         self.range_from_scene(context)
@@ -75,7 +80,7 @@ class _Staged:
             return {"CANCELLED"}
         finally:
             wm.progress_end()
-        self.report({"INFO"}, self.finished(context, action))
+        self.finished(context, action)
         return {"FINISHED"}
 
     def invoke(self, context, event):
@@ -106,7 +111,7 @@ class _Staged:
             stage = next(self._steps)
         except StopIteration as stop:
             self._stop(context)
-            self.report({"INFO"}, self.finished(context, stop.value))
+            self.finished(context, stop.value)
             return {"FINISHED"}
         except UserError as e:
             self._stop(context)
@@ -157,8 +162,8 @@ class STRNN_OT_extend_clip(_Staged, bpy.types.Operator):
     def done(self, action) -> str:
         if self.from_current:
             return (f"Continued after frame {bpy.context.scene.frame_current} with {self.frames} new frames in new "
-                    f"action {action.name!r}{range_note(action)}{report_note(action)}")
-        return f"Added {self.frames} frames in new action {action.name!r}{range_note(action)}{report_note(action)}"
+                    f"action {action.name!r}{range_note(action)}")
+        return f"Added {self.frames} frames in new action {action.name!r}{range_note(action)}"
 
 
 class STRNN_OT_fill_gap(_Staged, bpy.types.Operator):
@@ -243,8 +248,7 @@ class STRNN_OT_follow_curve(_Staged, bpy.types.Operator):
     bl_label = "Follow Curve"
     bl_options = {"REGISTER", "UNDO"}
 
-    curve: StringProperty(name="Curve", default="",
-                          description="Name of the curve object to follow; empty: the selected curve")
+    curve: options.curve_name()
     frames: options.curve_frames()
     speed: options.curve_speed()
     foot_lock: options.foot_lock(True)
@@ -263,8 +267,7 @@ class STRNN_OT_follow_curve(_Staged, bpy.types.Operator):
         curve = find_curve(bpy.context, self.curve)
         others = len(curve.data.splines) - 1
         note = f" (it followed the first of the curve's {others + 1} splines)" if others else ""
-        return (f"Walked the curve {curve.name!r} into new action {action.name!r}{note}{range_note(action)}"
-                f"{report_note(action)}")
+        return f"Walked the curve {curve.name!r} into new action {action.name!r}{note}{range_note(action)}"
 
 
 class STRNN_OT_transfer_motion(_Staged, bpy.types.Operator):
@@ -276,9 +279,7 @@ class STRNN_OT_transfer_motion(_Staged, bpy.types.Operator):
     bl_label = "Transfer Motion"
     bl_options = {"REGISTER", "UNDO"}
 
-    source: StringProperty(name="Source", default="",
-                           description="Name of the armature to take the motion from; empty: the other selected "
-                                       "armature")
+    source: options.source_name()
     foot_lock: options.foot_lock(True)
     scene_range: options.scene_range()
     output: options.output()

@@ -1,4 +1,4 @@
-"""Properties: the bone map and controls stored on the armature object, the sidebar settings and
+"""Properties: the operators' options (defined once), the bone map and controls stored on the armature object and
 the add-on preferences."""
 
 from __future__ import annotations
@@ -25,8 +25,9 @@ FOOT_LOCK_TIP = "Then pin the feet on the ground while they touch it (leg IK aga
 
 
 # ------------------------------------------------------------------ options
-# Each option is defined once, here: the operators and the sidebar settings (per scene) that
-# are handed to them both call these, so names, defaults, limits and tooltips always agree.
+# Each option is defined once, here, and lives on its operator: the sidebar shows and edits the
+# operator's remembered values (``WindowManager.operator_properties_last``), which are also what F3,
+# the menus and the redo panel use, and the batch CLI hands the same names.
 
 def frames_to_add():
     return IntProperty(name="Frames", default=120, min=1, soft_max=2000,
@@ -106,6 +107,28 @@ def curve_frames():
 def curve_speed():
     return FloatProperty(name="Speed", default=0.0, min=0.0, soft_max=5.0, unit="VELOCITY",
                          description="Walking speed along the curve; 0: the motion's own speed")
+
+
+def _objects_of(kind: str, exclude_active: bool = False):
+    """A search list of the scene's objects of ``kind`` (for a name option's drop-down)."""
+
+    def search(self, context, edit_text):
+        active = context.active_object if exclude_active else None
+        return [o.name for o in context.scene.objects
+                if o.type == kind and o is not active and edit_text.lower() in o.name.lower()]
+
+    return search
+
+
+def curve_name():
+    return StringProperty(name="Curve", default="", search=_objects_of("CURVE"),
+                          description="The curve object to walk along (Bezier, NURBS or poly; its centre line); "
+                                      "empty: the selected curve")
+
+
+def source_name():
+    return StringProperty(name="Source", default="", search=_objects_of("ARMATURE", exclude_active=True),
+                          description="The armature to take the motion from; empty: the other selected armature")
 
 
 def joint_label(joint: str) -> str:
@@ -216,41 +239,7 @@ def preferences(context):
     return addon.preferences if addon else None
 
 
-class STRNN_PG_settings(bpy.types.PropertyGroup):
-    """Sidebar options (per scene) handed to the operators."""
-
-    extend_frames: frames_to_add()
-    context_frames: context_frames()
-    extend_foot_lock: foot_lock(False)
-    extend_from_current: from_current()
-    denoise_strength: strength()
-    denoise_use_range: use_range("Denoise")
-    denoise_start: range_start("Denoise")
-    denoise_end: range_end("Denoise")
-    denoise_foot_lock: foot_lock(False)
-    fill_use_range: use_range("Fill")
-    fill_start: range_start("Fill")
-    fill_end: range_end("Fill")
-    fill_foot_lock: foot_lock(True)
-    lock_blend: lock_blend()
-    lock_use_range: use_range("Lock")
-    lock_start: range_start("Lock")
-    lock_end: range_end("Lock")
-    curve: PointerProperty(name="Curve", type=bpy.types.Object, poll=lambda self, obj: obj.type == "CURVE",
-                           description="The curve to walk along (Bezier, NURBS or poly; its centre line)")
-    curve_frames: curve_frames()
-    curve_speed: curve_speed()
-    curve_foot_lock: foot_lock(True)
-    transfer_source: PointerProperty(name="Source", type=bpy.types.Object,
-                                     poll=lambda self, obj: obj.type == "ARMATURE",
-                                     description="The armature to take the motion from; empty: the other selected "
-                                                 "armature")
-    transfer_foot_lock: foot_lock(True)
-    output: output()
-    simplify: simplify()
-
-
-classes = (STRNN_PG_bone_map, STRNN_PG_control, STRNN_PG_switch, STRNN_PG_settings, STRNN_AP_preferences)
+classes = (STRNN_PG_bone_map, STRNN_PG_control, STRNN_PG_switch, STRNN_AP_preferences)
 
 
 def register_properties():
@@ -266,11 +255,9 @@ def register_properties():
         name="Keys per Second", default=0.0, min=0.0, soft_max=240.0, override={"LIBRARY_OVERRIDABLE"},
         description="How many of the action's frames make one second of its motion, when it differs from the "
                     "scene's frame rate (a 60 fps take imported at 24 fps: 60); 0: the scene's rate")
-    bpy.types.Scene.strnn = PointerProperty(type=STRNN_PG_settings)
 
 
 def unregister_properties():
-    del bpy.types.Scene.strnn
     del bpy.types.Object.strnn_keys_per_second
     del bpy.types.Object.strnn_control_index
     del bpy.types.Object.strnn_switches

@@ -21,21 +21,6 @@ class _Sidebar:
         return context.mode in {"OBJECT", "POSE"}
 
 
-def _frame_range(col, settings, prefix: str) -> None:
-    """The Frame Range toggle and its Start / End (greyed out while off) of the ``prefix`` settings."""
-    col.prop(settings, f"{prefix}_use_range")
-    row = col.row(align=True)
-    row.active = getattr(settings, f"{prefix}_use_range")
-    row.prop(settings, f"{prefix}_start")
-    row.prop(settings, f"{prefix}_end")
-
-
-def _pass_range(op, settings, prefix: str) -> None:
-    """Hand the ``prefix`` frame range settings to the operator ``op``."""
-    op.use_range = getattr(settings, f"{prefix}_use_range")
-    op.frame_start, op.frame_end = getattr(settings, f"{prefix}_start"), getattr(settings, f"{prefix}_end")
-
-
 class STRNN_PT_main(_Sidebar, bpy.types.Panel):
     bl_label = "STRNN Motion"
 
@@ -54,110 +39,108 @@ class STRNN_PT_main(_Sidebar, bpy.types.Panel):
         first, last = (int(round(f)) for f in action.frame_range)
         col.label(text=f"{obj.name}: {action.name} (frames {first}-{last})", icon="ACTION")
         col.prop(obj, "strnn_keys_per_second")
-        self.layout.row().prop(context.scene.strnn, "output", expand=True)
-        self.layout.prop(context.scene.strnn, "simplify")
 
 
-class STRNN_PT_extend(_Sidebar, bpy.types.Panel):
+def remembered(context, idname: str):
+    """The options operator ``idname`` remembers: what a button, F3, a menu and the redo panel run it
+    with. The sidebar shows and edits these, so there is one set of options per operator."""
+    return context.window_manager.operator_properties_last(idname)
+
+
+def _frame_range(col, opts) -> None:
+    """The Frame Range toggle and its Start / End (greyed out while off)."""
+    col.prop(opts, "use_range")
+    row = col.row(align=True)
+    row.active = opts.use_range
+    row.prop(opts, "frame_start")
+    row.prop(opts, "frame_end")
+
+
+class _OperatorPanel(_Sidebar):
+    """A sidebar panel that shows an operator's remembered options and its button, which runs with them
+    (the button sets nothing itself: Blender fills a button's unset options from the remembered ones)."""
+
+    bl_parent_id = "STRNN_PT_main"
+    operator = ""
+    icon = "NONE"
+
+    def draw_options(self, col, opts, context) -> None:
+        raise NotImplementedError
+
+    def draw(self, context):
+        opts = remembered(context, self.operator)
+        self.draw_options(self.layout.column(align=True), opts, context)
+        col = self.layout.column(align=True)
+        col.row(align=True).prop(opts, "output", expand=True)
+        col.prop(opts, "simplify")
+        self.layout.operator(self.operator, icon=self.icon)
+
+
+class STRNN_PT_extend(_OperatorPanel, bpy.types.Panel):
     bl_label = "Extend"
-    bl_parent_id = "STRNN_PT_main"
+    operator, icon = "strnn.extend_clip", "TRACKING_FORWARDS"
 
-    def draw(self, context):
-        settings = context.scene.strnn
-        col = self.layout.column(align=True)
-        col.prop(settings, "extend_frames")
-        col.prop(settings, "context_frames")
-        col.prop(settings, "extend_from_current")
-        col.prop(settings, "extend_foot_lock")
-        op = self.layout.operator("strnn.extend_clip", icon="TRACKING_FORWARDS")
-        op.output, op.simplify = settings.output, settings.simplify
-        op.frames, op.context_frames = settings.extend_frames, settings.context_frames
-        op.from_current, op.foot_lock = settings.extend_from_current, settings.extend_foot_lock
+    def draw_options(self, col, opts, context):
+        col.prop(opts, "frames")
+        col.prop(opts, "context_frames")
+        col.prop(opts, "from_current")
+        col.prop(opts, "foot_lock")
 
 
-class STRNN_PT_fill_gap(_Sidebar, bpy.types.Panel):
+class STRNN_PT_fill_gap(_OperatorPanel, bpy.types.Panel):
     bl_label = "Fill Gap"
-    bl_parent_id = "STRNN_PT_main"
+    operator, icon = "strnn.inbetween", "IPO_EASE_IN_OUT"
 
-    def draw(self, context):
-        settings = context.scene.strnn
-        col = self.layout.column(align=True)
+    def draw_options(self, col, opts, context):
         col.label(text="The gap around the current frame, or the first", icon="INFO")
-        _frame_range(col, settings, "fill")
-        col.prop(settings, "fill_foot_lock")
-        op = self.layout.operator("strnn.inbetween", icon="IPO_EASE_IN_OUT")
-        op.output, op.simplify = settings.output, settings.simplify
-        _pass_range(op, settings, "fill")
-        op.foot_lock = settings.fill_foot_lock
+        _frame_range(col, opts)
+        col.prop(opts, "foot_lock")
 
 
-class STRNN_PT_denoise(_Sidebar, bpy.types.Panel):
+class STRNN_PT_denoise(_OperatorPanel, bpy.types.Panel):
     bl_label = "Denoise"
-    bl_parent_id = "STRNN_PT_main"
+    operator, icon = "strnn.denoise_action", "MOD_SMOOTH"
 
-    def draw(self, context):
-        settings = context.scene.strnn
-        col = self.layout.column(align=True)
-        col.prop(settings, "denoise_strength", slider=True)
-        _frame_range(col, settings, "denoise")
-        col.prop(settings, "denoise_foot_lock")
-        op = self.layout.operator("strnn.denoise_action", icon="MOD_SMOOTH")
-        op.output, op.simplify = settings.output, settings.simplify
-        _pass_range(op, settings, "denoise")
-        op.strength, op.foot_lock = settings.denoise_strength, settings.denoise_foot_lock
+    def draw_options(self, col, opts, context):
+        col.prop(opts, "strength", slider=True)
+        _frame_range(col, opts)
+        col.prop(opts, "only_selected")
+        col.prop(opts, "foot_lock")
 
 
-class STRNN_PT_foot_lock(_Sidebar, bpy.types.Panel):
+class STRNN_PT_foot_lock(_OperatorPanel, bpy.types.Panel):
     bl_label = "Foot Lock"
-    bl_parent_id = "STRNN_PT_main"
+    operator, icon = "strnn.foot_lock", "SNAP_ON"
 
-    def draw(self, context):
-        settings = context.scene.strnn
-        col = self.layout.column(align=True)
-        col.prop(settings, "lock_blend")
-        _frame_range(col, settings, "lock")
-        op = self.layout.operator("strnn.foot_lock", icon="SNAP_ON")
-        op.output, op.simplify = settings.output, settings.simplify
-        _pass_range(op, settings, "lock")
-        op.blend = settings.lock_blend
+    def draw_options(self, col, opts, context):
+        col.prop(opts, "blend")
+        _frame_range(col, opts)
+        col.prop(opts, "only_selected")
 
 
-class STRNN_PT_follow_curve(_Sidebar, bpy.types.Panel):
+class STRNN_PT_follow_curve(_OperatorPanel, bpy.types.Panel):
     bl_label = "Follow Curve"
-    bl_parent_id = "STRNN_PT_main"
+    operator, icon = "strnn.follow_curve", "CURVE_PATH"
 
-    def draw(self, context):
-        settings = context.scene.strnn
+    def draw_options(self, col, opts, context):
         if not torch_install.torch_available():
-            self.layout.label(text="Needs PyTorch: Preferences > Add-ons > STRNN Motion > Install PyTorch",
-                              icon="INFO")
-        col = self.layout.column(align=True)
-        col.prop(settings, "curve")
-        col.prop(settings, "curve_frames")
-        col.prop(settings, "curve_speed")
-        col.prop(settings, "curve_foot_lock")
-        op = self.layout.operator("strnn.follow_curve", icon="CURVE_PATH")
-        op.output, op.simplify = settings.output, settings.simplify
-        op.curve = settings.curve.name if settings.curve else ""
-        op.frames, op.speed, op.foot_lock = settings.curve_frames, settings.curve_speed, settings.curve_foot_lock
+            col.label(text="Needs PyTorch: Preferences > Add-ons > STRNN Motion > Install PyTorch", icon="INFO")
+        col.prop(opts, "curve", icon="OUTLINER_OB_CURVE")
+        col.prop(opts, "frames")
+        col.prop(opts, "speed")
+        col.prop(opts, "foot_lock")
 
 
-class STRNN_PT_transfer(_Sidebar, bpy.types.Panel):
+class STRNN_PT_transfer(_OperatorPanel, bpy.types.Panel):
     bl_label = "Transfer Motion"
-    bl_parent_id = "STRNN_PT_main"
     bl_options = {"DEFAULT_CLOSED"}
+    operator, icon = "strnn.transfer_motion", "ARMATURE_DATA"
 
-    def draw(self, context):
-        settings = context.scene.strnn
-        col = self.layout.column(align=True)
-        col.prop(settings, "transfer_source")
-        if settings.transfer_source is None:
+    def draw_options(self, col, opts, context):
+        col.prop(opts, "source", icon="OUTLINER_OB_ARMATURE")
+        if not opts.source:
             col.label(text="Or select the source, then the target", icon="INFO")
-        col.prop(settings, "transfer_foot_lock")
-        op = self.layout.operator("strnn.transfer_motion", icon="ARMATURE_DATA")
-        op.output, op.simplify = settings.output, settings.simplify
-        op.source = settings.transfer_source.name if settings.transfer_source else ""
-        op.foot_lock = settings.transfer_foot_lock
+        col.prop(opts, "foot_lock")
 
 
 class _ArmatureSidebar(_Sidebar):

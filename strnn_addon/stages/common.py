@@ -12,13 +12,16 @@ action is created, so a failure or a cancel leaves the file unchanged.
 from __future__ import annotations
 
 import contextlib
+import math
 import tomllib
 from pathlib import Path
 
 import bpy
+import numpy as np
 
 from ...model_core.inference.steps import drive
 from ...model_core.ops import footlock
+from ...model_core.ops.pace import Pace, stride_period
 from .. import engine_bridge
 from ..props import preferences
 from ..scene import anim, pipeline
@@ -121,10 +124,39 @@ def familiarity_record(found) -> dict:
     return {"familiarity": entry}
 
 
+PACE_SECONDS = 8.0  # how much of the action, up to its end, the pace is read from
+PACE_SAMPLES = 96  # at most this many frames of it are read (evaluated rigs pay per frame)
+
+
+def pace_record(context, clip, end: int | None = None) -> dict:
+    """The record's ``pace`` entry: the stride of the action's locomotion (up to its last
+    :data:`PACE_SECONDS` before ``end``) at the keys per second it was read at, and the note the
+    operator reports when that stride is one people do not take (keys at another rate than the
+    take's: set Keys per Second). Empty for motion without strides."""
+    end = clip.last if end is None else int(end)
+    span = min(end - clip.first, int(PACE_SECONDS * clip.fps))
+    if span < 8:
+        return {}
+    step = max(1, math.ceil(span / PACE_SAMPLES))
+    frames = np.arange(end - span, end + 1, step, dtype=np.float64)
+    try:  # every ``step``-th key: read at ``fps / step``; the stride in seconds is the same
+        stride = stride_period(pipeline.joint_positions(context, clip, frames), clip.fps / step)
+    except ValueError:  # legs of zero length: the operation itself says so
+        return {}
+    if stride is None:
+        return {}
+    pace = Pace(stride, float(clip.fps))
+    entry = {"stride_s": round(pace.stride_s, 3), "keys_per_second": float(clip.fps)}
+    if pace.note():
+        entry["note"] = pace.note()
+    return {"pace": entry}
+
+
 def report_note(action) -> str:
-    """The familiarity note of a new action's record, as a sentence to append to a report ('' if none)."""
-    note = action.get(RECORD, {}).get("familiarity", {}).get("note", "")
-    return f". {note}" if note else ""
+    """The pace and familiarity notes of a new action's record, as sentences to append to a report ('' if none)."""
+    record = action.get(RECORD, {})
+    notes = [record.get(key, {}).get("note", "") for key in ("pace", "familiarity")]
+    return "".join(f". {note}" for note in notes if note)
 
 
 def with_bake(record: dict, clip, error: float, frames) -> dict:

@@ -8,7 +8,7 @@ from ...model_core.ops.seam import fade_edges
 from ...model_core.rig.solve import solve
 from .. import engine_bridge
 from ..scene import pipeline
-from .common import frame_range, lock, made_by, model_steps, noop, prefs, run, write_new
+from .common import frame_range, lock, made_by, model_steps, noop, pace_record, prefs, run, write_new
 
 
 def denoise_action(context, obj, *, progress=noop, **options):
@@ -41,4 +41,5 @@ def denoise_steps(context, obj, *, frame_start: int | None = None, frame_end: in
     yield "write"
     record = made_by("Denoise Action", clip, engine_bridge.model_used(prefs(context), "denoise"), frame_start=a,
                      frame_end=b, strength=float(strength), foot_lock=foot_lock, only_selected=only_selected)
+    record.update(pace_record(context, clip))
     return write_new(context, clip, "denoised", frames, loc, rot, previous, (a, b), record, bones=bones)

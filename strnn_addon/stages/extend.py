@@ -8,7 +8,7 @@ from ...model_core.rig.solve import solve
 from .. import engine_bridge
 from ..scene import pipeline
 from ..scene.pipeline import UserError
-from .common import familiarity_record, lock, made_by, model_call, noop, prefs, run, write_new
+from .common import familiarity_record, lock, made_by, model_call, noop, pace_record, prefs, run, write_new
 
 
 def extend_clip(context, obj, *, progress=noop, **options):
@@ -62,6 +62,7 @@ def extend_steps(context, obj, *, frames: int = 120, context_frames: int = 0, fo
     record = made_by("Extend Clip", clip, engine_bridge.model_used(prefs(context)), frames=frames,
                      context_frames=len(ctx_frames), foot_lock=foot_lock, from_frame=from_frame)
     record.update(familiarity_record(model_call(engine_bridge.familiarity, prefs(context), pos, clip.fps)))
+    record.update(pace_record(context, clip, end))
     replace = None if end == clip.last else (end + 0.5, float("inf"))  # the old tail goes
     return write_new(context, clip, "extended", new_frames, loc, rot, previous, replace, record,
                      scene_range=scene_range)

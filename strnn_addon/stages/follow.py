@@ -15,7 +15,7 @@ from ...model_core.rig.solve import solve
 from .. import engine_bridge
 from ..scene import curves, pipeline
 from ..scene.pipeline import UserError
-from .common import familiarity_record, lock, made_by, model_steps, prefs, write_fresh, write_new
+from .common import familiarity_record, lock, made_by, model_steps, pace_record, prefs, write_fresh, write_new
 
 
 def follow_curve_steps(context, obj, *, curve: str = "", frames: int = 0, speed: float = 0.0, foot_lock: bool = True,
@@ -63,6 +63,7 @@ def follow_curve_steps(context, obj, *, curve: str = "", frames: int = 0, speed:
                      frames=n, speed=float(speed), foot_lock=foot_lock, steering_steps=steps)
     if context_pos is not None:
         record.update(familiarity_record(engine_bridge.familiarity(prefs(context), context_pos, clip.fps)))
+        record.update(pace_record(context, clip))
     if clip.action is not None:
         return write_new(context, clip, "curve", new_frames, loc, rot, previous, None, record,
                          scene_range=scene_range)

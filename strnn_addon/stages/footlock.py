@@ -8,7 +8,7 @@ from ...model_core.ops import footlock
 from ...model_core.rig.solve import solve
 from ..scene import pipeline
 from ..scene.pipeline import UserError
-from .common import frame_range, lock, made_by, write_new
+from .common import frame_range, lock, made_by, pace_record, write_new
 
 MIN_LOCK_FRAMES = 3
 
@@ -39,5 +39,6 @@ def foot_lock_steps(context, obj, *, frame_start: int | None = None, frame_end: 
     loc, rot = solve(clip.rig, clip.anchors, pipeline.to_armature(clip, locked), ref_loc, ref_rot)
     yield "write"
     record = made_by("Foot Lock", clip, frame_start=a, frame_end=b, blend=float(blend), only_selected=only_selected)
+    record.update(pace_record(context, clip))
     return write_new(context, clip, "footlocked", frames[inside], loc[inside], rot[inside], previous, (a, b),
                      record, bones=bones)

@@ -42,28 +42,35 @@ def hips_speed(addon, obj, frames) -> float:
     return float(np.linalg.norm(np.diff(hips, axis=0), axis=-1).mean())
 
 
-def extended_pace(addon, path, scene_fps: int, keys_per_second: float, native: bool) -> float:
-    """Hips ground speed per frame of 120 frames Extend adds to the take at ``path``."""
+def extended_pace(addon, path, scene_fps: int, keys_per_second: float, native: bool) -> tuple[float, dict]:
+    """Hips ground speed per frame of 120 frames Extend adds to the take at ``path``, and the pace the
+    new action's record read from the take."""
     bpy.ops.wm.read_homefile(use_empty=True)
     bpy.context.scene.render.fps = scene_fps
     obj = import_bvh(path, update_scene_fps=native)
     obj.strnn_keys_per_second = keys_per_second
     last = int(action_of(obj).frame_range[1])
     assert bpy.ops.strnn.extend_clip(frames=120) == {"FINISHED"}
-    assert action_of(obj)["strnn"]["keys_per_second"] == (keys_per_second or bpy.context.scene.render.fps)
-    return hips_speed(addon, obj, range(last + 1, last + 121))
+    record = action_of(obj)["strnn"].to_dict()
+    assert record["keys_per_second"] == (keys_per_second or bpy.context.scene.render.fps)
+    return hips_speed(addon, obj, range(last + 1, last + 121)), record["pace"]
 
 
 def test_keys_per_second_reads_a_60_fps_take_imported_at_24_fps_at_its_own_pace(addon, tmp_path, real_model):
     """Blender's BVH importer leaves the scene at 24 fps by default: with Keys per Second 60 the extension
-    moves as it does for the same take imported at 60 fps; read at 24 keys per second it does not."""
+    moves as it does for the same take imported at 60 fps; read at 24 keys per second it does not, and
+    the report warns, naming the rate to set (the walk's strides take 1.1 s)."""
     path = walk_bvh(tmp_path, frames=240, fps=60.0)
-    native = extended_pace(addon, path, 60, 0.0, True)
-    fixed = extended_pace(addon, path, 24, 60.0, False)
-    wrong = extended_pace(addon, path, 24, 0.0, False)
+    native, native_pace = extended_pace(addon, path, 60, 0.0, True)
+    fixed, fixed_pace = extended_pace(addon, path, 24, 60.0, False)
+    wrong, wrong_pace = extended_pace(addon, path, 24, 0.0, False)
     print(f"hips speed per frame: imported at 60 fps {native:.4f}, at 24 with 60 keys/s {fixed:.4f}, at 24 {wrong:.4f}")
     assert abs(fixed / native - 1.0) < 0.1
     assert abs(wrong / native - 1.0) > 0.2
+    for pace in (native_pace, fixed_pace):
+        assert pace["stride_s"] == pytest.approx(1.11, abs=0.05) and "note" not in pace
+    assert wrong_pace["stride_s"] == pytest.approx(2.5 * 1.11, abs=0.15)
+    assert "set Keys per Second to 60" in wrong_pace["note"]
 
 
 def test_simplify_keys_keeps_the_joints_within_the_tolerance(addon, tmp_path, real_model):

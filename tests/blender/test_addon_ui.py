@@ -4,67 +4,61 @@ from __future__ import annotations
 
 import bpy
 import pytest
-from scenes import build_armature, import_bvh, walk_bvh
+from scenes import action_of, build_armature, import_bvh, key_snapshot, same_keys, walk_bvh
 
 PANELS = ("STRNN_PT_main", "STRNN_PT_extend", "STRNN_PT_fill_gap", "STRNN_PT_denoise", "STRNN_PT_foot_lock",
           "STRNN_PT_follow_curve", "STRNN_PT_transfer", "STRNN_PT_bone_map", "STRNN_PT_controls")
 
 
+OPERATOR_PANELS = ("STRNN_PT_extend", "STRNN_PT_fill_gap", "STRNN_PT_denoise", "STRNN_PT_foot_lock",
+                   "STRNN_PT_follow_curve", "STRNN_PT_transfer")
+
+
 class Layout:
-    """Records layout calls; property names are checked against the data they are drawn from."""
+    """Records layout calls as (name, data, property); property names are checked against the data they are
+    drawn from, and an operator button must not set options of its own."""
 
     def __init__(self, calls):
         self.calls = calls
 
     def __getattr__(self, name):
         def call(*args, **kw):
+            data = prop = None
             if name in ("prop", "prop_search"):
                 data, prop = args[0], args[1]
                 assert prop in data.bl_rna.properties, f"{type(data).__name__} has no property {prop!r}"
             if name == "operator":
                 assert hasattr(bpy.ops.strnn, args[0].split(".")[1])
-            self.calls.append(name)
-            return OperatorProps(args[0]) if name == "operator" else Layout(self.calls)
+            self.calls.append((name, data, prop))
+            return OperatorButton(args[0]) if name == "operator" else Layout(self.calls)
 
         return call
 
 
-class OperatorProps:
-    """What a panel hands to an operator button: only properties the operator has."""
+class OperatorButton:
+    """An operator button: it takes the operator's remembered options, so a panel sets none on it."""
 
     def __init__(self, idname: str):
-        object.__setattr__(self, "rna", getattr(bpy.ops.strnn, idname.split(".")[1]).get_rna_type())
+        object.__setattr__(self, "idname", idname)
 
     def __setattr__(self, name, value):
-        assert name in self.rna.properties, f"{self.rna.identifier} has no property {name!r}"
+        raise AssertionError(f"the panel sets {name!r} on its {self.idname} button: the sidebar must edit the "
+                             "operator's remembered options instead")
 
 
-# sidebar setting (per scene) -> the operator property it is handed to
-HANDED = {
-    "extend_frames": ("extend_clip", "frames"), "context_frames": ("extend_clip", "context_frames"),
-    "extend_foot_lock": ("extend_clip", "foot_lock"), "extend_from_current": ("extend_clip", "from_current"),
-    "denoise_strength": ("denoise_action", "strength"),
-    "denoise_use_range": ("denoise_action", "use_range"), "denoise_start": ("denoise_action", "frame_start"),
-    "denoise_end": ("denoise_action", "frame_end"), "denoise_foot_lock": ("denoise_action", "foot_lock"),
-    "lock_blend": ("foot_lock", "blend"), "lock_use_range": ("foot_lock", "use_range"),
-    "lock_start": ("foot_lock", "frame_start"), "lock_end": ("foot_lock", "frame_end"),
-    "curve_frames": ("follow_curve", "frames"), "curve_speed": ("follow_curve", "speed"),
-    "curve_foot_lock": ("follow_curve", "foot_lock"),
-    "fill_use_range": ("inbetween", "use_range"), "fill_start": ("inbetween", "frame_start"),
-    "fill_end": ("inbetween", "frame_end"), "fill_foot_lock": ("inbetween", "foot_lock"),
-    "transfer_foot_lock": ("transfer_motion", "foot_lock"), "output": ("extend_clip", "output"),
-    "simplify": ("denoise_action", "simplify"),
-}
+def fake_panel(panel, layout):
+    """A stand-in for an instance of ``panel`` (Blender makes those only when it draws) with ``layout``."""
+    own = {k: getattr(panel, k) for k in ("operator", "icon", "draw_options") if hasattr(panel, k)}
+    return type("Fake", (), {"layout": layout, **own})()
 
 
 def draw_all(context) -> list[str]:
-    calls: list[str] = []
+    calls = []
     for name in PANELS:
         panel = getattr(bpy.types, name)
         if panel.poll(context):
-            fake = type("Fake", (), {"layout": Layout(calls)})()
-            panel.draw(fake, context)
-    return calls
+            panel.draw(fake_panel(panel, Layout(calls)), context)
+    return [c[0] for c in calls]
 
 
 def test_registered_in_sidebar_and_menus(addon):
@@ -96,15 +90,21 @@ def test_panels_draw(addon, tmp_path, scene):
         assert calls.count("prop_search") == 21 and "operator" in calls
 
 
-def test_sidebar_settings_agree_with_their_operators(addon):
-    """A setting and the operator option it feeds have one name, default, range and tooltip."""
-    settings = bpy.context.scene.strnn.bl_rna.properties
-    assert set(HANDED) == {p.identifier for p in settings} - {"rna_type", "name", "curve", "transfer_source"}
-    for setting, (op, option) in HANDED.items():
-        a, b = settings[setting], getattr(bpy.ops.strnn, op).get_rna_type().properties[option]
-        for attr in ("type", "name", "description", "default", "subtype", "unit", "hard_min", "hard_max",
-                     "soft_min", "soft_max"):
-            assert getattr(a, attr, None) == getattr(b, attr, None), f"{setting} / {op}.{option}: {attr}"
+def test_the_sidebar_edits_each_operators_remembered_options(addon, tmp_path):
+    """Each operator panel draws the options the operator remembers (what F3, the menus and the redo panel
+    use), every option an animator sets, and a button that sets nothing of its own."""
+    import_bvh(walk_bvh(tmp_path, frames=30))
+    wm = bpy.context.window_manager
+    for name in OPERATOR_PANELS:
+        panel = getattr(bpy.types, name)
+        calls = []
+        panel.draw(fake_panel(panel, Layout(calls)), bpy.context)
+        remembered = wm.operator_properties_last(panel.operator)
+        drawn = {prop for kind, data, prop in calls if kind == "prop"}
+        assert all(data.as_pointer() == remembered.as_pointer() for kind, data, _ in calls if kind == "prop"), name
+        options = {p.identifier for p in remembered.bl_rna.properties} - {"rna_type", "scene_range", "steering"}
+        assert drawn == options, f"{name}: not drawn {options - drawn}"
+        assert ("operator", None, None) in calls
 
 
 def panel_labels(panel: str, context) -> list[tuple[str, str]]:
@@ -120,7 +120,8 @@ def panel_labels(panel: str, context) -> list[tuple[str, str]]:
 
             return call
 
-    getattr(bpy.types, panel).draw(type("Fake", (), {"layout": Labels()})(), context)
+    cls = getattr(bpy.types, panel)
+    cls.draw(fake_panel(cls, Labels()), context)
     return labels
 
 
@@ -144,10 +145,20 @@ def test_follow_curve_panel_says_when_pytorch_is_missing(addon, monkeypatch):
         assert any(t.startswith("Needs PyTorch: Preferences > Add-ons") for t in texts) is not available
 
 
-def test_an_unset_frame_range_comes_from_the_preview_or_scene_range(addon, tmp_path):
-    """Run from F3, a menu or a script, Frame Range starts as the scene's preview range (else its
-    range); a range handed to the operator (as the sidebar does) is kept. (Headless Blender runs
-    execute directly, the path scripts take; a window's invoke goes through the same method.)"""
+def as_from_the_ui(op: str, **handed):
+    """Run ``strnn.<op>`` as a button, F3 or a menu runs it: every option not handed takes the operator's
+    remembered value (Blender's ``WM_operator_last_properties_init`` for a run from the interface; headless
+    bpy has no window to invoke from, so its copy is made here, option by option)."""
+    remembered = bpy.context.window_manager.operator_properties_last(f"strnn.{op}")
+    options = {p.identifier: getattr(remembered, p.identifier) for p in remembered.bl_rna.properties
+               if p.identifier != "rna_type" and not p.is_skip_save}
+    return getattr(bpy.ops.strnn, op)(**(options | handed))
+
+
+def test_a_frame_range_comes_from_the_preview_or_scene_range_unless_set(addon, tmp_path):
+    """A script's call without Start starts from the scene's preview range (else its range); so does a run
+    with Frame Range off, so that turning it on starts there; a range set with Frame Range on is kept,
+    whether handed to the call or remembered (the sidebar's) when invoked as F3 and buttons do."""
     import_bvh(walk_bvh(tmp_path, frames=60))
     scene = bpy.context.scene
     scene.frame_start, scene.frame_end = 5, 50
@@ -156,15 +167,53 @@ def test_an_unset_frame_range_comes_from_the_preview_or_scene_range(addon, tmp_p
     original = cls.steps
 
     def spy(self, context):
-        seen.append((self.frame_start, self.frame_end))
+        seen.append((self.use_range, self.frame_start, self.frame_end))
         return original(self, context)
 
+    remembered = bpy.context.window_manager.operator_properties_last("strnn.denoise_action")
     cls.steps = spy
     try:
-        bpy.ops.strnn.denoise_action("INVOKE_DEFAULT", use_range=True)
+        bpy.ops.strnn.denoise_action(use_range=True)
         scene.use_preview_range, scene.frame_preview_start, scene.frame_preview_end = True, 10, 30
-        bpy.ops.strnn.denoise_action("INVOKE_DEFAULT", use_range=True)
-        bpy.ops.strnn.denoise_action("INVOKE_DEFAULT", use_range=True, frame_start=2, frame_end=40)
+        bpy.ops.strnn.denoise_action(use_range=True)
+        bpy.ops.strnn.denoise_action(use_range=True, frame_start=2, frame_end=40)
+        remembered.use_range, remembered.frame_start, remembered.frame_end = True, 3, 33
+        as_from_the_ui("denoise_action")
+        remembered.use_range = False
+        as_from_the_ui("denoise_action")
     finally:
         cls.steps = original
-    assert seen == [(5, 50), (10, 30), (2, 40)]
+    assert seen == [(True, 5, 50), (True, 10, 30), (True, 2, 40), (True, 3, 33), (False, 10, 30)]
+
+
+# operator -> options an animator sets in its sidebar panel (none of them the defaults)
+SET_IN_SIDEBAR = {
+    "extend_clip": {"frames": 12, "foot_lock": True, "context_frames": 30},
+    "denoise_action": {"strength": 0.6, "use_range": True, "frame_start": 5, "frame_end": 40},
+    "foot_lock": {"blend": 0.3, "use_range": True, "frame_start": 3, "frame_end": 50},
+    "inbetween": {"use_range": True, "frame_start": 20, "frame_end": 30, "foot_lock": False},
+}
+
+
+@pytest.mark.parametrize("op", sorted(SET_IN_SIDEBAR))
+def test_f3_and_the_sidebar_run_with_the_same_options(addon, tmp_path, real_model, op):
+    """Options edited in the sidebar are the operator's remembered ones: run as F3, a menu or the sidebar's
+    button runs it (no options handed), it makes the same action as a call handed those options."""
+    obj = import_bvh(walk_bvh(tmp_path, frames=60))
+    source = action_of(obj)
+    options = SET_IN_SIDEBAR[op]
+    remembered = bpy.context.window_manager.operator_properties_last(f"strnn.{op}")
+    for name, value in options.items():
+        setattr(remembered, name, value)
+    assert as_from_the_ui(op) == {"FINISHED"}
+    from_sidebar = action_of(obj)
+    obj.animation_data.action = source
+    assert getattr(bpy.ops.strnn, op)(**options) == {"FINISHED"}
+    from_script = action_of(obj)
+    assert from_sidebar != from_script and from_sidebar != source
+    assert same_keys(key_snapshot(obj, from_sidebar), key_snapshot(obj, from_script))
+    settings = from_sidebar["strnn"].to_dict()["settings"]
+    assert settings == from_script["strnn"].to_dict()["settings"]
+    for name, value in options.items():
+        if name in settings:
+            assert settings[name] == pytest.approx(value), name
