@@ -4,9 +4,9 @@
 1. Takes a 20-frame seed window shipped with the model (models/strnn_default/seeds.npz; by
    default the first taken from a walk, --seed N for another) and continues it open-loop
    with the NumPy engine (--frames, default 600).
-2. Walks the evaluation figure-eight (two 2 m loops) from the last 20 frames, steered by the
-   torch path follower (the path is placed under the character, so there is no jump; skipped
-   with a note when torch is missing). --path-frames: frames of the walk (default: one lap).
+2. Walks the evaluation figure-eight (two 2 m loops) from the last 20 frames with the NumPy
+   path follower that Follow Curve runs (the path is placed under the character, so there is no
+   jump). --path-frames: frames of the walk (default: one lap).
 3. Foot-locks the result (contacts detected on the motion), then, as a check of Denoise,
    puts 3 cm of Gaussian jitter on every joint of it and denoises that with the bundled
    denoising model (the printed errors are against the foot-locked motion).

@@ -75,7 +75,10 @@ def parse_args(argv=None):
                         "uses, if it exists, else --checkpoint)")
     p.add_argument("--cache", default="data/cache", help="folder for cached dataset arrays ('' = none)")
     p.add_argument("--paths", action="store_true",
-                   help="path following (needs torch): line, circle, S-curve, figure-eight from walking seeds")
+                   help="path following (NumPy, as Follow Curve): line, circle, S-curve and figure-eight walked by "
+                        "walking seeds")
+    p.add_argument("--follow-torch", action="store_true",
+                   help="with --paths: follow with the paper's run-time control instead (fine-tuning; needs torch)")
     p.add_argument("--path-seeds", type=int, default=3, help="walking seeds per path")
     return p.parse_args(argv)
 
@@ -228,6 +231,8 @@ def run_paths(args, clips) -> dict:
     from model_core.eval.path_evaluation import evaluate_paths, synthesis_speed, walking_seeds
     from model_core.ops.follow import PathFollower
 
+    if args.follow_torch:
+        from model_core.ops.follow_torch import TorchPathFollower as PathFollower  # noqa: N814
     follower = PathFollower.load(args.checkpoint)
     paths = evaluate_paths(follower, clips, args.path_seeds, log=lambda m: print(m, file=sys.stderr))
     paths["synthesis_fps_1000"] = synthesis_speed(follower, walking_seeds(clips, 1)[0][1])
@@ -237,11 +242,12 @@ def run_paths(args, clips) -> dict:
 def print_paths(pt: dict) -> None:
     print(f"\nPath following ({len(pt['seed_clips'])} walking seeds; skate on detected contact frames)")
     print(f"{'path':<14}{'mean cm':>9}{'max cm':>9}{'skate raw':>11}{'locked':>8}{'bone err':>10}{'pops raw':>10}"
-          f"{'locked':>8}")
+          f"{'locked':>8}{'speed':>7}{'reached':>9}")
     for i, name in enumerate(pt["names"]):
         print(f"{name:<14}{pt['mean_cm'][i]:9.1f}{pt['max_cm'][i]:9.1f}{pt['foot_skate_cm']['raw'][i]:11.2f}"
               f"{pt['foot_skate_cm']['locked'][i]:8.2f}{pt['bone_error'][i]:10.4f}{pt['knee_pops']['raw'][i]:10d}"
-              f"{pt['knee_pops']['locked'][i]:8d}")
+              f"{pt['knee_pops']['locked'][i]:8d}{pt['speed_ratio'][i]:7.2f}{pt['end_reached'][i]:9.2f}")
+    print("speed: the walk's mean ground speed / its seed's; reached: share of the path walked (1 = its end)")
     claimed = pt["foot_skate_model_contacts_cm"]
     print("skate on the model's own contact channels, raw -> locked: "
           + ", ".join(f"{r:.2f} -> {k:.2f}" for r, k in zip(claimed["raw"], claimed["locked"])))

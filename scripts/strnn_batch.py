@@ -129,7 +129,6 @@ def build_parser() -> argparse.ArgumentParser:
                    help="for .blend inputs: name of a curve object in the file to follow instead of --path")
     p.add_argument("--frames", type=int, default=0, help="frames to make; 0: until the path ends (default: 0)")
     p.add_argument("--speed", type=float, default=0.0, help="walking speed in m/s; 0: the motion's own (default)")
-    p.add_argument("--steering", type=int, default=4, help="steering steps per 20-frame window (default: 4)")
     p.add_argument("--no-foot-lock", action="store_true", help="do not lock the feet")
     p = sub.add_parser("transfer", parents=[common], help="move each take onto a character "
                        "(strnn.transfer_motion)", description="Move the motion of each BVH take onto the rig of "
@@ -159,8 +158,7 @@ def operator_call(args) -> tuple[str, dict]:
                              "foot_lock": not args.no_foot_lock}
     if args.command == "transfer":
         return "transfer_motion", {"foot_lock": not args.no_foot_lock}
-    return "follow_curve", {"frames": args.frames, "speed": args.speed, "steering": args.steering,
-                            "foot_lock": not args.no_foot_lock}
+    return "follow_curve", {"frames": args.frames, "speed": args.speed, "foot_lock": not args.no_foot_lock}
 
 
 def check_args(parser, args) -> None:
@@ -176,8 +174,8 @@ def check_args(parser, args) -> None:
         parser.error("--gap START END needs at least 2 frames: END after START")
     if args.command == "footlock" and not 0.0 <= args.blend <= 2.0:
         parser.error("--blend must be between 0 and 2 seconds")
-    if args.command == "follow" and (args.frames < 0 or args.speed < 0 or args.steering < 0):
-        parser.error("--frames, --speed and --steering must not be negative")
+    if args.command == "follow" and (args.frames < 0 or args.speed < 0):
+        parser.error("--frames and --speed must not be negative")
     if args.command == "transfer" and (args.target.suffix.lower() != ".blend" or not args.target.is_file()):
         parser.error(f"--target {args.target}: not a .blend file")
     if args.command == "transfer" and args.in_place:

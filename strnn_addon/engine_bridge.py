@@ -6,9 +6,7 @@ the operators make, so a test can swap them for a stand-in.
 
 from __future__ import annotations
 
-import importlib
 import json
-from dataclasses import replace
 from pathlib import Path
 
 import bpy
@@ -18,6 +16,7 @@ from ..model_core.io.checkpoint import DEFAULT_MODEL, default_denoiser
 from ..model_core.ops.denoise import denoise_positions_steps
 from ..model_core.ops.extend import extend_positions
 from ..model_core.ops.familiarity import clip_familiarity
+from ..model_core.ops.follow import PathFollower, follow_curve_steps as follow_curve_model_steps
 from ..model_core.ops.inbetween import inbetween_positions
 
 _CACHE: dict[tuple, object] = {}
@@ -156,44 +155,11 @@ def denoise_steps(prefs, positions: np.ndarray, fps: float, strength: float):
     return (yield from denoise_positions_steps(engine, positions, fps, strength))
 
 
-_FOLLOWERS: dict[str, object] = {}
-TORCH_MISSING = ("Follow Curve needs PyTorch, which this Blender's Python does not have (Extend, Denoise "
-                 "and Foot Lock work without it): use Preferences > Add-ons > STRNN Motion > Install PyTorch "
-                 "(needs online access), or install the CPU build of torch into Blender's Python, e.g. "
-                 "'<blender python> -m pip install torch --index-url https://download.pytorch.org/whl/cpu'")
-
-
-def load_follower(folder: str = "", threads: int = 0):
-    """The torch path follower for ``folder`` ('' = bundled), cached; :class:`EngineError` without torch."""
-    try:
-        importlib.import_module("torch")
-    except ImportError as e:
-        raise EngineError(TORCH_MISSING) from e
-    path = model_path(folder)
-    if str(path) not in _FOLLOWERS:
-        _set_threads("TORCH", threads)
-        from ..model_core.ops.follow import PathFollower
-
-        try:
-            _FOLLOWERS.clear()
-            _FOLLOWERS[str(path)] = PathFollower.load(path)
-        except (ValueError, OSError, KeyError) as e:
-            raise EngineError(f"Could not use the model at {path}: {e}") from e
-    return _FOLLOWERS[str(path)]
-
-
 def follow_curve_steps(prefs, points: np.ndarray, cyclic: bool, fps: float, frames: int | None,
-                       speed: float | None, steps: int, context: np.ndarray | None = None,
-                       rest: np.ndarray | None = None):
+                       speed: float | None, context: np.ndarray | None = None, rest: np.ndarray | None = None):
     """Positions ``[frames, 21, 3]`` (Y-up scene units at ``fps``) walking the curve ``points`` ``[P, 3]``
-    (Y-up) after ``context`` ``[F, 21, 3]``, or from a shipped seed sized like ``rest`` ``[21, 3]``.
-    A step generator (``model_core.inference.steps``): yields the fraction done after each model window."""
-    follower = load_follower(main_folder(prefs), prefs.threads if prefs else 0)
-    from ..model_core.ops.follow import follow_curve_steps as model_steps  # after the check: it needs torch
-
-    saved = follower.settings
-    follower.settings = replace(saved, steps=int(steps))
-    try:
-        return (yield from model_steps(follower, points, cyclic, fps, frames, speed, context, rest))
-    finally:
-        follower.settings = saved
+    (Y-up) after ``context`` ``[F, 21, 3]``, or from a shipped seed sized like ``rest`` ``[21, 3]``, by the
+    main model. A step generator (``model_core.inference.steps``): yields the fraction done after each model
+    window."""
+    follower = PathFollower(generator_from_prefs(prefs))
+    return (yield from follow_curve_model_steps(follower, points, cyclic, fps, frames, speed, context, rest))

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import bpy
-from bpy.props import IntProperty
 
 from . import props as options
 from .props import joint_label
@@ -241,7 +240,7 @@ class STRNN_OT_foot_lock(_Staged, bpy.types.Operator):
 
 
 class STRNN_OT_follow_curve(_Staged, bpy.types.Operator):
-    """Make the active armature walk along a curve with the motion model (needs PyTorch); writes a new action"""
+    """Make the active armature walk along a curve with the motion model; writes a new action"""
 
     bl_idname = "strnn.follow_curve"
     need_action = False
@@ -253,15 +252,12 @@ class STRNN_OT_follow_curve(_Staged, bpy.types.Operator):
     speed: options.curve_speed()
     foot_lock: options.foot_lock(True)
     scene_range: options.scene_range()
-    steering: IntProperty(name="Steering Steps", default=4, min=0, soft_max=20,
-                          description="Fine-tuning steps per 20-frame window that pull the motion onto the curve")
     output: options.output()
     simplify: options.simplify()
 
     def steps(self, context):
         return follow_curve_steps(context, context.active_object, curve=self.curve, frames=self.frames,
-                                  speed=self.speed, foot_lock=self.foot_lock, steps=self.steering,
-                                  scene_range=self.scene_range)
+                                  speed=self.speed, foot_lock=self.foot_lock, scene_range=self.scene_range)
 
     def done(self, action) -> str:
         curve = find_curve(bpy.context, self.curve)

@@ -210,9 +210,6 @@ class STRNN_AP_preferences(bpy.types.AddonPreferences):
         col.prop(self, "engine")
         col.prop(self, "threads")
         draw_models(self.layout, self)
-        from .torch_install import draw_preferences
-
-        draw_preferences(self.layout)
 
 
 def draw_models(layout, prefs) -> None:

@@ -5,7 +5,6 @@ from __future__ import annotations
 import bpy
 
 from ..model_core.motion.conventions import JOINTS
-from . import torch_install
 from .operators import check_message
 from .props import TAIL_JOINTS, joint_label
 from .scene import controls
@@ -123,8 +122,6 @@ class STRNN_PT_follow_curve(_OperatorPanel, bpy.types.Panel):
     operator, icon = "strnn.follow_curve", "CURVE_PATH"
 
     def draw_options(self, col, opts, context):
-        if not torch_install.torch_available():
-            col.label(text="Needs PyTorch: Preferences > Add-ons > STRNN Motion > Install PyTorch", icon="INFO")
         col.prop(opts, "curve", icon="OUTLINER_OB_CURVE")
         col.prop(opts, "frames")
         col.prop(opts, "speed")

@@ -8,7 +8,6 @@ result and denoises it with the denoising model.
 
 from __future__ import annotations
 
-import importlib.util
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -75,7 +74,7 @@ def path_at_character(points: np.ndarray, context: np.ndarray) -> np.ndarray:
 
 def figure_eight_walk(model: str | Path | None, context: np.ndarray, frames: int | None):
     """Positions ``[frames, 21, 3]`` walking the evaluation figure-eight after ``context`` (its last
-    frames are the seed), and the path ``[P, 2]`` walked. Needs torch (ImportError otherwise)."""
+    frames are the seed), and the path ``[P, 2]`` walked (the NumPy follower, as Follow Curve)."""
     from ..ops.follow import PathFollower, follow_path
 
     follower = PathFollower.load(model)
@@ -93,12 +92,8 @@ def build_motion(model: str | Path | None, seed_index: int | None, frames: int, 
     extended, name, m, _ = seed_continuation(model, seed_index, frames)
     walked, notes = extended, []
     if walk and path_frames != 0:
-        if importlib.util.find_spec("torch") is None:
-            notes.append("torch is not installed: figure-eight walk skipped (scripts/setup.sh installs it)")
-            log(f"note: {notes[-1]}")
-        else:
-            new, _ = figure_eight_walk(model, extended, path_frames)
-            walked = np.concatenate([extended, new]).astype(np.float32)
+        new, _ = figure_eight_walk(model, extended, path_frames)
+        walked = np.concatenate([extended, new]).astype(np.float32)
     contacts = detect_foot_contacts(walked)
     locked = foot_lock(walked, contacts=contacts)
     return DemoMotion(name, m, extended, walked, locked, foot_skate_cm(walked, contacts),

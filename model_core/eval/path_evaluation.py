@@ -15,6 +15,7 @@ import time
 
 import numpy as np
 
+from ..motion.conventions import MODEL_FPS
 from ..ops.follow import PathFollower, follow_path
 from ..ops.footlock import contacts_from_features, detect_foot_contacts, foot_lock, foot_skate_cm, knee_pops
 from ..ops.paths import Path, evaluation_paths, path_errors_cm
@@ -34,6 +35,20 @@ def bone_error(pos: np.ndarray, seed: np.ndarray) -> float:
     return float(np.abs(bone_lengths_of(pos) / rest - 1.0).mean())
 
 
+def ground_speed(pos: np.ndarray) -> float:
+    """Mean ground speed (m/s at 30 fps) of the root of positions ``[F, J, 3]``."""
+    return float(np.linalg.norm(np.diff(pos[:, 0, [0, 2]], axis=0), axis=-1).mean() * MODEL_FPS)
+
+
+def share_walked(root: np.ndarray, path: Path) -> float:
+    """How much of ``path`` (its length, or one lap) a root trajectory ``[F, 3]`` covered: the arc length of
+    its last frame's match, followed along the walk as :func:`paths.path_errors_cm` does, over the length."""
+    s = path.project(root[0, [0, 2]], 0.0, 1.0)
+    for p in root[:, [0, 2]]:
+        s = path.project(p, s - 0.05, s + 1.0)
+    return float(min(s / path.length, 1.0))
+
+
 def one_run(follower: PathFollower, seed: np.ndarray, path: Path) -> dict:
     """All figures of one seed on one path."""
     pos, feats = follow_path(follower, seed, path)
@@ -41,6 +56,8 @@ def one_run(follower: PathFollower, seed: np.ndarray, path: Path) -> dict:
     locked = foot_lock(pos, contacts=contacts)
     mean, worst = path_errors_cm(pos[:, 0], path)
     return {"mean_cm": mean, "max_cm": worst, "frames": len(pos),
+            "speed_ratio": ground_speed(pos) / max(ground_speed(seed), 1e-6),
+            "end_reached": share_walked(pos[:, 0], path),
             "skate_raw": foot_skate_cm(pos, contacts), "skate_locked": foot_skate_cm(locked, contacts),
             "claimed_raw": foot_skate_cm(pos, claimed),
             "claimed_locked": foot_skate_cm(foot_lock(pos, contacts=claimed), claimed),
@@ -52,7 +69,7 @@ def evaluate_paths(follower: PathFollower, clips, seeds: int = 3, log=print) -> 
     knee pops: summed over seeds), plus the seeds used and the synthesis speed."""
     chosen = walking_seeds(clips, seeds)
     out = {"names": [], "mean_cm": [], "max_cm": [], "foot_skate_cm": {"raw": [], "locked": []},
-           "bone_error": [], "knee_pops": {"raw": [], "locked": []},
+           "bone_error": [], "knee_pops": {"raw": [], "locked": []}, "speed_ratio": [], "end_reached": [],
            "foot_skate_model_contacts_cm": {"raw": [], "locked": []}}
     frames, seconds = 0, 0.0
     for name, (points, cyclic) in evaluation_paths().items():
@@ -69,6 +86,8 @@ def evaluate_paths(follower: PathFollower, clips, seeds: int = 3, log=print) -> 
         for key in ("raw", "locked"):
             out["foot_skate_model_contacts_cm"][key].append(float(np.mean([r[f"claimed_{key}"] for r in runs])))
         out["bone_error"].append(float(np.mean([r["bone_error"] for r in runs])))
+        out["speed_ratio"].append(float(np.mean([r["speed_ratio"] for r in runs])))
+        out["end_reached"].append(float(np.min([r["end_reached"] for r in runs])))
         out["knee_pops"]["raw"].append(int(sum(r["pops_raw"] for r in runs)))
         out["knee_pops"]["locked"].append(int(sum(r["pops_locked"] for r in runs)))
         log(f"path {name}: {len(runs)} seeds, mean {out['mean_cm'][-1]:.1f} cm, max {out['max_cm'][-1]:.1f} cm")

@@ -1,44 +1,37 @@
-"""Curve-driven synthesis: the paper's run-time control, with the torch model.
+"""Curve-driven synthesis on the NumPy engine: a character walks a path with the model.
 
-Window by window (``n`` frames each): compute the control signal that walks the path
-from where the character is (:func:`paths.control_signal`), then fine-tune a COPY of the
-pre-trained weights for a few steps on the control costs, predict the window with it,
-and restore the pre-trained weights before the next window, so the rollout never drifts
-off the learnt manifold. Costs (DESIGN.md), over the predicted window:
+Window by window (``n`` frames each): the control signal that walks the path from where the
+character is (:func:`paths.control_signal`: the root's velocity and yaw rate, steering any
+offset from the path and its heading out over ``return_frames``) takes the place of the root
+channels of the model's prediction, and the window, fed back as context, tells the model how
+the body moves: the model reads the root channels of its context, so the body it predicts next
+walks at the speed and turns as the path asks, and the root stays on the path. The pose's jump
+at each window's first frame is faded out (:func:`smooth_seam`) and every window is put back on
+the seed's skeleton.
 
-- ``H_ctr``: squared deviation of the root channels (velocity, yaw rate; normalised
-  units) from the control signal;
-- ``H_bone``: squared relative deviation of bone lengths from the seed's skeleton;
-- ``H_fp``: squared horizontal foot speed (cm / frame), weighted by the predicted contacts;
-- and, beyond the paper, H_ctr integrated: the squared distance of the window's root
-  positions from where the control signal aims them (10 cm units), which stops small
-  velocity errors from adding up along the path.
+A character that stands away from the path's start walks there first, along a straight lead-in,
+and then follows the path from its start; with no frame count it walks until it reaches the
+path's end (one lap of a closed path), however fast it walks.
 
-Only the predictor LSTM cell is fine-tuned by default; the frozen encoder state and
-decoded context are computed once per window and the frozen spatial networks run folded
-(:mod:`spatial_fold`), so a 1,000-frame path takes a few seconds on one CPU thread.
-Each window's pose jump at its first frame is faded out (:func:`smooth_seam`).
+The paper's run-time control (fine-tuning a copy of the weights on control costs each window)
+is :mod:`follow_torch`, which needs torch; this module needs only NumPy, which Blender has.
 
-Features are RAW ``[T, C]`` in :data:`conventions.LAYOUT` order; positions are metres,
-Y-up, :data:`conventions.MODEL_FPS`, the standard skeleton (see :mod:`normalise`).
+Features are RAW ``[T, C]`` in :data:`conventions.LAYOUT` order; positions are metres, Y-up,
+:data:`conventions.MODEL_FPS`, the standard skeleton (see :mod:`normalise`).
 """
 
 from __future__ import annotations
 
-import contextlib
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path as FilePath
 
 import numpy as np
-import torch
 
-from ..inference.engine import bone_lengths, project_to_skeleton
-from ..inference.spatial_fold import fold_spatial
+from ..inference.engine import Engine, bone_lengths, project_to_skeleton
 from ..inference.steps import drive
-from ..inference.torch_engine import build_model
-from ..io.checkpoint import Checkpoint, load_release, walk_seed_index
-from ..motion.conventions import CONTACT_JOINTS, LAYOUT, MODEL_FPS, PARENTS, UP_AXIS
+from ..io.checkpoint import Checkpoint, walk_seed_index
+from ..motion.conventions import CONTACT_JOINTS, LAYOUT, MODEL_FPS, UP_AXIS
 from ..motion.features import (
     RootStart,
     continue_positions,
@@ -54,23 +47,17 @@ from .paths import Path, Steering, control_signal
 from .seam import SEAM_FRAMES, blend_seam
 
 WALK_SPEED = 1.3  # m/s used when the seed barely moves (its own speed cannot steer anything)
-POSITION_SCALE = 0.1  # metres: root position errors are costed in units of 10 cm
+LEAD_IN = 0.3  # metres: a character farther than this from the path's start walks to it first
+MAX_STRETCH = 3.0  # with no frame count, give up after this many times the frames the path should take
+ARRIVED = 0.1  # metres: with no frame count, the walk ends this close to the path's end
+PLANT_TRUST = 0.25  # weight of the control's step against a planted foot's (weight 1) in planted_steps
 
 
 @dataclass
 class ControlSettings:
     speed: float | None = None  # m/s along the path; None: the seed motion's own ground speed
-    steps: int = 4  # fine-tuning steps of the weight copy per window (0: plain prediction)
-    lr: float = 1e-3  # Adam learning rate of the fine-tuned copy (Adam moves each weight about lr per step)
-    w_ctr: float = 1.0  # weight of H_ctr
-    w_bone: float = 10.0  # weight of H_bone
-    w_fp: float = 0.5  # weight of H_fp
-    w_pos: float = 1.0  # weight of the root positions' deviation from the path (H_ctr integrated; 10 cm units)
-    tune: str = "predictor"  # which weights the copy fine-tunes: "predictor" (LSTM cell, fast) or "all"
     return_frames: float = 30.0  # frames over which an offset from the path (and its heading) is steered out
     seam_frames: int = SEAM_FRAMES  # frames over which the pose's jump at each window's start is faded out
-    seed: int = 0  # torch seed: a fixed seed gives the same motion
-    threads: int = 1  # torch CPU threads while following (batch 1: more cost more than they give); 0: as set
 
 
 def natural_speed(feats: np.ndarray, fps: float = MODEL_FPS) -> float:
@@ -78,30 +65,36 @@ def natural_speed(feats: np.ndarray, fps: float = MODEL_FPS) -> float:
     return float(np.linalg.norm(np.asarray(feats)[:, LAYOUT.velocity], axis=-1).mean() * fps)
 
 
-def ground_track(raw: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-    """Headings ``[T]`` and root ground positions ``[T, 2]`` (x, z) integrated over raw features
-    ``[T, C]``, relative to the first frame's root and heading."""
-    yaw_rate, vel = raw[:, LAYOUT.yaw_rate], raw[:, LAYOUT.velocity]
-    yaw = torch.cat([yaw_rate.new_zeros(1), torch.cumsum(yaw_rate[:-1], 0)])
-    return yaw, torch.cat([vel.new_zeros(1, 2), torch.cumsum(rotate_ground(yaw[:-1], vel[:-1], torch), 0)])
+def planted_steps(window: np.ndarray, control: np.ndarray, trust: float = PLANT_TRUST) -> np.ndarray:
+    """Root steps ``[n, 2]`` (ground velocity in each frame's root frame, metres per frame) for raw features
+    ``[n, C]`` (yaw rates already set) that keep its contact feet where they are from each frame to the next
+    and otherwise follow the ``control`` steps ``[n, 2]``: per frame, the least-squares step between the
+    step each heel and toe would need to stay planted (``L_t - R(yaw rate_t) L_{t+1}``, ``L`` its ground
+    position in the root's frame), weighted by the window's contact channels, and the control's step,
+    weighted by ``trust``. The last frame's next is not known yet: it takes the control's step."""
+    n = len(window)
+    steps = np.array(control, np.float64)
+    if n < 2:
+        return steps
+    local = window[:, LAYOUT.positions].reshape(n, -1, 3)[:, CONTACT_JOINTS][..., [0, 2]]  # (n, 4, 2)
+    planted = local[:-1] - rotate_ground(window[:-1, LAYOUT.yaw_rate][:, None], local[1:])  # (n - 1, 4, 2)
+    weight = np.clip(window[:-1, LAYOUT.contacts], 0.0, 1.0)[..., None]  # (n - 1, 4, 1)
+    steps[:-1] = ((weight * planted).sum(1) + trust * steps[:-1]) / (weight.sum(1) + trust)
+    return steps
 
 
-def foot_speed_cm(raw: torch.Tensor) -> torch.Tensor:
-    """Horizontal speed (cm / frame) ``[T - 1, 4]`` of the contact joints over raw features ``[T, C]``."""
-    yaw, root = ground_track(raw)
-    local = raw[:, LAYOUT.positions].reshape(len(raw), -1, 3)[:, CONTACT_JOINTS][..., [0, 2]]  # (T, 4, 2)
-    feet = rotate_ground(yaw[:, None], local, torch) + root[:, None]
-    return 100.0 * torch.linalg.vector_norm(feet[1:] - feet[:-1], dim=-1)
-
-
-def _folded_frames(ckpt: Checkpoint):
-    """The frozen spatial encoder and decoder of ``ckpt`` as folded torch functions ``(N, C) -> (N, W)``
-    and ``(N, W) -> (N, C)``, equal to ``STRNN.encode_frame`` / ``decode_frame`` in eval mode."""
-    w = {k: np.asarray(v, np.float32) for k, v in ckpt.weights.items()}
-    to = lambda a: torch.from_numpy(np.array(a, np.float32))  # noqa: E731 (a writable copy)
-    enc, dec, (scale, shift) = fold_spatial(w, ckpt.config, to=to, tanh=torch.tanh)
-    scale, shift = to(scale), to(shift)
-    return (lambda x: enc(x) * scale + shift), dec
+def match_mean(steps: np.ndarray, control: np.ndarray) -> np.ndarray:
+    """``steps`` ``[n, 2]`` turned and scaled (one rotation, one factor) so that their mean is the mean of
+    ``control`` ``[n, 2]``: the stride's own rhythm and sway, at the control's pace and direction. Where the
+    two disagree by more than half or a quarter turn, the control as it is."""
+    a, b = steps.mean(0), control.mean(0)
+    norm_a, norm_b = np.linalg.norm(a), np.linalg.norm(b)
+    if norm_a < 1e-6 or norm_b < 1e-6 or not 0.5 < norm_b / norm_a < 2.0:
+        return np.array(control, np.float64)
+    turn = np.arctan2(b[0], b[1]) - np.arctan2(a[0], a[1])  # rotate_ground(turn, a) points along b
+    if abs(np.angle(np.exp(1j * turn))) > np.pi / 4:
+        return np.array(control, np.float64)
+    return rotate_ground(turn, steps) * (norm_b / norm_a)
 
 
 def smooth_seam(ctx: np.ndarray, new: np.ndarray, frames: int) -> np.ndarray:
@@ -117,161 +110,86 @@ def smooth_seam(ctx: np.ndarray, new: np.ndarray, frames: int) -> np.ndarray:
 
 
 class PathFollower:
-    """Steers the torch STRNN along a :class:`paths.Path`. Build with :meth:`load`."""
+    """Walks the STRNN along a :class:`paths.Path` on the NumPy engine. Build with :meth:`load`."""
 
-    def __init__(self, ckpt: Checkpoint, settings: ControlSettings | None = None):
-        ckpt.require_generator("follow a path")
-        self.ckpt, self.settings = ckpt, settings or ControlSettings()
-        self.model = build_model(ckpt)
-        self.m, self.n = ckpt.config["encode_len"], ckpt.config["predict_len"]
-        self.mean, self.std = torch.from_numpy(ckpt.mean), torch.from_numpy(ckpt.std)
-        self.tuned = self._tunable(self.settings.tune)
-        for p in self.model.parameters():
-            p.requires_grad_(False)
-        for p in self.tuned:
-            p.requires_grad_(True)
-        self.pretrained = [p.detach().clone() for p in self.tuned]
-        self.encode_frame, self.decode_frame = _folded_frames(ckpt)
+    def __init__(self, engine: Engine, settings: ControlSettings | None = None):
+        engine.ckpt.require_generator("follow a path")
+        self.engine, self.ckpt, self.settings = engine, engine.ckpt, settings or ControlSettings()
+        self.m, self.n = engine.m, engine.n
 
     @classmethod
-    def load(cls, folder: str | FilePath | None = None, settings: ControlSettings | None = None) -> PathFollower:
+    def load(cls, folder: str | FilePath | None = None, settings: ControlSettings | None = None, **kw):
         """Load a release folder (default: the bundled model)."""
-        return cls(load_release(folder), settings)
-
-    def _tunable(self, which: str) -> list[torch.nn.Parameter]:
-        if which == "all":
-            return list(self.model.parameters())
-        if which == "predictor":
-            return list(self.model.predictor.parameters())
-        raise ValueError(f"tune must be 'predictor' or 'all', got {which!r}")
-
-    def _restore(self) -> None:
-        with torch.no_grad():
-            for p, p0 in zip(self.tuned, self.pretrained):
-                p.copy_(p0)
-
-    def costs(self, last: torch.Tensor, out: torch.Tensor, control: torch.Tensor, lengths: torch.Tensor,
-              aim: torch.Tensor | None = None) -> dict[str, torch.Tensor]:
-        """H_ctr (and its integrated form, ``pos``), H_bone, H_fp of a normalised window ``out`` ``[n, C]``
-        after the raw frame ``last`` ``[C]``; ``control`` ``[n, 3]`` normalised root channels, ``lengths``
-        ``[J - 1]`` metres, ``aim`` ``[n, 2]`` where the roots should be (metres, in the frame of ``last``)."""
-        raw = out * self.std + self.mean
-        local = raw[:, LAYOUT.positions].reshape(len(raw), -1, 3)
-        bones = torch.linalg.vector_norm(local[:, 1:] - local[:, PARENTS[1:]], dim=-1)
-        contact = raw[:, LAYOUT.contacts].detach().clamp(0.0, 1.0)  # (n, 4)
-        joined = torch.cat([last[None], raw])
-        speed = foot_speed_cm(joined)  # (n, 4): into each predicted frame
-        cost = {"ctr": (out[:, LAYOUT.root] - control).pow(2).mean(),
-                "bone": (bones / lengths - 1.0).pow(2).mean(),
-                "fp": (contact * speed.pow(2)).mean()}
-        if aim is not None:
-            cost["pos"] = ((ground_track(joined)[1][1:] - aim) / POSITION_SCALE).pow(2).sum(-1).mean()
-        return cost
+        return cls(Engine.load(folder), settings, **kw)
 
     def window(self, ctx: np.ndarray, control: np.ndarray, lengths: np.ndarray,
                aim: np.ndarray | None = None) -> np.ndarray:
-        """The next ``n`` raw frames ``[n, C]`` after raw context ``[m, C]``, steered towards the raw
-        root channels ``control`` ``[n, 3]`` (and the root positions ``aim`` ``[n, 2]``, metres in the
-        frame of the context's last root) by a fine-tuned copy of the weights (restored after)."""
-        cfg = self.settings
-        x = ((torch.from_numpy(np.asarray(ctx, np.float32)) - self.mean) / self.std)[None]  # (1, m, C)
-        target = (torch.from_numpy(np.asarray(control, np.float32)) - self.mean[LAYOUT.root]) / self.std[LAYOUT.root]
-        last, rest = torch.from_numpy(np.asarray(ctx[-1], np.float32)), torch.from_numpy(lengths.astype(np.float32))
-        goal = None if aim is None else torch.from_numpy(np.asarray(aim, np.float32))
-        weights = {"ctr": cfg.w_ctr, "bone": cfg.w_bone, "fp": cfg.w_fp, "pos": cfg.w_pos}
-        forward = self._predictor_pass(x) if cfg.tune == "predictor" else lambda: self.model(x)[0, self.m:]
-        try:
-            if cfg.steps > 0:
-                opt = torch.optim.Adam(self.tuned, lr=cfg.lr)
-                for _ in range(cfg.steps):
-                    cost = self.costs(last, forward(), target, rest, goal)
-                    loss = sum(weights[k] * v for k, v in cost.items())
-                    opt.zero_grad()
-                    loss.backward()
-                    opt.step()
-            with torch.no_grad():
-                out = forward()
-        finally:
-            self._restore()
-        return (out * self.std + self.mean).numpy()
+        """The next ``n`` raw frames ``[n, C]`` after raw context ``[m, C]``: the model's prediction with
+        the raw root channels ``control`` ``[n, 3]`` in place of its own: its yaw rate as it is, and its
+        velocity as the steps of the planted foot (:func:`planted_steps`) turned and scaled to the
+        control's mean step, so that the feet stay where they touch down. ``lengths`` and ``aim`` (the
+        bones, the roots' aimed positions) are for followers that steer the model itself."""
+        new = self.engine.predict(np.asarray(ctx, np.float32)[None])[0]
+        new[:, LAYOUT.yaw_rate] = control[:, 2]
+        new[:, LAYOUT.velocity] = match_mean(planted_steps(new, control[:, :2]), control[:, :2])
+        return new
 
-    def _predictor_pass(self, x: torch.Tensor):
-        """A function giving the normalised prediction ``[n, C]`` of context ``x`` ``[1, m, C]`` that reruns
-        only the predictor: what the fine-tuned predictor cannot change (encoder state, decoded context,
-        first input) is computed once, and the frozen spatial networks run folded (a few dense layers,
-        as in the NumPy engine), so a fine-tuning step costs a fraction of a full pass."""
-        model, enc, dec = self.model, self.encode_frame, self.decode_frame
-        with torch.no_grad():
-            _, (h, c) = model.encoder(enc(x[0])[None])
-            state, step, decoded = (h[0], c[0]), model.start.expand_as(h[0]), []
-            for _ in range(self.m):  # the backward decoder, as STRNN.spatio_temporal runs it
-                state = model.decoder(step, state)
-                decoded.append(dec(state[0]))
-                step = enc(decoded[-1])
-            decoded = torch.stack(decoded[::-1], 1)  # (1, m, C), chronological
-            first = enc(x[:, -1])
-
-        def forward() -> torch.Tensor:
-            state, step, frames = (h[0], c[0]), first, []
-            for _ in range(self.n):
-                state = model.predictor(step, state)
-                frames.append(dec(state[0]))
-                step = enc(frames[-1])
-            window = torch.cat([decoded, torch.stack(frames, 1)], 1)  # (1, m + n, C)
-            return (model.filter(window) if model.filter is not None else window)[0, self.m:]
-
-        return forward
-
-    def follow(self, seed: np.ndarray, start: RootStart, path: Path, frames: int | None = None) -> np.ndarray:
+    def follow(self, seed: np.ndarray, start: RootStart, path: Path, frames: int | None = None,
+               speed: float | None = None) -> np.ndarray:
         """Raw features ``[frames, C]`` continuing the raw seed ``[T >= m, C]`` (whose first frame's
-        root is ``start``) along ``path``; ``frames`` None: until the path ends (one lap if cyclic)."""
-        return drive(self.follow_steps(seed, start, path, frames))
+        root is ``start``) along ``path``; ``frames`` None: until the path ends (one lap if cyclic);
+        ``speed`` (m/s) None: the settings' (else the seed's own)."""
+        return drive(self.follow_steps(seed, start, path, frames, speed))
 
-    @contextlib.contextmanager
-    def _threads(self):
-        """torch's CPU threads as :attr:`ControlSettings.threads` asks, restored after."""
-        before = torch.get_num_threads()
-        wanted = self.settings.threads
-        if wanted > 0 and wanted != before:
-            torch.set_num_threads(wanted)
-        try:
-            yield
-        finally:
-            if torch.get_num_threads() != before:
-                torch.set_num_threads(before)
-
-    def follow_steps(self, seed: np.ndarray, start: RootStart, path: Path, frames: int | None = None):
+    def follow_steps(self, seed: np.ndarray, start: RootStart, path: Path, frames: int | None = None,
+                     speed: float | None = None):
         """:meth:`follow` as a step generator (:mod:`steps`): yields the fraction done after each
-        window, returns the features. The weights are the pre-trained ones between windows, so
-        closing it part way leaves the follower as it was."""
+        window, returns the features. With ``frames`` None it walks until its projection reaches the
+        path's end (one lap of a cyclic path), at most :data:`MAX_STRETCH` times the planned frames."""
         cfg = self.settings
-        torch.manual_seed(cfg.seed)
         seed = np.asarray(seed, np.float32)
-        speed = cfg.speed if cfg.speed else natural_speed(seed[-self.m:])
+        speed = speed or cfg.speed or natural_speed(seed[-self.m:])
         speed = speed if speed >= 0.3 else WALK_SPEED
         root, yaw = integrate_root(seed, start)
         p, theta = root[-1], float(yaw[-1])
         s = path.project(p[[0, 2]], 0.0, path.length, tie=0.05)  # at a crossing, the earlier branch
-        if frames is None:
-            frames = int(math.ceil((path.length - (0.0 if path.cyclic else s)) / speed * MODEL_FPS))
+        goal = path.length if path.cyclic else path.length - s  # arc length still to walk
+        planned = int(math.ceil(goal / speed * MODEL_FPS))
+        limit = planned * MAX_STRETCH if frames is None else frames
         ctx, lengths = seed[-self.m:], bone_lengths(seed[None, -self.m:])
-        out, total = [], 0
-        while total < frames:
+        out, total, walked = [], 0, 0.0
+        while total < limit and (frames is not None or walked < goal - ARRIVED):
             control, aim = control_signal(path, p[[0, 2]], theta, s, speed, self.n + 1, MODEL_FPS,
                                           Steering(cfg.return_frames))
             control = control[1:]  # the context's last frame already holds the step into the window
             aim = rotate_ground(-theta, aim[1:-1] - p[[0, 2]])  # new frames' roots, in the last root's frame
-            with self._threads():
-                new = self.window(ctx, control, lengths[0, 1:], aim)
+            new = self.window(ctx, control, lengths[0, 1:], aim)
             new = project_to_skeleton(smooth_seam(ctx, new, cfg.seam_frames)[None], lengths)[0]
             r, y = integrate_root(np.concatenate([ctx[-1:], new]), RootStart(p, theta))
             p, theta = r[-1], float(y[-1])
+            before = s
             s = path.project(p[[0, 2]], s, s + 2.0 + speed * self.n / MODEL_FPS)  # never backwards
+            walked += s - before
+            if path.cyclic and s >= path.length:
+                s -= path.length
             out.append(new)
             total += len(new)
             ctx = np.concatenate([ctx, new])[-self.m:]
-            yield min(total / frames, 1.0)
-        return np.concatenate(out)[:frames]
+            yield min(total / (frames or planned), 1.0) if frames else min(walked / goal, 1.0)
+        new = np.concatenate(out)
+        if frames is not None:
+            return new[:frames]
+        return new[:self._arrival(new, goal, walked)]
+
+    def _arrival(self, new: np.ndarray, goal: float, walked: float) -> int:
+        """How many of the frames of a walk to a path's end to keep: those up to where the walk reached it
+        (the last window overshoots by up to a window)."""
+        if walked <= goal:
+            return len(new)
+        speeds = np.linalg.norm(new[:, LAYOUT.velocity], axis=-1)
+        past = walked - goal  # metres walked beyond the end, in the last frames
+        back = np.cumsum(speeds[::-1])
+        return len(new) - int(np.searchsorted(back, past))
 
 
 def align_to_path(seed: np.ndarray, path: Path) -> np.ndarray:
@@ -288,6 +206,14 @@ def align_to_path(seed: np.ndarray, path: Path) -> np.ndarray:
     return moved.astype(np.float32)
 
 
+def with_lead_in(path: Path, position: np.ndarray, distance: float = LEAD_IN) -> Path:
+    """``path``, or when ground ``position`` ``[2]`` is farther than ``distance`` from its start, the
+    straight walk from there to its start followed by the path (a closed path's whole lap)."""
+    if np.linalg.norm(path.at(0.0) - position) <= distance:
+        return path
+    return Path(np.concatenate([np.asarray(position, np.float64)[None], path.points]), cyclic=False)
+
+
 def follow_path(follower: PathFollower, seed: np.ndarray, path: Path, frames: int | None = None,
                 align: bool = True) -> tuple[np.ndarray, np.ndarray]:
     """Positions ``[frames, 21, 3]`` walking ``path`` after seed positions ``[T >= m, 21, 3]``
@@ -297,11 +223,11 @@ def follow_path(follower: PathFollower, seed: np.ndarray, path: Path, frames: in
 
 
 def follow_path_steps(follower: PathFollower, seed: np.ndarray, path: Path, frames: int | None = None,
-                      align: bool = True):
+                      align: bool = True, speed: float | None = None):
     """:func:`follow_path` as a step generator: yields the fraction done after each window."""
     seed = align_to_path(seed, path) if align else np.asarray(seed, np.float32)
     feats, start = positions_to_features(seed)
-    new = yield from follower.follow_steps(feats, start, path, frames)
+    new = yield from follower.follow_steps(feats, start, path, frames, speed)
     return continue_positions(feats, start, new), new
 
 
@@ -327,8 +253,8 @@ def follow_curve_positions(follower: PathFollower, points: np.ndarray, cyclic: b
 def follow_curve_steps(follower: PathFollower, points: np.ndarray, cyclic: bool, fps: float,
                        frames: int | None = None, speed: float | None = None, context: np.ndarray | None = None,
                        rest: np.ndarray | None = None):
-    """:func:`follow_curve_positions` as a step generator: yields the fraction done after each
-    window; the follower's settings are restored however it ends."""
+    """:func:`follow_curve_positions` as a step generator: yields the fraction done after each window.
+    A clip that ends away from the curve's start walks to it first (:func:`with_lead_in`)."""
 
     if context is not None:
         duration = (len(context) - 1) / fps
@@ -339,14 +265,12 @@ def follow_curve_steps(follower: PathFollower, points: np.ndarray, cyclic: bool,
         norm = fit_normalisation(np.asarray(rest)[None])
         seed = walk_seed(follower.ckpt)
     path = Path(np.asarray(points, np.float64)[:, [0, 2]] * norm.scale, cyclic)
+    if context is not None:
+        path = with_lead_in(path, seed[-1, 0, [0, 2]])
     n_model = None if frames is None else int(math.ceil(frames * MODEL_FPS / fps)) + 1
-    saved = follower.settings
-    follower.settings = replace(saved, speed=speed * norm.scale if speed else None)
-    try:
-        walked, _ = yield from follow_path_steps(follower, seed, path, n_model, align=context is None)
-        new = norm.to_user(walked)
-    finally:
-        follower.settings = saved
+    walked, _ = yield from follow_path_steps(follower, seed, path, n_model, align=context is None,
+                                             speed=speed * norm.scale if speed else None)
+    new = norm.to_user(walked)
     if context is None:
         seq, first = new, 0
     else:

@@ -23,7 +23,9 @@ def find_curve(context, name: str = ""):
         if obj is None:
             raise UserError(f"No object named {name!r}: pick a curve to follow")
         if obj.type != "CURVE":
-            raise UserError(f"{name!r} is a {obj.type.lower()}, not a curve: pick a Bezier, NURBS or poly curve")
+            kind = obj.type.lower()
+            article = "an" if kind[0] in "aeiou" else "a"
+            raise UserError(f"{name!r} is {article} {kind}, not a curve: pick a Bezier, NURBS or poly curve")
         return obj
     curves = [o for o in context.selected_objects if o.type == "CURVE"]
     if len(curves) != 1:

@@ -1,8 +1,9 @@
 """Follow Curve: walk an armature along a curve with the model, as a stage generator (see :mod:`.common`).
 
-With an action, the new frames continue it from its last frames, steering onto the curve;
-without one, the walk starts on the curve's start from a seed shipped with the model, sized
-like the rig, at the scene's start frame. Everything is read, checked and computed before
+With an action, the new frames continue it from its last frames: a character away from the
+curve's start walks there first, then along the curve from its start; without one, the walk
+starts on the curve's start from a seed shipped with the model, sized like the rig, at the
+scene's start frame. Everything is read, checked and computed before
 the new action is made, so a failure or a cancel changes nothing.
 """
 
@@ -19,10 +20,10 @@ from .common import familiarity_record, lock, made_by, model_steps, pace_record,
 
 
 def follow_curve_steps(context, obj, *, curve: str = "", frames: int = 0, speed: float = 0.0, foot_lock: bool = True,
-                       steps: int = 4, scene_range: bool = True):
+                       scene_range: bool = True):
     """Walk ``obj`` along a curve object (``curve``: its name; '' = the selected curve) for ``frames``
     scene frames (0: until the curve ends) at ``speed`` scene units per second (0: the motion's
-    own), feet locked when ``foot_lock``; ``steps`` fine-tuning steps per model window.
+    own), feet locked when ``foot_lock``.
     A generator: yields each stage's name before running it, and the fraction of the model
     stage done after each model window; returns the new action."""
     clip = pipeline.prepare_any(context, obj)
@@ -47,7 +48,7 @@ def follow_curve_steps(context, obj, *, curve: str = "", frames: int = 0, speed:
         context_pos, rest, previous = None, pipeline.pose_joints(clip, held_loc, held_rot)[0], {}
     yield "model"
     new_pos = yield from model_steps(engine_bridge.follow_curve_steps(
-        prefs(context), points, cyclic, clip.fps, frames or None, speed or None, steps, context_pos, rest))
+        prefs(context), points, cyclic, clip.fps, frames or None, speed or None, context_pos, rest))
     if foot_lock:
         known = 0 if context_pos is None else len(context_pos)
         joined = new_pos if context_pos is None else np.concatenate([context_pos, new_pos])
@@ -60,7 +61,7 @@ def follow_curve_steps(context, obj, *, curve: str = "", frames: int = 0, speed:
     start = clip.last + 1 if clip.action is not None else context.scene.frame_start
     new_frames = start + np.arange(n, dtype=np.float64)
     record = made_by("Follow Curve", clip, engine_bridge.model_used(prefs(context)), curve=curve_obj.name,
-                     frames=n, speed=float(speed), foot_lock=foot_lock, steering_steps=steps)
+                     frames=n, speed=float(speed), foot_lock=foot_lock)
     if context_pos is not None:
         record.update(familiarity_record(engine_bridge.familiarity(prefs(context), context_pos, clip.fps)))
         record.update(pace_record(context, clip))

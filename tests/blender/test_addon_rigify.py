@@ -201,7 +201,6 @@ def test_operators_key_the_controls(walking_rig, addon, real_model, op, kw):
 
 
 def test_follow_curve_keys_the_controls(walking_rig, addon, real_model):
-    pytest.importorskip("torch")
     bpy.ops.curve.primitive_nurbs_path_add()
     path = bpy.context.active_object
     bpy.context.view_layer.objects.active = walking_rig

@@ -102,7 +102,7 @@ def test_the_sidebar_edits_each_operators_remembered_options(addon, tmp_path):
         remembered = wm.operator_properties_last(panel.operator)
         drawn = {prop for kind, data, prop in calls if kind == "prop"}
         assert all(data.as_pointer() == remembered.as_pointer() for kind, data, _ in calls if kind == "prop"), name
-        options = {p.identifier for p in remembered.bl_rna.properties} - {"rna_type", "scene_range", "steering"}
+        options = {p.identifier for p in remembered.bl_rna.properties} - {"rna_type", "scene_range"}
         assert drawn == options, f"{name}: not drawn {options - drawn}"
         assert ("operator", None, None) in calls
 
@@ -133,16 +133,6 @@ def test_main_panel_says_what_each_object_allows(addon, tmp_path):
                                               ("Follow Curve can start one; the others need an action", "NONE")]
     import_bvh(walk_bvh(tmp_path, frames=30))
     assert panel_labels("STRNN_PT_main", bpy.context) == [("walk: walk (frames 1-30)", "ACTION")]
-
-
-def test_follow_curve_panel_says_when_pytorch_is_missing(addon, monkeypatch):
-    import importlib
-
-    inst = importlib.import_module(addon.__name__ + ".strnn_addon.torch_install")
-    for available in (True, False):
-        monkeypatch.setattr(inst, "torch_available", lambda available=available: available)
-        texts = [text for text, _ in panel_labels("STRNN_PT_follow_curve", bpy.context)]
-        assert any(t.startswith("Needs PyTorch: Preferences > Add-ons") for t in texts) is not available
 
 
 def as_from_the_ui(op: str, **handed):

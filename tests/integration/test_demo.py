@@ -64,16 +64,17 @@ def test_demo_writes_bvh_png_plots_and_blend(tiny_model, tmp_path, capsys):
         assert (out / "demo_render.png").read_bytes().startswith(b"\x89PNG")
 
 
-def test_demo_skips_the_walk_and_blend_without_torch_and_bpy(tiny_model, tmp_path, capsys, monkeypatch):
+def test_demo_walks_without_torch_and_skips_the_blend_without_bpy(tiny_model, tmp_path, capsys, monkeypatch):
     real = importlib.util.find_spec
     monkeypatch.setattr(importlib.util, "find_spec",
                         lambda name, *a: None if name in ("torch", "bpy") else real(name, *a))
     out = tmp_path / "out"
-    assert _demo_module().main(["--model", str(tiny_model), "--out", str(out), "--frames", "30"]) == 0
+    argv = ["--model", str(tiny_model), "--out", str(out), "--frames", "30", "--path-frames", "25"]
+    assert _demo_module().main(argv) == 0
     printed = capsys.readouterr().out
-    assert "note: torch is not installed: figure-eight walk skipped" in printed
+    assert "torch" not in printed
     assert "note: the bpy module is not installed: .blend skipped" in printed
-    assert read_bvh(out / "demo.bvh").frames == 20 + 30
+    assert read_bvh(out / "demo.bvh").frames == 20 + 30 + 25  # the seed, its continuation and the walk
     assert (out / "demo_plots.png").is_file() and not (out / "demo.blend").exists()
 
 
