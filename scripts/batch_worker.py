@@ -1,16 +1,17 @@
-"""The worker side of scripts/strnn_batch.py: one input file in a fresh process with its own bpy.
+"""The worker side of scripts/strnn_batch.py: input files, one after another, in a process with its own bpy.
 
-:func:`process_file` resets Blender to factory settings (in a user folder of its own), installs
-and enables the extension zip, imports the file (Blender's BVH importer, or opens the .blend),
-runs the extension's operator on the armature and writes the result atomically. It never
-raises: a failure becomes a one-line reason in the result. Also used by the Blender benchmark
-and the README pictures, which install the extension the same way.
+The first :func:`process_file` of a worker process starts Blender (the ``bpy`` module) with factory
+settings in a user folder of its own and installs and enables the extension zip; every file then
+starts from Blender's factory startup file, is imported (Blender's BVH importer, or the .blend is
+opened), has the extension's operator run on its armature, and its result is written atomically.
+It never raises: a failure becomes a one-line reason in the result. :func:`install_extension` is
+also used by the README pictures, which install the extension the same way.
 """
 
 from __future__ import annotations
 
+import contextlib
 import os
-import shutil
 import sys
 import time
 import traceback
@@ -219,22 +220,14 @@ def run_file(bpy, job: dict) -> None:
     os.replace(tmp, dst)
 
 
-def process_file(job: dict) -> dict:
-    """Worker entry point: process one file in this (fresh) process; never raises."""
-    start = time.perf_counter()
-    result = {"file": job["display"], "status": "failed", "output": "", "reason": ""}
-    user_dir = Path(job["user_dir"])  # made (and removed again) by run_pool
-    log = user_dir / "blender.log"
-    saved = None
-    if not job["verbose"]:  # Blender prints from C as well as Python: redirect the descriptors
-        sys.stdout.flush()
-        sys.stderr.flush()
-        saved = os.dup(1), os.dup(2)
-        fd = os.open(log, os.O_WRONLY | os.O_CREAT | os.O_TRUNC)
-        os.dup2(fd, 1)
-        os.dup2(fd, 2)
-        os.close(fd)
-    try:
+_STARTED: dict = {}  # this process's Blender: the bpy module, once the extension is installed
+
+
+def start_blender(job: dict):
+    """The bpy module of this process with the extension installed from ``job["zip"]`` in the user folder
+    ``job["user_dir"]`` (made, and removed again, by the batch): done on the first file, kept after."""
+    if "bpy" not in _STARTED:
+        user_dir = Path(job["user_dir"])
         os.environ["BLENDER_USER_RESOURCES"] = str(user_dir / "user")  # keep the user's own Blender untouched
         # a parent that imported bpy passes on Blender's scripts/modules in sys.path, whose pure-Python
         # bpy package would shadow the bpy module itself
@@ -244,25 +237,53 @@ def process_file(job: dict) -> dict:
 
         bpy.ops.wm.read_factory_settings(use_empty=True)
         install_extension(bpy, job["zip"], user_dir)
-        prefs = bpy.context.preferences.addons[ADDON].preferences
-        prefs.model_folder, prefs.denoise_model_folder = job["model"], job["denoise_model"]
-        bpy.ops.wm.read_homefile(use_empty=True)
-        run_file(bpy, job)
-        result.update(status="ok", output=job["shown_output"])
-    except BatchError as e:
-        result["reason"] = str(e)
-    except Exception as e:  # an unexpected failure: still one line, with where it happened
-        frame = traceback.extract_tb(e.__traceback__)[-1]
-        result["reason"] = f"{type(e).__name__}: {e} ({Path(frame.filename).name}:{frame.lineno})".replace("\n", " ")
+        _STARTED["bpy"] = bpy
+    return _STARTED["bpy"]
+
+
+@contextlib.contextmanager
+def output_to(log: Path | None):
+    """Blender prints from C as well as Python: with ``log``, the process's stdout and stderr descriptors
+    go to that file for the length of the block."""
+    if log is None:
+        yield
+        return
+    sys.stdout.flush()
+    sys.stderr.flush()
+    saved = os.dup(1), os.dup(2)
+    fd = os.open(log, os.O_WRONLY | os.O_CREAT | os.O_APPEND)
+    os.dup2(fd, 1)
+    os.dup2(fd, 2)
+    os.close(fd)
+    try:
+        yield
     finally:
-        if saved is not None:
-            sys.stdout.flush()
-            sys.stderr.flush()
-            os.dup2(saved[0], 1)
-            os.dup2(saved[1], 2)
-            os.close(saved[0])
-            os.close(saved[1])
-        shutil.rmtree(user_dir, ignore_errors=True)
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os.dup2(saved[0], 1)
+        os.dup2(saved[1], 2)
+        os.close(saved[0])
+        os.close(saved[1])
+
+
+def process_file(job: dict) -> dict:
+    """Worker entry point: process one file in this process (Blender started on its first file); never raises."""
+    start = time.perf_counter()
+    result = {"file": job["display"], "status": "failed", "output": "", "reason": ""}
+    log = None if job["verbose"] else Path(job["user_dir"]) / "blender.log"
+    with output_to(log):
+        try:
+            bpy = start_blender(job)
+            bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)  # nothing of the last file stays
+            prefs = bpy.context.preferences.addons[ADDON].preferences
+            prefs.model_folder, prefs.denoise_model_folder = job["model"], job["denoise_model"]
+            run_file(bpy, job)
+            result.update(status="ok", output=job["shown_output"])
+        except BatchError as e:
+            result["reason"] = str(e)
+        except Exception as e:  # an unexpected failure: still one line, with where it happened
+            frame = traceback.extract_tb(e.__traceback__)[-1]
+            where = f"{Path(frame.filename).name}:{frame.lineno}"
+            result["reason"] = f"{type(e).__name__}: {e} ({where})".replace("\n", " ")
     result["seconds"] = time.perf_counter() - start
     return result
-

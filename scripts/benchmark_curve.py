@@ -1,7 +1,8 @@
 #!/usr/bin/env python3
 """Curve-synthesis speed: generated frames per second for a 1,000-frame path (a circle of
-radius 2 m) with the run-time control loop (predict, fine-tune a copy, restore), beside
-plain open-loop generation with the same torch model and the NumPy engine in the same run.
+radius 2 m) with Follow Curve's NumPy follower and with the paper's run-time control (predict,
+fine-tune a copy with torch, restore), beside plain open-loop generation with the NumPy and torch
+engines, all in the same run.
 
   python scripts/benchmark_curve.py [--model FOLDER] [--frames 1000] [--threads 1]
 """
@@ -42,10 +43,11 @@ def main(argv=None) -> int:
     from model_core.inference.torch_engine import TorchEngine
     from model_core.motion.features import features_to_positions
     from model_core.ops.follow import PathFollower, follow_path
+    from model_core.ops.follow_torch import TorchPathFollower
     from model_core.ops.paths import Path as CurvePath, evaluation_paths
 
     torch.set_num_threads(args.threads)
-    follower = PathFollower.load(args.model)
+    follower, tuned = PathFollower.load(args.model), TorchPathFollower.load(args.model)
     engine, torch_engine = Engine.load(args.model), TorchEngine.load(args.model)
     walk = next((i for i, n in enumerate(engine.ckpt.seed_names) if "walk" in n), 0)
     seed_feats = engine.seeds[walk]
@@ -53,15 +55,16 @@ def main(argv=None) -> int:
     points, cyclic = evaluation_paths()["circle"]
     path = CurvePath(points, cyclic)
     rows = [
-        ("curve synthesis (torch, control)", timed(lambda: follow_path(follower, seed, path, frames=args.frames))),
+        ("Follow Curve (NumPy)", timed(lambda: follow_path(follower, seed, path, frames=args.frames))),
+        ("run-time control (torch, fine-tuned)", timed(lambda: follow_path(tuned, seed, path, frames=args.frames))),
         ("open loop (torch engine)", timed(lambda: torch_engine.extrapolate(seed_feats, args.frames))),
         ("open loop (NumPy engine)", timed(lambda: engine.extrapolate(seed_feats, args.frames))),
     ]
     base = rows[0][1]
     print(f"seed: {engine.ckpt.seed_names[walk]}; {args.frames} frames; {args.threads} thread(s)")
-    print(f"{'':<34}{'frames/s':>10}{'x curve':>9}")
+    print(f"{'':<38}{'frames/s':>10}{'x Follow Curve':>16}")
     for name, seconds in rows:
-        print(f"{name:<34}{args.frames / seconds:10,.0f}{base / seconds:9.1f}")
+        print(f"{name:<38}{args.frames / seconds:10,.0f}{base / seconds:16.2f}")
     print("paper: 1,200 frames/s of curve synthesis on a GTX 1080")
     return 0
 

@@ -36,7 +36,6 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 import numpy as np
 
 from model_core.eval.demo_pipeline import build_motion, denoise_check, load_evaluation, plot_demo
-from model_core.eval.plots import contact_sheet
 from model_core.io.bvh_export import write_bvh
 from model_core.io.checkpoint import CheckpointError
 from model_core.motion.conventions import MODEL_FPS
@@ -66,7 +65,8 @@ def write_blend(bvh: str | Path, blend: str | Path, render_dir: Path | None = No
     save ``blend`` and, with ``render_dir``, render ``frames`` frames with Workbench.
     Returns (path or None, [(frame, png)], note explaining a skip or failure)."""
     if importlib.util.find_spec("bpy") is None:
-        return None, [], "the bpy module is not installed: .blend skipped (scripts/setup.sh installs it)"
+        return None, [], ("the bpy module is not installed: .blend skipped (scripts/setup.sh installs it; "
+                          "with pip: strnn-motion[blender])")
     shown, blend = Path(blend), Path(blend).resolve()
     blend.parent.mkdir(parents=True, exist_ok=True)
     cmd = [sys.executable, str(Path(__file__).with_name("demo_blend.py")), str(Path(bvh).resolve()), str(blend),
@@ -136,12 +136,17 @@ def main(argv=None) -> int:
     bvh = write_bvh(out / "demo.bvh", motion.locked, fps=MODEL_FPS)
     title = (f"STRNN: {motion.seed_name} + {args.frames} frames" + (f" + {walk} on a figure-eight" if walk else "")
              + f", foot-locked ({len(motion.locked) / MODEL_FPS:.1f} s)")
-    png = contact_sheet(out / "demo.png", motion.locked, count=args.panels, title=title)
-    plots = plot_demo(out / "demo_plots.png", load_evaluation(args.model), motion.skate_before_cm,
-                      motion.skate_after_cm)
     print(f"BVH: {bvh}")
-    print(f"PNG: {png}")
-    print(f"Plots: {plots}")
+    pictures = importlib.util.find_spec("matplotlib") is not None
+    if pictures:
+        from model_core.eval.plots import contact_sheet
+
+        print(f"PNG: {contact_sheet(out / 'demo.png', motion.locked, count=args.panels, title=title)}")
+        evaluation = load_evaluation(args.model)
+        print(f"Plots: {plot_demo(out / 'demo_plots.png', evaluation, motion.skate_before_cm, motion.skate_after_cm)}")
+    else:
+        print("note: matplotlib is not installed: pictures skipped (scripts/setup.sh installs it; with pip: "
+              "strnn-motion[plots])")
     if args.no_blend:
         print("Blend: skipped (--no-blend)")
     else:
@@ -149,7 +154,7 @@ def main(argv=None) -> int:
             blend, rendered, note = write_blend(bvh, out / "demo.blend", Path(tmp) if args.renders else None,
                                                 args.renders)
             print(f"Blend: {blend}" if blend else f"note: {note}")
-            if rendered:
+            if rendered and pictures:
                 print(f"Render: {render_sheet(out / 'demo_render.png', rendered, title)}")
     return 0
 

@@ -27,8 +27,11 @@ are listed at the end), 2 for bad arguments.
 from __future__ import annotations
 
 import argparse
+import contextlib
+import importlib.util
 import multiprocessing
 import multiprocessing.connection as mp_connection
+import os
 import shutil
 import signal
 import sys
@@ -39,7 +42,10 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
-from batch_worker import process_file  # noqa: E402
+if __package__:  # installed with pip: strnn_motion.scripts
+    from .batch_worker import process_file
+else:  # run by path from a checkout
+    from batch_worker import process_file  # noqa: E402
 
 from model_core.io.files import write_json  # noqa: E402  (model_core never imports bpy)
 
@@ -84,7 +90,7 @@ def build_parser() -> argparse.ArgumentParser:
                      help="let Blender's own output through (default: hidden; kept in the failure reason)")
 
     parser = argparse.ArgumentParser(
-        prog="strnn_batch.py", description=__doc__.split("\n\n")[0],
+        description=__doc__.split("\n\n")[0],
         epilog=__doc__.split("\n\n", 2)[2], formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
@@ -294,12 +300,55 @@ def _raise_interrupted(signum, frame):
     raise Interrupted(signum)
 
 
-def _worker(job: dict, conn) -> None:
-    """Spawned process: process one file and send its result back. Ctrl-C in the terminal reaches
-    every process of the group: the parent alone decides, and stops the workers itself."""
+def _serve(conn) -> None:
+    """A worker process: file after file from ``conn`` (its Blender started on the first and kept), each
+    result sent back, until told to stop (None) or the batch goes away. Ctrl-C in the terminal reaches every
+    process of the group: the parent alone decides, and stops the workers itself. The process ends without
+    Python's teardown, which bpy can hang in."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
-    conn.send(process_file(job))
+    while True:
+        try:
+            job = conn.recv()
+        except EOFError:
+            break
+        if job is None:
+            break
+        conn.send(process_file(job))
     conn.close()
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os._exit(0)
+
+
+class _Worker:
+    """A worker process with its own Blender and user folder, and the job it is on (None: idle)."""
+
+    def __init__(self, ctx):
+        self.user_dir = tempfile.mkdtemp(prefix="strnn_batch_")
+        self.conn, theirs = ctx.Pipe()
+        self.proc = ctx.Process(target=_serve, args=(theirs,), daemon=True)
+        self.proc.start()
+        theirs.close()
+        self.job, self.started = None, 0.0
+
+    def give(self, job: dict) -> None:
+        job["user_dir"] = self.user_dir
+        self.job, self.started = job, time.perf_counter()
+        self.conn.send(job)
+
+    def stop(self, kill: bool = False) -> None:
+        """End the process (asked to, or killed), and remove its user folder."""
+        if not kill and self.proc.is_alive():
+            try:
+                self.conn.send(None)
+            except (BrokenPipeError, OSError):
+                pass
+            self.proc.join(timeout=10)
+        if self.proc.is_alive():
+            self.proc.kill()
+        self.proc.join()
+        self.conn.close()
+        shutil.rmtree(self.user_dir, ignore_errors=True)
 
 
 def _failed(file: str, reason: str, seconds: float = 0.0) -> dict:
@@ -308,81 +357,110 @@ def _failed(file: str, reason: str, seconds: float = 0.0) -> dict:
 
 
 def _discard_partial(job: dict) -> None:
-    """Remove what a killed worker may have left: its half-written output and its Blender user folder."""
+    """Remove what a killed worker may have left of its file: its half-written output."""
     dst = Path(job["output"])
     tmp = dst.with_name(dst.stem + ".tmp" + dst.suffix)
     tmp.unlink(missing_ok=True)
     tmp.with_name(tmp.name + "@").unlink(missing_ok=True)  # Blender's own temporary name while saving a .blend
-    shutil.rmtree(job["user_dir"], ignore_errors=True)
+
+
+BLAS_THREADS = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
+
+
+@contextlib.contextmanager
+def one_blas_thread_per_worker():
+    """Workers run side by side, one file each: their NumPy gets one BLAS thread (unless the environment
+    says otherwise), since threads of small matrix products only spin against each other. Spawned workers
+    inherit the environment, which is restored after."""
+    before = {var: os.environ.get(var) for var in BLAS_THREADS}
+    for var in BLAS_THREADS:
+        os.environ.setdefault(var, "1")
+    try:
+        yield
+    finally:
+        for var, value in before.items():
+            if value is None:
+                os.environ.pop(var, None)
+            else:
+                os.environ[var] = value
 
 
 def run_pool(jobs: list[dict], workers: int, report, timeout: float = 0.0) -> tuple[list[dict], int]:
-    """Run ``jobs`` with at most ``workers`` at a time, each in a fresh spawned process (its own bpy).
+    """Run ``jobs`` on at most ``workers`` worker processes, each starting Blender and installing the
+    extension once and then taking file after file (from Blender's factory startup file each time).
 
-    A worker that runs past ``timeout`` seconds (0: no limit) is killed and its file reported as
-    failed, as is one whose process dies; neither affects the other files. On Ctrl-C or SIGTERM the
-    running workers are killed and their partial files removed, and every file not done is reported
-    as interrupted. Returns (the results in job order, the signal that stopped the batch or 0)."""
+    A file that runs past ``timeout`` seconds (0: no limit) has its worker killed and is reported as
+    failed, as is one whose worker dies; a new worker takes the next file, and no other file is
+    affected. On Ctrl-C or SIGTERM the workers are killed and their partial files removed, and every
+    file not done is reported as interrupted. Returns (the results in job order, the signal that stopped
+    the batch or 0)."""
     ctx = multiprocessing.get_context("spawn")
-    pending, running, results = list(jobs), {}, {}
+    pending, pool, results = list(jobs), [], {}
     try:
-        _loop(ctx, pending, running, results, workers, report, timeout)
+        with one_blas_thread_per_worker():
+            _loop(ctx, pending, pool, results, workers, report, timeout)
         stopped = 0
     except (Interrupted, KeyboardInterrupt) as e:
         stopped = getattr(e, "signum", signal.SIGINT)
         now = time.perf_counter()
-        for conn, (proc, job, started) in list(running.items()):
-            proc.kill()
-            proc.join()
-            conn.close()
-            _discard_partial(job)
-            results[job["index"]] = _failed(job["display"], "interrupted while it ran; nothing written for it",
-                                            now - started)
+        for worker in pool:
+            worker.stop(kill=True)
+            if worker.job is not None:
+                _discard_partial(worker.job)
+                results[worker.job["index"]] = _failed(worker.job["display"], "interrupted while it ran; nothing "
+                                                       "written for it", now - worker.started)
+        pool.clear()
         for job in pending:
             results[job["index"]] = _failed(job["display"], "interrupted before it started")
+    finally:
+        for worker in pool:
+            worker.stop()
     return [results[i] for i in sorted(results)], stopped
 
 
-def _loop(ctx, pending: list, running: dict, results: dict, workers: int, report, timeout: float) -> None:
-    """The body of :func:`run_pool`: start, collect and time out workers until every job is done."""
+def _loop(ctx, pending: list, pool: list, results: dict, workers: int, report, timeout: float) -> None:
+    """The body of :func:`run_pool`: hand out files, collect results, replace dead or timed-out workers."""
 
-    def finish(conn, result):
-        proc, job, _ = running.pop(conn)
-        proc.join()
-        conn.close()
-        _discard_partial(job)
+    def finish(worker, result, dead: bool = False):
+        job = worker.job
+        worker.job = None
+        if dead:
+            pool.remove(worker)
+            worker.stop(kill=True)
+            _discard_partial(job)
         results[job["index"]] = result
         report(result)
 
-    while pending or running:
-        while pending and len(running) < workers:
-            job = pending.pop(0)
-            job["user_dir"] = tempfile.mkdtemp(prefix="strnn_batch_")
-            recv, send = ctx.Pipe(duplex=False)
-            proc = ctx.Process(target=_worker, args=(job, send), daemon=True)
-            proc.start()
-            send.close()
-            running[recv] = (proc, job, time.perf_counter())
-        for conn in mp_connection.wait(list(running), timeout=0.2):
-            proc, job, started = running[conn]
+    while pending or any(w.job is not None for w in pool):
+        for worker in pool:
+            if worker.job is None and pending:
+                worker.give(pending.pop(0))
+        while pending and len(pool) < workers:
+            pool.append(_Worker(ctx))
+            pool[-1].give(pending.pop(0))
+        busy = {w.conn: w for w in pool if w.job is not None}
+        for conn in mp_connection.wait(list(busy), timeout=0.2):
+            worker = busy[conn]
             try:
-                result = conn.recv()
+                finish(worker, conn.recv())
             except EOFError:  # the process died without an answer
-                proc.join()
-                result = _failed(job["display"], f"the Blender worker process crashed on this file (exit code "
-                                                 f"{proc.exitcode})", time.perf_counter() - started)
-            finish(conn, result)
+                worker.proc.join()
+                finish(worker, _failed(worker.job["display"], f"the Blender worker process crashed on this file "
+                                                              f"(exit code {worker.proc.exitcode})",
+                                       time.perf_counter() - worker.started), dead=True)
         now = time.perf_counter()
-        for conn, (proc, job, started) in list(running.items()):
-            if timeout and now - started > timeout:
-                proc.kill()
-                finish(conn, _failed(job["display"], f"timed out after {timeout:g} s (--timeout); nothing "
-                                                     "written for it", now - started))
+        for worker in [w for w in pool if w.job is not None]:
+            if timeout and now - worker.started > timeout:
+                finish(worker, _failed(worker.job["display"], f"timed out after {timeout:g} s (--timeout); nothing "
+                                                              "written for it", now - worker.started), dead=True)
 
 
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
+    if importlib.util.find_spec("bpy") is None:
+        parser.error("the batch runs the extension in Blender's bpy module, which is not installed: bash "
+                     "scripts/setup.sh installs it; with pip: strnn-motion[blender]")
     check_args(parser, args)
     check_writable(parser, args)
     files, problems = collect(args.inputs)

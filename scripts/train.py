@@ -17,6 +17,11 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
+try:
+    import torch  # noqa: F401  (training is PyTorch)
+except ImportError:
+    sys.exit("error: training needs PyTorch: bash scripts/setup.sh installs it; with pip: strnn-motion[torch]")
+
 from model_core.io.checkpoint import PURPOSES  # noqa: E402
 from model_core.model.dataset import DataError  # noqa: E402
 from model_core.model.strnn import STRNNConfig  # noqa: E402

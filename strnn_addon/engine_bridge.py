@@ -6,12 +6,16 @@ the operators make, so a test can swap them for a stand-in.
 
 from __future__ import annotations
 
+import contextlib
+import hashlib
 import json
+from collections import OrderedDict
 from pathlib import Path
 
 import bpy
 import numpy as np
 
+from ..model_core.inference.steps import drive
 from ..model_core.io.checkpoint import DEFAULT_MODEL, default_denoiser
 from ..model_core.ops.denoise import denoise_positions_steps
 from ..model_core.ops.extend import extend_positions
@@ -70,19 +74,18 @@ def model_card(folder: str) -> dict:
     return {"name": path.name, "licence": licence, "non_commercial": "-NC" in licence or "NonCommercial" in licence}
 
 
-def load_engine(folder: str = "", engine: str = "NUMPY", threads: int = 0, setting: str = "Model Folder"):
-    """The inference engine for ``folder`` ('' = bundled), cached across calls; errors name the
-    preference ``setting`` that picks the folder."""
+def load_engine(folder: str = "", engine: str = "NUMPY", setting: str = "Model Folder"):
+    """The inference engine for ``folder`` ('' = bundled), kept loaded across calls (the main model and
+    the denoiser; an older choice is let go); errors name the preference ``setting`` that picks the folder."""
     path = model_path(folder, setting)
-    key = (str(path), engine, threads)
+    key = (str(path), engine, _stamp(path))
     if key not in _CACHE:
-        _set_threads(engine, threads)
         try:
             if engine == "TORCH":
                 from ..model_core.inference.torch_engine import TorchEngine as Engine
             else:
                 from ..model_core.inference.engine import Engine
-            if len(_CACHE) >= 2:  # the main model and the denoiser stay loaded; older choices go
+            if len(_CACHE) >= 2:
                 _CACHE.pop(next(iter(_CACHE)))
             _CACHE[key] = Engine.load(path)
         except (ImportError, ValueError, OSError, KeyError) as e:
@@ -90,19 +93,33 @@ def load_engine(folder: str = "", engine: str = "NUMPY", threads: int = 0, setti
     return _CACHE[key]
 
 
-def _set_threads(engine: str, threads: int) -> None:
-    if threads <= 0:
-        return
-    if engine == "TORCH":
-        import torch
-
-        torch.set_num_threads(threads)
+def _stamp(path: Path) -> int:
+    """When the weights in ``path`` last changed (a model retrained into the same folder is reloaded)."""
     try:
-        from threadpoolctl import threadpool_limits
+        return (path / "model.safetensors").stat().st_mtime_ns
+    except OSError:
+        return 0
 
-        threadpool_limits(threads)
-    except ImportError:
-        pass  # NumPy's BLAS keeps its own thread count
+
+@contextlib.contextmanager
+def threads(prefs):
+    """The Threads preference for the length of one model call, the process's thread counts restored
+    after (0: as Blender runs)."""
+    count = prefs.threads if prefs is not None else 0
+    with contextlib.ExitStack() as stack:
+        if count > 0:
+            if prefs.engine == "TORCH":
+                import torch
+
+                stack.callback(torch.set_num_threads, torch.get_num_threads())
+                torch.set_num_threads(count)
+            try:
+                from threadpoolctl import threadpool_limits
+            except ImportError:  # NumPy's BLAS keeps its own thread count
+                pass
+            else:
+                stack.enter_context(threadpool_limits(count))
+        yield
 
 
 def engine_from_prefs(prefs, folder: str | None = None, setting: str = "Model Folder"):
@@ -110,9 +127,7 @@ def engine_from_prefs(prefs, folder: str | None = None, setting: str = "Model Fo
     Model Folder or for ``folder`` (picked by the preference ``setting``)."""
     if folder is None:
         folder = main_folder(prefs)
-    if prefs is None:
-        return load_engine(folder, setting=setting)
-    return load_engine(folder, prefs.engine, prefs.threads, setting)
+    return load_engine(folder, prefs.engine if prefs is not None else "NUMPY", setting)
 
 
 def generator_from_prefs(prefs):
@@ -125,6 +140,54 @@ def generator_from_prefs(prefs):
     return engine
 
 
+# The last few model results, by what went in: a redo that changes only what comes after the model
+# (Result, Simplify Keys, Foot Lock, Scene Range, ...) or a second run on the same frames does not run
+# the model again. Results are returned as copies, so nothing downstream can change a kept one.
+_RESULTS: OrderedDict[tuple, object] = OrderedDict()
+KEEP_RESULTS = 4
+
+
+def _fingerprint(value):
+    if isinstance(value, np.ndarray):
+        data = np.ascontiguousarray(value)
+        return value.shape, str(value.dtype), hashlib.blake2b(data.tobytes(), digest_size=16).hexdigest()
+    return value
+
+
+def _key(operation: str, engine, *inputs) -> tuple:
+    """What a result depends on: the operation, the model (folder, engine kind, weights' time) and the inputs."""
+    model = next(key for key, loaded in _CACHE.items() if loaded is engine)
+    return (operation, model, *(_fingerprint(v) for v in inputs))
+
+
+def _copy(result):
+    """Arrays copied (also inside tuples); other results (read-only records) as they are."""
+    if isinstance(result, tuple):
+        return tuple(_copy(r) for r in result)
+    return np.array(result, copy=True) if isinstance(result, np.ndarray) else result
+
+
+def _kept_steps(key: tuple, make_steps):
+    """The result of the step generator ``make_steps()``, or the one kept for ``key`` without running it."""
+    if key in _RESULTS:
+        _RESULTS.move_to_end(key)
+        return _copy(_RESULTS[key])
+    result = yield from make_steps()
+    _RESULTS[key] = _copy(result)
+    while len(_RESULTS) > KEEP_RESULTS:
+        _RESULTS.popitem(last=False)
+    return result
+
+
+def _kept(key: tuple, compute):
+    """``compute()``, or the result kept for ``key``."""
+    def steps():
+        return compute()
+        yield  # a generator with no steps
+
+    return drive(_kept_steps(key, steps))
+
+
 def bpy_path(path: str) -> str:
     """Resolve Blender's ``//`` relative paths."""
     if path.startswith("//"):
@@ -134,25 +197,35 @@ def bpy_path(path: str) -> str:
 
 def extend(prefs, positions: np.ndarray, fps: float, frames: int) -> np.ndarray:
     """Continue ``positions`` ``[F, 21, 3]`` (Y-up scene units at ``fps``) by ``frames`` -> ``[frames, 21, 3]``."""
-    return extend_positions(generator_from_prefs(prefs), positions, fps, frames)
+    engine = generator_from_prefs(prefs)
+    with threads(prefs):
+        return _kept(_key("extend", engine, positions, fps, frames),
+                     lambda: extend_positions(engine, positions, fps, frames))
 
 
 def inbetween(prefs, before: np.ndarray, after: np.ndarray, fps: float, frames: int) -> np.ndarray:
     """The ``frames`` frames ``[frames, 21, 3]`` between ``before`` and ``after`` ``[F, 21, 3]`` (Y-up
     scene units at ``fps``), made by the main model."""
-    return inbetween_positions(generator_from_prefs(prefs), before, after, fps, frames)
+    engine = generator_from_prefs(prefs)
+    with threads(prefs):
+        return _kept(_key("inbetween", engine, before, after, fps, frames),
+                     lambda: inbetween_positions(engine, before, after, fps, frames))
 
 
 def familiarity(prefs, positions: np.ndarray, fps: float):
     """How familiar ``positions`` ``[F, 21, 3]`` (Y-up scene units at ``fps``) are to the main model."""
-    return clip_familiarity(generator_from_prefs(prefs), positions, fps)
+    engine = generator_from_prefs(prefs)
+    with threads(prefs):
+        return _kept(_key("familiarity", engine, positions, fps), lambda: clip_familiarity(engine, positions, fps))
 
 
 def denoise_steps(prefs, positions: np.ndarray, fps: float, strength: float):
     """Denoised ``positions`` ``[F, 21, 3]`` (same space and frames), blended by ``strength``.
     A step generator (``model_core.inference.steps``): yields the fraction of the clip done as it goes."""
     engine = engine_from_prefs(prefs, denoiser_folder(prefs), "Denoise Model Folder")
-    return (yield from denoise_positions_steps(engine, positions, fps, strength))
+    with threads(prefs):
+        return (yield from _kept_steps(_key("denoise", engine, positions, fps, strength),
+                                       lambda: denoise_positions_steps(engine, positions, fps, strength)))
 
 
 def follow_curve_steps(prefs, points: np.ndarray, cyclic: bool, fps: float, frames: int | None,
@@ -161,5 +234,9 @@ def follow_curve_steps(prefs, points: np.ndarray, cyclic: bool, fps: float, fram
     (Y-up) after ``context`` ``[F, 21, 3]``, or from a shipped seed sized like ``rest`` ``[21, 3]``, by the
     main model. A step generator (``model_core.inference.steps``): yields the fraction done after each model
     window."""
-    follower = PathFollower(generator_from_prefs(prefs))
-    return (yield from follow_curve_model_steps(follower, points, cyclic, fps, frames, speed, context, rest))
+    engine = generator_from_prefs(prefs)
+    follower = PathFollower(engine)
+    key = _key("follow", engine, points, cyclic, fps, frames, speed, context, rest)
+    with threads(prefs):
+        return (yield from _kept_steps(key, lambda: follow_curve_model_steps(
+            follower, points, cyclic, fps, frames, speed, context, rest)))

@@ -21,7 +21,7 @@ from .normalise import fit_normalisation, model_frames_available, sample_at
 KEY = "familiarity"
 
 
-@dataclass
+@dataclass(frozen=True)
 class Familiarity:
     error_cm: float  # mean reconstruction error of the clip's windows
     usual_cm: float | None  # 90 % of the model's held-back windows reconstruct better than this
