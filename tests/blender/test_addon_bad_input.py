@@ -120,6 +120,7 @@ def test_linked_armature(addon, tmp_path, op):
     bpy.context.scene.collection.objects.link(linked)
     bpy.context.view_layer.objects.active = linked
     assert linked.library is not None
+    assert not getattr(bpy.ops.strnn, op).poll()  # greyed out, with the reason below
     refuse(op, "linked from")
 
 
@@ -149,7 +150,7 @@ def test_a_model_folder_without_a_model_names_its_preference(addon, tmp_path, op
         setattr(prefs, setting, "")
 
 
-POLLED = ["extend_clip", "inbetween", "denoise_action", "foot_lock", "follow_curve", "auto_map"]
+POLLED = ["extend_clip", "inbetween", "denoise_action", "foot_lock", "follow_curve", "transfer_motion", "auto_map"]
 
 
 @pytest.mark.parametrize("op", POLLED)
@@ -160,7 +161,7 @@ def test_poll_is_false_with_a_reason(addon, op, scene):
         bpy.ops.mesh.primitive_cube_add()
     elif scene == "bare_armature":
         build_armature("Bare", [("a", None, (0, 0, 0), (0, 0, 1))])
-    runs = scene == "bare_armature" and op in ("follow_curve", "auto_map")  # these take an armature as it is
+    runs = scene == "bare_armature" and op in ("follow_curve", "transfer_motion", "auto_map")  # take it as it is
     assert getattr(bpy.ops.strnn, op).poll() == runs
     if not runs:
         with pytest.raises(RuntimeError, match="armature|active object|action"):
