@@ -1,14 +1,18 @@
-"""Benchmark Extend Clip (or Denoise Action, or Fill Gap) in Blender on a 60-bone rig: a
-1,000-frame clip extended by 1,000 frames (or denoised whole, or a 30-frame gap in its middle filled).
+"""Benchmark Extend Clip (or Denoise Action, Foot Lock, or Fill Gap) in Blender on a 60-bone rig: a
+1,000-frame clip extended by 1,000 frames (or denoised or foot-locked whole, or a 30-frame gap in its
+middle filled), with the time of each stage and the memory the run takes beyond the scene's own.
 
 Builds the extension, installs it into the bpy module (a temporary user repository, as the
 tests do), builds a 60-bone armature with a 1,000-frame keyed action, runs the operator's
 worker and prints the time of each stage (read, model, solve, write) beside the floor:
-reading and writing the same keys with bulk ``foreach_get`` / ``foreach_set`` and nothing else.
+reading and writing the same keys with bulk ``foreach_get`` / ``foreach_set`` and nothing else, and
+the peak of the process's resident memory during the run above what it held before (sampled every
+5 ms from /proc/self/statm).
 
     python scripts/benchmark_blender.py
     python scripts/benchmark_blender.py --operator denoise   # with the bundled denoising model
     python scripts/benchmark_blender.py --operator inbetween --gap 30   # Fill Gap of 30 frames
+    python scripts/benchmark_blender.py --operator footlock --frames 30000 --repeat 1   # a long take
     python scripts/benchmark_blender.py --model runs/default/release --frames 1000 --repeat 3
     python scripts/benchmark_blender.py --untrained   # timing only: a randomly initialised model
 """
@@ -17,6 +21,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import sys
 import tempfile
 import time
@@ -191,17 +196,46 @@ def floor_time(obj, frames: int) -> tuple[float, float]:
     return t1 - t0, t2 - t1
 
 
+class PeakMemory:
+    """The peak resident memory (MB) of this process above its level at the start, sampled in a thread."""
+
+    def __enter__(self):
+        import threading
+
+        self.page = os.sysconf("SC_PAGE_SIZE")
+        self.start = self.peak = self._rss()
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._watch, daemon=True)
+        self._thread.start()
+        return self
+
+    def _rss(self) -> int:
+        with open("/proc/self/statm") as f:
+            return int(f.read().split()[1]) * self.page
+
+    def _watch(self) -> None:
+        while not self._stop.wait(0.005):
+            self.peak = max(self.peak, self._rss())
+
+    def __exit__(self, *exc):
+        self._stop.set()
+        self._thread.join()
+        self.peak = max(self.peak, self._rss())
+        self.extra_mb = (self.peak - self.start) / 2**20
+
+
 def stage_times(worker, *args, **kwargs) -> dict:
     """Seconds of each stage of ``worker(*args, progress=..., **kwargs)`` (a runner of
     ``strnn_addon/stages/``, which calls ``progress(stage)`` as each stage starts): a stage lasts
     until the next starts (the first also covers the checks before it), plus the ``total``."""
     marks: list[tuple[str, float]] = []
-    start = time.perf_counter()
-    worker(*args, progress=lambda stage: marks.append((stage, time.perf_counter())), **kwargs)
-    end = time.perf_counter()
+    with PeakMemory() as memory:
+        start = time.perf_counter()
+        worker(*args, progress=lambda stage: marks.append((stage, time.perf_counter())), **kwargs)
+        end = time.perf_counter()
     bounds = [start] + [t for _, t in marks[1:]] + [end]
     times = {stage: b - a for (stage, _), a, b in zip(marks, bounds, bounds[1:])}
-    return {**times, "total": end - start}
+    return {**times, "total": end - start, "extra_mb": memory.extra_mb}
 
 
 def main(argv: list[str] | None = None) -> dict:
@@ -210,8 +244,9 @@ def main(argv: list[str] | None = None) -> dict:
     parser.add_argument("--model", type=Path, default=None, help="release folder (default: bundled or runs/*)")
     parser.add_argument("--untrained", action="store_true", help="use a random model when none is trained")
     parser.add_argument("--repeat", type=int, default=3, help="runs; the fastest is reported (default 3)")
-    parser.add_argument("--operator", choices=("extend", "denoise", "inbetween"), default="extend",
-                        help="Extend Clip (default), Denoise Action (the extension's denoising model) or Fill Gap")
+    parser.add_argument("--operator", choices=("extend", "denoise", "footlock", "inbetween"), default="extend",
+                        help="Extend Clip (default), Denoise Action (the extension's denoising model), Foot Lock "
+                             "or Fill Gap")
     parser.add_argument("--gap", type=int, default=30, help="Fill Gap: frames cut out of the clip's middle (30)")
     args = parser.parse_args(argv)
     model = find_model(args)
@@ -220,6 +255,8 @@ def main(argv: list[str] | None = None) -> dict:
     extend = importlib.import_module(package + ".strnn_addon.stages.extend")
     denoise = importlib.import_module(package + ".strnn_addon.stages.denoise")
     inbetween = importlib.import_module(package + ".strnn_addon.stages.inbetween")
+    common = importlib.import_module(package + ".strnn_addon.stages.common")
+    footlock = importlib.import_module(package + ".strnn_addon.stages.footlock")
     best: dict = {}
     for _ in range(args.repeat):
         obj = build_scene(args.frames)
@@ -231,12 +268,15 @@ def main(argv: list[str] | None = None) -> dict:
             clear_keys(obj, start, start + args.gap - 1)
             timings = stage_times(inbetween.fill_gap, bpy.context, obj, frame_start=start,
                                   frame_end=start + args.gap - 1)
+        elif args.operator == "footlock":
+            timings = stage_times(lambda context, o, progress: common.run(footlock.foot_lock_steps(context, o),
+                                                                           progress), bpy.context, obj)
         else:
             timings = stage_times(denoise.denoise_action, bpy.context, obj)
         timings.update(floor_read=read_floor, floor_write=write_floor)
         if not best or timings["total"] < best["total"]:
             best = timings
-    done = {"extend": f"+ {args.frames} new", "denoise": "denoised",
+    done = {"extend": f"+ {args.frames} new", "denoise": "denoised", "footlock": "foot-locked",
             "inbetween": f"with a gap of {args.gap} frames filled"}[args.operator]
     if args.operator == "denoise":
         bridge = importlib.import_module(package + ".strnn_addon.engine_bridge")
@@ -245,6 +285,7 @@ def main(argv: list[str] | None = None) -> dict:
     for stage in ("read", "model", "solve", "write", "total"):
         print(f"  {stage:6s} {best[stage]:7.3f} s")
     print(f"  floor: read keys {best['floor_read']:.3f} s, write keys {best['floor_write']:.3f} s")
+    print(f"  memory beyond the scene's own: {best['extra_mb']:.0f} MB at the peak")
     return best
 
 
