@@ -41,7 +41,7 @@ VARIANTS = {
 def parse_args(argv=None) -> argparse.Namespace:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--data", required=True, help="folder of .bvh files (searched recursively)")
-    p.add_argument("--out", default="runs/default", help="output folder (state, log, release)")
+    p.add_argument("--out", default=TrainConfig.out, help="output folder (state, log, release)")
     p.add_argument("--arch", choices=ARCHS, default="strnn",
                    help="STRNN, or a baseline: siMLPe (Guo et al. 2023) or the residual GRU (Martinez et al. "
                         "2017); the STRNN-only options below are ignored for a baseline")
@@ -49,14 +49,16 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--width", type=int, default=None,
                    help="STRNN: L4 width and LSTM size (default 128, paper: 512); residual GRU: units (default 512)")
     p.add_argument("--blocks", type=int, default=48, help="siMLPe: temporal MLP blocks")
-    p.add_argument("--encode-len", type=int, default=20, help="context frames m")
-    p.add_argument("--predict-len", type=int, default=20, help="predicted frames n")
-    p.add_argument("--residual-width", type=int, default=512, help="hidden units of the residual filter")
-    p.add_argument("--dropout", type=float, default=0.0, help="dropout after each spatial layer (paper: 0.1)")
-    p.add_argument("--spatial-norm", choices=("batch", "none"), default="batch",
+    p.add_argument("--encode-len", type=int, default=STRNNConfig.encode_len, help="context frames m")
+    p.add_argument("--predict-len", type=int, default=STRNNConfig.predict_len, help="predicted frames n")
+    p.add_argument("--residual-width", type=int, default=STRNNConfig.residual_width,
+                   help="hidden units of the residual filter")
+    p.add_argument("--dropout", type=float, default=STRNNConfig.dropout,
+                   help="dropout after each spatial layer (paper: 0.1)")
+    p.add_argument("--spatial-norm", choices=("batch", "none"), default=STRNNConfig.spatial_norm,
                    help="normalisation after each spatial layer: the paper's batch norm, or none (trains and "
                         "runs alike; see the model card)")
-    p.add_argument("--steps", type=int, default=5000, help="optimiser steps over all phases")
+    p.add_argument("--steps", type=int, default=TrainConfig.steps, help="optimiser steps over all phases")
     p.add_argument("--recalibrate-batches", type=int, default=TrainConfig.recalibrate_batches, metavar="N",
                    help="before writing the release, recompute the batch norms' running statistics over N "
                         "training batches (with --init and --steps 0: fix a trained model's statistics)")
@@ -65,39 +67,44 @@ def parse_args(argv=None) -> argparse.Namespace:
                    help="share of the steps for the spatio-temporal net, the residual filter's pre-training on "
                         "ground truth and its fine-tuning on the frozen net's output (e.g. 0 0 1 after --init: "
                         "only the filter, which starts afresh where --residual-width differs)")
-    p.add_argument("--batch", type=int, default=128, help="windows per step")
-    p.add_argument("--optimizer", choices=("adam", "adadelta"), default="adam")
+    p.add_argument("--batch", type=int, default=TrainConfig.batch, help="windows per step")
+    p.add_argument("--optimizer", choices=("adam", "adadelta"), default=TrainConfig.optimizer)
     p.add_argument("--lr", type=float, default=None,
                    help="learning rate (default: 1e-3; siMLPe 3e-4, the paper's)")
-    p.add_argument("--smooth-weight", type=float, default=1.0, help="weight of the long-horizon cost")
-    p.add_argument("--recon-weight", type=float, default=1.0,
+    p.add_argument("--smooth-weight", type=float, default=TrainConfig.smooth_weight,
+                   help="weight of the long-horizon cost")
+    p.add_argument("--recon-weight", type=float, default=TrainConfig.recon_weight,
                    help="weight of the reconstructed context frames against the predicted frames in the MSE")
     p.add_argument("--velocity-weight", type=float, default=TrainConfig.velocity_weight,
                    help="weight of the error of the joints' frame-to-frame motion from the context's last frame "
                         "through the prediction (0: off)")
-    p.add_argument("--rollout-windows", type=int, default=0,
+    p.add_argument("--rollout-windows", type=int, default=TrainConfig.rollout_windows,
                    help="train on contexts the model generated itself, open loop for up to this many windows "
                         "(0: off)")
-    p.add_argument("--rollout-fraction", type=float, default=0.5,
+    p.add_argument("--rollout-fraction", type=float, default=TrainConfig.rollout_fraction,
                    help="share of the first phase's steps that use such contexts")
-    p.add_argument("--denoise-fraction", type=float, default=0.25,
+    p.add_argument("--denoise-fraction", type=float, default=TrainConfig.denoise_fraction,
                    help="share of each batch whose context is re-derived from positions with noise (denoising)")
-    p.add_argument("--init", default="", help="start from the weights of a train_state.pt or release folder")
-    p.add_argument("--noise-start", type=float, default=0.1, help="initial input-noise std")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--init", default=TrainConfig.init,
+                   help="start from the weights of a train_state.pt or release folder")
+    p.add_argument("--noise-start", type=float, default=TrainConfig.noise_start, help="initial input-noise std")
+    p.add_argument("--seed", type=int, default=TrainConfig.seed)
     p.add_argument("--threads", type=int, default=0, help="torch CPU threads (0: torch's default)")
-    p.add_argument("--cache", default="data/cache", help="folder for cached dataset arrays")
-    p.add_argument("--max-minutes", type=float, default=0.0, help="stop with a checkpoint after this long")
-    p.add_argument("--checkpoint-seconds", type=float, default=120.0, help="seconds between checkpoints")
+    p.add_argument("--cache", default=TrainConfig.cache, help="folder for cached dataset arrays")
+    p.add_argument("--max-minutes", type=float, default=TrainConfig.max_minutes,
+                   help="stop with a checkpoint after this long")
+    p.add_argument("--checkpoint-seconds", type=float, default=TrainConfig.checkpoint_seconds,
+                   help="seconds between checkpoints")
     p.add_argument("--resume", action="store_true", help="continue from OUT/train_state.pt")
     p.add_argument("--export", action="store_true",
                    help="only write OUT/release_stepN from OUT/train_state.pt (try a model mid-training)")
-    p.add_argument("--purpose", choices=PURPOSES, default=PURPOSES[0],
+    p.add_argument("--purpose", choices=PURPOSES, default=TrainConfig.purpose,
                    help="recorded in the release: 'denoise' marks a model trained for Denoise alone (its "
                         "predictions are not for Extend or Follow Curve, which then refuse it)")
     p.add_argument("--offsets", action="store_true",
                    help="the frame decoder outputs offsets from the last context frame (a residual connection)")
-    p.add_argument("--mirror", type=float, default=0.0, help="share of training windows mirrored left to right")
+    p.add_argument("--mirror", type=float, default=TrainConfig.mirror,
+                   help="share of training windows mirrored left to right")
     p.add_argument("--hold-out", action="store_true",
                    help="keep the held-out groups of configs/data.toml out of training and validation")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
