@@ -48,6 +48,7 @@ else:  # run by path from a checkout
     from batch_worker import process_file  # noqa: E402
 
 from model_core.io.files import write_json  # noqa: E402  (model_core never imports bpy)
+from model_core.ops import options as opts  # noqa: E402
 
 EXTENSIONS = (".bvh", ".blend")
 PATHS = ("line", "circle", "s_curve", "figure_eight")
@@ -96,21 +97,20 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("extend", parents=[common], help="continue each clip (strnn.extend_clip)",
                        description="Continue each clip by --frames frames with the motion model.")
-    p.add_argument("--frames", type=int, default=120, help="frames to add after the last frame (default: 120)")
-    p.add_argument("--context-frames", type=int, default=0,
-                   help="frames before the end the model reads; 0: just enough (default: 0)")
+    p.add_argument("--frames", type=int, default=opts.EXTEND_FRAMES.default, help=opts.EXTEND_FRAMES.help())
+    p.add_argument("--context-frames", type=int, default=opts.CONTEXT_FRAMES.default,
+                   help=opts.CONTEXT_FRAMES.help())
     p.add_argument("--from-frame", type=int, default=None, metavar="FRAME",
                    help="continue after this frame instead of the clip's last, replacing the motion after it")
-    p.add_argument("--foot-lock", action="store_true", help="also lock the feet on the new frames")
+    foot_lock_flag(p, "extend_clip")
 
     p = sub.add_parser("denoise", parents=[common], help="clean each clip (strnn.denoise_action)",
                        description="Clean each clip with the motion model.")
-    p.add_argument("--strength", type=float, default=1.0,
-                   help="blend between the original (0) and the model's output (1) (default: 1.0)")
+    p.add_argument("--strength", type=float, default=opts.STRENGTH.default, help=opts.STRENGTH.help())
     p.add_argument("--denoise-model", type=Path, default=None, metavar="DIR",
                    help="model release folder for the Denoise Model Folder preference (default: the "
                         "denoising model bundled in the zip)")
-    p.add_argument("--foot-lock", action="store_true", help="also lock the feet")
+    foot_lock_flag(p, "denoise_action")
 
     p = sub.add_parser("inbetween", parents=[common], help="fill a gap with the model's in-between "
                        "(strnn.inbetween)", description="Fill a gap in each clip with the motion model. With --gap, "
@@ -118,24 +118,23 @@ def build_parser() -> argparse.ArgumentParser:
                        "around them; without it, the first run of frames without keys is filled.")
     p.add_argument("--gap", type=int, nargs=2, default=None, metavar=("START", "END"),
                    help="the frames to fill (their keys are replaced); default: the first gap between keys")
-    p.add_argument("--no-foot-lock", action="store_true", help="do not lock the feet in the gap")
+    foot_lock_flag(p, "inbetween")
 
     p = sub.add_parser("footlock", parents=[common], help="pin the feet while they touch the ground "
                        "(strnn.foot_lock)", description="Pin the feet on the ground while they touch it (leg IK).")
-    p.add_argument("--blend", type=float, default=0.15,
-                   help="seconds over which each lock fades in and out (default: 0.15)")
+    p.add_argument("--blend", type=float, default=opts.LOCK_BLEND.default, help=opts.LOCK_BLEND.help(" s"))
 
-    p = sub.add_parser("follow", parents=[common], help="walk each character along a path (strnn.follow_curve, "
-                       "needs PyTorch)", description="Make each character walk along a path with the motion "
-                       "model (needs PyTorch in the Python running this script).")
+    p = sub.add_parser("follow", parents=[common], help="walk each character along a path (strnn.follow_curve)",
+                       description="Make each character walk along a path with the motion model, from the "
+                       "path's start (walking there first when the take ends elsewhere).")
     p.add_argument("--path", choices=PATHS, default="circle",
                    help="built-in ground path starting at the world origin heading -Y: line (10 m), circle "
                         "(radius 2 m), s_curve (8 m), figure_eight (two 2 m loops) (default: circle)")
     p.add_argument("--curve", default="",
                    help="for .blend inputs: name of a curve object in the file to follow instead of --path")
-    p.add_argument("--frames", type=int, default=0, help="frames to make; 0: until the path ends (default: 0)")
-    p.add_argument("--speed", type=float, default=0.0, help="walking speed in m/s; 0: the motion's own (default)")
-    p.add_argument("--no-foot-lock", action="store_true", help="do not lock the feet")
+    p.add_argument("--frames", type=int, default=opts.CURVE_FRAMES.default, help=opts.CURVE_FRAMES.help())
+    p.add_argument("--speed", type=float, default=opts.CURVE_SPEED.default, help=opts.CURVE_SPEED.help(" m/s"))
+    foot_lock_flag(p, "follow_curve")
     p = sub.add_parser("transfer", parents=[common], help="move each take onto a character "
                        "(strnn.transfer_motion)", description="Move the motion of each BVH take onto the rig of "
                        "a character .blend (its proportions, feet on the floor), one new action per take, saved "
@@ -145,8 +144,17 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--rig", default="", metavar="NAME",
                    help="the armature object in --target to put the motion on (default: its active armature, "
                         "or its only one)")
-    p.add_argument("--no-foot-lock", action="store_true", help="do not lock the feet during contacts")
+    foot_lock_flag(p, "transfer_motion")
     return parser
+
+
+def foot_lock_flag(p, operator: str) -> None:
+    """``--foot-lock`` where the operator does not lock the feet by default, ``--no-foot-lock`` where it does
+    (:data:`options.FOOT_LOCK`); either way ``args.foot_lock`` says what to do."""
+    if opts.FOOT_LOCK[operator]:
+        p.add_argument("--no-foot-lock", dest="foot_lock", action="store_false", help="do not lock the feet")
+    else:
+        p.add_argument("--foot-lock", action="store_true", help=opts.FOOT_LOCK_TIP.replace("Then p", "P"))
 
 
 def operator_call(args) -> tuple[str, dict]:
@@ -161,10 +169,10 @@ def operator_call(args) -> tuple[str, dict]:
     if args.command == "inbetween":
         start, end = args.gap or (1, 250)
         return "inbetween", {"use_range": args.gap is not None, "frame_start": start, "frame_end": end,
-                             "foot_lock": not args.no_foot_lock}
+                             "foot_lock": args.foot_lock}
     if args.command == "transfer":
-        return "transfer_motion", {"foot_lock": not args.no_foot_lock}
-    return "follow_curve", {"frames": args.frames, "speed": args.speed, "foot_lock": not args.no_foot_lock}
+        return "transfer_motion", {"foot_lock": args.foot_lock}
+    return "follow_curve", {"frames": args.frames, "speed": args.speed, "foot_lock": args.foot_lock}
 
 
 def check_args(parser, args) -> None:

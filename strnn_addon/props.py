@@ -17,26 +17,24 @@ from bpy.props import (
 )
 
 from ..model_core.motion.conventions import JOINTS
+from ..model_core.ops import options as opts
 from . import engine_bridge
 
 ADDON_ID = __package__.rpartition(".")[0]  # the extension's module, e.g. bl_ext.user_default.strnn_motion
 TAIL_JOINTS = ("l_toe", "r_toe", "l_fingertip", "r_fingertip")
-FOOT_LOCK_TIP = "Then pin the feet on the ground while they touch it (leg IK against foot sliding)"
 
 
 # ------------------------------------------------------------------ options
-# Each option is defined once, here, and lives on its operator: the sidebar shows and edits the
-# operator's remembered values (``WindowManager.operator_properties_last``), which are also what F3,
-# the menus and the redo panel use, and the batch CLI hands the same names.
+# Each option lives on its operator: the sidebar shows and edits the operator's remembered values
+# (``WindowManager.operator_properties_last``), which are also what F3, the menus and the redo panel
+# use. The options the batch CLI also takes are declared once in ``model_core/ops/options.py``.
 
 def frames_to_add():
-    return IntProperty(name="Frames", default=120, min=1, soft_max=2000,
-                       description="How many frames to add after the action's last frame")
+    return IntProperty(**opts.EXTEND_FRAMES.blender())
 
 
 def context_frames():
-    return IntProperty(name="Context", default=0, min=0, soft_max=600,
-                       description="Frames before the end the model reads; 0: just enough (20 at 30 fps)")
+    return IntProperty(**opts.CONTEXT_FRAMES.blender())
 
 
 def from_current():
@@ -56,13 +54,13 @@ def only_selected():
                         description="Write new keys only on the selected bones; the others keep their keys exactly")
 
 
-def foot_lock(default: bool):
-    return BoolProperty(name="Foot Lock", default=default, description=FOOT_LOCK_TIP)
+def foot_lock(operator: str):
+    """``operator``: the operator's name (``extend_clip``, ...), whose default :data:`options.FOOT_LOCK` gives."""
+    return BoolProperty(name="Foot Lock", default=opts.FOOT_LOCK[operator], description=opts.FOOT_LOCK_TIP)
 
 
 def strength():
-    return FloatProperty(name="Strength", default=1.0, min=0.0, max=1.0, subtype="FACTOR",
-                         description="Blend between the original (0) and the model's output (1)")
+    return FloatProperty(subtype="FACTOR", **opts.STRENGTH.blender())
 
 
 def output():
@@ -95,18 +93,15 @@ def range_end(verb: str):
 
 
 def lock_blend():
-    return FloatProperty(name="Blend", default=0.15, min=0.0, soft_max=0.5, max=2.0, unit="TIME_ABSOLUTE",
-                         description="Seconds over which each lock fades in before a contact and out after it")
+    return FloatProperty(unit="TIME_ABSOLUTE", **opts.LOCK_BLEND.blender())
 
 
 def curve_frames():
-    return IntProperty(name="Frames", default=0, min=0, soft_max=5000,
-                       description="How many frames to make; 0: until the curve ends (one lap if cyclic)")
+    return IntProperty(**opts.CURVE_FRAMES.blender())
 
 
 def curve_speed():
-    return FloatProperty(name="Speed", default=0.0, min=0.0, soft_max=5.0, unit="VELOCITY",
-                         description="Walking speed along the curve; 0: the motion's own speed")
+    return FloatProperty(unit="VELOCITY", **opts.CURVE_SPEED.blender())
 
 
 def _objects_of(kind: str, exclude_active: bool = False):

@@ -207,3 +207,24 @@ def test_f3_and_the_sidebar_run_with_the_same_options(addon, tmp_path, real_mode
     for name, value in options.items():
         if name in settings:
             assert settings[name] == pytest.approx(value), name
+
+
+def test_the_batch_cli_and_the_operators_share_each_options_default(addon, tmp_path):
+    """Both are built from one declaration (model_core/ops/options.py): a batch run without options does what
+    the operator does without options."""
+    import importlib.util
+
+    from scenes import REPO
+
+    spec = importlib.util.spec_from_file_location("strnn_batch", REPO / "scripts" / "strnn_batch.py")
+    batch = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(batch)
+    parser = batch.build_parser()
+    for command in ("extend", "denoise", "footlock", "inbetween", "follow"):
+        args = parser.parse_args([command, str(tmp_path / "take.bvh")])
+        op, kwargs = batch.operator_call(args)
+        rna = getattr(bpy.ops.strnn, op).get_rna_type().properties
+        for name, value in kwargs.items():
+            if name in ("use_range", "frame_start", "frame_end", "from_current"):
+                continue  # the batch decides these from --gap / --from-frame
+            assert rna[name].default == pytest.approx(value), f"{command} --{name}: {value} != {rna[name].default}"

@@ -1,0 +1,46 @@
+"""The editing operations' options, each declared once: its label, default, limits and description.
+
+The Blender operators build their properties from these (``strnn_addon/props.py``; the sidebar shows
+the operators' own remembered values) and the batch CLI its arguments (``scripts/strnn_batch.py``), so
+a name, default or limit never differs between them. Plain data: no bpy here.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+
+@dataclass(frozen=True)
+class Option:
+    name: str  # the label in Blender
+    default: float | int | bool
+    description: str
+    min: float | None = None
+    max: float | None = None
+    soft_max: float | None = None
+
+    def blender(self) -> dict:
+        """Keyword arguments for a ``bpy.props`` property."""
+        return {k: v for k, v in asdict(self).items() if v is not None}
+
+    def help(self, unit: str = "") -> str:
+        """The text of a command-line argument: the description and the default."""
+        return f"{self.description} (default: {self.default:g}{unit})" if not isinstance(self.default, bool) \
+            else self.description
+
+
+EXTEND_FRAMES = Option("Frames", 120, "How many frames to add after the last frame", min=1, soft_max=2000)
+CONTEXT_FRAMES = Option("Context", 0, "Frames before the end the model reads; 0: just enough (20 at 30 fps)",
+                        min=0, soft_max=600)
+STRENGTH = Option("Strength", 1.0, "Blend between the original (0) and the model's output (1)", min=0.0, max=1.0)
+LOCK_BLEND = Option("Blend", 0.15, "Seconds over which each lock fades in before a contact and out after it",
+                    min=0.0, max=2.0, soft_max=0.5)
+CURVE_FRAMES = Option("Frames", 0, "How many frames to make; 0: until the curve ends (one lap if cyclic)",
+                      min=0, soft_max=5000)
+CURVE_SPEED = Option("Speed", 0.0, "Walking speed along the curve; 0: the motion's own speed", min=0.0,
+                     soft_max=5.0)
+
+# Whether each operation locks the feet unless told otherwise (Foot Lock's own operator always does).
+FOOT_LOCK = {"extend_clip": False, "denoise_action": False, "inbetween": True, "follow_curve": True,
+             "transfer_motion": True}
+FOOT_LOCK_TIP = "Then pin the feet on the ground while they touch it (leg IK against foot sliding)"
