@@ -163,18 +163,25 @@ def print_seeds(lh: dict) -> None:
 
 
 def run(args) -> dict:
+    # every model and the output path are checked before any work
     engine = Engine.load(args.checkpoint)
     if engine.ckpt.purpose == "denoise":
         raise CheckpointError(f"{args.checkpoint} is a denoise-only model, which cannot be scored on prediction: "
                               f"pass it as --denoise-checkpoint (with --denoise-std) and leave --checkpoint "
                               f"at a generating model")
+    denoiser, denoise_folder = None, None
+    if args.denoise_std or args.denoise_pops:
+        denoise_folder = args.denoise_checkpoint or default_denoiser(args.checkpoint)
+        denoiser = Engine.load(denoise_folder)
+    baselines = load_baselines(args)
+    if args.json:
+        check_writable(Path(args.json))
     data = load_folder(args.data, cache_dir=args.cache or None)
     for failure in data.failures:
         print(f"skipped: {failure}", file=sys.stderr)
     clips = select_clips(data, args.split, args.group)
     print(f"evaluating {args.checkpoint} on {len(clips)} clips of {args.data} ({args.group or args.split})",
           file=sys.stderr)
-    baselines = load_baselines(args)
     pred = evaluate_prediction(engine, clips, {name: b for name, (b, _) in baselines.items()})
     result = {"checkpoint": str(args.checkpoint), "data": str(args.data), "clips": len(clips),
               "windows": pred.pop("windows"), "prediction": pred}
@@ -187,10 +194,8 @@ def run(args) -> dict:
         lh = evaluate_long_horizon(engine, clips, args.long_horizon, args.seeds, reference,
                                    log=lambda m: print(m, file=sys.stderr))
         result["long_horizon"] = lh
-    if args.denoise_std or args.denoise_pops:
-        folder = args.denoise_checkpoint or default_denoiser(args.checkpoint)
-        extra["denoise_checkpoint"] = f"{folder} at {args.denoise_fps:g} fps"
-        denoiser = Engine.load(folder)
+    if denoiser is not None:
+        extra["denoise_checkpoint"] = f"{denoise_folder} at {args.denoise_fps:g} fps"
     if args.denoise_std:
         dn = evaluate_denoise(denoiser, clips, args.denoise_std, fps=args.denoise_fps)
         extra["butterworth_cutoff_hz"] = dn.pop("butterworth_cutoff_hz")
@@ -209,6 +214,15 @@ def run(args) -> dict:
         result["paths"] = run_paths(args, clips)
     print_table(result, extra)
     return result
+
+
+def check_writable(path: Path) -> None:
+    """:class:`ValueError` before any work when the --json file cannot be written where it is asked."""
+    folder = path.parent
+    while not folder.exists() and folder != folder.parent:
+        folder = folder.parent
+    if path.is_dir() or not folder.is_dir() or not os.access(folder, os.W_OK | os.X_OK):
+        raise ValueError(f"--json {path}: cannot write there; choose another path")
 
 
 def load_baselines(args) -> dict:

@@ -6,6 +6,7 @@
 from __future__ import annotations
 
 import json
+import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -137,6 +138,19 @@ def save_release(folder: str | Path, weights: dict[str, np.ndarray], config: dic
     return folder
 
 
+def _read_json(path: Path) -> dict:
+    """``path`` parsed as a JSON object, or :class:`CheckpointError` naming the file and the fault."""
+    try:
+        doc = json.loads(path.read_text())
+    except (OSError, UnicodeDecodeError) as e:
+        raise CheckpointError(f"{path} cannot be read ({e})") from e
+    except ValueError as e:
+        raise CheckpointError(f"{path} is not valid JSON ({e}): copy the model folder again") from e
+    if not isinstance(doc, dict):
+        raise CheckpointError(f"{path} does not hold a JSON object: copy the model folder again")
+    return doc
+
+
 def load_release(folder: str | Path | None = None) -> Checkpoint:
     """Load a release checkpoint folder (default: the bundled model). Never unpickles."""
     folder = Path(folder) if folder else DEFAULT_MODEL
@@ -146,25 +160,60 @@ def load_release(folder: str | Path | None = None) -> Checkpoint:
         if not (folder / name).exists():
             raise CheckpointError(f"{folder}: missing {name}; a model folder holds model.safetensors, "
                                   "model.json and seeds.npz (see models/strnn_default)")
-    doc = json.loads((folder / "model.json").read_text())
+    doc = _read_json(folder / "model.json")
     if doc.get("format") != "strnn-release-1":
         raise CheckpointError(f"{folder / 'model.json'}: unsupported format {doc.get('format')!r}")
-    if doc["layout"]["size"] != LAYOUT.size:
-        raise CheckpointError(f"{folder}: feature size {doc['layout']['size']} does not match "
-                              f"this code's {LAYOUT.size}")
-    seeds, names = np.zeros((0, doc["config"]["encode_len"], LAYOUT.size), np.float32), []
+    for key, wanted in (("layout", dict), ("config", dict), ("normalisation", dict)):
+        if not isinstance(doc.get(key), wanted):
+            raise CheckpointError(f"{folder / 'model.json'}: no {key!r} section; the file is incomplete (copy the "
+                                  "whole model folder again, or write it with scripts/train.py --export)")
+    if doc["layout"].get("size") != LAYOUT.size:
+        raise CheckpointError(f"{folder}: feature size {doc['layout'].get('size')} does not match "
+                              f"this code's {LAYOUT.size}: the model was trained for another feature layout")
+    seeds, names = np.zeros((0, doc["config"].get("encode_len", 0), LAYOUT.size), np.float32), []
     if (folder / "seeds.npz").exists():
-        z = np.load(folder / "seeds.npz", allow_pickle=False)
-        seeds, names = z["features"], [str(n) for n in z["names"]]
+        try:
+            z = np.load(folder / "seeds.npz", allow_pickle=False)
+            seeds, names = z["features"], [str(n) for n in z["names"]]
+        except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile) as e:
+            raise CheckpointError(f"{folder / 'seeds.npz'} is unreadable ({e}): copy the model folder again") from e
     norm = doc["normalisation"]
+    if len(norm.get("mean", ())) != LAYOUT.size or len(norm.get("std", ())) != LAYOUT.size:
+        raise CheckpointError(f"{folder / 'model.json'}: the normalisation must hold {LAYOUT.size} means and "
+                              "standard deviations; the file is incomplete (copy the model folder again)")
     meta = {k: v for k, v in doc.items() if k not in ("config", "normalisation")}
     reader = load_file if load_file is not None else read_safetensors
-    ckpt = Checkpoint(reader(str(folder / "model.safetensors")), doc["config"],
-                      np.array(norm["mean"], np.float32), np.array(norm["std"], np.float32), meta, seeds, names)
+    try:
+        weights = reader(str(folder / "model.safetensors"))
+    except Exception as e:  # safetensors raises its own error type for a damaged file
+        raise CheckpointError(f"{folder / 'model.safetensors'} is damaged or incomplete ({e}): copy the model "
+                              "folder again, or export it anew with scripts/train.py --export") from e
+    ckpt = Checkpoint(weights, doc["config"], np.array(norm["mean"], np.float32), np.array(norm["std"], np.float32),
+                      meta, seeds, names)
     if ckpt.purpose not in PURPOSES:
         raise CheckpointError(f"{folder / 'model.json'}: unknown purpose {ckpt.purpose!r} "
                               f"(one of {', '.join(PURPOSES)})")
     if ckpt.architecture not in ARCHITECTURES:
         raise CheckpointError(f"{folder / 'model.json'}: unknown architecture {ckpt.architecture!r} "
                               f"(one of {', '.join(ARCHITECTURES)})")
+    if ckpt.architecture == ARCHITECTURES[0]:
+        _check_strnn_shapes(folder, ckpt)
     return ckpt
+
+
+def _check_strnn_shapes(folder: Path, ckpt: Checkpoint) -> None:
+    """The weights of an STRNN release have the width, window and frame size its model.json says."""
+    cfg, w = ckpt.config, ckpt.weights
+    width, m, n = cfg.get("width"), cfg.get("encode_len"), cfg.get("predict_len")
+    found = {"width": w["predictor.weight_hh"].shape[1] if "predictor.weight_hh" in w else None}
+    if cfg.get("residual") and "filter.net.0.weight" in w:
+        found["window"] = w["filter.net.0.weight"].shape[1] // max(cfg.get("frame_size", LAYOUT.size), 1)
+    wanted = {"width": width, "window": (m or 0) + (n or 0)}
+    for key, value in found.items():
+        if value is None:
+            raise CheckpointError(f"{folder / 'model.safetensors'} holds no STRNN predictor: it belongs to another "
+                                  "model than model.json describes (copy both from the same model folder)")
+        if value != wanted[key]:
+            raise CheckpointError(f"{folder}: model.json describes a {key} of {wanted[key]} but model.safetensors "
+                                  f"holds one of {value}: the two files come from different models (copy both "
+                                  "from the same model folder)")

@@ -328,12 +328,22 @@ def _dist_env() -> tuple[int, int]:
     return (dist.get_rank(), world) if world > 1 else (0, 1)
 
 
+def check_writable(out: Path) -> None:
+    """:class:`ValueError` before any work when the run folder ``out`` cannot be made or written."""
+    existing = out
+    while not existing.exists() and existing != existing.parent:
+        existing = existing.parent
+    if not existing.is_dir() or not os.access(existing, os.W_OK | os.X_OK):
+        raise ValueError(f"--out {out}: cannot write there ({existing} is not a writable folder); choose another "
+                         "--out")
+
+
 def train(cfg: TrainConfig, resume: bool = False, progress: bool = True) -> Path:
     """Train, checkpointing to ``cfg.out/train_state.pt``; writes the release folder
     ``cfg.out/release`` at the end and returns it."""
     rank, world = _dist_env()
     out = Path(cfg.out)
-    log = setup_logging(out, rank)
+    check_writable(out)
     torch.manual_seed(cfg.seed + rank)
     rng = np.random.default_rng(cfg.seed + rank)
     data = load_folder(cfg.data, cache_dir=cfg.cache, progress=rank == 0 and progress)
@@ -353,11 +363,15 @@ def train(cfg: TrainConfig, resume: bool = False, progress: bool = True) -> Path
         step, history = saved["step"], json.loads(saved["history"])
         torch.set_rng_state(saved["torch_rng"])
         rng.bit_generator.state = json.loads(saved["numpy_rng"])
+    if saved is None and cfg.init:
+        model.load_state_dict(initial_weights(cfg.init, model))
+    # everything is checked and loaded: only now does the run folder (and its log) appear
+    log = setup_logging(out, rank)
+    if saved is not None:
         log.info("resumed at step %d", step)
     elif resume:
         log.info("no state at %s; starting from scratch", state_path)
     if saved is None and cfg.init:
-        model.load_state_dict(initial_weights(cfg.init, model))
         log.info("initial weights from %s", cfg.init)
     if rank == 0:
         log.info("config %s", json.dumps(asdict(cfg)))

@@ -135,3 +135,23 @@ def test_inbetween_feet_and_denoise_options_write_their_keys(walks, tmp_path, ca
     printed = capsys.readouterr().out
     for heading in ("In-betweening", "Single-frame pops", "Feet of"):
         assert heading in printed
+
+
+def test_bad_models_and_outputs_are_found_before_any_work(walks, tmp_path, capsys):
+    """A damaged --denoise-checkpoint and an unwritable --json stop the run before the data is even read: one
+    error line naming the file, no scoring, nothing written."""
+    damaged = tmp_path / "damaged"
+    damaged.mkdir()
+    from model_core.io.checkpoint import DEFAULT_MODEL
+
+    for name in ("model.json", "seeds.npz"):
+        (damaged / name).write_bytes((DEFAULT_MODEL / name).read_bytes())
+    (damaged / "model.safetensors").write_bytes((DEFAULT_MODEL / "model.safetensors").read_bytes()[:5000])
+    assert evaluate.main(["--data", str(walks), "--denoise-std", "3", "--denoise-checkpoint", str(damaged)]) == 2
+    err = capsys.readouterr().err
+    assert "damaged or incomplete" in err and "evaluating" not in err and "Traceback" not in err
+    blocked = tmp_path / "file"
+    blocked.write_text("")
+    assert evaluate.main(["--data", str(walks), "--json", str(blocked / "out.json")]) == 2
+    err = capsys.readouterr().err
+    assert "--json" in err and "cannot write there" in err and "evaluating" not in err

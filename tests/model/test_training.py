@@ -23,7 +23,7 @@ REPO = Path(__file__).resolve().parents[2]
 
 
 def tiny(**kw) -> STRNNConfig:
-    return STRNNConfig(width=16, residual_width=16, **kw)
+    return STRNNConfig(**({"width": 16, "residual_width": 16} | kw))
 
 
 def test_overfits_one_batch():
@@ -189,3 +189,21 @@ def test_seeds_come_from_another_split_when_the_folder_has_no_test_take(walk_fol
     short = MotionData(data.root, [dataclasses.replace(c, features=c.features[:5]) for c in data.clips])
     with pytest.raises(ValueError, match="no clip has 20 frames"):
         pick_seeds(short, 20)
+
+
+def test_a_run_that_cannot_start_says_why_and_leaves_no_run_folder(walk_folder, tmp_path):
+    """Checked before any work: an --out that cannot be written, an --init of another width, a data folder
+    without takes. Each is one error, and no run folder is left behind."""
+    blocked = tmp_path / "file"
+    blocked.write_text("")
+    with pytest.raises(ValueError, match="cannot write there"):
+        train(_cfg(walk_folder, blocked / "run"), progress=False)
+    wide = train(_cfg(walk_folder, tmp_path / "wide", model=tiny(width=64)), progress=False)
+    with pytest.raises(ValueError, match="same width"):
+        train(_cfg(walk_folder, tmp_path / "narrow", model=tiny(width=32), init=str(wide)), progress=False)
+    assert not (tmp_path / "narrow").exists()
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    with pytest.raises(ValueError, match="no .bvh files"):
+        train(_cfg(empty, tmp_path / "nothing"), progress=False)
+    assert not (tmp_path / "nothing").exists()
