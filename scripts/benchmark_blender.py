@@ -37,7 +37,7 @@ import bpy  # noqa: E402
 from batch_worker import clear_keys  # noqa: E402
 
 from model_core.motion.conventions import JOINTS, PARENT_NAMES, yup_to_zup  # noqa: E402
-from model_core.motion.synthetic import _offset  # noqa: E402
+from model_core.motion.synthetic import rest_offset  # noqa: E402
 
 FINGERS = ("Thumb", "Index", "Middle", "Ring", "Pinky")
 
@@ -85,7 +85,7 @@ def rig_bones() -> list[tuple]:
     j = {}
     for joint in JOINTS:
         parent = PARENT_NAMES[joint]
-        j[joint] = (j[parent] if parent else np.array([0.0, 0.95, 0.0])) + _offset(joint)
+        j[joint] = (j[parent] if parent else np.array([0.0, 0.95, 0.0])) + rest_offset(joint)
     j = {k: yup_to_zup(v) for k, v in j.items()}
     mid = lambda a, b, t=0.5: a + (b - a) * t
     up = np.array([0, 0, 0.1])

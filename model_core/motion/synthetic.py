@@ -23,7 +23,7 @@ _OFFSETS = {
 }
 
 
-def _offset(joint: str) -> np.ndarray:
+def rest_offset(joint: str) -> np.ndarray:
     side, _, part = joint.partition("_")
     o = np.array(_OFFSETS[part if part else side], dtype=np.float64)
     if side == "r":
@@ -74,5 +74,5 @@ def walking_skeleton(frames: int = 120, fps: float = MODEL_FPS, speed: float = 1
             grot[:, j], gpos[:, j] = yaw_matrix(yaw) @ rot, root
         else:
             grot[:, j] = grot[:, p] @ rot
-            gpos[:, j] = gpos[:, p] + np.einsum("fij,j->fi", grot[:, p], _offset(name))
+            gpos[:, j] = gpos[:, p] + np.einsum("fij,j->fi", grot[:, p], rest_offset(name))
     return gpos.astype(np.float32)

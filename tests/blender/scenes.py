@@ -81,13 +81,13 @@ def same_keys(a: dict, b: dict) -> bool:
 def _rest_joints() -> dict[str, np.ndarray]:
     """Canonical joint rest positions, Blender axes (Z up, facing -Y, left = +X), metres."""
     from model_core.motion.conventions import JOINTS, PARENT_NAMES, yup_to_zup
-    from model_core.motion.synthetic import _offset
+    from model_core.motion.synthetic import rest_offset
 
     pos: dict[str, np.ndarray] = {}
     for joint in JOINTS:
         parent = PARENT_NAMES[joint]
         base = pos[parent] if parent else np.array([0.0, 0.95, 0.0])
-        pos[joint] = base + _offset(joint)
+        pos[joint] = base + rest_offset(joint)
     return {j: yup_to_zup(p) for j, p in pos.items()}
 
 
