@@ -55,10 +55,23 @@ OPS = [("extend_clip", {"frames": 30}), ("denoise_action", {}), ("foot_lock", {}
        ("inbetween", {"use_range": True, "frame_start": 40, "frame_end": 50})]
 
 
-@pytest.mark.parametrize("op, kw", OPS, ids=[o for o, _ in OPS])
-def test_every_operator_writes_a_local_action(character, real_model, op, kw):
+@pytest.mark.parametrize("op, kw", OPS + [("follow_curve", {"frames": 30}), ("transfer_motion", {})],
+                         ids=[o for o, _ in OPS] + ["follow_curve", "transfer_motion"])
+def test_every_operator_writes_a_local_action(character, real_model, tmp_path, op, kw):
     arm, library = character
     before = digest(library)
+    if op == "follow_curve":  # a curve of the shot, from the character's feet along -Y
+        data = bpy.data.curves.new("Path", "CURVE")
+        spline = data.splines.new("POLY")
+        spline.points.add(1)
+        spline.points[0].co, spline.points[1].co = (0, 0, 0, 1), (0, -4, 0, 1)
+        curve = bpy.data.objects.new("Path", data)
+        bpy.context.scene.collection.objects.link(curve)
+        kw = {**kw, "curve": curve.name}
+    elif op == "transfer_motion":  # a take imported into the shot, moved onto the overridden character
+        source = import_bvh(walk_bvh(tmp_path / "take", frames=60))
+        kw = {**kw, "source": source.name}
+        bpy.context.view_layer.objects.active = arm
     old = action_of(arm)
     assert getattr(bpy.ops.strnn, op)(**kw) == {"FINISHED"}
     new = action_of(arm)
