@@ -186,25 +186,24 @@ class Engine:
 
     def denoise_steps(self, feats: np.ndarray, stride: int | None = None, batch: int = 256):
         """:meth:`denoise` as a step generator (:mod:`steps`): yields the fraction of the windows
-        done after each ``batch`` of them, returns the features."""
+        done after each ``batch`` of them, returns the features. Each batch is blended in as it comes,
+        so a long take holds one batch of windows at a time."""
         feats = np.asarray(feats, np.float32)
         f = len(feats)
         if f < self.m:
             raise ValueError(f"denoising needs at least {self.m} frames, got {f}")
         stride = stride or max(1, self.m // 4)
         starts = sorted(set(range(0, f - self.m + 1, stride)) | {f - self.m})
-        windows = np.stack([feats[s:s + self.m] for s in starts])
-        parts = []
-        for i in range(0, len(windows), batch):
-            parts.append(self.forward(windows[i:i + batch])[:, : self.m])
-            yield min(i + batch, len(windows)) / len(windows)
-        decoded = np.concatenate(parts)
         weight = np.hanning(self.m + 2)[1:-1].astype(np.float32)[:, None]
         acc = np.zeros_like(feats)
         norm = np.zeros((f, 1), np.float32)
-        for s, d in zip(starts, decoded):
-            acc[s:s + self.m] += weight * d
-            norm[s:s + self.m] += weight
+        for i in range(0, len(starts), batch):
+            part = starts[i:i + batch]
+            decoded = self.forward(np.stack([feats[s:s + self.m] for s in part]))
+            for s, d in zip(part, decoded):
+                acc[s:s + self.m] += weight * d[: self.m]
+                norm[s:s + self.m] += weight
+            yield min(i + batch, len(starts)) / len(starts)
         return acc / norm
 
     # ------------------------------------------------------ position level

@@ -34,6 +34,7 @@ NOISE_FLOOR_M = 0.0001  # nor the input beyond this one (clean capture reads as 
 D2_NOISE_GAIN = 6.0  # variance of the 2nd difference of unit white noise
 BIAS_WINDOW_S = 0.1  # sigma of the low-pass that separates the model's error from the input's noise
 TRUST_WINDOW_S = 0.25  # sigma of the window over which the model's error is measured
+JOINT_GROUP = 11  # joints measured and solved at a time: half a long take's working arrays, two passes of the solve
 
 
 @dataclass
@@ -103,13 +104,27 @@ def repair_pops(pos: np.ndarray, rounds: int = 3) -> tuple[np.ndarray, np.ndarra
     return x, pops
 
 
+def joint_groups(j: int) -> list[slice]:
+    """Every measurement and solve here is joint by joint: a long take is worked on :data:`JOINT_GROUP`
+    joints at a time, so its working arrays stay a fraction of the take's size."""
+    return [slice(a, min(a + JOINT_GROUP, j)) for a in range(0, j, JOINT_GROUP)]
+
+
 def assess(pos: np.ndarray) -> tuple[np.ndarray, Assessment]:
     """(pop-repaired positions, :class:`Assessment`) of a take ``[F, J, 3]``."""
-    fixed, pops = repair_pops(pos)
-    return fixed, Assessment(noise_level(fixed), pops)
+    pos = np.asarray(pos, np.float64)
+    parts = [repair_pops(pos[:, g]) for g in joint_groups(pos.shape[1])]
+    fixed = np.concatenate([p[0] for p in parts], axis=1)
+    return fixed, Assessment(noise_level(fixed), np.concatenate([p[1] for p in parts], axis=1))
 
 
 def fuse(pos: np.ndarray, model: np.ndarray, found: Assessment, fps: float) -> np.ndarray:
+    """:func:`fuse_joints`, :data:`JOINT_GROUP` joints at a time."""
+    return np.concatenate([fuse_joints(pos[:, g], model[:, g], Assessment(found.noise_m[g], found.pops[:, g]), fps)
+                           for g in joint_groups(np.shape(pos)[1])], axis=1)
+
+
+def fuse_joints(pos: np.ndarray, model: np.ndarray, found: Assessment, fps: float) -> np.ndarray:
     """The motion ``[F, J, 3]`` that weighs the pop-repaired input ``pos`` by its noise (less at the
     repaired pops) and the model's estimate ``model`` by its measured error, with a penalty on
     acceleration, solved exactly (:func:`solve_smooth`).

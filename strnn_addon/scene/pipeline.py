@@ -15,9 +15,9 @@ import bpy
 import numpy as np
 
 from ...model_core.motion import rotations
-from ...model_core.motion.conventions import JOINT_INDEX, MODEL_FPS, yup_to_zup, zup_to_yup
+from ...model_core.motion.conventions import JOINT_INDEX, JOINTS, MODEL_FPS, yup_to_zup, zup_to_yup
 from ...model_core.rig.controls import ControlSet, visual_local
-from ...model_core.rig.solve import Anchors, Rig, anchor_positions, fk, solved_bones
+from ...model_core.rig.solve import Anchors, Rig, anchor_positions, fk, solve, solved_bones
 from . import anim, controls, mapping, rig_io
 
 MIN_MODEL_FRAMES = 20
@@ -163,25 +163,57 @@ def check_keys(action, fcurves) -> None:
                             "or delete that key in the Graph Editor and run again")
 
 
+CHUNK_FRAMES = 1024  # frames read or solved at a time: a long take's per-bone arrays never all at once
+
+
+def chunks(n: int, size: int = CHUNK_FRAMES):
+    """Slices ``[a, b)`` covering ``range(n)`` in pieces of at most ``size``."""
+    return [slice(a, min(a + size, n)) for a in range(0, n, size)]
+
+
 def joint_positions(context, clip: Clip, frames: np.ndarray) -> np.ndarray:
-    """World-space canonical joints ``[F, 21, 3]`` at scene ``frames``, Y-up (model axes), scene units."""
-    if rig_io.needs_scene_evaluation(clip.obj, clip.channels.fcurves):
-        pose, world = rig_io.pose_matrices_evaluated(context, clip.obj, clip.rig, frames)
-    else:
-        pose = rig_io.pose_matrices_fast(clip.obj, clip.rig, clip.channels.fcurves, frames)
-        world = np.broadcast_to(clip.world, (len(frames), 4, 4))
-    local = anchor_positions(clip.rig, clip.anchors, pose)
-    pos = np.einsum("fij,fkj->fki", world[:, :3, :3], local) + world[:, None, :3, 3]
-    return zup_to_yup(pos)
+    """World-space canonical joints ``[F, 21, 3]`` at scene ``frames``, Y-up (model axes), scene units;
+    read :data:`CHUNK_FRAMES` frames at a time."""
+    frames = np.asarray(frames, dtype=np.float64)
+    evaluated = rig_io.needs_scene_evaluation(clip.obj, clip.channels.fcurves)
+    out, cache = np.empty((len(frames), len(JOINTS), 3)), rig_io.KeyCache()
+    for part in chunks(len(frames)):
+        if evaluated:
+            pose, world = rig_io.pose_matrices_evaluated(context, clip.obj, clip.rig, frames[part])
+        else:
+            pose = rig_io.pose_matrices_fast(clip.obj, clip.rig, clip.channels.fcurves, frames[part], cache)
+            world = np.broadcast_to(clip.world, (len(pose), 4, 4))
+        local = anchor_positions(clip.rig, clip.anchors, pose)
+        out[part] = np.einsum("fij,fkj->fki", world[:, :3, :3], local) + world[:, None, :3, 3]
+    return zup_to_yup(out)
 
 
-def reference_pose(context, clip: Clip, frames: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def solve_frames(context, clip: Clip, frames: np.ndarray, positions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The rig's local pose ``loc`` ``[F, B, 3]``, ``rot`` ``[F, B, 3, 3]`` (float32) that puts its joints on
+    ``positions`` ``[F, 21, 3]`` (Y-up, scene units) at scene ``frames``, each frame starting from its own
+    reference pose (:func:`reference_pose`): read and solved :data:`CHUNK_FRAMES` frames at a time, so a
+    long take never holds more than one chunk's reference and working arrays."""
+    frames = np.asarray(frames, dtype=np.float64)
+    targets = to_armature(clip, positions)
+    n, b = len(frames), len(clip.rig.names)
+    loc, rot = np.empty((n, b, 3), np.float32), np.empty((n, b, 3, 3), np.float32)
+    cache = rig_io.KeyCache()
+    for part in chunks(n):
+        ref_loc, ref_rot = reference_pose(context, clip, frames[part], cache)
+        loc[part], rot[part] = solve(clip.rig, clip.anchors, targets[part], ref_loc, ref_rot)
+    return loc, rot
+
+
+def reference_pose(context, clip: Clip, frames: np.ndarray,
+                   cache: rig_io.KeyCache | None = None) -> tuple[np.ndarray, np.ndarray]:
     """The local pose ``loc`` ``[F, B, 3]``, ``rot`` ``[F, B, 3, 3]`` the solve starts from at scene
-    ``frames``: the keyed channels, or on a control rig the evaluated (visual) pose of its joint skeleton."""
+    ``frames``: the keyed channels (``cache``: their keys, when read already), or on a control rig the
+    evaluated (visual) pose of its joint skeleton."""
     if clip.controls is not None:
         pose, _ = rig_io.pose_matrices_evaluated(context, clip.obj, clip.rig, frames)
         return visual_local(clip.rig, pose)
-    loc, rot, _ = rig_io.read_local_pose(clip.obj, clip.rig, clip.channels.fcurves if clip.channels else [], frames)
+    loc, rot, _ = rig_io.read_local_pose(clip.obj, clip.rig, clip.channels.fcurves if clip.channels else [], frames,
+                                         cache)
     return loc, rot
 
 
@@ -315,6 +347,7 @@ def _key_property(clip: Clip, channels: anim.Channels, pb, prop: str, frames: np
 
 def encode_rotation(mode: str, m: np.ndarray, previous: np.ndarray | None) -> tuple[str, np.ndarray]:
     """(property, values ``[F, 3 or 4]``) of rotations ``m`` ``[F, 3, 3]`` in a bone's rotation mode."""
+    m = np.asarray(m, dtype=np.float64)
     if mode in ("QUATERNION", "AXIS_ANGLE"):
         prev_q = previous
         if mode == "AXIS_ANGLE" and previous is not None:

@@ -45,14 +45,49 @@ def read_rig(obj) -> Rig:
     return Rig([names[i] for i in order], np.array(parents), rest[order], lengths[order])
 
 
-def sample_fcurve(fc, frames: np.ndarray) -> np.ndarray:
-    """Values ``[F]`` of an F-curve at scene ``frames`` ``[F]``; exact and fast for baked keys."""
+class KeyCache:
+    """The keys of F-curves, read once for many samplings (a long take read in chunks of frames). A baked
+    curve (one key on every whole frame, no modifiers) keeps only its first frame and its values."""
+
+    def __init__(self):
+        self._keys: dict[int, tuple] = {}
+
+    def keys(self, fc) -> tuple:
+        """("baked", first frame, values float32 [n]) or ("keys", frames [n], values [n]) (float64)."""
+        key = fc.as_pointer()
+        if key not in self._keys:
+            self._keys[key] = _read_keys(fc)
+        return self._keys[key]
+
+
+def _read_keys(fc) -> tuple:
     n = len(fc.keyframe_points)
-    if n == 0:
-        return np.full(len(frames), fc.evaluate(float(frames[0])) if len(frames) else 0.0)
     co = np.empty(2 * n, dtype=np.float32)
     fc.keyframe_points.foreach_get("co", co)
-    kx, ky = co[0::2].astype(np.float64), co[1::2].astype(np.float64)
+    kx, ky = co[0::2].astype(np.float64), co[1::2]
+    plain = len(fc.modifiers) == 0 and fc.extrapolation == "CONSTANT"
+    if n and plain and np.allclose(kx, kx[0] + np.arange(n), atol=1e-4) and float(kx[0]).is_integer():
+        return ("baked", float(kx[0]), ky.copy())
+    return ("keys", kx, ky.astype(np.float64))
+
+
+def sample_fcurve(fc, frames: np.ndarray, cache: KeyCache | None = None) -> np.ndarray:
+    """Values ``[F]`` of an F-curve at scene ``frames`` ``[F]``; exact and fast for baked keys. ``cache``:
+    keys already read (else they are read now)."""
+    if len(fc.keyframe_points) == 0:
+        return np.full(len(frames), fc.evaluate(float(frames[0])) if len(frames) else 0.0)
+    found = (cache or KeyCache()).keys(fc)
+    frames = np.asarray(frames, np.float64)
+    if found[0] == "baked":
+        _, first, ky = found
+        index = frames - first
+        whole = np.abs(index - np.round(index)) < 1e-4
+        if np.all(whole | (index < 0) | (index > len(ky) - 1)):
+            at = np.clip(np.round(index).astype(np.int64), 0, len(ky) - 1)
+            return ky[at].astype(np.float64)
+        return np.array([fc.evaluate(float(f)) for f in frames])
+    _, kx, ky = found
+    n = len(kx)
     inside = (frames >= kx[0]) & (frames <= kx[-1])
     at = np.clip(np.searchsorted(kx, frames - 1e-4), 0, n - 1)
     on_key = np.abs(kx[at] - frames) < 1e-4
@@ -76,8 +111,9 @@ def bone_channels(fcurves) -> dict[tuple[str, str], dict[int, object]]:
     return out
 
 
-def read_local_pose(obj, rig: Rig, fcurves, frames: np.ndarray):
-    """Local pose channels of every bone at scene ``frames`` ``[F]`` from the action's F-curves.
+def read_local_pose(obj, rig: Rig, fcurves, frames: np.ndarray, cache: KeyCache | None = None):
+    """Local pose channels of every bone at scene ``frames`` ``[F]`` from the action's F-curves (``cache``:
+    their keys, when read already).
 
     Returns ``loc`` ``[F, B, 3]``, ``rot`` ``[F, B, 3, 3]``, ``scale`` ``[F, B, 3]``; channels the
     action does not animate take the pose bone's current value.
@@ -88,25 +124,25 @@ def read_local_pose(obj, rig: Rig, fcurves, frames: np.ndarray):
     rot = np.empty((f, len(rig.names), 3, 3))
     for b, name in enumerate(rig.names):
         pb = obj.pose.bones[name]
-        loc[:, b] = _channel(chans, name, "location", pb.location, frames)
-        scale[:, b] = _channel(chans, name, "scale", pb.scale, frames)
-        rot[:, b] = rotation_matrices(pb.rotation_mode, rotation_values(chans, pb, frames))
+        loc[:, b] = _channel(chans, name, "location", pb.location, frames, cache)
+        scale[:, b] = _channel(chans, name, "scale", pb.scale, frames, cache)
+        rot[:, b] = rotation_matrices(pb.rotation_mode, rotation_values(chans, pb, frames, cache))
     return loc, rot, scale
 
 
-def _channel(chans, bone: str, prop: str, current, frames: np.ndarray) -> np.ndarray:
+def _channel(chans, bone: str, prop: str, current, frames: np.ndarray, cache: KeyCache | None = None) -> np.ndarray:
     """One vector property ``[F, len(current)]`` sampled from its F-curves or held at ``current``."""
     curves = chans.get((bone, prop), {})
     out = np.tile(np.asarray(current, dtype=np.float64), (len(frames), 1))
     for i, fc in curves.items():
         if i < out.shape[1]:
-            out[:, i] = sample_fcurve(fc, frames)
+            out[:, i] = sample_fcurve(fc, frames, cache)
     return out
 
 
-def rotation_values(chans, pb, frames: np.ndarray) -> np.ndarray:
+def rotation_values(chans, pb, frames: np.ndarray, cache: KeyCache | None = None) -> np.ndarray:
     prop = _ROT_PATHS.get(pb.rotation_mode, "rotation_euler")
-    return _channel(chans, pb.name, prop, getattr(pb, prop), frames)
+    return _channel(chans, pb.name, prop, getattr(pb, prop), frames, cache)
 
 
 def rotation_matrices(mode: str, values: np.ndarray) -> np.ndarray:
@@ -141,9 +177,9 @@ def needs_scene_evaluation(obj, fcurves) -> str:
     return ""
 
 
-def pose_matrices_fast(obj, rig: Rig, fcurves, frames: np.ndarray) -> np.ndarray:
+def pose_matrices_fast(obj, rig: Rig, fcurves, frames: np.ndarray, cache: KeyCache | None = None) -> np.ndarray:
     """Armature-space pose matrices ``[F, B, 4, 4]`` by NumPy forward kinematics."""
-    loc, rot, scale = read_local_pose(obj, rig, fcurves, frames)
+    loc, rot, scale = read_local_pose(obj, rig, fcurves, frames, cache)
     return fk(rig, loc, rot, scale)
 
 

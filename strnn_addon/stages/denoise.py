@@ -5,7 +5,6 @@ from __future__ import annotations
 import numpy as np
 
 from ...model_core.ops.seam import fade_edges
-from ...model_core.rig.solve import solve
 from .. import engine_bridge
 from ..scene import pipeline
 from .common import frame_range, lock, made_by, model_steps, noop, pace_record, prefs, run, write_new
@@ -29,7 +28,6 @@ def denoise_steps(context, obj, *, frame_start: int | None = None, frame_end: in
     frames = np.arange(a, b + 1, dtype=np.float64)
     yield "read"
     pos = pipeline.joint_positions(context, clip, frames)
-    ref_loc, ref_rot = pipeline.reference_pose(context, clip, frames)
     previous = pipeline.raw_rotations(clip, a)
     yield "model"
     clean = yield from model_steps(engine_bridge.denoise_steps(prefs(context), pos, clip.fps, float(strength)))
@@ -37,7 +35,7 @@ def denoise_steps(context, obj, *, frame_start: int | None = None, frame_end: in
     if foot_lock:
         clean = lock(clean, clip.fps)
     yield "solve"
-    loc, rot = solve(clip.rig, clip.anchors, pipeline.to_armature(clip, clean), ref_loc, ref_rot)
+    loc, rot = pipeline.solve_frames(context, clip, frames, clean)
     yield "write"
     record = made_by("Denoise Action", clip, engine_bridge.model_used(prefs(context), "denoise"), frame_start=a,
                      frame_end=b, strength=float(strength), foot_lock=foot_lock, only_selected=only_selected)

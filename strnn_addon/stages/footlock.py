@@ -5,7 +5,6 @@ from __future__ import annotations
 import numpy as np
 
 from ...model_core.ops import footlock
-from ...model_core.rig.solve import solve
 from ..scene import pipeline
 from ..scene.pipeline import UserError
 from .common import frame_range, lock, made_by, pace_record, write_new
@@ -27,7 +26,6 @@ def foot_lock_steps(context, obj, *, frame_start: int | None = None, frame_end: 
     inside = (frames >= a) & (frames <= b)  # plus one untouched frame either side to continue from
     yield "read"
     pos = pipeline.joint_positions(context, clip, frames)
-    ref_loc, ref_rot = pipeline.reference_pose(context, clip, frames)
     previous = pipeline.raw_rotations(clip, a)
     yield "model"
     contacts = lock(pos, clip.fps, detect_only=True)
@@ -36,7 +34,7 @@ def foot_lock_steps(context, obj, *, frame_start: int | None = None, frame_end: 
                         "lowest height and slower than 0.6 m/s): nothing to lock")
     locked = lock(pos, clip.fps, contacts=contacts, fixed=~inside, blend=blend, lower_body=False)
     yield "solve"
-    loc, rot = solve(clip.rig, clip.anchors, pipeline.to_armature(clip, locked), ref_loc, ref_rot)
+    loc, rot = pipeline.solve_frames(context, clip, frames, locked)
     yield "write"
     record = made_by("Foot Lock", clip, frame_start=a, frame_end=b, blend=float(blend), only_selected=only_selected)
     record.update(pace_record(context, clip))

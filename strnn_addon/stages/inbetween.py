@@ -6,7 +6,6 @@ from __future__ import annotations
 import numpy as np
 
 from ...model_core.ops.inbetween import MAX_GAP_S
-from ...model_core.rig.solve import solve
 from .. import engine_bridge
 from ..scene import pipeline, rig_io
 from ..scene.pipeline import UserError
@@ -93,7 +92,6 @@ def inbetween_steps(context, obj, *, frame_start: int | None = None, frame_end: 
     yield "read"
     pos_before = pipeline.joint_positions(context, clip, before)
     pos_after = pipeline.joint_positions(context, clip, after)
-    ref_loc, ref_rot = pipeline.reference_pose(context, clip, gap)
     previous = pipeline.raw_rotations(clip, start - 1)
     yield "model"
     new_pos = model_call(engine_bridge.inbetween, prefs(context), pos_before, pos_after, clip.fps, len(gap))
@@ -103,7 +101,7 @@ def inbetween_steps(context, obj, *, frame_start: int | None = None, frame_end: 
         fixed[len(before):len(before) + len(gap)] = False
         new_pos = lock(seq, clip.fps, fixed=fixed)[len(before):len(before) + len(gap)]
     yield "solve"
-    loc, rot = solve(clip.rig, clip.anchors, pipeline.to_armature(clip, new_pos), ref_loc, ref_rot)
+    loc, rot = pipeline.solve_frames(context, clip, gap, new_pos)
     yield "write"
     record = made_by("Fill Gap", clip, engine_bridge.model_used(prefs(context)), frame_start=start, frame_end=end,
                      foot_lock=foot_lock)
