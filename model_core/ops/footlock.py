@@ -60,7 +60,7 @@ class FootLockSettings:
     blend_s: float = 0.15  # seconds over which a lock fades in before a span and out after it
     min_gap_s: float = 0.07  # contact gaps shorter than this (flicker) are filled before locking
     softness: float = 0.03  # fraction of the leg's reach over which an unreachable target eases out
-    max_offset: float = 0.35  # legs' lengths: a span needing a bigger correction is no contact, left alone
+    max_offset: float = 0.6  # legs' lengths: a span needing a bigger correction is no contact, left alone
     floor_tolerance: float = 0.01  # metres (for a standard body): contacts this close to the floor stay
     lower_body: bool = True  # after fixed frames, a body whose feet hover may come down as a whole
 
