@@ -1,7 +1,8 @@
 """The one place the add-on calls the model: load (cached) and run it on a clip.
 
-:func:`extend`, :func:`denoise_steps` and :func:`follow_curve_steps` are the only model calls
-the operators make, so a test can swap them for a stand-in.
+:func:`run_extend`, :func:`run_inbetween`, :func:`run_familiarity`, :func:`run_denoise` and
+:func:`run_follow_curve` (one verb per layer: ``run_*`` here) are the only model calls the operators
+make, so a test can swap them for a stand-in.
 """
 
 from __future__ import annotations
@@ -20,7 +21,7 @@ from ..model_core.io.checkpoint import DEFAULT_MODEL, default_denoiser
 from ..model_core.ops.denoise import denoise_positions_steps
 from ..model_core.ops.extend import extend_positions
 from ..model_core.ops.familiarity import clip_familiarity
-from ..model_core.ops.follow import PathFollower, follow_curve_steps as follow_curve_model_steps
+from ..model_core.ops.follow import PathFollower, follow_curve_positions_steps
 from ..model_core.ops.inbetween import inbetween_positions
 
 _CACHE: dict[tuple, object] = {}
@@ -196,7 +197,7 @@ def bpy_path(path: str) -> str:
     return path
 
 
-def extend(prefs, positions: np.ndarray, fps: float, frames: int) -> np.ndarray:
+def run_extend(prefs, positions: np.ndarray, fps: float, frames: int) -> np.ndarray:
     """Continue ``positions`` ``[F, 21, 3]`` (Y-up scene units at ``fps``) by ``frames`` -> ``[frames, 21, 3]``."""
     engine = generator_from_prefs(prefs)
     with threads(prefs):
@@ -204,7 +205,7 @@ def extend(prefs, positions: np.ndarray, fps: float, frames: int) -> np.ndarray:
                      lambda: extend_positions(engine, positions, fps, frames))
 
 
-def inbetween(prefs, before: np.ndarray, after: np.ndarray, fps: float, frames: int) -> np.ndarray:
+def run_inbetween(prefs, before: np.ndarray, after: np.ndarray, fps: float, frames: int) -> np.ndarray:
     """The ``frames`` frames ``[frames, 21, 3]`` between ``before`` and ``after`` ``[F, 21, 3]`` (Y-up
     scene units at ``fps``), made by the main model."""
     engine = generator_from_prefs(prefs)
@@ -213,14 +214,14 @@ def inbetween(prefs, before: np.ndarray, after: np.ndarray, fps: float, frames: 
                      lambda: inbetween_positions(engine, before, after, fps, frames))
 
 
-def familiarity(prefs, positions: np.ndarray, fps: float):
+def run_familiarity(prefs, positions: np.ndarray, fps: float):
     """How familiar ``positions`` ``[F, 21, 3]`` (Y-up scene units at ``fps``) are to the main model."""
     engine = generator_from_prefs(prefs)
     with threads(prefs):
         return _kept(_key("familiarity", engine, positions, fps), lambda: clip_familiarity(engine, positions, fps))
 
 
-def denoise_steps(prefs, positions: np.ndarray, fps: float, strength: float):
+def run_denoise(prefs, positions: np.ndarray, fps: float, strength: float):
     """Denoised ``positions`` ``[F, 21, 3]`` (same space and frames), blended by ``strength``.
     A step generator (``model_core.inference.steps``): yields the fraction of the clip done as it goes."""
     engine = engine_from_prefs(prefs, denoiser_folder(prefs), "Denoise Model Folder")
@@ -229,7 +230,7 @@ def denoise_steps(prefs, positions: np.ndarray, fps: float, strength: float):
                                        lambda: denoise_positions_steps(engine, positions, fps, strength)))
 
 
-def follow_curve_steps(prefs, points: np.ndarray, cyclic: bool, fps: float, frames: int | None,
+def run_follow_curve(prefs, points: np.ndarray, cyclic: bool, fps: float, frames: int | None,
                        speed: float | None, context: np.ndarray | None = None, rest: np.ndarray | None = None):
     """Positions ``[frames, 21, 3]`` (Y-up scene units at ``fps``) walking the curve ``points`` ``[P, 3]``
     (Y-up) after ``context`` ``[F, 21, 3]``, or from a shipped seed sized like ``rest`` ``[21, 3]``, by the
@@ -239,5 +240,5 @@ def follow_curve_steps(prefs, points: np.ndarray, cyclic: bool, fps: float, fram
     follower = PathFollower(engine)
     key = _key("follow", engine, points, cyclic, fps, frames, speed, context, rest)
     with threads(prefs):
-        return (yield from _kept_steps(key, lambda: follow_curve_model_steps(
+        return (yield from _kept_steps(key, lambda: follow_curve_positions_steps(
             follower, points, cyclic, fps, frames, speed, context, rest)))

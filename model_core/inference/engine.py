@@ -179,12 +179,12 @@ class Engine:
         out = np.concatenate(chunks, 1)[:, :frames]
         return out[0] if single else out
 
-    def denoise(self, feats: np.ndarray, stride: int | None = None) -> np.ndarray:
+    def reconstruct(self, feats: np.ndarray, stride: int | None = None) -> np.ndarray:
         """Project raw features ``[F, C]`` (F >= m) onto the manifold: overlapping m-frame
         windows through encoder and decoder, blended with a Hann weight."""
-        return drive(self.denoise_steps(feats, stride))
+        return drive(self.reconstruct_steps(feats, stride))
 
-    def denoise_steps(self, feats: np.ndarray, stride: int | None = None, batch: int = 256):
+    def reconstruct_steps(self, feats: np.ndarray, stride: int | None = None, batch: int = 256):
         """:meth:`denoise` as a step generator (:mod:`steps`): yields the fraction of the windows
         done after each ``batch`` of them, returns the features. Each batch is blended in as it comes,
         so a long take holds one batch of windows at a time."""
@@ -213,13 +213,13 @@ class Engine:
         feats, start = positions_to_features(positions)
         return continue_positions(feats, start, self.extrapolate(feats[-self.m:], frames, **kw))
 
-    def denoise_positions(self, positions: np.ndarray, root_weight: float = 3.0,
+    def reconstruct_positions(self, positions: np.ndarray, root_weight: float = 3.0,
                           yaw_weight: float = 10.0) -> np.ndarray:
         """Denoise global positions ``[F, 21, 3]``: :meth:`denoise_positions_steps` run to the end."""
-        return drive(self.denoise_positions_steps(positions, root_weight, yaw_weight))
+        return drive(self.reconstruct_positions_steps(positions, root_weight, yaw_weight))
 
-    def denoise_positions_steps(self, positions: np.ndarray, root_weight: float = 3.0, yaw_weight: float = 10.0):
-        """Denoise global positions ``[F, 21, 3]``; a step generator like :meth:`denoise_steps`.
+    def reconstruct_positions_steps(self, positions: np.ndarray, root_weight: float = 3.0, yaw_weight: float = 10.0):
+        """Denoise global positions ``[F, 21, 3]``; a step generator like :meth:`reconstruct_steps`.
 
         The body comes from the model. It is placed on the input frame by frame by the heading
         and shift that fit it best to all 21 input joints (least squares, so the noise of the
@@ -229,7 +229,7 @@ class Engine:
         split)."""
         positions = np.asarray(positions, dtype=np.float64)
         feats, _ = positions_to_features(positions)
-        clean = yield from self.denoise_steps(feats)
+        clean = yield from self.reconstruct_steps(feats)
         origin = RootStart(np.zeros(3), 0.0)
         root_model, _ = integrate_root(clean, origin)
         body = features_to_positions(clean, origin) - root_model[:, None]  # root at the origin

@@ -74,8 +74,8 @@ class TorchEngine:
     seam_frames = Engine.seam_frames
     predict = Engine.predict
     extrapolate = Engine.extrapolate
-    denoise = Engine.denoise
-    denoise_steps = Engine.denoise_steps
+    reconstruct = Engine.reconstruct
+    reconstruct_steps = Engine.reconstruct_steps
     extend = Engine.extend
-    denoise_positions = Engine.denoise_positions
-    denoise_positions_steps = Engine.denoise_positions_steps
+    reconstruct_positions = Engine.reconstruct_positions
+    reconstruct_positions_steps = Engine.reconstruct_positions_steps

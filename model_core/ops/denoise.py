@@ -40,7 +40,7 @@ def denoise_positions_steps(engine, pos: np.ndarray, fps: float, strength: float
     prior = np.zeros_like(fixed)
     for i, phase in enumerate(phases):
         times = _model_times(duration, phase)
-        clean = yield from _scaled(engine.denoise_positions_steps(sample_at(fixed, fps, times).astype(np.float32)),
+        clean = yield from _scaled(engine.reconstruct_positions_steps(sample_at(fixed, fps, times).astype(np.float32)),
                                    i / len(phases), 1 / len(phases))
         prior += _sample_times(np.asarray(clean, np.float64), times, frames) / len(phases)
     out = norm.to_user(fusion.fuse(fixed, prior, found, fps))

@@ -247,10 +247,10 @@ def follow_curve_positions(follower: PathFollower, points: np.ndarray, cyclic: b
     the clip to continue (its last frames at ``fps``), or None to start on the curve from a
     shipped seed sized like ``rest`` ``[21, 3]`` (the rig's rest joints). ``frames`` None: until the
     curve ends; ``speed`` in scene units per second, None: the motion's own."""
-    return drive(follow_curve_steps(follower, points, cyclic, fps, frames, speed, context, rest))
+    return drive(follow_curve_positions_steps(follower, points, cyclic, fps, frames, speed, context, rest))
 
 
-def follow_curve_steps(follower: PathFollower, points: np.ndarray, cyclic: bool, fps: float,
+def follow_curve_positions_steps(follower: PathFollower, points: np.ndarray, cyclic: bool, fps: float,
                        frames: int | None = None, speed: float | None = None, context: np.ndarray | None = None,
                        rest: np.ndarray | None = None):
     """:func:`follow_curve_positions` as a step generator: yields the fraction done after each window.

@@ -30,7 +30,7 @@ def denoise_steps(context, obj, *, frame_start: int | None = None, frame_end: in
     pos = pipeline.joint_positions(context, clip, frames)
     previous = pipeline.raw_rotations(clip, a)
     yield "model"
-    clean = yield from model_steps(engine_bridge.denoise_steps(prefs(context), pos, clip.fps, float(strength)))
+    clean = yield from model_steps(engine_bridge.run_denoise(prefs(context), pos, clip.fps, float(strength)))
     clean = fade_edges(pos, clean, clip.fps, a > clip.first, b < clip.last)
     if foot_lock:
         clean = lock(clean, clip.fps)

@@ -50,7 +50,7 @@ def extend_steps(context, obj, *, frames: int = 120, context_frames: int = 0, fo
     held_loc, held_rot = pipeline.reference_pose(context, clip, ctx_frames[-1:])
     previous = pipeline.raw_rotations(clip, end)
     yield "model"
-    new_pos = model_call(engine_bridge.extend, prefs(context), pos, clip.fps, frames)
+    new_pos = model_call(engine_bridge.run_extend, prefs(context), pos, clip.fps, frames)
     if foot_lock:
         new_pos = lock(np.concatenate([pos, new_pos]), clip.fps, fixed=np.arange(len(pos) + frames) < len(pos))
         new_pos = new_pos[len(pos):]
@@ -61,7 +61,7 @@ def extend_steps(context, obj, *, frames: int = 120, context_frames: int = 0, fo
     new_frames = end + 1 + np.arange(frames, dtype=np.float64)
     record = made_by("Extend Clip", clip, engine_bridge.model_used(prefs(context)), frames=frames,
                      context_frames=len(ctx_frames), foot_lock=foot_lock, from_frame=from_frame)
-    record.update(familiarity_record(model_call(engine_bridge.familiarity, prefs(context), pos, clip.fps)))
+    record.update(familiarity_record(model_call(engine_bridge.run_familiarity, prefs(context), pos, clip.fps)))
     record.update(pace_record(context, clip, end))
     replace = None if end == clip.last else (end + 0.5, float("inf"))  # the old tail goes
     return write_new(context, clip, "extended", new_frames, loc, rot, previous, replace, record,

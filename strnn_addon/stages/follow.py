@@ -47,7 +47,7 @@ def follow_curve_steps(context, obj, *, curve: str = "", frames: int = 0, speed:
         held_loc, held_rot = pipeline.reference_pose(context, clip, np.array([float(context.scene.frame_current)]))
         context_pos, rest, previous = None, pipeline.pose_joints(clip, held_loc, held_rot)[0], {}
     yield "model"
-    new_pos = yield from model_steps(engine_bridge.follow_curve_steps(
+    new_pos = yield from model_steps(engine_bridge.run_follow_curve(
         prefs(context), points, cyclic, clip.fps, frames or None, speed or None, context_pos, rest))
     if foot_lock:
         known = 0 if context_pos is None else len(context_pos)
@@ -63,7 +63,7 @@ def follow_curve_steps(context, obj, *, curve: str = "", frames: int = 0, speed:
     record = made_by("Follow Curve", clip, engine_bridge.model_used(prefs(context)), curve=curve_obj.name,
                      frames=n, speed=float(speed), foot_lock=foot_lock)
     if context_pos is not None:
-        record.update(familiarity_record(engine_bridge.familiarity(prefs(context), context_pos, clip.fps)))
+        record.update(familiarity_record(engine_bridge.run_familiarity(prefs(context), context_pos, clip.fps)))
         record.update(pace_record(context, clip))
     if clip.action is not None:
         return write_new(context, clip, "curve", new_frames, loc, rot, previous, None, record,

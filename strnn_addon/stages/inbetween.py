@@ -94,7 +94,7 @@ def inbetween_steps(context, obj, *, frame_start: int | None = None, frame_end: 
     pos_after = pipeline.joint_positions(context, clip, after)
     previous = pipeline.raw_rotations(clip, start - 1)
     yield "model"
-    new_pos = model_call(engine_bridge.inbetween, prefs(context), pos_before, pos_after, clip.fps, len(gap))
+    new_pos = model_call(engine_bridge.run_inbetween, prefs(context), pos_before, pos_after, clip.fps, len(gap))
     if foot_lock:
         seq = np.concatenate([pos_before, new_pos, pos_after])
         fixed = np.ones(len(seq), bool)

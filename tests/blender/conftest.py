@@ -63,16 +63,16 @@ def fake_model(addon, monkeypatch):
     last velocity (a rigid motion, so the solve can follow it exactly); denoise = identity."""
     bridge = importlib.import_module(addon.__name__ + ".strnn_addon.engine_bridge")
 
-    def extend(prefs, pos, fps, frames):
+    def run_extend(prefs, pos, fps, frames):
         step = pos[-1, 0] - pos[-2, 0]  # hips
         return pos[-1] + step * np.arange(1, frames + 1)[:, None, None]
 
-    def denoise_steps(prefs, pos, fps, strength):
+    def run_denoise(prefs, pos, fps, strength):
         return np.array(pos, dtype=np.float64)
         yield  # a step generator, like the real one
 
-    monkeypatch.setattr(bridge, "extend", extend)
-    monkeypatch.setattr(bridge, "denoise_steps", denoise_steps)
+    monkeypatch.setattr(bridge, "run_extend", run_extend)
+    monkeypatch.setattr(bridge, "run_denoise", run_denoise)
     return bridge
 
 

@@ -57,7 +57,7 @@ def test_range_and_unmapped_bones(fake_model, addon, monkeypatch):
     frames = np.arange(1, 61)
     before = evaluated_joints(addon, obj, frames)
     shift = np.array([0.0, 0.05, 0.0])  # a stand-in "denoiser" that lifts the body by 5 cm (Y-up)
-    monkeypatch.setattr(fake_model, "denoise_steps", stand_in(lambda pos, strength: pos + strength * shift))
+    monkeypatch.setattr(fake_model, "run_denoise", stand_in(lambda pos, strength: pos + strength * shift))
     old, new = denoise(use_range=True, frame_start=21, frame_end=40, strength=0.5)
     after = evaluated_joints(addon, obj, frames)
     lift = (after - before)[..., 2]  # Blender Z
@@ -75,7 +75,7 @@ def test_strength_zero_changes_no_motion(fake_model, addon, monkeypatch):
     obj = mixamo_walk(40)
     frames = np.arange(1, 41)
     before = evaluated_joints(addon, obj, frames)
-    monkeypatch.setattr(fake_model, "denoise_steps", stand_in(lambda pos, strength: pos + strength * 0.1))
+    monkeypatch.setattr(fake_model, "run_denoise", stand_in(lambda pos, strength: pos + strength * 0.1))
     denoise(strength=0.0)
     assert np.abs(evaluated_joints(addon, obj, frames) - before).max() < 1e-4
 

@@ -97,7 +97,7 @@ def swaying_model(fake_model, monkeypatch):
         sway = np.stack([np.sin(2 * np.pi * t), 0 * t, 0 * t], -1) * 0.06
         return pos[-1] + sway[:, None]
 
-    monkeypatch.setattr(fake_model, "extend", extend)
+    monkeypatch.setattr(fake_model, "run_extend", extend)
 
 
 @pytest.mark.parametrize("foot_lock", [False, True])

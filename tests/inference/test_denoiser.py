@@ -40,7 +40,7 @@ def test_beats_the_best_low_pass_filter_on_test_takes(denoiser, mocap_root):
     clean = [load_clip(p)[:300] for p in takes]
     rng = np.random.default_rng(0)
     noisy = [add_noise(c, 3.0, rng) for c in clean]
-    ours = np.concatenate([mpjpe_cm(denoiser.denoise_positions(n), c) for n, c in zip(noisy, clean)]).mean()
+    ours = np.concatenate([mpjpe_cm(denoiser.reconstruct_positions(n), c) for n, c in zip(noisy, clean)]).mean()
     filtered, cutoff = best_butterworth(clean, noisy)
     raw = np.concatenate([mpjpe_cm(n, c) for n, c in zip(noisy, clean)]).mean()
     print(f"3 cm noise on {len(takes)} takes: noisy {raw:.2f} cm, Butterworth {filtered:.2f} ({cutoff} Hz), "

@@ -129,11 +129,11 @@ def test_denoise_shape(release):
     engine = Engine.load(release)
     rng = np.random.default_rng(1)
     feats = (engine.mean + engine.std * rng.normal(size=(engine.m * 3 + 1, C))).astype(np.float32)
-    out = engine.denoise(feats)
+    out = engine.reconstruct(feats)
     assert out.shape == feats.shape and np.isfinite(out).all()
-    assert TorchEngine.load(release).denoise(feats).shape == feats.shape
+    assert TorchEngine.load(release).reconstruct(feats).shape == feats.shape
     with pytest.raises(ValueError, match="at least"):
-        engine.denoise(feats[: engine.m - 1])
+        engine.reconstruct(feats[: engine.m - 1])
 
 
 def test_denoise_steps_report_batches_and_give_the_same_result(release):
@@ -141,17 +141,17 @@ def test_denoise_steps_report_batches_and_give_the_same_result(release):
     rng = np.random.default_rng(2)
     feats = (engine.mean + engine.std * rng.normal(size=(engine.m * 6, C))).astype(np.float32)
     fractions = []
-    out = drive(engine.denoise_steps(feats, batch=4), fractions.append)
+    out = drive(engine.reconstruct_steps(feats, batch=4), fractions.append)
     windows = len(range(0, len(feats) - engine.m + 1, max(1, engine.m // 4)))
     assert fractions == [min(4 * (k + 1), windows) / windows for k in range(-(-windows // 4))]
-    np.testing.assert_allclose(out, engine.denoise(feats), atol=1e-5)
+    np.testing.assert_allclose(out, engine.reconstruct(feats), atol=1e-5)
 
 
 def test_a_denoise_only_model_denoises_and_refuses_to_predict(tmp_path):
     random_release(tmp_path, purpose="denoise")
     for engine in (Engine.load(tmp_path), TorchEngine.load(tmp_path)):
         assert engine.ckpt.purpose == "denoise"
-        assert engine.denoise(np.repeat(engine.seeds[0], 3, 0)).shape == (3 * engine.m, C)
+        assert engine.reconstruct(np.repeat(engine.seeds[0], 3, 0)).shape == (3 * engine.m, C)
         with pytest.raises(CheckpointError, match="trained for Denoise alone.*strnn_default"):
             engine.extrapolate(engine.seeds[0], 5)
     from model_core.ops.follow import PathFollower
