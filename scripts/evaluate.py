@@ -34,7 +34,7 @@ from model_core.eval.inbetween_evaluation import evaluate_inbetween  # noqa: E40
 from model_core.inference.engine import Engine  # noqa: E402
 from model_core.io.bvh import BvhError  # noqa: E402
 from model_core.io.checkpoint import DEFAULT_MODEL, CheckpointError, default_denoiser  # noqa: E402
-from model_core.io.files import write_json  # noqa: E402
+from model_core.io.files import unwritable, write_json  # noqa: E402
 from model_core.model.dataset import DataError, load_data_config, load_folder  # noqa: E402
 from model_core.rig.rigs import RigError  # noqa: E402
 
@@ -175,7 +175,9 @@ def run(args) -> dict:
         denoiser = Engine.load(denoise_folder)
     baselines = load_baselines(args)
     if args.json:
-        check_writable(Path(args.json))
+        reason = "it is a folder" if Path(args.json).is_dir() else unwritable(Path(args.json).parent)
+        if reason:
+            raise ValueError(f"--json {args.json}: cannot write there ({reason}); choose another path")
     data = load_folder(args.data, cache_dir=args.cache or None)
     for failure in data.failures:
         print(f"skipped: {failure}", file=sys.stderr)
@@ -214,15 +216,6 @@ def run(args) -> dict:
         result["paths"] = run_paths(args, clips)
     print_table(result, extra)
     return result
-
-
-def check_writable(path: Path) -> None:
-    """:class:`ValueError` before any work when the --json file cannot be written where it is asked."""
-    folder = path.parent
-    while not folder.exists() and folder != folder.parent:
-        folder = folder.parent
-    if path.is_dir() or not folder.is_dir() or not os.access(folder, os.W_OK | os.X_OK):
-        raise ValueError(f"--json {path}: cannot write there; choose another path")
 
 
 def load_baselines(args) -> dict:

@@ -47,7 +47,7 @@ if __package__:  # installed with pip: strnn_motion.scripts
 else:  # run by path from a checkout
     from batch_worker import process_file  # noqa: E402
 
-from model_core.io.files import write_json  # noqa: E402  (model_core never imports bpy)
+from model_core.io.files import unwritable, write_json  # noqa: E402  (model_core never imports bpy)
 from model_core.ops import options as opts  # noqa: E402
 
 EXTENSIONS = (".bvh", ".blend")
@@ -208,12 +208,8 @@ def check_writable(parser, args) -> None:
     if args.report is not None:
         places.append(("--report", args.report.parent if str(args.report.parent) else Path(".")))
     for option, folder in places:
-        try:
-            folder.mkdir(parents=True, exist_ok=True)
-            with tempfile.NamedTemporaryFile(dir=folder, prefix=".strnn_write_check_"):
-                pass
-        except OSError as e:
-            parser.error(f"{option} {folder}: cannot write there ({e.strerror or e}); pick a writable folder")
+        if unwritable(folder):
+            parser.error(f"{option} {folder}: cannot write there ({unwritable(folder)}); pick a writable folder")
     if args.report is not None and args.report.is_dir():
         parser.error(f"--report {args.report}: is a folder; give a file name")
 

@@ -29,6 +29,19 @@ def write_atomic(path: str | Path, write: Callable[[Path], object]) -> Path:
     return path
 
 
+def unwritable(folder: str | Path) -> str:
+    """Why files could not be written into ``folder`` ('' when they can), found without creating anything:
+    the nearest folder that exists at or above it must be a writable folder (the rest is made on writing)."""
+    existing = Path(folder)
+    while not existing.exists() and existing != existing.parent:
+        existing = existing.parent
+    if not existing.is_dir():
+        return f"{existing} is not a folder"
+    if not os.access(existing, os.W_OK | os.X_OK):
+        return f"{existing} is not writable"
+    return ""
+
+
 def write_text(path: str | Path, text: str) -> Path:
     return write_atomic(path, lambda p: p.write_text(text))
 

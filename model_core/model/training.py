@@ -21,7 +21,7 @@ import torch.distributed as dist
 from torch.nn.parallel import DistributedDataParallel
 
 from ..io.checkpoint import PURPOSES, load_release, save_release
-from ..io.files import write_atomic
+from ..io.files import unwritable, write_atomic
 from ..motion.conventions import LAYOUT
 from ..motion.features import MIRROR_SIGN, MIRROR_SOURCE, features_to_positions, positions_to_features
 from ..ops.seam import PREDICT_SEAM_FRAMES, seam_fade
@@ -328,22 +328,14 @@ def _dist_env() -> tuple[int, int]:
     return (dist.get_rank(), world) if world > 1 else (0, 1)
 
 
-def check_writable(out: Path) -> None:
-    """:class:`ValueError` before any work when the run folder ``out`` cannot be made or written."""
-    existing = out
-    while not existing.exists() and existing != existing.parent:
-        existing = existing.parent
-    if not existing.is_dir() or not os.access(existing, os.W_OK | os.X_OK):
-        raise ValueError(f"--out {out}: cannot write there ({existing} is not a writable folder); choose another "
-                         "--out")
-
-
 def train(cfg: TrainConfig, resume: bool = False, progress: bool = True) -> Path:
     """Train, checkpointing to ``cfg.out/train_state.pt``; writes the release folder
     ``cfg.out/release`` at the end and returns it."""
     rank, world = _dist_env()
     out = Path(cfg.out)
-    check_writable(out)
+    reason = unwritable(out)  # before any work, and before the run folder appears
+    if reason:
+        raise ValueError(f"--out {out}: cannot write there ({reason}); choose another --out")
     torch.manual_seed(cfg.seed + rank)
     rng = np.random.default_rng(cfg.seed + rank)
     data = load_folder(cfg.data, cache_dir=cfg.cache, progress=rank == 0 and progress)
