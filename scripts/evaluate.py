@@ -236,11 +236,11 @@ def load_baselines(args) -> dict:
 
 def run_paths(args, clips) -> dict:
     from model_core.eval.path_evaluation import evaluate_paths, synthesis_speed, walking_seeds
-    from model_core.ops.follow import PathFollower
-
     if args.follow_torch:
-        from model_core.ops.follow_torch import TorchPathFollower as PathFollower  # noqa: N814
-    follower = PathFollower.load(args.checkpoint)
+        from model_core.ops.follow_torch import TorchPathFollower as follower_class
+    else:
+        from model_core.ops.follow import PathFollower as follower_class
+    follower = follower_class.load(args.checkpoint)
     paths = evaluate_paths(follower, clips, args.path_seeds, log=lambda m: print(m, file=sys.stderr))
     paths["synthesis_fps_1000"] = synthesis_speed(follower, walking_seeds(clips, 1)[0][1])
     return paths

@@ -154,11 +154,11 @@ class PathFollower:
         p, theta = root[-1], float(yaw[-1])
         s = path.project(p[[0, 2]], 0.0, path.length, tie=0.05)  # at a crossing, the earlier branch
         goal = path.length if path.cyclic else path.length - s  # arc length still to walk
-        planned = int(math.ceil(goal / speed * MODEL_FPS))
+        planned = max(1, int(math.ceil(goal / speed * MODEL_FPS)))
         limit = planned * MAX_STRETCH if frames is None else frames
         ctx, lengths = seed[-self.m:], bone_lengths(seed[None, -self.m:])
         out, total, walked = [], 0, 0.0
-        while total < limit and (frames is not None or walked < goal - ARRIVED):
+        while total < limit and (frames is not None or not out or walked < goal - ARRIVED):
             control, aim = control_signal(path, p[[0, 2]], theta, s, speed, self.n + 1, MODEL_FPS,
                                           Steering(cfg.return_frames))
             control = control[1:]  # the context's last frame already holds the step into the window
@@ -175,7 +175,7 @@ class PathFollower:
             out.append(new)
             total += len(new)
             ctx = np.concatenate([ctx, new])[-self.m:]
-            yield min(total / (frames or planned), 1.0) if frames else min(walked / goal, 1.0)
+            yield min(total / frames, 1.0) if frames else min(walked / max(goal, 1e-9), 1.0)
         new = np.concatenate(out)
         if frames is not None:
             return new[:frames]
@@ -183,13 +183,13 @@ class PathFollower:
 
     def _arrival(self, new: np.ndarray, goal: float, walked: float) -> int:
         """How many of the frames of a walk to a path's end to keep: those up to where the walk reached it
-        (the last window overshoots by up to a window)."""
+        (the last window overshoots by up to a window), and at least one."""
         if walked <= goal:
             return len(new)
         speeds = np.linalg.norm(new[:, LAYOUT.velocity], axis=-1)
         past = walked - goal  # metres walked beyond the end, in the last frames
         back = np.cumsum(speeds[::-1])
-        return len(new) - int(np.searchsorted(back, past))
+        return max(1, len(new) - int(np.searchsorted(back, past)))
 
 
 def align_to_path(seed: np.ndarray, path: Path) -> np.ndarray:

@@ -143,3 +143,11 @@ def test_path_evaluation_section(bundled):
     assert all(r > 0.95 for r in out["end_reached"]) and all(0.7 < r < 1.3 for r in out["speed_ratio"])
     assert len(out["foot_skate_cm"]["raw"]) == len(out["knee_pops"]["locked"]) == 4
     assert out["seed_clips"] == ["walk_0"] and out["frames_per_second"] > 0
+
+
+def test_a_character_already_at_the_paths_end_gets_a_short_walk_not_an_error(bundled):
+    seed = walking_skeleton(40)
+    end = seed[-1, 0, [0, 2]]
+    path = Path(np.stack([end - [0.0, 3.0], end], 0))  # ends where the seed ends
+    pos, _ = follow_path(bundled, seed, path, align=False)
+    assert 1 <= len(pos) <= bundled.n and np.isfinite(pos).all()
