@@ -216,7 +216,7 @@ class PeakMemory:
         import threading
 
         self.page = os.sysconf("SC_PAGE_SIZE")
-        self.start = self.peak = self._rss()
+        self.start = self.peak = self.top = self._rss()
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._watch, daemon=True)
         self._thread.start()
@@ -230,25 +230,42 @@ class PeakMemory:
         while not self._stop.wait(0.005):
             self.peak = max(self.peak, self._rss())
 
+    def mark(self) -> float:
+        """The peak (MB above the start) since the last mark; the next mark counts from now."""
+        rss = self._rss()
+        peak, self.peak = max(self.peak, rss), rss
+        self.top = max(self.top, peak)
+        return (peak - self.start) / 2**20
+
     def __exit__(self, *exc):
         self._stop.set()
         self._thread.join()
-        self.peak = max(self.peak, self._rss())
-        self.extra_mb = (self.peak - self.start) / 2**20
+        self.top = max(self.top, self.peak, self._rss())
+        self.extra_mb = (self.top - self.start) / 2**20
 
 
 def stage_times(worker, *args, **kwargs) -> dict:
     """Seconds of each stage of ``worker(*args, progress=..., **kwargs)`` (a runner of
     ``strnn_addon/stages/``, which calls ``progress(stage)`` as each stage starts): a stage lasts
-    until the next starts (the first also covers the checks before it), plus the ``total``."""
+    until the next starts (the first also covers the checks before it), plus the ``total``; and
+    the peak memory of each stage (``mb`` by stage) and of the whole run (``extra_mb``)."""
     marks: list[tuple[str, float]] = []
+    peaks: list[float] = []
+
+    def progress(stage):
+        peaks.append(memory.mark())
+        marks.append((stage, time.perf_counter()))
+
     with PeakMemory() as memory:
         start = time.perf_counter()
-        worker(*args, progress=lambda stage: marks.append((stage, time.perf_counter())), **kwargs)
+        worker(*args, progress=progress, **kwargs)
         end = time.perf_counter()
+        peaks.append(memory.mark())
     bounds = [start] + [t for _, t in marks[1:]] + [end]
     times = {stage: b - a for (stage, _), a, b in zip(marks, bounds, bounds[1:])}
-    return {**times, "total": end - start, "extra_mb": memory.extra_mb}
+    # The first stage also covers the checks before it, as its time does.
+    mb = {stage: max(peaks[i + 1], peaks[0]) if i == 0 else peaks[i + 1] for i, (stage, _) in enumerate(marks)}
+    return {**times, "total": end - start, "extra_mb": memory.extra_mb, "mb": mb}
 
 
 def main(argv: list[str] | None = None) -> dict:
@@ -296,8 +313,9 @@ def main(argv: list[str] | None = None) -> dict:
         bridge = importlib.import_module(package + ".strnn_addon.engine_bridge")
         model = bridge.denoiser_folder(bpy.context.preferences.addons[package].preferences)
     print(f"{args.operator}, model: {model}\nrig: {len(obj.data.bones)} bones, clip {args.frames} frames {done}")
-    for stage in ("read", "model", "solve", "write", "total"):
-        print(f"  {stage:6s} {best[stage]:7.3f} s")
+    for stage in ("read", "model", "solve", "write"):
+        print(f"  {stage:6s} {best[stage]:7.3f} s   peak {best['mb'].get(stage, 0.0):5.0f} MB")
+    print(f"  total  {best['total']:7.3f} s")
     print(f"  floor: read keys {best['floor_read']:.3f} s, write keys {best['floor_write']:.3f} s")
     print(f"  memory beyond the scene's own: {best['extra_mb']:.0f} MB at the peak, of which a copy of the action "
           f"(the new action's own size) {best['floor_mb']:.0f} MB; the operation's working memory "

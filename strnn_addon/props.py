@@ -3,6 +3,7 @@ the add-on preferences."""
 
 from __future__ import annotations
 
+import importlib.util
 import textwrap
 
 import bpy
@@ -175,12 +176,9 @@ class STRNN_PG_switch(bpy.types.PropertyGroup):
 
 def _engines(self, context):
     items = [("NUMPY", "NumPy", "Run the model with NumPy (works in every Blender)")]
-    try:
-        import torch  # noqa: F401
-
+    # Found, not imported: reading this setting must not load PyTorch (some 170 MB) when NumPy runs the model.
+    if importlib.util.find_spec("torch") is not None:
         items.append(("TORCH", "PyTorch", "Run the model with PyTorch (installed in this Blender)"))
-    except ImportError:
-        pass
     return items
 
 

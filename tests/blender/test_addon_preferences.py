@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import importlib
+import importlib.util
 
 import bpy
 
@@ -39,3 +40,24 @@ def test_preferences_name_a_missing_model(addon, tmp_path):
     labels = [c[2].get("text", "") for c in calls if c[0] == "label"]
     assert labels == ["Extend, Follow Curve: no model in the Model Folder",
                       "Denoise: no model in the Denoise Model Folder"]
+
+
+def test_reading_the_engine_setting_does_not_import_torch(addon, monkeypatch):
+    """The Engine choice lists PyTorch where it is installed, found without importing it: reading the
+    setting (every model call does) must not load PyTorch into a Blender that runs the model with NumPy."""
+    import builtins
+
+    imported = []
+    real_import = builtins.__import__
+
+    def watch(name, *args, **kwargs):
+        imported.append(name)
+        return real_import(name, *args, **kwargs)
+
+    monkeypatch.setattr(builtins, "__import__", watch)
+    prefs = bpy.context.preferences.addons[addon.__name__].preferences
+    assert prefs.engine == "NUMPY"
+    items = {item[0] for item in importlib.import_module(addon.__name__ + ".strnn_addon.props")._engines(prefs, None)}
+    monkeypatch.undo()
+    assert not [name for name in imported if name.split(".")[0] == "torch"], imported
+    assert ("TORCH" in items) == (importlib.util.find_spec("torch") is not None)
