@@ -11,9 +11,12 @@ is another. How much each is worth is measured on the take:
   where the model cannot follow the motion (a kick it never saw), it gets little weight.
 
 The result minimises, per joint and axis, the weighted distance to the input and to the
-model plus a small penalty on acceleration: a banded linear system solved exactly. Clean
-takes come back nearly unchanged; noisy ones lean on the model and the smoothness prior.
-Works at the take's own frame rate. Positions are ``[F, J, 3]`` in metres (model scale).
+model plus a penalty on acceleration that follows the motion (light where it moves fast, as in
+a kick, heavy where it holds still): banded linear systems solved exactly. Last, the bones are
+given back the lengths they keep through the take (:func:`keep_bone_lengths`), as far as the
+noise could have changed them. Clean takes come back nearly unchanged; noisy ones lean on the
+model and the smoothness prior. Works at the take's own frame rate. Positions are ``[F, J, 3]``
+in metres (model scale).
 """
 
 from __future__ import annotations
@@ -22,6 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..motion.conventions import PARENTS
 from ..motion.features import gaussian_smooth, gaussian_taps
 
 D4_NOISE_GAIN = np.sqrt(70.0)  # std of the 4th difference of unit white noise
@@ -34,6 +38,10 @@ NOISE_FLOOR_M = 0.0001  # nor the input beyond this one (clean capture reads as 
 D2_NOISE_GAIN = 6.0  # variance of the 2nd difference of unit white noise
 BIAS_WINDOW_S = 0.1  # sigma of the low-pass that separates the model's error from the input's noise
 TRUST_WINDOW_S = 0.25  # sigma of the window over which the model's error is measured
+PRIOR_WINDOW_S = 0.1  # sigma of the window over which the motion's acceleration is measured, frame by frame
+MODEL_MOTION_TRUST = 2.0  # the model's acceleration counts this much against the first pass's
+PRIOR_FLOOR = 0.02  # the acceleration allowed anywhere: at least this share of the take's mean
+BONE_PASSES = 5  # rounds of the bone-length projection
 JOINT_GROUP = 11  # joints measured and solved at a time: half a long take's working arrays, two passes of the solve
 
 
@@ -153,10 +161,37 @@ def fuse_joints(pos: np.ndarray, model: np.ndarray, found: Assessment, fps: floa
                        (np.diff(m, n=2, axis=0) ** 2).mean((0, 2)))
     else:
         q = np.ones(j)
-    lam = 1.0 / np.maximum(q, 1e-10)
+    q = np.maximum(q, 1e-10)
     weights = np.repeat((w + v)[..., None], 3, -1).reshape(f, -1)
     rhs = (w[..., None] * x + v[..., None] * m).reshape(f, -1)
-    return solve_smooth(weights, rhs, np.repeat(lam, 3)).reshape(x.shape)
+    y = solve_smooth(weights, rhs, np.repeat(1.0 / q, 3)).reshape(x.shape)
+    if f < 8:
+        return y
+    # Second pass: the acceleration the motion has around each frame, from the first pass and the model.
+    acc2 = np.maximum(np.diff(y, n=2, axis=0) ** 2, MODEL_MOTION_TRUST * np.diff(m, n=2, axis=0) ** 2)
+    local = np.maximum(gaussian_smooth(acc2, max(1.0, PRIOR_WINDOW_S * fps)), PRIOR_FLOOR * q[:, None])
+    return solve_smooth(weights, rhs, 1.0 / local.reshape(f - 2, -1)).reshape(x.shape)
+
+
+def keep_bone_lengths(pos: np.ndarray, noise_m: np.ndarray) -> np.ndarray:
+    """``pos`` ``[F, 21, 3]`` with each bone brought towards the length it has through most of the
+    take (its median), both ends moved alike, joint by joint at most the noise ``noise_m`` ``[21]``
+    (m) measured on the input: a skeleton's bones do not stretch, so what stretches them is noise,
+    and a clean take (or a rig that animates its bones' length on purpose, without noise) is kept."""
+    x = np.asarray(pos, np.float64)
+    bones = [(int(PARENTS[j]), j) for j in range(len(PARENTS)) if PARENTS[j] >= 0]
+    length = np.median(np.stack([np.linalg.norm(x[:, c] - x[:, p], axis=-1) for p, c in bones], 1), 0)
+    y = x.copy()
+    for _ in range(BONE_PASSES):
+        for (p, c), want in zip(bones, length):
+            d = y[:, c] - y[:, p]
+            n = np.linalg.norm(d, axis=-1, keepdims=True)
+            half = 0.5 * (n - want) * d / np.maximum(n, 1e-12)
+            y[:, c] -= half
+            y[:, p] += half
+    moved = y - x
+    size = np.linalg.norm(moved, axis=-1, keepdims=True)
+    return x + moved * np.minimum(1.0, np.asarray(noise_m)[None, :, None] / np.maximum(size, 1e-12))
 
 
 def model_error2(gap: np.ndarray, sigma2: np.ndarray, fps: float) -> np.ndarray:
@@ -188,24 +223,24 @@ def running_median(x: np.ndarray, radius: int) -> np.ndarray:
 
 
 def solve_smooth(weights: np.ndarray, rhs: np.ndarray, lam: np.ndarray) -> np.ndarray:
-    """Solve ``(diag(weights) + lam D^T D) y = rhs`` per column (D: second differences in time).
+    """Solve ``(diag(weights) + D^T diag(lam) D) y = rhs`` per column (D: second differences in time).
 
-    ``weights``, ``rhs``: ``[F, K]``; ``lam``: ``[K]``. The matrix is symmetric pentadiagonal and
-    positive definite; an LDL^T elimination over frames, vectorised over the K columns."""
+    ``weights``, ``rhs``: ``[F, K]``; ``lam``: ``[K]`` (the same at every frame) or ``[F-2, K]`` (one per
+    second difference). The matrix is symmetric pentadiagonal and positive definite; an LDL^T
+    elimination over frames, vectorised over the K columns."""
     f = len(weights)
     a0 = weights.astype(np.float64).copy()
     if f < 3:
         return rhs / np.maximum(a0, 1e-12)
-    c0, c1 = np.zeros(f), np.zeros(f - 1)  # D^T D: each row [1, -2, 1] of D adds its outer product
-    c0[:-2] += 1.0
-    c0[1:-1] += 4.0
-    c0[2:] += 1.0
-    c1[:-1] -= 2.0
-    c1[1:] -= 2.0
-    a0 += c0[:, None] * lam
-    a1 = c1[:, None] * lam
-    a2 = np.ones(f - 2)[:, None] * lam
-    return _ldl_pentadiagonal(a0, a1, a2, rhs.astype(np.float64))
+    lam = np.broadcast_to(np.asarray(lam, np.float64), (f - 2, a0.shape[1]))
+    # Row k of D is [1, -2, 1] on frames k, k+1, k+2; it adds lam[k] times its outer product.
+    a0[:-2] += lam
+    a0[1:-1] += 4.0 * lam
+    a0[2:] += lam
+    a1 = np.zeros((f - 1, a0.shape[1]))
+    a1[:-1] -= 2.0 * lam
+    a1[1:] -= 2.0 * lam
+    return _ldl_pentadiagonal(a0, a1, lam, rhs.astype(np.float64))
 
 
 def _ldl_pentadiagonal(a0, a1, a2, b):

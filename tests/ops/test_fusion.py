@@ -9,6 +9,7 @@ import pytest
 from model_core.eval.metrics import add_noise, add_pops, best_butterworth, best_median, mpjpe_cm
 from model_core.inference.engine import Engine
 from model_core.io.checkpoint import DEFAULT_MODEL, default_denoiser
+from model_core.motion.conventions import PARENTS
 from model_core.motion.synthetic import walking_skeleton
 from model_core.ops import fusion
 from model_core.ops.denoise import denoise_positions
@@ -47,6 +48,42 @@ def test_solve_smooth_equals_a_dense_solve():
     for c in range(k):
         want = np.linalg.solve(np.diag(weights[:, c]) + lam[c] * d.T @ d, rhs[:, c])
         np.testing.assert_allclose(fusion.solve_smooth(weights, rhs, lam)[:, c], want, atol=1e-10)
+
+
+def test_solve_smooth_with_a_prior_per_frame_equals_a_dense_solve():
+    rng = np.random.default_rng(2)
+    f, k = 12, 2
+    weights, rhs, lam = rng.uniform(0.5, 2, (f, k)), rng.normal(size=(f, k)), rng.uniform(0.1, 5, (f - 2, k))
+    d = np.diff(np.eye(f), n=2, axis=0)
+    for c in range(k):
+        want = np.linalg.solve(np.diag(weights[:, c]) + d.T @ np.diag(lam[:, c]) @ d, rhs[:, c])
+        np.testing.assert_allclose(fusion.solve_smooth(weights, rhs, lam)[:, c], want, atol=1e-10)
+
+
+def bone_lengths(pos):
+    return np.stack([np.linalg.norm(pos[:, j] - pos[:, PARENTS[j]], axis=-1) for j in range(21) if PARENTS[j] >= 0], 1)
+
+
+def test_keep_bone_lengths_removes_stretch_up_to_the_noise():
+    walk = walking_skeleton(120)
+    rng = np.random.default_rng(3)
+    noisy = walk + rng.normal(0, 0.01, walk.shape)
+    out = fusion.keep_bone_lengths(noisy, np.full(21, 0.01))
+    assert bone_lengths(out).std(0).mean() < 0.5 * bone_lengths(noisy).std(0).mean()
+    assert np.linalg.norm(out - walk, axis=-1).mean() < 0.9 * np.linalg.norm(noisy - walk, axis=-1).mean()
+    assert np.linalg.norm(out - noisy, axis=-1).max() <= 0.01 + 1e-9  # never more than the noise
+
+
+def test_keep_bone_lengths_keeps_a_clean_stretching_rig():
+    """A clean take whose bones change length on purpose (a stretchy rig) is kept: the input's noise is
+    what the bones may be moved by, and a clean take has next to none."""
+    walk = walking_skeleton(120)
+    stretch = 1.0 + 0.2 * np.sin(np.linspace(0, 6, 120))[:, None, None]
+    stretchy = walk[:, :1] + (walk - walk[:, :1]) * stretch
+    noise = fusion.noise_level(stretchy)
+    out = fusion.keep_bone_lengths(stretchy, noise)
+    assert noise.max() < 0.002
+    np.testing.assert_allclose(bone_lengths(out), bone_lengths(stretchy), atol=0.002)
 
 
 def test_running_median_ignores_one_outlier():
