@@ -42,6 +42,10 @@ PRIOR_WINDOW_S = 0.1  # sigma of the window over which the motion's acceleration
 MODEL_MOTION_TRUST = 2.0  # the model's acceleration counts this much against the first pass's
 PRIOR_FLOOR = 0.02  # the acceleration allowed anywhere: at least this share of the take's mean
 BONE_PASSES = 5  # rounds of the bone-length projection
+# Capture is never free of jitter: up to about 2 mm (what clean takes measure) it is kept as part of the
+# take, and the motion-following prior and the bone lengths come in fully from 4 mm of noise on.
+JITTER_KEPT_M = 0.002
+JITTER_REMOVED_M = 0.004
 JOINT_GROUP = 11  # joints measured and solved at a time: half a long take's working arrays, two passes of the solve
 
 
@@ -168,17 +172,31 @@ def fuse_joints(pos: np.ndarray, model: np.ndarray, found: Assessment, fps: floa
     if f < 8:
         return y
     # Second pass: the acceleration the motion has around each frame, from the first pass and the model.
+    share = noise_share(found.noise_m)
+    if not share.any():
+        return y
     acc2 = np.maximum(np.diff(y, n=2, axis=0) ** 2, MODEL_MOTION_TRUST * np.diff(m, n=2, axis=0) ** 2)
     local = np.maximum(gaussian_smooth(acc2, max(1.0, PRIOR_WINDOW_S * fps)), PRIOR_FLOOR * q[:, None])
-    return solve_smooth(weights, rhs, 1.0 / local.reshape(f - 2, -1)).reshape(x.shape)
+    following = solve_smooth(weights, rhs, 1.0 / local.reshape(f - 2, -1)).reshape(x.shape)
+    return y + share[None, :, None] * (following - y)
+
+
+def noise_share(noise_m: np.ndarray) -> np.ndarray:
+    """How far each joint's measured noise ``[J]`` (m) is jitter to remove rather than the capture's own
+    (0 up to :data:`JITTER_KEPT_M`, 1 from :data:`JITTER_REMOVED_M`)."""
+    return np.clip((np.asarray(noise_m) - JITTER_KEPT_M) / (JITTER_REMOVED_M - JITTER_KEPT_M), 0.0, 1.0)
 
 
 def keep_bone_lengths(pos: np.ndarray, noise_m: np.ndarray) -> np.ndarray:
     """``pos`` ``[F, 21, 3]`` with each bone brought towards the length it has through most of the
     take (its median), both ends moved alike, joint by joint at most the noise ``noise_m`` ``[21]``
-    (m) measured on the input: a skeleton's bones do not stretch, so what stretches them is noise,
-    and a clean take (or a rig that animates its bones' length on purpose, without noise) is kept."""
+    (m) measured on the input, of jitter to remove (:func:`noise_share`): a skeleton's bones do not
+    stretch, so what stretches them is noise, and a clean take (or a rig that animates its bones'
+    length on purpose, without noise) is kept."""
     x = np.asarray(pos, np.float64)
+    limit = noise_share(noise_m) * np.asarray(noise_m)
+    if not limit.any():
+        return x
     bones = [(int(PARENTS[j]), j) for j in range(len(PARENTS)) if PARENTS[j] >= 0]
     length = np.median(np.stack([np.linalg.norm(x[:, c] - x[:, p], axis=-1) for p, c in bones], 1), 0)
     y = x.copy()
@@ -191,7 +209,7 @@ def keep_bone_lengths(pos: np.ndarray, noise_m: np.ndarray) -> np.ndarray:
             y[:, p] += half
     moved = y - x
     size = np.linalg.norm(moved, axis=-1, keepdims=True)
-    return x + moved * np.minimum(1.0, np.asarray(noise_m)[None, :, None] / np.maximum(size, 1e-12))
+    return x + moved * np.minimum(1.0, limit[None, :, None] / np.maximum(size, 1e-12))
 
 
 def model_error2(gap: np.ndarray, sigma2: np.ndarray, fps: float) -> np.ndarray:
