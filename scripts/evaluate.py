@@ -69,7 +69,8 @@ def parse_args(argv=None):
                    help="feet of extended motion before and after Foot Lock: skate beside the real takes', sink "
                         "below the take's floor, knees left fully straight")
     p.add_argument("--denoise-fps", type=float, default=30.0, metavar="FPS",
-                   help="denoise at this frame rate (the clips are upsampled by a cubic above 30 fps)")
+                   help="denoise at this frame rate: clips captured at least this fast are read from their files at "
+                        "it, the others upsampled from 30 fps by a cubic")
     p.add_argument("--denoise-checkpoint", default=None, metavar="FOLDER",
                    help="release folder that denoises (default: the bundled denoising model, which Denoise "
                         "uses, if it exists, else --checkpoint)")
@@ -109,7 +110,8 @@ def print_table(result: dict, extra: dict):
         print("mean D_1nn per 1000-frame block: " + " ".join(f"{d:.4f}" for d in blocks))
     if "denoise" in result:
         dn = result["denoise"]
-        print(f"\nDenoising MPJPE (cm), model {extra['denoise_checkpoint']}")
+        print(f"\nDenoising MPJPE (cm), model {extra['denoise_checkpoint']}: {dn['clips_captured_at_fps']} of "
+              f"{dn['clips']} clips captured at that rate or faster, the others upsampled by a cubic")
         print(f"{'noise std cm':<20}" + "".join(f"{s:>8.1f}" for s in dn["std_cm"]))
         for name, row in dn["mpjpe_cm"].items():
             print(f"{name:<20}" + "".join(f"{v:8.2f}" for v in row))
@@ -199,12 +201,12 @@ def run(args) -> dict:
     if denoiser is not None:
         extra["denoise_checkpoint"] = f"{denoise_folder} at {args.denoise_fps:g} fps"
     if args.denoise_std:
-        dn = evaluate_denoise(denoiser, clips, args.denoise_std, fps=args.denoise_fps)
+        dn = evaluate_denoise(denoiser, clips, args.denoise_std, fps=args.denoise_fps, root=args.data)
         extra["butterworth_cutoff_hz"] = dn.pop("butterworth_cutoff_hz")
         extra["denoise_fps"] = dn.pop("strnn_frames_per_s")
         result["denoise"] = dn
     if args.denoise_pops:
-        pops = evaluate_pops(denoiser, clips, args.denoise_pops, fps=args.denoise_fps)
+        pops = evaluate_pops(denoiser, clips, args.denoise_pops, fps=args.denoise_fps, root=args.data)
         extra["pops_filters"] = (pops.pop("butterworth_cutoff_hz")[0], pops.pop("median_frames")[0])
         pops.pop("strnn_frames_per_s")
         result["denoise_pops"] = pops

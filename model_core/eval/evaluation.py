@@ -4,13 +4,16 @@ each beside its baselines, as the JSON document ``scripts/evaluate.py`` writes."
 from __future__ import annotations
 
 import time
+from pathlib import Path
 
 import numpy as np
 
-from ..model.dataset import MotionData
+from ..io.bvh import read_bvh
+from ..model.dataset import MotionData, fps_override
 from ..motion.conventions import MODEL_FPS
 from ..motion.features import floor_height, positions_to_features
 from ..ops.denoise import denoise_positions
+from ..rig.rigs import canonical_clip
 from .metrics import (
     HORIZONS_MS,
     add_noise,
@@ -95,13 +98,15 @@ def _drift(blocks: list[float]) -> float:
     return float(blocks[-1] / blocks[0]) if len(blocks) > 1 and blocks[0] > 0 else float("nan")
 
 
-def evaluate_denoise(engine, clips, stds_cm, seed: int = 0, fps: float = MODEL_FPS) -> dict:
+def evaluate_denoise(engine, clips, stds_cm, seed: int = 0, fps: float = MODEL_FPS, root=None) -> dict:
     """Denoise as the product runs it (:func:`denoise.denoise_positions`, at ``fps``: clips are
-    upsampled by a cubic when it is above the model's rate) against the best Butterworth filter, at
-    each Gaussian noise std in cm (0: the clean take, how much Denoise changes it)."""
-    usable = _at_rate([c.positions for c in clips if len(c.positions) >= 2 * engine.m], fps)
+    brought to it by :func:`_at_rate`, from their files under ``root`` where they were captured that
+    fast) against the best Butterworth filter, at each Gaussian noise std in cm (0: the clean take,
+    how much Denoise changes it)."""
+    usable, captured = _at_rate([c for c in clips if len(c.positions) >= 2 * engine.m], fps, root)
     out = {"std_cm": list(stds_cm), "mpjpe_cm": {"strnn": [], "butterworth_best": [], "noisy": []},
-           "butterworth_cutoff_hz": [], "strnn_frames_per_s": []}
+           "butterworth_cutoff_hz": [], "strnn_frames_per_s": [], "fps": fps, "clips": len(usable),
+           "clips_captured_at_fps": captured}
     for std in stds_cm:
         rng = np.random.default_rng(seed)
         noisy = [add_noise(p, std, rng) for p in usable]
@@ -109,14 +114,15 @@ def evaluate_denoise(engine, clips, stds_cm, seed: int = 0, fps: float = MODEL_F
     return out
 
 
-def evaluate_pops(engine, clips, rate: float, seed: int = 0, fps: float = MODEL_FPS) -> dict:
+def evaluate_pops(engine, clips, rate: float, seed: int = 0, fps: float = MODEL_FPS, root=None) -> dict:
     """Denoise against the best Butterworth and the best median filter on clips where ``rate`` of
     the joint-frames jump 10 to 30 cm for one frame (as from a marker swap)."""
-    usable = _at_rate([c.positions for c in clips if len(c.positions) >= 2 * engine.m], fps)
+    usable, captured = _at_rate([c for c in clips if len(c.positions) >= 2 * engine.m], fps, root)
     rng = np.random.default_rng(seed)
     noisy = [add_pops(p, rate, rng) for p in usable]
     out = {"rate": rate, "mpjpe_cm": {"strnn": [], "butterworth_best": [], "median_best": [], "noisy": []},
-           "butterworth_cutoff_hz": [], "median_frames": [], "strnn_frames_per_s": []}
+           "butterworth_cutoff_hz": [], "median_frames": [], "strnn_frames_per_s": [], "fps": fps,
+           "clips": len(usable), "clips_captured_at_fps": captured}
     _score(out, engine, usable, noisy, fps)
     err, size = best_median(usable, noisy)
     out["mpjpe_cm"]["median_best"].append(err)
@@ -140,6 +146,23 @@ def _mpjpe(pred: list, true: list) -> float:
     return float(np.concatenate([mpjpe_cm(p, t) for p, t in zip(pred, true)]).mean())
 
 
-def _at_rate(clips: list, fps: float) -> list:
-    """Clips at the model's rate brought to ``fps`` (a Catmull-Rom cubic between the frames)."""
-    return clips if fps == MODEL_FPS else [upsample(c, fps / MODEL_FPS) for c in clips]
+def _at_rate(clips: list, fps: float, root=None) -> tuple[list, int]:
+    """(positions, how many were captured at that rate or faster): the positions of ``clips`` (read at
+    the model's rate) at ``fps``: re-read from their files under
+    ``root`` at that rate when they were captured at least that fast (real capture, with its own
+    detail and jitter), else by a Catmull-Rom cubic between the model-rate frames (smoother than any
+    capture)."""
+    if fps == MODEL_FPS:
+        return [c.positions for c in clips], len(clips)
+    out, captured = [], 0
+    for clip in clips:
+        native = _native(Path(root) / clip.name, fps) if root is not None else None
+        captured += native is not None
+        out.append(native if native is not None else upsample(clip.positions, fps / MODEL_FPS))
+    return out, captured
+
+
+def _native(path: Path, fps: float) -> np.ndarray | None:
+    """The take at ``path`` read at ``fps``, or None when it was captured slower than that."""
+    bvh = read_bvh(path, fps=fps_override(path))
+    return canonical_clip(bvh, fps) if bvh.fps >= fps * 0.995 else None  # headers round: 0.016667 s is 60 fps

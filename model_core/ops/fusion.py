@@ -4,7 +4,8 @@ The model's reconstruction of a take is one estimate of the true motion; the tak
 is another. How much each is worth is measured on the take:
 
 - the input's noise level per joint, from its 4th differences in time (white noise dominates
-  them, smooth motion hardly reaches them), robustly, so a clean take reads as clean;
+  them, smooth motion hardly reaches them), robustly, so a clean take reads as clean; the
+  capture's own jitter (up to about 2 mm) counts as part of the take, not as noise;
 - single-frame pops (a joint jumping for one frame, as from a marker swap), as joint-frames
   far from the cubic through their neighbours; they get no weight at all;
 - the model's error, frame by frame, from how far it is from the input beyond the noise:
@@ -155,8 +156,10 @@ def fuse_joints(pos: np.ndarray, model: np.ndarray, found: Assessment, fps: floa
     edge = np.r_[:min(2, f), max(f - 2, 0):f]
     pops[edge] |= gap2[edge] > np.maximum(POP_FLOOR_M ** 2, 25.0 * 3.0 * (sigma2 + tau2[edge]))
     x = np.where(pops[..., None] & ~found.pops[..., None], m, x)
+    # The input is trusted to its noise, less the capture's own jitter, which is part of the take.
+    kept2 = np.maximum((noise_share(found.noise_m) * found.noise_m) ** 2, NOISE_FLOOR_M ** 2)
     # At a pop the input is the cubic through its neighbours: their noise and what the cubic misses.
-    w = np.where(pops, 1.0 / (2.0 * sigma2 + POP_FILL_ERROR_M ** 2), 1.0 / sigma2)  # (F, J)
+    w = np.where(pops, 1.0 / (2.0 * kept2 + POP_FILL_ERROR_M ** 2), 1.0 / kept2)  # (F, J)
     v = 1.0 / tau2
     # The prior's strength: the acceleration the motion itself has, the larger of what the input shows
     # beyond its noise and what the model's (noise-free) estimate shows.

@@ -166,18 +166,22 @@ def canonical_positions(bvh: Bvh, rig: RigMap | None = None) -> np.ndarray:
     return out
 
 
-def load_clip(path: str | Path, fps: float | None = None) -> np.ndarray:
+def load_clip(path: str | Path, fps: float | None = None, rate: float = MODEL_FPS) -> np.ndarray:
     """Read a BVH file as canonical motion ``float32 [frames, 21, 3]``: metres, standard
-    leg length, :data:`MODEL_FPS`, ground at y = 0.
+    leg length, ``rate`` frames per second (the model's), ground at y = 0.
 
     ``fps`` overrides a wrong header frame rate. Raises ``BvhError`` or ``RigError``.
     """
-    bvh = read_bvh(path, fps=fps)
+    return canonical_clip(read_bvh(path, fps=fps), rate)
+
+
+def canonical_clip(bvh, rate: float = MODEL_FPS) -> np.ndarray:
+    """A read BVH (:func:`read_bvh`) as :func:`load_clip` returns it."""
     pos = canonical_positions(bvh)
     legs = leg_length(pos)
     if not np.isfinite(legs) or legs <= 1e-6:
-        raise BvhError(f"{path}: legs have zero length; cannot normalise the skeleton's scale")
-    pos = resample(pos * (STANDARD_LEG_LENGTH / legs), bvh.fps, MODEL_FPS)
+        raise BvhError(f"{bvh.path}: legs have zero length; cannot normalise the skeleton's scale")
+    pos = resample(pos * (STANDARD_LEG_LENGTH / legs), bvh.fps, rate)
     feet = pos[:, [JOINT_INDEX[j] for j in ("l_foot", "l_toe", "r_foot", "r_toe")], UP_AXIS]
     pos[..., UP_AXIS] -= np.percentile(feet.min(axis=1), 5)
     return pos.astype(np.float32)

@@ -47,7 +47,8 @@ def test_one_run_writes_exactly_the_metric_keys(walks, tmp_path, capsys):
     assert set(lh["feet"]) == {"touch_fraction", "floor_offset_cm", "sink_cm"}
     assert [len(b) for b in lh["d1nn_per_block"]] == [1, 1]
     dn = doc["denoise"]
-    assert set(dn) == {"std_cm", "mpjpe_cm"} and set(dn["mpjpe_cm"]) == {"strnn", "butterworth_best", "noisy"}
+    assert set(dn) == {"std_cm", "mpjpe_cm", "fps", "clips", "clips_captured_at_fps"}
+    assert set(dn["mpjpe_cm"]) == {"strnn", "butterworth_best", "noisy"}
     assert dn["mpjpe_cm"]["butterworth_best"][0] < dn["mpjpe_cm"]["noisy"][0]  # the filter removes noise
     assert 4.0 < dn["mpjpe_cm"]["noisy"][0] < 5.6  # |N(0, 3 cm I3)| has mean 4.8 cm
     for heading in ("Long horizon", "Denoising", "speed / its take", "walk_0.bvh", "as Extend (seam)"):
@@ -155,3 +156,18 @@ def test_bad_models_and_outputs_are_found_before_any_work(walks, tmp_path, capsy
     assert evaluate.main(["--data", str(walks), "--json", str(blocked / "out.json")]) == 2
     err = capsys.readouterr().err
     assert "--json" in err and "cannot write there" in err and "evaluating" not in err
+
+
+def test_denoise_at_60_fps_reads_takes_captured_that_fast_from_their_files(tmp_path, capsys):
+    """--denoise-fps 60 reads a 60 fps take at its own rate (real detail and jitter), and upsamples a
+    30 fps one by a cubic; the JSON says how many were which."""
+    root = tmp_path / "takes"
+    root.mkdir()
+    write_bvh(root / "walk_60.bvh", walking_skeleton(frames=240, fps=60.0), fps=60.0)
+    write_bvh(root / "walk_30.bvh", walking_skeleton(frames=120), fps=30.0)
+    out = tmp_path / "eval.json"
+    assert evaluate.main(["--data", str(root), "--split", "all", "--cache", "", "--denoise-std", "0",
+                          "--denoise-fps", "60", "--json", str(out)]) == 0
+    dn = json.loads(out.read_text())["denoise"]
+    assert (dn["fps"], dn["clips"], dn["clips_captured_at_fps"]) == (60.0, 2, 1)
+    assert "1 of 2 clips captured at that rate or faster" in capsys.readouterr().out
