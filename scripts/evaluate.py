@@ -27,6 +27,7 @@ from model_core.eval.evaluation import (  # noqa: E402
     evaluate_long_horizon,
     evaluate_pops,
     evaluate_prediction,
+    evaluate_rotation_jitter,
     select_clips,
 )
 from model_core.eval.feet_evaluation import evaluate_feet  # noqa: E402
@@ -59,6 +60,9 @@ def parse_args(argv=None):
     p.add_argument("--reference", help="folder of BVH files for D_1nn and speed (default: --data's clips)")
     p.add_argument("--denoise-std", type=float, nargs="+", metavar="S",
                    help="Gaussian noise std in cm (0: the clean take, to see how much Denoise changes it)")
+    p.add_argument("--denoise-rot", type=float, nargs="+", metavar="DEG",
+                   help="also score Gaussian jitter of DEG degrees on every joint's rotation channels (a BVH's or "
+                        "an armature's jitter), against the best Butterworth")
     p.add_argument("--denoise-pops", type=float, metavar="RATE",
                    help="also score single-frame pops of 10 to 30 cm on this fraction of joint-frames, against "
                         "the best Butterworth and the best median filter")
@@ -117,6 +121,13 @@ def print_table(result: dict, extra: dict):
             print(f"{name:<20}" + "".join(f"{v:8.2f}" for v in row))
         print(f"{'best cutoff Hz':<20}" + "".join(f"{v:8.1f}" for v in extra["butterworth_cutoff_hz"]))
         print(f"{'strnn frames/s':<20}" + "".join(f"{v:8.0f}" for v in extra["denoise_fps"]))
+    if "denoise_rotation" in result:
+        rot = result["denoise_rotation"]
+        print(f"\nRotation jitter on every joint's channels, MPJPE (cm), model {extra['denoise_checkpoint']}")
+        print(f"{'jitter degrees':<20}" + "".join(f"{s:>8.1f}" for s in rot["deg"]))
+        for name, row in rot["mpjpe_cm"].items():
+            print(f"{name:<20}" + "".join(f"{v:8.2f}" for v in row))
+        print(f"{'best cutoff Hz':<20}" + "".join(f"{v:8.1f}" for v in extra["rotation_cutoff_hz"]))
     if "denoise_pops" in result:
         pops = result["denoise_pops"]
         cutoff, size = extra["pops_filters"]
@@ -172,7 +183,7 @@ def run(args) -> dict:
                               f"pass it as --denoise-checkpoint (with --denoise-std) and leave --checkpoint "
                               f"at a generating model")
     denoiser, denoise_folder = None, None
-    if args.denoise_std or args.denoise_pops:
+    if args.denoise_std or args.denoise_pops or args.denoise_rot:
         denoise_folder = args.denoise_checkpoint or default_denoiser(args.checkpoint)
         denoiser = Engine.load(denoise_folder)
     baselines = load_baselines(args)
@@ -205,6 +216,11 @@ def run(args) -> dict:
         extra["butterworth_cutoff_hz"] = dn.pop("butterworth_cutoff_hz")
         extra["denoise_fps"] = dn.pop("strnn_frames_per_s")
         result["denoise"] = dn
+    if args.denoise_rot:
+        rot = evaluate_rotation_jitter(denoiser, clips, args.denoise_rot, fps=args.denoise_fps, root=args.data)
+        extra["rotation_cutoff_hz"] = rot.pop("butterworth_cutoff_hz")
+        rot.pop("strnn_frames_per_s")
+        result["denoise_rotation"] = rot
     if args.denoise_pops:
         pops = evaluate_pops(denoiser, clips, args.denoise_pops, fps=args.denoise_fps, root=args.data)
         extra["pops_filters"] = (pops.pop("butterworth_cutoff_hz")[0], pops.pop("median_frames")[0])

@@ -18,6 +18,7 @@ from .metrics import (
     HORIZONS_MS,
     add_noise,
     add_pops,
+    add_rotation_jitter,
     best_butterworth,
     best_median,
     joint_speed,
@@ -103,13 +104,24 @@ def evaluate_denoise(engine, clips, stds_cm, seed: int = 0, fps: float = MODEL_F
     brought to it by :func:`_at_rate`, from their files under ``root`` where they were captured that
     fast) against the best Butterworth filter, at each Gaussian noise std in cm (0: the clean take,
     how much Denoise changes it)."""
+    return _noise_levels(engine, clips, "std_cm", stds_cm, add_noise, seed, fps, root)
+
+
+def evaluate_rotation_jitter(engine, clips, degrees, seed: int = 0, fps: float = MODEL_FPS, root=None) -> dict:
+    """:func:`evaluate_denoise` with Gaussian jitter of each of ``degrees`` on every joint's rotation
+    channels (:func:`metrics.add_rotation_jitter`) instead of on its position."""
+    return _noise_levels(engine, clips, "deg", degrees, add_rotation_jitter, seed, fps, root)
+
+
+def _noise_levels(engine, clips, key: str, levels, corrupt, seed: int, fps: float, root) -> dict:
+    """Denoise, the best Butterworth and the input, scored at each level of ``corrupt(pos, level, rng)``."""
     usable, captured = _at_rate([c for c in clips if len(c.positions) >= 2 * engine.m], fps, root)
-    out = {"std_cm": list(stds_cm), "mpjpe_cm": {"strnn": [], "butterworth_best": [], "noisy": []},
+    out = {key: list(levels), "mpjpe_cm": {"strnn": [], "butterworth_best": [], "noisy": []},
            "butterworth_cutoff_hz": [], "strnn_frames_per_s": [], "fps": fps, "clips": len(usable),
            "clips_captured_at_fps": captured}
-    for std in stds_cm:
+    for level in levels:
         rng = np.random.default_rng(seed)
-        noisy = [add_noise(p, std, rng) for p in usable]
+        noisy = [corrupt(p, level, rng) for p in usable]
         _score(out, engine, usable, noisy, fps)
     return out
 

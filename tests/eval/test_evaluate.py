@@ -123,18 +123,22 @@ def test_group_scores_every_clip_of_a_held_out_group(tmp_path):
 def test_inbetween_feet_and_denoise_options_write_their_keys(walks, tmp_path, capsys):
     out = tmp_path / "eval.json"
     assert evaluate.main(["--data", str(walks), "--cache", "", "--inbetween", "15", "30", "--feet",
-                          "--denoise-std", "0", "3", "--denoise-pops", "0.01", "--json", str(out)]) == 0
+                          "--denoise-std", "0", "3", "--denoise-pops", "0.01", "--denoise-rot", "1.5",
+                          "--json", str(out)]) == 0
     doc = json.loads(out.read_text())
     ib = doc["inbetween"]
     assert ib["gap_frames"] == [15, 30] and set(ib["l2p_cm"]) >= {"strnn", "interpolation"}
     assert set(ib["foot_skate_cm"]) >= {"strnn", "interpolation"} and len(ib["target_error_cm"]["strnn"]) == 2
     assert doc["denoise"]["std_cm"] == [0.0, 3.0] and doc["denoise"]["mpjpe_cm"]["noisy"][0] == 0.0
     assert doc["denoise"]["mpjpe_cm"]["strnn"][0] < 0.3  # a clean take is left (nearly) as it was
+    rot = doc["denoise_rotation"]
+    assert rot["deg"] == [1.5] and set(rot["mpjpe_cm"]) == {"strnn", "butterworth_best", "noisy"}
+    assert rot["mpjpe_cm"]["strnn"][0] < rot["mpjpe_cm"]["noisy"][0]
     pops = doc["denoise_pops"]
     assert pops["rate"] == 0.01 and set(pops["mpjpe_cm"]) == {"strnn", "butterworth_best", "median_best", "noisy"}
     assert set(doc["feet"]) >= {"skate_real_cm", "skate_locked_cm", "sink_locked_cm", "straight_knees_locked"}
     printed = capsys.readouterr().out
-    for heading in ("In-betweening", "Single-frame pops", "Feet of"):
+    for heading in ("In-betweening", "Single-frame pops", "Feet of", "Rotation jitter"):
         assert heading in printed
 
 

@@ -4,8 +4,15 @@ from __future__ import annotations
 
 import numpy as np
 
-from model_core.eval.metrics import feet_report, joint_speed, pose_vectors, rollout_report, segments
-from model_core.motion.conventions import UP_AXIS
+from model_core.eval.metrics import (
+    add_rotation_jitter,
+    feet_report,
+    joint_speed,
+    pose_vectors,
+    rollout_report,
+    segments,
+)
+from model_core.motion.conventions import JOINT_INDEX, PARENTS, UP_AXIS
 from model_core.motion.features import floor_height, positions_to_features
 from model_core.motion.synthetic import walking_skeleton
 
@@ -103,3 +110,15 @@ def test_rollout_report_judges_the_feet_of_the_last_block():
     report = rollout_report(feats, pos[:20], speed, segments(pose_vectors(feats[:400])), floor=floor_height(pos))
     assert report.feet.touch_fraction == 1.0 and report.feet.sink_cm < 1
     assert rollout_report(feats, pos[:20], speed, segments(pose_vectors(feats[:400]))).feet is None
+
+
+def test_rotation_jitter_turns_joints_and_keeps_bones():
+    """Jitter on rotation channels moves joints (more the further from the hips) but never stretches a
+    bone, as jitter in a BVH's or an armature's channels does."""
+    walk = walking_skeleton(60)
+    out = add_rotation_jitter(walk, 1.5, np.random.default_rng(0))
+    lengths = [np.linalg.norm(p[:, 1:] - p[:, PARENTS[1:]], axis=-1) for p in (walk, out)]
+    np.testing.assert_allclose(lengths[1], lengths[0], atol=1e-5)
+    moved = np.linalg.norm(out - walk, axis=-1).mean(0)
+    assert moved[0] < 1e-6 and 0.005 < moved.mean() < 0.1
+    assert moved[JOINT_INDEX["l_fingertip"]] > moved[JOINT_INDEX["spine"]]
