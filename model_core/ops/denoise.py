@@ -43,7 +43,7 @@ def denoise_positions_steps(engine, pos: np.ndarray, fps: float, strength: float
         clean = yield from _scaled(engine.reconstruct_positions_steps(sample_at(fixed, fps, times).astype(np.float32)),
                                    i / len(phases), 1 / len(phases))
         prior += _sample_times(np.asarray(clean, np.float64), times, frames) / len(phases)
-    out = norm.to_user(fusion.keep_bone_lengths(fusion.fuse(fixed, prior, found, fps), found.noise_m))
+    out = norm.to_user(fusion.keep_bone_lengths(fusion.fuse(fixed, prior, found, fps), found.joint_noise_m))
     user = np.asarray(pos, dtype=np.float64)
     return user + strength * (out - user)
 

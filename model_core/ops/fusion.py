@@ -52,16 +52,23 @@ JOINT_GROUP = 11  # joints measured and solved at a time: half a long take's wor
 
 @dataclass
 class Assessment:
-    """What was measured on a take: noise std per joint ``[J]`` (m) and pops ``bool [F, J]``."""
+    """What was measured on a take: noise std per joint and axis ``[J, 3]`` (m) and pops ``bool [F, J]``."""
 
     noise_m: np.ndarray
     pops: np.ndarray
 
+    @property
+    def joint_noise_m(self) -> np.ndarray:
+        """Noise std per joint ``[J]`` (m), over its three axes."""
+        return np.sqrt((np.asarray(self.noise_m) ** 2).mean(-1))
+
 
 def noise_level(pos: np.ndarray) -> np.ndarray:
-    """Robust std (m) of white noise per joint ``[J]`` of positions ``[F, J, 3]`` (F >= 5)."""
+    """Robust std (m) of white noise per joint and axis ``[J, 3]`` of positions ``[F, J, 3]`` (F >= 5).
+    Per axis, because noise need not be the same in every direction: jitter of a joint's rotation moves
+    the joints below it across their bones, not along them."""
     d4 = np.diff(np.asarray(pos, np.float64), n=4, axis=0)
-    mad = np.median(np.abs(d4 - np.median(d4, 0)), axis=(0, 2))
+    mad = np.median(np.abs(d4 - np.median(d4, 0)), axis=0)
     return np.maximum(1.4826 * mad / D4_NOISE_GAIN, NOISE_FLOOR_M)
 
 
@@ -148,38 +155,36 @@ def fuse_joints(pos: np.ndarray, model: np.ndarray, found: Assessment, fps: floa
     x = np.asarray(pos, np.float64)
     m = np.asarray(model, np.float64)
     f, j = x.shape[:2]
-    sigma2 = found.noise_m ** 2  # (J,)
+    sigma2 = np.asarray(found.noise_m) ** 2  # (J, 3)
     gap = x - m
     gap2 = (gap ** 2).sum(-1)  # (F, J)
     tau2 = model_error2(gap, sigma2, fps)
     pops = found.pops.copy()
     edge = np.r_[:min(2, f), max(f - 2, 0):f]
-    pops[edge] |= gap2[edge] > np.maximum(POP_FLOOR_M ** 2, 25.0 * 3.0 * (sigma2 + tau2[edge]))
+    pops[edge] |= gap2[edge] > np.maximum(POP_FLOOR_M ** 2, 25.0 * (sigma2.sum(-1) + 3.0 * tau2[edge]))
     x = np.where(pops[..., None] & ~found.pops[..., None], m, x)
     # The input is trusted to its noise, less the capture's own jitter, which is part of the take.
-    kept2 = np.maximum((noise_share(found.noise_m) * found.noise_m) ** 2, NOISE_FLOOR_M ** 2)
+    share = noise_share(found.joint_noise_m)
+    kept2 = np.maximum((share[:, None] * found.noise_m) ** 2, NOISE_FLOOR_M ** 2)  # (J, 3)
     # At a pop the input is the cubic through its neighbours: their noise and what the cubic misses.
-    w = np.where(pops, 1.0 / (2.0 * kept2 + POP_FILL_ERROR_M ** 2), 1.0 / kept2)  # (F, J)
-    v = 1.0 / tau2
+    w = np.where(pops[..., None], 1.0 / (2.0 * kept2 + POP_FILL_ERROR_M ** 2), 1.0 / kept2)  # (F, J, 3)
+    v = 1.0 / tau2[..., None]
     # The prior's strength: the acceleration the motion itself has, the larger of what the input shows
     # beyond its noise and what the model's (noise-free) estimate shows.
     if f > 2:
-        q = np.maximum((np.diff(x, n=2, axis=0) ** 2).mean((0, 2)) - D2_NOISE_GAIN * sigma2,
-                       (np.diff(m, n=2, axis=0) ** 2).mean((0, 2)))
+        q = np.maximum((np.diff(x, n=2, axis=0) ** 2).mean(0) - D2_NOISE_GAIN * sigma2,
+                       (np.diff(m, n=2, axis=0) ** 2).mean(0))
     else:
-        q = np.ones(j)
-    q = np.maximum(q, 1e-10)
-    weights = np.repeat((w + v)[..., None], 3, -1).reshape(f, -1)
-    rhs = (w[..., None] * x + v[..., None] * m).reshape(f, -1)
-    y = solve_smooth(weights, rhs, np.repeat(1.0 / q, 3)).reshape(x.shape)
-    if f < 8:
+        q = np.ones((j, 3))
+    q = np.maximum(q, 1e-10)  # (J, 3)
+    weights = (w + v).reshape(f, -1)
+    rhs = (w * x + v * m).reshape(f, -1)
+    y = solve_smooth(weights, rhs, 1.0 / q.reshape(-1)).reshape(x.shape)
+    if f < 8 or not share.any():
         return y
     # Second pass: the acceleration the motion has around each frame, from the first pass and the model.
-    share = noise_share(found.noise_m)
-    if not share.any():
-        return y
     acc2 = np.maximum(np.diff(y, n=2, axis=0) ** 2, MODEL_MOTION_TRUST * np.diff(m, n=2, axis=0) ** 2)
-    local = np.maximum(gaussian_smooth(acc2, max(1.0, PRIOR_WINDOW_S * fps)), PRIOR_FLOOR * q[:, None])
+    local = np.maximum(gaussian_smooth(acc2, max(1.0, PRIOR_WINDOW_S * fps)), PRIOR_FLOOR * q)
     following = solve_smooth(weights, rhs, 1.0 / local.reshape(f - 2, -1)).reshape(x.shape)
     return y + share[None, :, None] * (following - y)
 
@@ -216,7 +221,8 @@ def keep_bone_lengths(pos: np.ndarray, noise_m: np.ndarray) -> np.ndarray:
 
 
 def model_error2(gap: np.ndarray, sigma2: np.ndarray, fps: float) -> np.ndarray:
-    """The model's squared error per axis ``[F, J]`` from its gap to the input ``[F, J, 3]``: the gap
+    """The model's squared error per axis ``[F, J]`` from its gap to the input ``[F, J, 3]`` (the input's
+    noise variance per joint and axis ``sigma2`` ``[J, 3]``): the gap
     low-passed over :data:`BIAS_WINDOW_S` (where the input's noise averages out and the model's
     own, slowly varying, error stays), less what is left of the noise, taken as a running median
     over :data:`TRUST_WINDOW_S` on each side so that one bad frame does not make the model look
@@ -224,7 +230,7 @@ def model_error2(gap: np.ndarray, sigma2: np.ndarray, fps: float) -> np.ndarray:
     sigma = max(1.0, BIAS_WINDOW_S * fps)
     taps = gaussian_taps(sigma)
     left = taps @ taps  # share of white noise variance left after the filter
-    bias2 = (gaussian_smooth(gap, sigma) ** 2).sum(-1) / 3.0 - left * sigma2
+    bias2 = ((gaussian_smooth(gap, sigma) ** 2).sum(-1) - left * np.asarray(sigma2).sum(-1)) / 3.0
     # The noise is white and the acceleration prior removes most of it, the model's error is slow and
     # stays: it is weighed against the input's noise as it is after the low-pass, not as it is raw.
     return np.maximum(running_median(bias2, int(round(TRUST_WINDOW_S * fps))), MODEL_ERROR_FLOOR_M ** 2) / left
