@@ -169,6 +169,11 @@ def _copy(result):
     return np.array(result, copy=True) if isinstance(result, np.ndarray) else result
 
 
+def forget_results() -> None:
+    """Drop the kept model results, so the next call runs the model (a benchmark's repeated runs)."""
+    _RESULTS.clear()
+
+
 def _kept_steps(key: tuple, make_steps):
     """The result of the step generator ``make_steps()``, or the one kept for ``key`` without running it."""
     if key in _RESULTS:
