@@ -103,6 +103,9 @@ def parse_args(argv=None) -> argparse.Namespace:
                         "predictions are not for Extend or Follow Curve, which then refuse it)")
     p.add_argument("--offsets", action="store_true",
                    help="the frame decoder outputs offsets from the last context frame (a residual connection)")
+    p.add_argument("--offset-keep", type=int, default=None, metavar="K",
+                   help="with --offsets: the predicted frames from the K-th on let go of the last context frame, "
+                        "linearly, to absolute frames at the window's end (no offset carried from window to window)")
     p.add_argument("--mirror", type=float, default=TrainConfig.mirror,
                    help="share of training windows mirrored left to right")
     p.add_argument("--hold-out", action="store_true",
@@ -134,7 +137,7 @@ def baseline_run(args, argv):
 def strnn_run(args, argv):
     model = STRNNConfig(width=args.width or DEFAULT_WIDTH["strnn"], encode_len=args.encode_len,
                         predict_len=args.predict_len, residual_width=args.residual_width, dropout=args.dropout,
-                        offsets=args.offsets, spatial_norm=args.spatial_norm, **VARIANTS[args.variant])
+                        offsets=args.offsets, offset_keep=args.offset_keep, spatial_norm=args.spatial_norm, **VARIANTS[args.variant])
     cfg = TrainConfig(data=args.data, out=args.out, model=model, steps=args.steps, batch=args.batch,
                       phase_split=tuple(args.phase_split), recalibrate_batches=args.recalibrate_batches,
                       optimizer=args.optimizer, lr=learning_rate(args), smooth_weight=args.smooth_weight,

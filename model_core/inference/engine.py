@@ -62,6 +62,16 @@ def _cell(gates: np.ndarray, c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return t[..., 3 * h:] * np.tanh(c), c
 
 
+def offset_weights(n: int, keep: int | None) -> np.ndarray:
+    """How much of the last context frame each of ``n`` predicted frames adds to its decoded offset
+    ``[n]``: 1 for the first ``keep`` frames, then falling linearly to 0 at the last (``keep`` None or
+    at least ``n``: all 1). Only for a model whose decoder outputs offsets."""
+    w = np.ones(n)
+    if keep is not None and keep < n:
+        w[keep:] = 1.0 - np.arange(1, n - keep + 1) / (n - keep)
+    return w
+
+
 class Engine:
     """STRNN inference in NumPy. Build with :meth:`load`."""
 
@@ -73,6 +83,7 @@ class Engine:
         self.ckpt = ckpt
         self.m, self.n, self.width = cfg["encode_len"], cfg["predict_len"], cfg["width"]
         self.offsets = bool(cfg.get("offsets", False))
+        self.offset_keep = offset_weights(self.n, cfg.get("offset_keep")).astype(np.float32)
         self.mean, self.std = ckpt.mean, ckpt.std
         w = {k: v.astype(np.float32) for k, v in ckpt.weights.items()}
         self.enc_frame, self.dec_frame, out_bn = fold_spatial(w, cfg)
@@ -120,7 +131,8 @@ class Engine:
             hs, cs = _cell(gin + np.matmul(hs, self.step_whh), cs)
             frames = self.dec_frame(hs.reshape(2 * b, -1))  # (2B, C)
             if base is not None:
-                frames += base
+                frames[:b] += base[:b]
+                frames[b:] += base[b:] * self.offset_keep[min(t, self.n - 1)]
             out[:, t] = frames.reshape(2, b, c)
             if t + 1 < steps:
                 gin = np.matmul(self.enc_frame(frames).reshape(2, b, -1), self.step_wih) + self.step_b

@@ -10,6 +10,7 @@ from dataclasses import asdict, dataclass
 import torch
 from torch import nn
 
+from ..inference.engine import offset_weights
 from ..motion.conventions import LAYOUT, LIMBS, group_channels as group_indices
 
 
@@ -26,6 +27,10 @@ class STRNNConfig:
     # The frame decoder outputs offsets from the last context frame (a residual connection over
     # time) instead of whole frames, so the first predicted frames start where the context ends.
     offsets: bool = False
+    # With offsets: the predicted frames from this one on let go of the last context frame, its weight
+    # falling linearly to 0 at the window's last frame (:func:`offset_weights`), so that an open-loop
+    # rollout carries no offset, and no bias, from window to window (None: every frame an offset).
+    offset_keep: int | None = None
     # Normalisation after each spatial layer: "batch" (the paper's batch norm) or "none". Batch norm
     # normalises each step's frames over the batch while training but uses running statistics at
     # inference; unrolled over the encoder, decoder and predictor steps the two differ, and the
@@ -147,6 +152,7 @@ class STRNN(nn.Module):
         pred_in = self.encode_frames(x[:, -1:])[:, 0]
         (hd, cd), (hp, cp) = (h, c), (h, c)
         base = x[:, -1] if cfg.offsets else 0.0
+        keep = offset_weights(cfg.predict_len, cfg.offset_keep)
         decoded, predicted = [], []
         for i in range(max(cfg.encode_len, cfg.predict_len)):
             if i < cfg.encode_len:
@@ -156,7 +162,7 @@ class STRNN(nn.Module):
                 dec_in = self.encode_frame(frame)
             if i < cfg.predict_len:
                 hp, cp = self.predictor(pred_in, (hp, cp))
-                frame = base + self.decode_frame(hp)
+                frame = base * float(keep[i]) + self.decode_frame(hp)
                 predicted.append(frame)
                 pred_in = self.encode_frame(frame)
         return torch.stack(decoded[::-1], 1), torch.stack(predicted, 1)

@@ -17,7 +17,7 @@ torch = pytest.importorskip("torch")
 
 from releases import random_release  # noqa: E402
 
-from model_core.inference.engine import Engine, bone_lengths  # noqa: E402
+from model_core.inference.engine import Engine, bone_lengths, offset_weights  # noqa: E402
 from model_core.inference.steps import drive  # noqa: E402
 from model_core.inference.torch_engine import TorchEngine  # noqa: E402
 from model_core.io.checkpoint import DEFAULT_MODEL, REPO, CheckpointError, load_release  # noqa: E402
@@ -90,6 +90,18 @@ def test_offset_decoder_matches_torch_and_starts_at_the_context(tmp_path, spatia
         model.cfg.residual = False
     window = torch_forward(model, raw, mean, std)
     np.testing.assert_allclose(window, np.repeat(raw[:, -1:], window.shape[1], 1), atol=1e-5)
+
+
+def test_offsets_let_go_after_offset_keep_in_numpy_as_in_torch(tmp_path):
+    """``offset_keep``: the predicted frames from the K-th on add less and less of the last context frame,
+    none at the window's end; NumPy equals torch, and a decoder that outputs nothing reproduces the last
+    context frame only where the weight is 1."""
+    model, mean, std = random_release(tmp_path, False, False, offsets=True, offset_keep=4)
+    engine = Engine.load(tmp_path)
+    raw = engine.seeds
+    np.testing.assert_allclose(engine.forward(raw), torch_forward(model, raw, mean, std), atol=1e-4, rtol=0)
+    np.testing.assert_allclose(offset_weights(10, 4), [1, 1, 1, 1, 5 / 6, 4 / 6, 3 / 6, 2 / 6, 1 / 6, 0])
+    assert (offset_weights(10, None) == 1).all() and (offset_weights(10, 10) == 1).all()
 
 
 def test_extrapolate_shapes_and_batch_matches_single(release):
