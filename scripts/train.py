@@ -137,7 +137,8 @@ def baseline_run(args, argv):
 def strnn_run(args, argv):
     model = STRNNConfig(width=args.width or DEFAULT_WIDTH["strnn"], encode_len=args.encode_len,
                         predict_len=args.predict_len, residual_width=args.residual_width, dropout=args.dropout,
-                        offsets=args.offsets, offset_keep=args.offset_keep, spatial_norm=args.spatial_norm, **VARIANTS[args.variant])
+                        offsets=args.offsets, offset_keep=args.offset_keep, spatial_norm=args.spatial_norm,
+                        **VARIANTS[args.variant])
     cfg = TrainConfig(data=args.data, out=args.out, model=model, steps=args.steps, batch=args.batch,
                       phase_split=tuple(args.phase_split), recalibrate_batches=args.recalibrate_batches,
                       optimizer=args.optimizer, lr=learning_rate(args), smooth_weight=args.smooth_weight,
