@@ -160,10 +160,9 @@ def _mpjpe(pred: list, true: list) -> float:
 
 def _at_rate(clips: list, fps: float, root=None) -> tuple[list, int]:
     """(positions, how many were captured at that rate or faster): the positions of ``clips`` (read at
-    the model's rate) at ``fps``: re-read from their files under
-    ``root`` at that rate when they were captured at least that fast (real capture, with its own
-    detail and jitter), else by a Catmull-Rom cubic between the model-rate frames (smoother than any
-    capture)."""
+    the model's rate) brought to ``fps``. A clip captured at least that fast is re-read from its file
+    under ``root`` at that rate (real capture, with its own detail and jitter); the others are
+    upsampled by a Catmull-Rom cubic between their frames (smoother than any capture)."""
     if fps == MODEL_FPS:
         return [c.positions for c in clips], len(clips)
     out, captured = [], 0
