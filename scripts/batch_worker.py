@@ -210,6 +210,8 @@ def run_file(bpy, job: dict) -> None:
     try:
         if dst.suffix.lower() == ".bvh":
             view_layer.objects.active = obj
+            if src.suffix.lower() == ".bvh":
+                to_file_axes(bpy, obj)
             bpy.ops.export_anim.bvh(filepath=str(tmp), frame_start=start, frame_end=end,
                                     check_existing=False)
         else:
@@ -218,6 +220,23 @@ def run_file(bpy, job: dict) -> None:
         tmp.unlink(missing_ok=True)
         raise BatchError(f"Blender could not write {dst.name}: {blender_error(e)}") from None
     os.replace(tmp, dst)
+
+
+def to_file_axes(bpy, obj) -> None:
+    """Turn the armature back into the BVH file's axes (Y up) before Blender's exporter writes it.
+
+    The importer turned the file's Y-up into Blender's Z-up, and the exporter writes armature space
+    with no axis option, so without this a take comes back lying on its back. The turn goes into the
+    armature's rest (its keys are relative to the bones, so the motion turns with them)."""
+    from math import pi
+
+    from mathutils import Matrix
+
+    obj.matrix_world = Matrix.Rotation(-pi / 2, 4, "X") @ obj.matrix_world
+    for other in bpy.context.view_layer.objects:
+        other.select_set(other is obj)
+    bpy.context.view_layer.objects.active = obj
+    bpy.ops.object.transform_apply(location=False, rotation=True, scale=False)
 
 
 _STARTED: dict = {}  # this process's Blender: the bpy module, once the extension is installed

@@ -11,10 +11,13 @@ import tempfile
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 
+from model_core.io.bvh import read_bvh
 from model_core.io.bvh_export import write_bvh
 from model_core.motion.synthetic import walking_skeleton
+from model_core.rig.rigs import canonical_positions
 
 REPO = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(REPO / "scripts"))
@@ -72,6 +75,9 @@ def test_good_file_processed_corrupt_one_reported(clips, tmp_path, extension, ca
     assert code == 1
     result = out / "walk.extend.bvh"
     assert result.is_file() and frames_of(result) == 60 + 20
+    # the result is in the take's own axes (Y up), its first frames the take's
+    taken, written = (canonical_positions(read_bvh(p)) for p in (clips / "walk.bvh", result))
+    assert np.abs(written[:60] - taken).max() < 0.01 * np.abs(taken).max(), np.abs(written[:60] - taken).max()
     assert sorted(p.name for p in out.iterdir()) == ["walk.extend.bvh"]  # nothing for the broken one
     assert snapshot(clips) == before  # inputs untouched
     failures = captured.err.split("failures:")[1]
