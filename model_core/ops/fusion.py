@@ -28,6 +28,7 @@ import numpy as np
 
 from ..motion.conventions import PARENTS
 from ..motion.features import gaussian_smooth, gaussian_taps
+from .transfer import bone_lengths
 
 D4_NOISE_GAIN = np.sqrt(70.0)  # std of the 4th difference of unit white noise
 POP_FLOOR_M = 0.05  # a pop moves a joint at least this far from where its neighbours put it
@@ -205,11 +206,11 @@ def keep_bone_lengths(pos: np.ndarray, noise_m: np.ndarray) -> np.ndarray:
     limit = noise_share(noise_m) * np.asarray(noise_m)
     if not limit.any():
         return x
-    bones = [(int(PARENTS[j]), j) for j in range(len(PARENTS)) if PARENTS[j] >= 0]
-    length = np.median(np.stack([np.linalg.norm(x[:, c] - x[:, p], axis=-1) for p, c in bones], 1), 0)
+    length = bone_lengths(x)  # [21], by the bone's lower joint
     y = x.copy()
     for _ in range(BONE_PASSES):
-        for (p, c), want in zip(bones, length):
+        for c in np.flatnonzero(PARENTS >= 0):
+            p, want = PARENTS[c], length[c]
             d = y[:, c] - y[:, p]
             n = np.linalg.norm(d, axis=-1, keepdims=True)
             half = 0.5 * (n - want) * d / np.maximum(n, 1e-12)
