@@ -83,7 +83,7 @@ class Engine:
         self.ckpt = ckpt
         self.m, self.n, self.width = cfg["encode_len"], cfg["predict_len"], cfg["width"]
         self.offsets = bool(cfg.get("offsets", False))
-        self.offset_keep = offset_weights(self.n, cfg.get("offset_keep")).astype(np.float32)
+        self.base_weights = offset_weights(self.n, cfg.get("offset_keep")).astype(np.float32)  # per predicted frame
         self.mean, self.std = ckpt.mean, ckpt.std
         w = {k: v.astype(np.float32) for k, v in ckpt.weights.items()}
         self.enc_frame, self.dec_frame, out_bn = fold_spatial(w, cfg)
@@ -132,7 +132,7 @@ class Engine:
             frames = self.dec_frame(hs.reshape(2 * b, -1))  # (2B, C)
             if base is not None:
                 frames[:b] += base[:b]
-                frames[b:] += base[b:] * self.offset_keep[min(t, self.n - 1)]
+                frames[b:] += base[b:] * self.base_weights[min(t, self.n - 1)]
             out[:, t] = frames.reshape(2, b, c)
             if t + 1 < steps:
                 gin = np.matmul(self.enc_frame(frames).reshape(2, b, -1), self.step_wih) + self.step_b
