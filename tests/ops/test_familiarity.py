@@ -36,3 +36,11 @@ def test_calibration_percentiles():
     clips = [features_to_positions(np.concatenate([s, s])) for s in engine.seeds]
     record = familiarity.calibrate(engine, clips)
     assert 0 < record["reconstruction_cm_p50"] <= record["reconstruction_cm_p90"] and record["windows"] > 0
+
+
+def test_a_clip_a_little_above_the_ninetieth_percentile_is_not_called_unfamiliar():
+    """One clip in ten of held-back takes rebuilds worse than the 90th percentile: the note waits for a margin."""
+    usual = 2.0
+    assert not familiarity.Familiarity(1.1 * usual, usual).unfamiliar
+    assert familiarity.Familiarity(1.3 * usual, usual).unfamiliar
+    assert not familiarity.Familiarity(5.0, None).unfamiliar  # an uncalibrated model says nothing
