@@ -9,7 +9,7 @@ from ...model_core.ops.inbetween import MAX_GAP_S
 from .. import engine_bridge
 from ..scene import pipeline, rig_io
 from ..scene.pipeline import UserError
-from .common import lock, made_by, model_call, noop, pace_record, prefs, run, write_new
+from .common import familiarity_record, lock, made_by, model_call, noop, pace_record, prefs, run, write_new
 
 MIN_GAP_FRAMES = 2
 
@@ -105,5 +105,8 @@ def inbetween_steps(context, obj, *, frame_start: int | None = None, frame_end: 
     yield "write"
     record = made_by("Fill Gap", clip, engine_bridge.model_used(prefs(context)), frame_start=start, frame_end=end,
                      foot_lock=foot_lock)
+    if len(before) >= need:  # how well the model knows the motion before the gap, as Extend reports it
+        record.update(familiarity_record(model_call(engine_bridge.run_familiarity, prefs(context), pos_before,
+                                                    clip.fps)))
     record.update(pace_record(context, clip))
     return write_new(context, clip, "filled", gap, loc, rot, previous, (start - 0.5, end + 0.5), record)

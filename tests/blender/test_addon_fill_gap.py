@@ -44,6 +44,8 @@ def test_fill_the_gap_around_the_playhead(addon, real_model, gapped):
     assert step.max() < 2.0 * usual, "no pop at either end of the gap"
     moved = np.abs(out[40:70] - interpolated[40:70]).max()
     assert moved > 0.01 * np.ptp(truth[..., 2]), "the gap holds the model's motion, not the F-curve interpolation"
+    found = new["strnn"]["familiarity"]  # a procedural walk is far from any capture, and the record says so
+    assert found["reconstruction_cm"] > found["usual_cm_p90"] and "unlike what the model learnt" in found["note"]
 
 
 def test_fill_a_frame_range_and_the_first_gap(addon, real_model, gapped):
