@@ -8,6 +8,9 @@ context (where the motion already continues it) to exactly what is missing at th
   the target stands: the continuation's path is turned about the gap's start and shifted;
 - the pose in the body's own frame (root-local joints), so that it arrives in the target pose.
 
+Before that, the continuation's jump from the context is faded out as Extend fades it
+(:func:`seam.blend_seam`), so the gap leaves the context without a pop.
+
 Each correction follows a cubic Hermite curve with zero slope at the start; with two or more
 target frames its slope at the end also matches the target's own velocity, so the motion
 leaves the gap as the target moves on (no pop after it). Positions are ``[F, 21, 3]`` metres,
@@ -24,6 +27,7 @@ from ..motion.conventions import MODEL_FPS, ROOT, UP_AXIS
 from ..motion.features import heading, yaw_matrix
 from ..motion.geometry import interpolate_frames
 from .normalise import fit_normalisation, sample_at
+from .seam import blend_seam
 
 MAX_GAP_S = 4.0  # longest gap the model is asked to bridge (its continuation drifts beyond a few seconds)
 
@@ -89,7 +93,13 @@ def inbetween(engine, context: np.ndarray, target: np.ndarray, frames: int) -> n
     if len(context) < engine.m:
         context = np.concatenate([np.repeat(context[:1], engine.m - len(context), 0), context])
     pred = np.asarray(engine.extend(context[-engine.m:].astype(np.float32), frames + 1), np.float64)
-    return bend_onto(pred, context[-1], np.asarray(target, np.float64))[:-1]
+    return fill_from(context, pred, np.asarray(target, np.float64))[:-1]
+
+
+def fill_from(context: np.ndarray, pred: np.ndarray, target: np.ndarray) -> np.ndarray:
+    """The model's continuation ``pred`` ``[N + 1, J, 3]`` of ``context`` ``[C, J, 3]``, its seam faded as
+    Extend fades it and bent onto ``target`` ``[T, J, 3]``: the ``N`` gap frames and the target's frame."""
+    return bend_onto(blend_seam(context, pred), context[-1], target)
 
 
 def inbetween_positions(engine, before: np.ndarray, after: np.ndarray, fps: float, frames: int) -> np.ndarray:

@@ -11,7 +11,7 @@ from model_core.eval.inbetween_evaluation import evaluate_inbetween, interpolate
 from model_core.inference.engine import Engine
 from model_core.motion.features import heading
 from model_core.motion.synthetic import walking_skeleton
-from model_core.ops.inbetween import bend_onto, inbetween, inbetween_positions
+from model_core.ops.inbetween import bend_onto, fill_from, inbetween, inbetween_positions
 
 
 def test_bend_onto_arrives_at_the_target_and_its_velocity():
@@ -24,6 +24,20 @@ def test_bend_onto_arrives_at_the_target_and_its_velocity():
     assert np.abs(out - truth).max() > 0.01  # it is the bent continuation, not the truth
     first = np.linalg.norm(out[0] - pred[0], axis=-1).max()
     assert first < 0.01, "no jump at the start of the gap"
+
+
+def test_a_continuation_that_jumps_leaves_the_context_without_a_pop():
+    """The model's first frame can sit a little off the context (its decoder's error): the jump is faded out
+    as Extend fades it, so the gap's first frame goes on where the context's velocity leads."""
+    walk = walking_skeleton(120).astype(np.float64)
+    context, truth = walk[20:40], walk[40:71]
+    pred = truth + np.array([0.0, 0.1, 0.12])  # the continuation, 16 cm off from its first frame on
+    out = fill_from(context, pred, walk[70:72])
+    usual = np.linalg.norm(np.diff(walk, axis=0), axis=-1).max()
+    assert np.linalg.norm(bend_onto(pred, context[-1], walk[70:72])[0] - context[-1], axis=-1).max() > 1.8 * usual
+    steps = np.linalg.norm(np.diff(np.concatenate([context[-2:], out]), axis=0), axis=-1).max(1)
+    assert steps.max() < 1.5 * usual
+    np.testing.assert_allclose(out[-1], walk[70], atol=1e-4)  # and still arrives
 
 
 def test_the_model_fills_a_gap_at_any_rate_and_unit():
