@@ -61,15 +61,14 @@ class _Staged:
         """Thin the keys (``simplify``), deliver the new action as asked (``output``), report what was done
         (a warning with a note: the take's pace suggests its keys are read at another rate than captured, or
         its motion is unlike what the model learnt)."""
-        said = self.done(action) + report_note(action)
+        note = report_note(action)
+        said = self.done(action) + note
         if getattr(self, "simplify", 0.0) > 0.0:
             said += simplified(context, action, self.simplify)
         if getattr(self, "output", "ACTION") == "NLA":
             track = as_nla_strip(context.active_object, action)
             said += f"; put on NLA track {track.name!r}, the active action unchanged"
-        record = action.get(RECORD, {})
-        noted = any("note" in record.get(key, {}) for key in ("pace", "familiarity"))
-        self.report({"WARNING"} if noted else {"INFO"}, said)
+        self.report({"WARNING"} if note else {"INFO"}, said)
 
     def execute(self, context):
         self.range_from_scene(context)
