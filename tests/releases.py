@@ -15,13 +15,13 @@ C = LAYOUT.size
 
 
 def random_release(folder, spatial=True, residual=True, m=10, n=10, seed=0, purpose=None, offsets=False,
-                   spatial_norm="batch", offset_keep=None):
+                   spatial_norm="batch", offset_keep=None, filter_context=False):
     """Save a random STRNN as a release in ``folder``; return (eval-mode model, mean [C], std [C])."""
     torch.manual_seed(seed)
     rng = np.random.default_rng(seed)
     cfg = STRNNConfig(width=64, encode_len=m, predict_len=n, spatial=spatial, residual=residual,
                       residual_width=32, offsets=offsets, spatial_norm=spatial_norm,
-                      offset_keep=offset_keep)
+                      offset_keep=offset_keep, filter_context=filter_context)
     model = STRNN(cfg)
     with torch.no_grad():
         for mod in model.modules():

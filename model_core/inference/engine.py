@@ -99,6 +99,7 @@ class Engine:
         self.start_gates = (w["start"] - s) @ dec[0]
         self.filter = [(w[f"filter.net.{i}.weight"].T.copy(), w[f"filter.net.{i}.bias"]) for i in (0, 2, 4, 6)] \
             if cfg["residual"] else None
+        self.filter_context = bool(cfg.get("filter_context", False))
 
     @classmethod
     def load(cls, folder: str | Path | None = None) -> Engine:
@@ -139,7 +140,7 @@ class Engine:
         window = np.concatenate([out[0, : self.m][::-1], out[1, : self.n]]).transpose(1, 0, 2)  # (B, T, C)
         if self.filter is not None:
             y = window.reshape(b, -1)
-            z = y
+            z = np.concatenate([y, x.reshape(b, -1)], 1) if self.filter_context else y
             for i, (wt, bias) in enumerate(self.filter):
                 z = z @ wt + bias
                 if i < 3:

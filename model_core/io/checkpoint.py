@@ -207,7 +207,8 @@ def _check_strnn_shapes(folder: Path, ckpt: Checkpoint) -> None:
     width, m, n = cfg.get("width"), cfg.get("encode_len"), cfg.get("predict_len")
     found = {"width": w["predictor.weight_hh"].shape[1] if "predictor.weight_hh" in w else None}
     if cfg.get("residual") and "filter.net.0.weight" in w:
-        found["window"] = w["filter.net.0.weight"].shape[1] // max(cfg.get("frame_size", LAYOUT.size), 1)
+        frames = w["filter.net.0.weight"].shape[1] // max(cfg.get("frame_size", LAYOUT.size), 1)
+        found["window"] = frames - (m or 0) * bool(cfg.get("filter_context"))
     wanted = {"width": width, "window": (m or 0) + (n or 0)}
     for key, value in found.items():
         if value is None:

@@ -37,6 +37,11 @@ class STRNNConfig:
     # first predicted frame of the released models is 3 to 4 cm off with running statistics against
     # 1 cm with the batch's (model card). "none" trains and runs the same.
     spatial_norm: str = "batch"
+    # The residual filter also reads the true context frames, not only the window of decoded context
+    # and prediction: the predictor's LSTM sees the context only through its state and the last frame,
+    # and the filter over the whole window could correct the first predicted frames only from the
+    # decoder's reconstruction of the context, errors included.
+    filter_context: bool = False
 
     def __post_init__(self):
         if self.spatial_norm not in ("batch", "none"):
@@ -114,14 +119,22 @@ class ResidualFilter(nn.Module):
     def __init__(self, cfg: STRNNConfig):
         super().__init__()
         n = (cfg.encode_len + cfg.predict_len) * cfg.frame_size
+        n_in = n + (cfg.encode_len * cfg.frame_size if cfg.filter_context else 0)
         w = cfg.residual_width
-        self.net = nn.Sequential(nn.Linear(n, w), nn.ELU(), nn.Linear(w, w), nn.ELU(),
+        self.reads_context = cfg.filter_context
+        self.net = nn.Sequential(nn.Linear(n_in, w), nn.ELU(), nn.Linear(w, w), nn.ELU(),
                                  nn.Linear(w, w), nn.ELU(), nn.Linear(w, n))
         nn.init.zeros_(self.net[-1].weight)
         nn.init.zeros_(self.net[-1].bias)
 
-    def forward(self, x):
-        return x + self.net(x.flatten(1)).view_as(x)
+    def forward(self, x, context=None):
+        """Window ``(B, m + n, C)`` (and, where the filter reads it, the true context ``(B, m, C)``)."""
+        y = x.flatten(1)
+        if self.reads_context:
+            if context is None:
+                raise ValueError("this residual filter reads the true context: pass it")
+            y = torch.cat([y, context.flatten(1)], 1)
+        return x + self.net(y).view_as(x)
 
 
 class STRNN(nn.Module):
@@ -172,7 +185,7 @@ class STRNN(nn.Module):
         decoded, predicted = self.spatio_temporal(x)
         out = torch.cat([decoded, predicted], 1)
         if self.filter is not None and use_filter:
-            out = self.filter(out)
+            out = self.filter(out, x)
         return out
 
 

@@ -158,7 +158,7 @@ def window_loss(model: STRNN, window: torch.Tensor, cfg: TrainConfig, phase: str
     m = cfg.model.encode_len
     if phase == PHASES[1]:
         noisy = window + cfg.residual_noise * torch.randn_like(window)
-        return (model.filter(noisy) - window).pow(2).mean()
+        return (model.filter(noisy, noisy[:, :m]) - window).pow(2).mean()
     context = window[:, :m]
     if noisy is not None:
         context = torch.cat([noisy, context[len(noisy):]])
@@ -167,7 +167,7 @@ def window_loss(model: STRNN, window: torch.Tensor, cfg: TrainConfig, phase: str
     if phase == PHASES[2]:
         with torch.no_grad():
             decoded, predicted = model.spatio_temporal(context)
-        return (model.filter(torch.cat([decoded, predicted], 1)) - window).pow(2).mean()
+        return (model.filter(torch.cat([decoded, predicted], 1), context) - window).pow(2).mean()
     out = (net or model)(context, use_filter=False)
     w = torch.ones(out.shape[1], dtype=out.dtype)
     w[:m] = cfg.recon_weight  # decoded frames against predicted ones
@@ -270,6 +270,11 @@ def initial_weights(path: str | Path, model: STRNN) -> dict[str, torch.Tensor]:
     out = {}
     for k, v in model.state_dict().items():
         w = found.get(k, v)
+        if k == "filter.net.0.weight" and model.cfg.filter_context and w.shape[1] < v.shape[1] == \
+                w.shape[1] + model.cfg.encode_len * model.cfg.frame_size and w.shape[0] == v.shape[0]:
+            # A filter that reads the context, from one that did not: it starts as the old filter,
+            # the true context's weights at zero.
+            w = torch.cat([w, torch.zeros(v.shape[0], v.shape[1] - w.shape[1], dtype=w.dtype)], 1)
         if w.shape != v.shape:
             if not k.startswith("filter."):
                 raise ValueError(f"--init {path}: {k} has shape {tuple(w.shape)}, this model's {tuple(v.shape)}: "

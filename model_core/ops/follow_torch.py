@@ -28,7 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from ..inference.engine import Engine
+from ..inference.engine import Engine, offset_weights
 from ..inference.spatial_fold import fold_spatial
 from ..inference.torch_engine import build_model
 from ..io.checkpoint import Checkpoint
@@ -162,21 +162,24 @@ class TorchPathFollower(PathFollower):
         with torch.no_grad():
             _, (h, c) = model.encoder(enc(x[0])[None])
             state, step, decoded = (h[0], c[0]), model.start.expand_as(h[0]), []
+            # An offsets model's frames are offsets from the context's last frame (STRNNConfig.offsets).
+            base = x[:, -1] if model.cfg.offsets else torch.zeros_like(x[:, -1])
+            keep = offset_weights(self.n, model.cfg.offset_keep)
             for _ in range(self.m):  # the backward decoder, as STRNN.spatio_temporal runs it
                 state = model.decoder(step, state)
-                decoded.append(dec(state[0]))
+                decoded.append(base + dec(state[0]))
                 step = enc(decoded[-1])
             decoded = torch.stack(decoded[::-1], 1)  # (1, m, C), chronological
             first = enc(x[:, -1])
 
         def forward() -> torch.Tensor:
             state, step, frames = (h[0], c[0]), first, []
-            for _ in range(self.n):
+            for i in range(self.n):
                 state = model.predictor(step, state)
-                frames.append(dec(state[0]))
+                frames.append(base * float(keep[i]) + dec(state[0]))
                 step = enc(frames[-1])
             window = torch.cat([decoded, torch.stack(frames, 1)], 1)  # (1, m + n, C)
-            return (model.filter(window) if model.filter is not None else window)[0, self.m:]
+            return (model.filter(window, x) if model.filter is not None else window)[0, self.m:]
 
         return forward
 

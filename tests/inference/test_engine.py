@@ -67,6 +67,24 @@ def test_a_model_without_spatial_norms_runs_the_same_in_numpy_and_torch(tmp_path
                                atol=1e-5, rtol=0)
 
 
+@pytest.mark.parametrize("spatial", [True, False])
+def test_a_filter_that_reads_the_context_runs_the_same_in_numpy_and_torch_and_uses_it(tmp_path, spatial):
+    """``filter_context``: the residual filter's input is the window and the true context; NumPy equals
+    torch, and the context changes the output through the filter alone."""
+    model, mean, std = random_release(tmp_path, spatial, True, offsets=True, offset_keep=4, filter_context=True)
+    engine = Engine.load(tmp_path)
+    raw = engine.seeds
+    want = torch_forward(model, raw, mean, std)
+    np.testing.assert_allclose(engine.forward(raw), want, atol=1e-4, rtol=0)
+    np.testing.assert_allclose(TorchEngine.load(tmp_path).forward(raw), want, atol=1e-5, rtol=0)
+    x = torch.from_numpy((raw - mean) / std).float()
+    with torch.no_grad():
+        window = model(x, use_filter=False)
+        assert not torch.allclose(model.filter(window, x), model.filter(window, torch.zeros_like(x)))
+    with pytest.raises(ValueError, match="context"):
+        model.filter(window)
+
+
 def test_spatial_norm_is_checked():
     with pytest.raises(ValueError, match="spatial_norm"):
         STRNNConfig(spatial_norm="layer")

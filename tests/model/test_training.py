@@ -159,6 +159,26 @@ def test_rollout_fine_tuning_from_init(walk_folder, tmp_path):
         np.testing.assert_allclose(got[k], state[k].numpy(), err_msg=k)
 
 
+def test_a_filter_that_reads_the_context_starts_from_a_filter_that_did_not(walk_folder, tmp_path):
+    """``--init`` from a model whose filter read only the window: the new filter starts as that one (the
+    true context's input weights at zero), so before training both give the same window."""
+    first = train(_cfg(walk_folder, tmp_path / "base"), progress=False)
+    reads = _cfg(walk_folder, tmp_path / "reads", model=tiny(filter_context=True), init=str(first), steps=0)
+    second = train(reads, progress=False)
+    a, b = load_file(str(first / "model.safetensors")), load_file(str(second / "model.safetensors"))
+    w = b["filter.net.0.weight"]
+    n = a["filter.net.0.weight"].shape[1]
+    np.testing.assert_array_equal(w[:, :n], a["filter.net.0.weight"])
+    assert w.shape[1] == n + 20 * reads.model.frame_size and not w[:, n:].any()
+    x = torch.randn(3, 20, reads.model.frame_size)
+    old, new = STRNN(tiny()), STRNN(tiny(filter_context=True))
+    old.load_state_dict({k: torch.from_numpy(v) for k, v in a.items()}, strict=False)
+    new.load_state_dict({k: torch.from_numpy(v) for k, v in b.items()}, strict=False)
+    old.eval(), new.eval()
+    with torch.no_grad():
+        torch.testing.assert_close(new(x), old(x))
+
+
 def test_torchrun_two_cpu_processes(walk_folder, tmp_path):
     torchrun = Path(sys.executable).parent / "torchrun"
     if not torchrun.exists():

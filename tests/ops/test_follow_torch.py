@@ -83,9 +83,11 @@ def test_unknown_tune_option(follower):
         follower(tune="encoder")
 
 
-@pytest.mark.parametrize("spatial,residual", [(True, True), (False, False)])
-def test_predictor_pass_equals_the_full_model(tmp_path, spatial, residual):
-    random_release(tmp_path / "r", spatial=spatial, residual=residual)
+@pytest.mark.parametrize("spatial,residual,offsets", [(True, True, False), (False, False, False), (True, True, True),
+                                                      (False, True, True)])
+def test_predictor_pass_equals_the_full_model(tmp_path, spatial, residual, offsets):
+    random_release(tmp_path / "r", spatial=spatial, residual=residual, offsets=offsets,
+                   offset_keep=4 if offsets else None, filter_context=offsets and not spatial)
     f = TorchPathFollower(Engine.load(tmp_path / "r"))
     x = torch.randn(1, f.m, LAYOUT.size)
     with torch.no_grad():
