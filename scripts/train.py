@@ -109,6 +109,9 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--filter-context", action="store_true",
                    help="the residual filter also reads the true context frames, not only the decoded window "
                         "(with --init from a model without: it starts as that model's filter)")
+    p.add_argument("--predictor-context", action="store_true",
+                   help="every input of the forward predictor also gets a learnt linear map of the context's "
+                        "frames less its last frame (with --init from a model without: it starts at zero)")
     p.add_argument("--mirror", type=float, default=TrainConfig.mirror,
                    help="share of training windows mirrored left to right")
     p.add_argument("--hold-out", action="store_true",
@@ -141,7 +144,8 @@ def strnn_run(args, argv):
     model = STRNNConfig(width=args.width or DEFAULT_WIDTH["strnn"], encode_len=args.encode_len,
                         predict_len=args.predict_len, residual_width=args.residual_width, dropout=args.dropout,
                         offsets=args.offsets, offset_keep=args.offset_keep, spatial_norm=args.spatial_norm,
-                        filter_context=args.filter_context, **VARIANTS[args.variant])
+                        filter_context=args.filter_context,
+                        predictor_context=args.predictor_context, **VARIANTS[args.variant])
     cfg = TrainConfig(data=args.data, out=args.out, model=model, steps=args.steps, batch=args.batch,
                       phase_split=tuple(args.phase_split), recalibrate_batches=args.recalibrate_batches,
                       optimizer=args.optimizer, lr=learning_rate(args), smooth_weight=args.smooth_weight,

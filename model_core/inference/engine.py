@@ -97,6 +97,10 @@ class Engine:
         self.step_b = np.stack([dec[2] + s @ dec[0], pred[2] + s @ pred[0]])[:, None]  # (2, 1, 4H)
         # The decoder's first input is the learnt start code, not a batch-normed frame code.
         self.start_gates = (w["start"] - s) @ dec[0]
+        # A predictor that reads the context (STRNNConfig.predictor_context): its code of the context enters
+        # the predictor's gates through the predictor's input weights, folded into one map.
+        self.context_gates = (w["context_in.weight"].T @ pred[0]).astype(np.float32) \
+            if cfg.get("predictor_context") else None
         self.filter = [(w[f"filter.net.{i}.weight"].T.copy(), w[f"filter.net.{i}.bias"]) for i in (0, 2, 4, 6)] \
             if cfg["residual"] else None
         self.filter_context = bool(cfg.get("filter_context", False))
@@ -125,6 +129,9 @@ class Engine:
         first = self.enc_frame(x[:, -1])  # (B, W)
         gin = np.stack([np.broadcast_to(self.start_gates, (b, self.start_gates.shape[0])),
                         first @ self.step_wih[1]]) + self.step_b
+        extra = (x - x[:, -1:]).reshape(b, -1) @ self.context_gates if self.context_gates is not None else None
+        if extra is not None:
+            gin[1] += extra
         steps = max(self.m, self.n)
         out = np.empty((2, steps, b, c), np.float32)
         base = np.concatenate([x[:, -1], x[:, -1]]) if self.offsets else None  # (2B, C)
@@ -137,6 +144,8 @@ class Engine:
             out[:, t] = frames.reshape(2, b, c)
             if t + 1 < steps:
                 gin = np.matmul(self.enc_frame(frames).reshape(2, b, -1), self.step_wih) + self.step_b
+                if extra is not None:
+                    gin[1] += extra
         window = np.concatenate([out[0, : self.m][::-1], out[1, : self.n]]).transpose(1, 0, 2)  # (B, T, C)
         if self.filter is not None:
             y = window.reshape(b, -1)

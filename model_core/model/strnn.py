@@ -42,6 +42,10 @@ class STRNNConfig:
     # and the filter over the whole window could correct the first predicted frames only from the
     # decoder's reconstruction of the context, errors included.
     filter_context: bool = False
+    # Every input of the forward predictor also gets a learnt linear map of the context's frames less its
+    # last frame (the motion leading up to the cut, as siMLPe-like predictors read it): without it the
+    # predictor knows the context's pace only through the encoder's state.
+    predictor_context: bool = False
 
     def __post_init__(self):
         if self.spatial_norm not in ("batch", "none"):
@@ -151,6 +155,15 @@ class STRNN(nn.Module):
         self.predictor = nn.LSTMCell(w, w)
         self.start = nn.Parameter(torch.zeros(w))  # first input of the backward decoder
         self.filter = ResidualFilter(cfg) if cfg.residual else None
+        if cfg.predictor_context:
+            self.context_in = nn.Linear(cfg.encode_len * c, w, bias=False)
+            nn.init.zeros_(self.context_in.weight)  # starts as the model without it
+
+    def context_code(self, x):
+        """The predictor's extra input from context ``(B, m, C)``: ``(B, W)``, or 0 without one."""
+        if not self.cfg.predictor_context:
+            return 0.0
+        return self.context_in((x - x[:, -1:]).flatten(1))
 
     def encode_frames(self, x):
         b, t, c = x.shape
@@ -162,7 +175,8 @@ class STRNN(nn.Module):
         _, (h, c) = self.encoder(self.encode_frames(x))
         h, c = h[0], c[0]  # (B, W)
         dec_in = self.start.expand_as(h)
-        pred_in = self.encode_frames(x[:, -1:])[:, 0]
+        extra = self.context_code(x)
+        pred_in = self.encode_frames(x[:, -1:])[:, 0] + extra
         (hd, cd), (hp, cp) = (h, c), (h, c)
         base = x[:, -1] if cfg.offsets else 0.0
         keep = offset_weights(cfg.predict_len, cfg.offset_keep)
@@ -177,7 +191,7 @@ class STRNN(nn.Module):
                 hp, cp = self.predictor(pred_in, (hp, cp))
                 frame = base * float(keep[i]) + self.decode_frame(hp)
                 predicted.append(frame)
-                pred_in = self.encode_frame(frame)
+                pred_in = self.encode_frame(frame) + extra
         return torch.stack(decoded[::-1], 1), torch.stack(predicted, 1)
 
     def forward(self, x, use_filter: bool = True):

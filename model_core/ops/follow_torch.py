@@ -170,14 +170,15 @@ class TorchPathFollower(PathFollower):
                 decoded.append(base + dec(state[0]))
                 step = enc(decoded[-1])
             decoded = torch.stack(decoded[::-1], 1)  # (1, m, C), chronological
-            first = enc(x[:, -1])
+            extra = model.context_code(x)
+            first = enc(x[:, -1]) + extra
 
         def forward() -> torch.Tensor:
             state, step, frames = (h[0], c[0]), first, []
             for i in range(self.n):
                 state = model.predictor(step, state)
                 frames.append(base * float(keep[i]) + dec(state[0]))
-                step = enc(frames[-1])
+                step = enc(frames[-1]) + extra
             window = torch.cat([decoded, torch.stack(frames, 1)], 1)  # (1, m + n, C)
             return (model.filter(window, x) if model.filter is not None else window)[0, self.m:]
 

@@ -85,6 +85,24 @@ def test_a_filter_that_reads_the_context_runs_the_same_in_numpy_and_torch_and_us
         model.filter(window)
 
 
+@pytest.mark.parametrize("spatial", [True, False])
+def test_a_predictor_that_reads_the_context_runs_the_same_in_numpy_and_torch(tmp_path, spatial):
+    """``predictor_context``: the context's frames less its last enter every predictor step; NumPy equals
+    torch, the prediction depends on them and the decoded context does not."""
+    model, mean, std = random_release(tmp_path, spatial, False, offsets=True, predictor_context=True)
+    engine = Engine.load(tmp_path)
+    raw = engine.seeds
+    want = torch_forward(model, raw, mean, std)
+    np.testing.assert_allclose(engine.forward(raw), want, atol=1e-4, rtol=0)
+    np.testing.assert_allclose(TorchEngine.load(tmp_path).forward(raw), want, atol=1e-5, rtol=0)
+    with torch.no_grad():
+        model.context_in.weight.zero_()
+    without = torch_forward(model, raw, mean, std)
+    m = model.cfg.encode_len
+    np.testing.assert_allclose(without[:, :m], want[:, :m], atol=1e-6)
+    assert np.abs(without[:, m:] - want[:, m:]).max() > 1e-3
+
+
 def test_spatial_norm_is_checked():
     with pytest.raises(ValueError, match="spatial_norm"):
         STRNNConfig(spatial_norm="layer")

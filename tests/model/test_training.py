@@ -179,6 +179,18 @@ def test_a_filter_that_reads_the_context_starts_from_a_filter_that_did_not(walk_
         torch.testing.assert_close(new(x), old(x))
 
 
+def test_a_predictor_that_reads_the_context_starts_as_the_model_it_comes_from_and_learns_to(walk_folder, tmp_path):
+    """``--init`` from a model without ``predictor_context``: the new map starts at zero (the same model),
+    and training moves it."""
+    first = train(_cfg(walk_folder, tmp_path / "base"), progress=False)
+    start = train(_cfg(walk_folder, tmp_path / "start", model=tiny(predictor_context=True), init=str(first),
+                       steps=0), progress=False)
+    assert not load_file(str(start / "model.safetensors"))["context_in.weight"].any()
+    tuned = train(_cfg(walk_folder, tmp_path / "tuned", model=tiny(predictor_context=True), init=str(first)),
+                  progress=False)
+    assert load_file(str(tuned / "model.safetensors"))["context_in.weight"].any()
+
+
 def test_torchrun_two_cpu_processes(walk_folder, tmp_path):
     torchrun = Path(sys.executable).parent / "torchrun"
     if not torchrun.exists():
