@@ -109,6 +109,9 @@ class RolloutReport:
 # should come within FOOT_TOUCH_M of the floor at least once a second.
 LOCOMOTION_SPEED = 0.3  # m / s
 FOOT_TOUCH_M = 0.03
+# Both feet at least this far above the floor: the body is in the air (a run's flight, a hop, a jump).
+# Walks and standing takes of the data spend none of their frames so; runs about 30 %.
+AIRBORNE_M = 0.05
 
 
 @dataclass
@@ -118,6 +121,13 @@ class FeetReport:
     touch_fraction: float  # of the 1-second spans in locomotion, those where a foot touches the floor (nan: none)
     floor_offset_cm: float  # median height of the lowest foot joint over the floor: hovering > 0, sinking < 0
     sink_cm: float  # how far the lowest foot goes below the floor (99th percentile over frames, >= 0)
+    airborne_fraction: float = float("nan")  # of the frames, those with both feet in the air (:func:`airborne_fraction`)
+
+
+def airborne_fraction(pos: np.ndarray, floor: float) -> float:
+    """Share of the frames of ``[F, J, 3]`` in which every heel and toe is more than :data:`AIRBORNE_M` above
+    ``floor``: a walk that turns into hopping shows here while its speed and floor contacts look fine."""
+    return float(np.mean(lowest_foot(pos) - floor > AIRBORNE_M))
 
 
 def feet_report(pos: np.ndarray, floor: float, fps: float = MODEL_FPS) -> FeetReport:
@@ -129,7 +139,8 @@ def feet_report(pos: np.ndarray, floor: float, fps: float = MODEL_FPS) -> FeetRe
     spans = [slice(a, a + second) for a in range(0, len(pos) - second + 1, second)]
     moving = [s for s in spans if speed[s].mean() > LOCOMOTION_SPEED]
     touch = float(np.mean([height[s].min() < FOOT_TOUCH_M for s in moving])) if moving else float("nan")
-    return FeetReport(touch, float(100 * np.median(height)), float(100 * max(0.0, np.percentile(-height, 99))))
+    return FeetReport(touch, float(100 * np.median(height)), float(100 * max(0.0, np.percentile(-height, 99))),
+                      airborne_fraction(pos, floor))
 
 
 def segments(local: np.ndarray, length: int = 40, stride: int = 10) -> np.ndarray:

@@ -6,6 +6,7 @@ import numpy as np
 
 from model_core.eval.metrics import (
     add_rotation_jitter,
+    airborne_fraction,
     feet_report,
     joint_speed,
     pose_vectors,
@@ -102,6 +103,20 @@ def test_feet_report_sees_hovering_sinking_and_gliding():
     assert feet_report(glide, floor).touch_fraction == 0.0
     still = feet_report(np.repeat(pos[:1], 60, 0), floor)
     assert np.isnan(still.touch_fraction)  # no locomotion: nothing to judge
+
+
+def test_a_walk_turned_into_hops_is_in_the_air_where_the_walk_never_is():
+    """Both feet leave the floor together for a third of each hop: the speed and the once-a-second floor
+    contact look like a walk's, the share of frames in the air does not."""
+    pos = walking_skeleton(300)
+    floor = floor_height(pos)
+    walk = feet_report(pos, floor).airborne_fraction
+    hops = pos.copy()
+    t = np.arange(300)
+    hops[..., UP_AXIS] += (0.15 * np.clip(np.sin(2 * np.pi * t / 20), 0, None))[:, None]  # 1.5 hops a second
+    report = feet_report(hops, floor)
+    assert report.touch_fraction == 1.0 and report.airborne_fraction > walk + 0.2
+    assert airborne_fraction(pos, floor - 1.0) == 1.0 and airborne_fraction(pos, floor + 1.0) == 0.0
 
 
 def test_rollout_report_judges_the_feet_of_the_last_block():
