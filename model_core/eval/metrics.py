@@ -121,7 +121,7 @@ class FeetReport:
     touch_fraction: float  # of the 1-second spans in locomotion, those where a foot touches the floor (nan: none)
     floor_offset_cm: float  # median height of the lowest foot joint over the floor: hovering > 0, sinking < 0
     sink_cm: float  # how far the lowest foot goes below the floor (99th percentile over frames, >= 0)
-    airborne_fraction: float = float("nan")  # of the frames, those with both feet in the air (:func:`airborne_fraction`)
+    airborne_fraction: float = float("nan")  # share of frames with both feet in the air
 
 
 def airborne_fraction(pos: np.ndarray, floor: float) -> float:
