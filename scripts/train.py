@@ -85,6 +85,9 @@ def parse_args(argv=None) -> argparse.Namespace:
                    help="share of the first phase's steps that use such contexts")
     p.add_argument("--denoise-fraction", type=float, default=TrainConfig.denoise_fraction,
                    help="share of each batch whose context is re-derived from positions with noise (denoising)")
+    p.add_argument("--denoise-rotation-deg", type=float, default=TrainConfig.denoise_rotation_deg,
+                   help="above 0: half of those contexts get jitter of the joints' rotations instead, of a std "
+                        "drawn from 0 to this many degrees")
     p.add_argument("--init", default=TrainConfig.init,
                    help="start from the weights of a train_state.pt or release folder")
     p.add_argument("--noise-start", type=float, default=TrainConfig.noise_start, help="initial input-noise std")
@@ -151,7 +154,7 @@ def strnn_run(args, argv):
                       optimizer=args.optimizer, lr=learning_rate(args), smooth_weight=args.smooth_weight,
                       recon_weight=args.recon_weight, velocity_weight=args.velocity_weight, init=args.init,
                       rollout_windows=args.rollout_windows, rollout_fraction=args.rollout_fraction,
-                      denoise_fraction=args.denoise_fraction,
+                      denoise_fraction=args.denoise_fraction, denoise_rotation_deg=args.denoise_rotation_deg,
                       noise_start=args.noise_start, seed=args.seed, cache=args.cache, max_minutes=args.max_minutes,
                       checkpoint_seconds=args.checkpoint_seconds, purpose=args.purpose,
                       mirror=args.mirror, hold_out=args.hold_out, command=command_line(argv))

@@ -15,7 +15,7 @@ from ..motion.features import (
     lowest_foot,
     positions_to_features,
 )
-from ..motion.rotations import euler_to_matrix
+from ..motion.noise import add_rotation_jitter  # noqa: F401  (scored here, made there)
 from ..ops.fusion import running_median
 from ..ops.seam import blend_seam
 
@@ -204,28 +204,6 @@ def add_pops(pos: np.ndarray, rate: float, rng: np.random.Generator, low_m: floa
     way /= np.linalg.norm(way, axis=-1, keepdims=True)
     out[hit] += (way * rng.uniform(low_m, high_m, out.shape[:2])[..., None])[hit]
     return out.astype(np.float32)
-
-
-def add_rotation_jitter(pos: np.ndarray, deg: float, rng: np.random.Generator) -> np.ndarray:
-    """``pos`` ``[F, 21, 3]`` as if every joint's three rotation channels had Gaussian jitter of ``deg``
-    degrees, as a BVH's or an armature's do: from the hips down, each joint's subtree is turned about
-    the joint by its own small random rotation, frame by frame."""
-    out = np.array(pos, np.float64)
-    below = [[k for k in range(len(PARENTS)) if _descends(k, j)] for j in range(len(PARENTS))]
-    for j, sub in enumerate(below):
-        if sub:
-            turn = euler_to_matrix(rng.normal(0.0, np.radians(deg), (len(out), 3)), "ZXY")  # a BVH's usual order
-            out[:, sub] = out[:, j:j + 1] + np.einsum("fij,fkj->fki", turn, out[:, sub] - out[:, j:j + 1])
-    return out.astype(np.float32)
-
-
-def _descends(k: int, j: int) -> bool:
-    """Whether joint ``k`` lies below joint ``j`` in the canonical tree."""
-    while PARENTS[k] >= 0:
-        k = int(PARENTS[k])
-        if k == j:
-            return True
-    return False
 
 
 def median_filter(pos: np.ndarray, size: int) -> np.ndarray:

@@ -24,6 +24,7 @@ from ..io.checkpoint import PURPOSES, load_release, save_release
 from ..io.files import unwritable, write_atomic
 from ..motion.conventions import LAYOUT
 from ..motion.features import MIRROR_SIGN, MIRROR_SOURCE, features_to_positions, positions_to_features
+from ..motion.noise import add_rotation_jitter
 from ..ops.seam import PREDICT_SEAM_FRAMES, seam_fade
 from .dataset import SPLITS, MotionData, Normaliser, load_folder, window_starts
 from .strnn import STRNN, STRNNConfig, smoothness_cost
@@ -56,6 +57,9 @@ class TrainConfig:
     residual_noise: float = 0.05  # input noise while pre-training the filter on ground truth
     denoise_fraction: float = 0.25  # share of each batch whose context is re-derived from noisy positions ...
     denoise_max_cm: float = 6.0  # ... with a per-window noise std (cm) drawn from U(0, this): teaches denoising
+    # Above 0: half of those contexts get jitter of the joints' rotations instead, of a per-window std drawn
+    # from U(0, this) degrees (motion.noise.add_rotation_jitter), as a BVH's or a keyed rig's channels carry.
+    denoise_rotation_deg: float = 0.0
     lr_final: float = 0.1  # cosine decay of the learning rate to this fraction within each phase
     seed: int = 0
     checkpoint_seconds: float = 120.0  # how often the resumable state is written
@@ -120,13 +124,18 @@ class Windows:
     def batch(self, idx: np.ndarray) -> torch.Tensor:
         return torch.from_numpy(self.feats[self.starts[idx][:, None] + self.span])
 
-    def noisy_contexts(self, idx: np.ndarray, m: int, max_cm: float, rng: np.random.Generator) -> torch.Tensor:
+    def noisy_contexts(self, idx: np.ndarray, m: int, max_cm: float, rng: np.random.Generator,
+                       max_deg: float = 0.0) -> torch.Tensor:
         """Normalised contexts ``(B, m, C)`` re-derived, as at inference, from the windows'
-        positions plus Gaussian noise of a per-window std drawn from U(0, ``max_cm``)."""
+        positions plus Gaussian noise of a per-window std drawn from U(0, ``max_cm``), or, with
+        ``max_deg`` above 0, for half of them rotation jitter of a std drawn from U(0, ``max_deg``)."""
         out = []
         for s in self.starts[idx]:
             pos = features_to_positions(self.raw[s:s + m])
-            pos = pos + rng.normal(0.0, rng.uniform(0, max_cm) / 100.0, pos.shape)
+            if max_deg > 0 and rng.random() < 0.5:
+                pos = add_rotation_jitter(pos, rng.uniform(0, max_deg), rng)
+            else:
+                pos = pos + rng.normal(0.0, rng.uniform(0, max_cm) / 100.0, pos.shape)
             out.append(positions_to_features(pos)[0])
         return torch.from_numpy(self.norm.encode(np.stack(out)).astype(np.float32))
 
@@ -401,7 +410,8 @@ def train(cfg: TrainConfig, resume: bool = False, progress: bool = True) -> Path
             idx = rng.integers(0, len(train_w), per_rank)
             window = mirror(train_w.batch(idx), flip)
             heavy = idx[: int(round(cfg.denoise_fraction * len(idx)))] if phase != PHASES[1] else idx[:0]
-            noisy = train_w.noisy_contexts(heavy, cfg.model.encode_len, cfg.denoise_max_cm, rng) if len(heavy) else None
+            noisy = train_w.noisy_contexts(heavy, cfg.model.encode_len, cfg.denoise_max_cm, rng,
+                                           cfg.denoise_rotation_deg) if len(heavy) else None
             noisy = mirror(noisy, flip)
         loss = window_loss(model, window, cfg, phase, noise_std(cfg, step), net=net, noisy=noisy)
         scale = float(cfg.lr_final + (1 - cfg.lr_final) * 0.5 * (1 + np.cos(np.pi * phase_progress(cfg, step))))

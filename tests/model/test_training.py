@@ -239,3 +239,24 @@ def test_a_run_that_cannot_start_says_why_and_leaves_no_run_folder(walk_folder, 
     with pytest.raises(ValueError, match="no .bvh files"):
         train(_cfg(empty, tmp_path / "nothing"), progress=False)
     assert not (tmp_path / "nothing").exists()
+
+
+def test_noisy_contexts_with_rotation_jitter_keep_bone_lengths_and_position_noise_does_not(walk_folder):
+    """``denoise_rotation_deg``: half of the noisy contexts turn the joints (bones keep their lengths), the
+    others move them (bones stretch); all differ from the clean context."""
+    from model_core.eval.metrics import bone_lengths_of
+    from model_core.model.dataset import Normaliser, load_folder
+    from model_core.model.training import Windows
+    from model_core.motion.features import features_to_positions
+
+    data = load_folder(walk_folder, cache_dir=None, progress=False)
+    windows = Windows(data, "train", Normaliser.fit(np.concatenate([c.features for c in data.clips])), 40)
+    idx = np.arange(40)
+    noisy = windows.noisy_contexts(idx, 20, 3.0, np.random.default_rng(0), max_deg=3.0).numpy()
+    clean = windows.batch(idx)[:, :20].numpy()
+    kept = []
+    for n, c in zip(noisy, clean):
+        got, want = (bone_lengths_of(features_to_positions(windows.norm.decode(x))) for x in (n, c))
+        kept.append(np.abs(got - want).max() < 1e-4)
+        assert np.abs(n - c).max() > 1e-3
+    assert 5 < sum(kept) < 35  # about half turned, half moved
