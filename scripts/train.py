@@ -115,6 +115,9 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--predictor-context", action="store_true",
                    help="every input of the forward predictor also gets a learnt linear map of the context's "
                         "frames less its last frame (with --init from a model without: it starts at zero)")
+    p.add_argument("--temporal-skip", action="store_true",
+                   help="each predicted frame also gets a learnt linear extrapolation of the context's motion "
+                        "(an n x m map shared by all channels; with --init from a model without: it starts at zero)")
     p.add_argument("--mirror", type=float, default=TrainConfig.mirror,
                    help="share of training windows mirrored left to right")
     p.add_argument("--hold-out", action="store_true",
@@ -148,7 +151,8 @@ def strnn_run(args, argv):
                         predict_len=args.predict_len, residual_width=args.residual_width, dropout=args.dropout,
                         offsets=args.offsets, offset_keep=args.offset_keep, spatial_norm=args.spatial_norm,
                         filter_context=args.filter_context,
-                        predictor_context=args.predictor_context, **VARIANTS[args.variant])
+                        predictor_context=args.predictor_context, temporal_skip=args.temporal_skip,
+                        **VARIANTS[args.variant])
     cfg = TrainConfig(data=args.data, out=args.out, model=model, steps=args.steps, batch=args.batch,
                       phase_split=tuple(args.phase_split), recalibrate_batches=args.recalibrate_batches,
                       optimizer=args.optimizer, lr=learning_rate(args), smooth_weight=args.smooth_weight,

@@ -101,6 +101,7 @@ class Engine:
         # the predictor's gates through the predictor's input weights, folded into one map.
         self.context_gates = (w["context_in.weight"].T @ pred[0]).astype(np.float32) \
             if cfg.get("predictor_context") else None
+        self.skip = w["skip"] if cfg.get("temporal_skip") else None  # (n, m): STRNNConfig.temporal_skip
         self.filter = [(w[f"filter.net.{i}.weight"].T.copy(), w[f"filter.net.{i}.bias"]) for i in (0, 2, 4, 6)] \
             if cfg["residual"] else None
         self.filter_context = bool(cfg.get("filter_context", False))
@@ -135,12 +136,15 @@ class Engine:
         steps = max(self.m, self.n)
         out = np.empty((2, steps, b, c), np.float32)
         base = np.concatenate([x[:, -1], x[:, -1]]) if self.offsets else None  # (2B, C)
+        skip = np.einsum("it,btc->ibc", self.skip, x - x[:, -1:]) if self.skip is not None else None
         for t in range(steps):
             hs, cs = _cell(gin + np.matmul(hs, self.step_whh), cs)
             frames = self.dec_frame(hs.reshape(2 * b, -1))  # (2B, C)
             if base is not None:
                 frames[:b] += base[:b]
                 frames[b:] += base[b:] * self.base_weights[min(t, self.n - 1)]
+            if skip is not None:
+                frames[b:] += skip[min(t, self.n - 1)]
             out[:, t] = frames.reshape(2, b, c)
             if t + 1 < steps:
                 gin = np.matmul(self.enc_frame(frames).reshape(2, b, -1), self.step_wih) + self.step_b

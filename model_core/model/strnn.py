@@ -46,6 +46,10 @@ class STRNNConfig:
     # last frame (the motion leading up to the cut, as siMLPe-like predictors read it): without it the
     # predictor knows the context's pace only through the encoder's state.
     predictor_context: bool = False
+    # Each predicted frame also gets a learnt linear extrapolation of the context's motion: frame i adds
+    # sum_t A[i, t] (x_t - x_last), one (n, m) map shared by every channel (zero and constant velocity
+    # are two such maps), so the network learns what a linear extrapolation leaves over.
+    temporal_skip: bool = False
 
     def __post_init__(self):
         if self.spatial_norm not in ("batch", "none"):
@@ -155,9 +159,17 @@ class STRNN(nn.Module):
         self.predictor = nn.LSTMCell(w, w)
         self.start = nn.Parameter(torch.zeros(w))  # first input of the backward decoder
         self.filter = ResidualFilter(cfg) if cfg.residual else None
+        if cfg.temporal_skip:
+            self.skip = nn.Parameter(torch.zeros(cfg.predict_len, cfg.encode_len))  # starts as the model without
         if cfg.predictor_context:
             self.context_in = nn.Linear(cfg.encode_len * c, w, bias=False)
             nn.init.zeros_(self.context_in.weight)  # starts as the model without it
+
+    def skip_frames(self, x):
+        """The linear extrapolation ``(B, n, C)`` of context ``(B, m, C)`` (:attr:`STRNNConfig.temporal_skip`)."""
+        if not self.cfg.temporal_skip:
+            return None
+        return torch.einsum("it,btc->bic", self.skip, x - x[:, -1:])
 
     def context_code(self, x):
         """The predictor's extra input from context ``(B, m, C)``: ``(B, W)``, or 0 without one."""
@@ -176,6 +188,7 @@ class STRNN(nn.Module):
         h, c = h[0], c[0]  # (B, W)
         dec_in = self.start.expand_as(h)
         extra = self.context_code(x)
+        skip = self.skip_frames(x)
         pred_in = self.encode_frames(x[:, -1:])[:, 0] + extra
         (hd, cd), (hp, cp) = (h, c), (h, c)
         base = x[:, -1] if cfg.offsets else 0.0
@@ -190,6 +203,8 @@ class STRNN(nn.Module):
             if i < cfg.predict_len:
                 hp, cp = self.predictor(pred_in, (hp, cp))
                 frame = base * float(keep[i]) + self.decode_frame(hp)
+                if skip is not None:
+                    frame = frame + skip[:, i]
                 predicted.append(frame)
                 pred_in = self.encode_frame(frame) + extra
         return torch.stack(decoded[::-1], 1), torch.stack(predicted, 1)

@@ -171,13 +171,15 @@ class TorchPathFollower(PathFollower):
                 step = enc(decoded[-1])
             decoded = torch.stack(decoded[::-1], 1)  # (1, m, C), chronological
             extra = model.context_code(x)
+            skip = model.skip_frames(x)
+            skip = torch.zeros(1, self.n, x.shape[-1]) if skip is None else skip
             first = enc(x[:, -1]) + extra
 
         def forward() -> torch.Tensor:
             state, step, frames = (h[0], c[0]), first, []
             for i in range(self.n):
                 state = model.predictor(step, state)
-                frames.append(base * float(keep[i]) + dec(state[0]))
+                frames.append(base * float(keep[i]) + dec(state[0]) + skip[:, i])
                 step = enc(frames[-1]) + extra
             window = torch.cat([decoded, torch.stack(frames, 1)], 1)  # (1, m + n, C)
             return (model.filter(window, x) if model.filter is not None else window)[0, self.m:]

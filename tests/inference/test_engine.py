@@ -103,6 +103,26 @@ def test_a_predictor_that_reads_the_context_runs_the_same_in_numpy_and_torch(tmp
     assert np.abs(without[:, m:] - want[:, m:]).max() > 1e-3
 
 
+@pytest.mark.parametrize("spatial", [True, False])
+def test_a_temporal_skip_runs_the_same_in_numpy_and_torch_and_extrapolates_linearly(tmp_path, spatial):
+    """``temporal_skip``: each predicted frame adds a linear map of the context's motion; NumPy equals torch,
+    and a map that repeats the last step (constant velocity) moves the prediction by exactly that."""
+    model, mean, std = random_release(tmp_path, spatial, False, offsets=True, temporal_skip=True)
+    engine = Engine.load(tmp_path)
+    raw = engine.seeds
+    want = torch_forward(model, raw, mean, std)
+    np.testing.assert_allclose(engine.forward(raw), want, atol=1e-4, rtol=0)
+    np.testing.assert_allclose(TorchEngine.load(tmp_path).forward(raw), want, atol=1e-5, rtol=0)
+    x = torch.from_numpy((raw - mean) / std).float()
+    m, n = model.cfg.encode_len, model.cfg.predict_len
+    with torch.no_grad():
+        model.skip.zero_()
+        model.skip[:, m - 2] = -torch.arange(1, n + 1, dtype=torch.float32)  # frame i: (i + 1) x the last step
+        step = x[:, -1] - x[:, -2]
+        expected = step[:, None] * torch.arange(1, n + 1, dtype=torch.float32)[None, :, None]
+        torch.testing.assert_close(model.skip_frames(x), expected)
+
+
 def test_spatial_norm_is_checked():
     with pytest.raises(ValueError, match="spatial_norm"):
         STRNNConfig(spatial_norm="layer")

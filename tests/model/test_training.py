@@ -189,6 +189,9 @@ def test_a_predictor_that_reads_the_context_starts_as_the_model_it_comes_from_an
     tuned = train(_cfg(walk_folder, tmp_path / "tuned", model=tiny(predictor_context=True), init=str(first)),
                   progress=False)
     assert load_file(str(tuned / "model.safetensors"))["context_in.weight"].any()
+    skip = train(_cfg(walk_folder, tmp_path / "skip", model=tiny(temporal_skip=True), init=str(first)),
+                 progress=False)
+    assert load_file(str(skip / "model.safetensors"))["skip"].any()
 
 
 def test_torchrun_two_cpu_processes(walk_folder, tmp_path):

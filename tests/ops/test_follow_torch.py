@@ -88,7 +88,7 @@ def test_unknown_tune_option(follower):
 def test_predictor_pass_equals_the_full_model(tmp_path, spatial, residual, offsets):
     random_release(tmp_path / "r", spatial=spatial, residual=residual, offsets=offsets,
                    offset_keep=4 if offsets else None, filter_context=offsets and not spatial,
-                   predictor_context=offsets)
+                   predictor_context=offsets, temporal_skip=offsets and spatial)
     f = TorchPathFollower(Engine.load(tmp_path / "r"))
     x = torch.randn(1, f.m, LAYOUT.size)
     with torch.no_grad():
