@@ -67,16 +67,23 @@ def test_a_model_without_spatial_norms_runs_the_same_in_numpy_and_torch(tmp_path
                                atol=1e-5, rtol=0)
 
 
-@pytest.mark.parametrize("spatial", [True, False])
-def test_a_filter_that_reads_the_context_runs_the_same_in_numpy_and_torch_and_uses_it(tmp_path, spatial):
-    """``filter_context``: the residual filter's input is the window and the true context; NumPy equals
-    torch, and the context changes the output through the filter alone."""
-    model, mean, std = random_release(tmp_path, spatial, True, offsets=True, offset_keep=4, filter_context=True)
+def _engines_agree(tmp_path, spatial, residual, **kw):
+    """A random offsets release with the options ``kw``: the NumPy and torch engines give the model's window.
+    Returns (model, mean, std, raw seeds, the window)."""
+    model, mean, std = random_release(tmp_path, spatial, residual, offsets=True, **kw)
     engine = Engine.load(tmp_path)
     raw = engine.seeds
     want = torch_forward(model, raw, mean, std)
     np.testing.assert_allclose(engine.forward(raw), want, atol=1e-4, rtol=0)
     np.testing.assert_allclose(TorchEngine.load(tmp_path).forward(raw), want, atol=1e-5, rtol=0)
+    return model, mean, std, raw, want
+
+
+@pytest.mark.parametrize("spatial", [True, False])
+def test_a_filter_that_reads_the_context_runs_the_same_in_numpy_and_torch_and_uses_it(tmp_path, spatial):
+    """``filter_context``: the residual filter's input is the window and the true context; NumPy equals
+    torch, and the context changes the output through the filter alone."""
+    model, mean, std, raw, want = _engines_agree(tmp_path, spatial, True, offset_keep=4, filter_context=True)
     x = torch.from_numpy((raw - mean) / std).float()
     with torch.no_grad():
         window = model(x, use_filter=False)
@@ -89,12 +96,7 @@ def test_a_filter_that_reads_the_context_runs_the_same_in_numpy_and_torch_and_us
 def test_a_predictor_that_reads_the_context_runs_the_same_in_numpy_and_torch(tmp_path, spatial):
     """``predictor_context``: the context's frames less its last enter every predictor step; NumPy equals
     torch, the prediction depends on them and the decoded context does not."""
-    model, mean, std = random_release(tmp_path, spatial, False, offsets=True, predictor_context=True)
-    engine = Engine.load(tmp_path)
-    raw = engine.seeds
-    want = torch_forward(model, raw, mean, std)
-    np.testing.assert_allclose(engine.forward(raw), want, atol=1e-4, rtol=0)
-    np.testing.assert_allclose(TorchEngine.load(tmp_path).forward(raw), want, atol=1e-5, rtol=0)
+    model, mean, std, raw, want = _engines_agree(tmp_path, spatial, False, predictor_context=True)
     with torch.no_grad():
         model.context_in.weight.zero_()
     without = torch_forward(model, raw, mean, std)
@@ -107,12 +109,7 @@ def test_a_predictor_that_reads_the_context_runs_the_same_in_numpy_and_torch(tmp
 def test_a_temporal_skip_runs_the_same_in_numpy_and_torch_and_extrapolates_linearly(tmp_path, spatial):
     """``temporal_skip``: each predicted frame adds a linear map of the context's motion; NumPy equals torch,
     and a map that repeats the last step (constant velocity) moves the prediction by exactly that."""
-    model, mean, std = random_release(tmp_path, spatial, False, offsets=True, temporal_skip=True)
-    engine = Engine.load(tmp_path)
-    raw = engine.seeds
-    want = torch_forward(model, raw, mean, std)
-    np.testing.assert_allclose(engine.forward(raw), want, atol=1e-4, rtol=0)
-    np.testing.assert_allclose(TorchEngine.load(tmp_path).forward(raw), want, atol=1e-5, rtol=0)
+    model, mean, std, raw, want = _engines_agree(tmp_path, spatial, False, temporal_skip=True)
     x = torch.from_numpy((raw - mean) / std).float()
     m, n = model.cfg.encode_len, model.cfg.predict_len
     with torch.no_grad():
