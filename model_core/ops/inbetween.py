@@ -5,7 +5,9 @@ bent onto the target with corrections that grow smoothly over the gap, from noth
 context (where the motion already continues it) to exactly what is missing at the target:
 
 - the body's heading and ground position (the root), so that it arrives where and facing how
-  the target stands: the continuation's path is turned about the gap's start and shifted;
+  the target stands: the continuation's path is turned and stretched about the gap's start so
+  that it ends at the target (its shape kept), the body turning with it and then onto the
+  target's heading; what stretching within limits cannot reach is shifted;
 - the pose in the body's own frame (root-local joints), so that it arrives in the target pose.
 
 Before that, the continuation's jump from the context is faded out as Extend fades it
@@ -48,8 +50,38 @@ def _hermite(s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return 3 * s ** 2 - 2 * s ** 3, s ** 3 - s ** 2
 
 
+# The path is stretched at most this much either way to reach the target; the rest is shifted.
+MAX_PATH_SCALE = 1.5
+# Paths (the continuation's, and the one to the target) shorter than the first length are shifted
+# only (the body stands or shuffles, and a short path's direction says little); from the second on
+# they are turned and stretched in full, and in between partly.
+PATH_M = (0.3, 0.8)
+
+
+def _chord_fit(reach: np.ndarray, want: np.ndarray) -> tuple[float, float]:
+    """(yaw angle, scale) that turn and stretch the ground vector ``reach`` onto ``want`` (both ``[3]``)."""
+    a, b = np.hypot(reach[0], reach[2]), np.hypot(want[0], want[2])
+    lo, hi = PATH_M
+    weight = float(np.clip((min(a, b) - lo) / max(hi - lo, 1e-9), 0.0, 1.0))
+    if weight == 0.0:
+        return 0.0, 1.0
+    angle = wrap_angle(np.arctan2(want[0], want[2]) - np.arctan2(reach[0], reach[2]))
+    scale = np.clip(b / a, 1 / MAX_PATH_SCALE, MAX_PATH_SCALE)
+    return float(weight * angle), float(1 + weight * (scale - 1))
+
+
 def wrap_angle(angle: np.ndarray) -> np.ndarray:
     return (angle + np.pi) % (2 * np.pi) - np.pi
+
+
+def _arrive(q: np.ndarray, end, step, h_end: np.ndarray, h_slope: np.ndarray) -> np.ndarray:
+    """``q`` ``[N + 1, ...]`` corrected along the Hermite curves so that its last frame is ``end`` and, where
+    ``step`` is given, its last frame-to-frame change is exactly ``step`` (the target's own motion)."""
+    shape = (-1,) + (1,) * (q.ndim - 1)
+    out = q + h_end.reshape(shape) * (end - q[-1])
+    if step is not None and len(q) > 1:  # h_slope is 0 at the end: only the last step changes
+        out = out + h_slope.reshape(shape) * (((out[-1] - out[-2]) - step) / h_slope[-2])
+    return out
 
 
 def bend_onto(pred: np.ndarray, start: np.ndarray, target: np.ndarray) -> np.ndarray:
@@ -62,25 +94,22 @@ def bend_onto(pred: np.ndarray, start: np.ndarray, target: np.ndarray) -> np.nda
     p_root, p_yaw, p_local = root_and_local(pred)
     t_root, t_yaw, t_local = root_and_local(target)
     origin = root_and_local(start[None])[0][0]
-    # Heading: turn the continuation's path about the gap's start onto the target's heading.
-    turn = wrap_angle(t_yaw[0] - p_yaw[-1])
-    turn_slope = 0.0
-    if len(target) > 1:  # arrive turning as the target turns on
-        turn_slope = (wrap_angle(t_yaw[1] - t_yaw[0]) - wrap_angle(p_yaw[-1] - p_yaw[-2])) * n1
-    angle = turn * h_end + turn_slope * h_slope
-    rot = yaw_matrix(angle)
-    root = origin + np.einsum("fij,fj->fi", rot, p_root - origin)
-    # Ground position: shift what is still missing at the target, slope matched to its velocity.
-    miss = t_root[0] - root[-1]
-    miss_slope = np.zeros(3)
-    if len(target) > 1:
-        miss_slope = ((t_root[1] - t_root[0]) - (root[-1] - root[-2])) * n1
-    root = root + h_end[:, None] * miss + h_slope[:, None] * miss_slope
+    moves_on = len(target) > 1  # arrive moving (and turning) as the target moves on
+    # The path: turned and scaled about the gap's start so that it ends where the target stands, the turn
+    # and the scale growing smoothly over the gap (no kink at its start). It keeps its shape and its pace
+    # evens out, where a shift alone would drag the body sideways or hurry it at the end.
+    chord, scale = _chord_fit(p_root[-1] - origin, t_root[0] - origin)
+    path_angle = chord * h_end
+    stretch = 1 + (scale - 1) * h_end
+    root = origin + np.einsum("fij,fj->fi", yaw_matrix(path_angle), (p_root - origin) * stretch[:, None])
+    # Heading: the body turns with its path, then onto the target's heading.
+    p_yaw = p_yaw + path_angle
+    yaw = _arrive(p_yaw, p_yaw[-1] + wrap_angle(t_yaw[0] - p_yaw[-1]),
+                  wrap_angle(t_yaw[1] - t_yaw[0]) if moves_on else None, h_end, h_slope)
+    # Ground position: what is still missing at the target shifted in.
+    root = _arrive(root, t_root[0], t_root[1] - t_root[0] if moves_on else None, h_end, h_slope)
     # Pose in the body's frame.
-    local = p_local + h_end[:, None, None] * (t_local[0] - p_local[-1])
-    if len(target) > 1:
-        local = local + h_slope[:, None, None] * ((t_local[1] - t_local[0]) - (p_local[-1] - p_local[-2])) * n1
-    yaw = p_yaw + angle
+    local = _arrive(p_local, t_local[0], t_local[1] - t_local[0] if moves_on else None, h_end, h_slope)
     out = np.einsum("fij,fkj->fki", yaw_matrix(yaw), local) + root[:, None]
     return out.astype(np.float32)
 
