@@ -77,3 +77,15 @@ def test_interpolation_baselines_and_the_evaluation_keys():
     assert set(out["l2p_cm"]) == {"strnn", "interpolation", "interpolation_heading"}
     assert max(out["target_error_cm"]["strnn"]) < 1.0
     assert set(out["foot_skate_cm"]) == {"strnn", "strnn_locked", "interpolation", "real"}
+
+
+@pytest.mark.parametrize("turn", [np.pi - 0.1, -np.pi + 0.05, 2.0])
+def test_bend_onto_turns_with_the_scene_across_the_back_heading(turn):
+    """The bend does not care which way the scene faces: turned about the vertical (headings crossing
+    +-180 degrees included), the result is the same motion turned, with no spin."""
+    walk = walking_skeleton(120, radius=5.0).astype(np.float64)
+    pred = walking_skeleton(150, radius=3.0, speed=1.0)[40:71].astype(np.float64)
+    c, s = np.cos(turn), np.sin(turn)
+    rot = np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]])  # about +Y
+    turned = bend_onto(pred @ rot.T, walk[39] @ rot.T, walk[70:72] @ rot.T)
+    np.testing.assert_allclose(turned, bend_onto(pred, walk[39], walk[70:72]) @ rot.T, atol=1e-4)
