@@ -71,6 +71,8 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--optimizer", choices=("adam", "adadelta"), default=TrainConfig.optimizer)
     p.add_argument("--lr", type=float, default=None,
                    help="learning rate (default: 1e-3; siMLPe 3e-4, the paper's)")
+    p.add_argument("--weight-decay", type=float, default=TrainConfig.weight_decay,
+                   help="decoupled weight decay of the optimiser (AdamW; STRNN runs)")
     p.add_argument("--smooth-weight", type=float, default=TrainConfig.smooth_weight,
                    help="weight of the long-horizon cost")
     p.add_argument("--recon-weight", type=float, default=TrainConfig.recon_weight,
@@ -155,7 +157,8 @@ def strnn_run(args, argv):
                         **VARIANTS[args.variant])
     cfg = TrainConfig(data=args.data, out=args.out, model=model, steps=args.steps, batch=args.batch,
                       phase_split=tuple(args.phase_split), recalibrate_batches=args.recalibrate_batches,
-                      optimizer=args.optimizer, lr=learning_rate(args), smooth_weight=args.smooth_weight,
+                      optimizer=args.optimizer, lr=learning_rate(args), weight_decay=args.weight_decay,
+                      smooth_weight=args.smooth_weight,
                       recon_weight=args.recon_weight, velocity_weight=args.velocity_weight, init=args.init,
                       rollout_windows=args.rollout_windows, rollout_fraction=args.rollout_fraction,
                       denoise_fraction=args.denoise_fraction, denoise_rotation_deg=args.denoise_rotation_deg,
