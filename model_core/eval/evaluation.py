@@ -13,13 +13,13 @@ from ..io.bvh import read_bvh
 from ..model.dataset import MotionData, fps_override
 from ..motion.conventions import MODEL_FPS
 from ..motion.features import floor_height, positions_to_features
+from ..motion.noise import add_rotation_jitter
 from ..ops.denoise import denoise_positions
 from ..rig.rigs import canonical_clip
 from .metrics import (
     HORIZONS_MS,
     add_noise,
     add_pops,
-    add_rotation_jitter,
     airborne_fraction,
     best_butterworth,
     best_median,
@@ -78,7 +78,8 @@ def evaluate_long_horizon(engine, clips, frames: int, seeds: int, reference=None
     log(f"long horizon: {seeds} seeds x {frames} frames open loop")
     rollouts = engine.extrapolate(seed_feats, frames)
     block = min(1000, frames)
-    reports = [rollout_report(r, p, speed, ref, block=block, median_speed=median, floor=floor_height(by_name[name]))
+    floors = {name: floor_height(by_name[name]) for name, _ in chosen}
+    reports = [rollout_report(r, p, speed, ref, block=block, median_speed=median, floor=floors[name])
                for r, (name, p) in zip(rollouts, chosen)]
     take_speed = [float(joint_speed(by_name[name]).mean()) for name, _ in chosen]
     return {
@@ -94,8 +95,7 @@ def evaluate_long_horizon(engine, clips, frames: int, seeds: int, reference=None
         "feet": {key: [getattr(r.feet, key) if r.feet else float("nan") for r in reports]
                  for key in ("touch_fraction", "floor_offset_cm", "sink_cm", "airborne_fraction")}
         # the seed's own take in the air as often: a run's flight is not a walk turned into hops
-        | {"take_airborne_fraction": [airborne_fraction(by_name[name], floor_height(by_name[name]))
-                                      for name, _ in chosen]},
+        | {"take_airborne_fraction": [airborne_fraction(by_name[name], floors[name]) for name, _ in chosen]},
     }
 
 
@@ -114,7 +114,7 @@ def evaluate_denoise(engine, clips, stds_cm, seed: int = 0, fps: float = MODEL_F
 
 def evaluate_rotation_jitter(engine, clips, degrees, seed: int = 0, fps: float = MODEL_FPS, root=None) -> dict:
     """:func:`evaluate_denoise` with Gaussian jitter of each of ``degrees`` on every joint's rotation
-    channels (:func:`metrics.add_rotation_jitter`) instead of on its position."""
+    channels (:func:`motion.noise.add_rotation_jitter`) instead of on its position."""
     return _noise_levels(engine, clips, "deg", degrees, add_rotation_jitter, seed, fps, root)
 
 

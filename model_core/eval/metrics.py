@@ -15,7 +15,6 @@ from ..motion.features import (
     lowest_foot,
     positions_to_features,
 )
-from ..motion.noise import add_rotation_jitter  # noqa: F401  (scored here, made there)
 from ..ops.fusion import running_median
 from ..ops.seam import blend_seam
 

@@ -279,8 +279,8 @@ def initial_weights(path: str | Path, model: STRNN) -> dict[str, torch.Tensor]:
     out = {}
     for k, v in model.state_dict().items():
         w = found.get(k, v)
-        if k == "filter.net.0.weight" and model.cfg.filter_context and w.shape[1] < v.shape[1] == \
-                w.shape[1] + model.cfg.encode_len * model.cfg.frame_size and w.shape[0] == v.shape[0]:
+        extra = model.cfg.encode_len * model.cfg.frame_size
+        if k == "filter.net.0.weight" and model.cfg.filter_context and v.shape == (w.shape[0], w.shape[1] + extra):
             # A filter that reads the context, from one that did not: it starts as the old filter,
             # the true context's weights at zero.
             w = torch.cat([w, torch.zeros(v.shape[0], v.shape[1] - w.shape[1], dtype=w.dtype)], 1)

@@ -5,7 +5,6 @@ from __future__ import annotations
 import numpy as np
 
 from model_core.eval.metrics import (
-    add_rotation_jitter,
     airborne_fraction,
     feet_report,
     joint_speed,
@@ -15,6 +14,7 @@ from model_core.eval.metrics import (
 )
 from model_core.motion.conventions import JOINT_INDEX, PARENTS, UP_AXIS
 from model_core.motion.features import floor_height, positions_to_features
+from model_core.motion.noise import add_rotation_jitter
 from model_core.motion.synthetic import walking_skeleton
 
 
