@@ -70,6 +70,9 @@ class TrainConfig:
     init: str = ""  # start from the weights of this training state or release folder (fine-tuning)
     purpose: str = PURPOSES[0]  # recorded in the release: "denoise" marks a model whose predictions are not for use
     mirror: float = 0.0  # share of training windows mirrored left to right (augmentation)
+    # Above 0: each training window is played at a speed drawn log-uniformly from [1 / (1 + this), 1 + this]
+    # times the capture's (time-warp augmentation, Windows.raw_frames): motion of other paces than the data's.
+    time_warp: float = 0.0
     # Before the release is written, recompute the batch norms' running statistics as the plain average
     # over this many training batches of the whole model's forward pass (0: keep them as trained).
     recalibrate_batches: int = 0
@@ -110,6 +113,7 @@ class Windows:
         if len(starts) == 0:
             raise ValueError(f"{self.root}: no {self.split!r} clip is {length} frames long")
         self.starts = offsets[starts[:, 0]] + starts[:, 1]
+        self.ends = offsets[starts[:, 0]] + np.asarray(self.lengths)[starts[:, 0]]  # one past each window's clip
         self.span = np.arange(length)
 
     def with_length(self, length: int, stride: int = 1) -> Windows:
@@ -121,17 +125,38 @@ class Windows:
     def __len__(self):
         return len(self.starts)
 
-    def batch(self, idx: np.ndarray) -> torch.Tensor:
-        return torch.from_numpy(self.feats[self.starts[idx][:, None] + self.span])
+    def batch(self, idx: np.ndarray, speeds: np.ndarray | None = None) -> torch.Tensor:
+        """Windows ``idx``; with ``speeds``, each played that many times as fast (:meth:`raw`)."""
+        if speeds is None:
+            return torch.from_numpy(self.feats[self.starts[idx][:, None] + self.span])
+        return torch.from_numpy(self.norm.encode(self.raw_frames(idx, speeds)).astype(np.float32))
+
+    def raw_frames(self, idx: np.ndarray, speeds: np.ndarray, length: int | None = None) -> np.ndarray:
+        """Un-normalised windows ``(B, length, C)`` played ``speeds`` ``(B,)`` times as fast (time-warp
+        augmentation): frames sampled every ``speed`` frames of the clip, linearly between its frames, the
+        root's per-frame motion scaled by the speed and contacts kept where they hold for most of the way.
+        A window that a faster speed would carry past its clip's end is played as fast as its clip allows."""
+        length = len(self.span) if length is None else length
+        starts, ends = self.starts[idx], self.ends[idx]
+        speeds = np.minimum(np.asarray(speeds, np.float64), (ends - 1 - starts) / max(length - 1, 1))
+        t = starts[:, None] + speeds[:, None] * np.arange(length)
+        lo = np.minimum(np.floor(t).astype(np.int64), ends[:, None] - 1)
+        hi = np.minimum(lo + 1, ends[:, None] - 1)
+        a = (t - lo)[..., None]
+        out = (1.0 - a) * self.raw[lo] + a * self.raw[hi]
+        out[..., LAYOUT.root] *= speeds[:, None, None]
+        out[..., LAYOUT.contacts] = out[..., LAYOUT.contacts] >= 0.5
+        return out.astype(np.float32)
 
     def noisy_contexts(self, idx: np.ndarray, m: int, max_cm: float, rng: np.random.Generator,
-                       max_deg: float = 0.0) -> torch.Tensor:
+                       max_deg: float = 0.0, speeds: np.ndarray | None = None) -> torch.Tensor:
         """Normalised contexts ``(B, m, C)`` re-derived, as at inference, from the windows'
         positions plus Gaussian noise of a per-window std drawn from U(0, ``max_cm``), or, with
         ``max_deg`` above 0, for half of them rotation jitter of a std drawn from U(0, ``max_deg``)."""
         out = []
-        for s in self.starts[idx]:
-            pos = features_to_positions(self.raw[s:s + m])
+        raw = self.raw_frames(idx, speeds, m) if speeds is not None else (self.raw[s:s + m] for s in self.starts[idx])
+        for frames in raw:
+            pos = features_to_positions(frames)
             if max_deg > 0 and rng.random() < 0.5:
                 pos = add_rotation_jitter(pos, rng.uniform(0, max_deg), rng)
             else:
@@ -420,10 +445,12 @@ def train(cfg: TrainConfig, resume: bool = False, progress: bool = True) -> Path
             window, noisy = rollout_batch(model, mirror(long_w.batch(rng.integers(0, len(long_w), per_rank)), flip), k)
         else:
             idx = rng.integers(0, len(train_w), per_rank)
-            window = mirror(train_w.batch(idx), flip)
-            heavy = idx[: int(round(cfg.denoise_fraction * len(idx)))] if phase != PHASES[1] else idx[:0]
-            noisy = train_w.noisy_contexts(heavy, cfg.model.encode_len, cfg.denoise_max_cm, rng,
-                                           cfg.denoise_rotation_deg) if len(heavy) else None
+            speeds = np.exp(rng.uniform(-1, 1, per_rank) * np.log1p(cfg.time_warp)) if cfg.time_warp > 0 else None
+            window = mirror(train_w.batch(idx, speeds), flip)
+            n_heavy = int(round(cfg.denoise_fraction * len(idx))) if phase != PHASES[1] else 0
+            noisy = train_w.noisy_contexts(idx[:n_heavy], cfg.model.encode_len, cfg.denoise_max_cm, rng,
+                                           cfg.denoise_rotation_deg, None if speeds is None else speeds[:n_heavy]
+                                           ) if n_heavy else None
             noisy = mirror(noisy, flip)
         loss = window_loss(model, window, cfg, phase, noise_std(cfg, step), net=net, noisy=noisy)
         scale = float(cfg.lr_final + (1 - cfg.lr_final) * 0.5 * (1 + np.cos(np.pi * phase_progress(cfg, step))))

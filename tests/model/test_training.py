@@ -263,3 +263,53 @@ def test_noisy_contexts_with_rotation_jitter_keep_bone_lengths_and_position_nois
         kept.append(np.abs(got - want).max() < 1e-4)
         assert np.abs(n - c).max() > 1e-3
     assert 5 < sum(kept) < 35  # about half turned, half moved
+
+
+def test_time_warped_windows_play_the_clip_faster_or_slower_and_stay_in_it(walk_folder):
+    """``time_warp``: a window at speed 1 is the window itself; at speed 2 it holds every second frame of
+    the clip with the root's per-frame motion doubled (so its ground path is the clip's, sampled); a window
+    that speed would carry past its clip's end reads no frame of the next clip; contacts stay 0 or 1."""
+    from model_core.model.dataset import Normaliser, load_folder
+    from model_core.model.training import Windows
+    from model_core.motion.conventions import LAYOUT
+    from model_core.motion.features import features_to_positions
+
+    data = load_folder(walk_folder, cache_dir=None, progress=False)
+    windows = Windows(data, "train", Normaliser.fit(np.concatenate([c.features for c in data.clips])), 40)
+    idx = np.arange(len(windows))
+    same = windows.raw_frames(idx[:16], np.ones(16))
+    np.testing.assert_allclose(same, windows.raw[windows.starts[:16, None] + windows.span], atol=1e-6)
+    np.testing.assert_allclose(windows.batch(idx[:16], np.ones(16)).numpy(), windows.batch(idx[:16]).numpy(),
+                               atol=1e-5)
+
+    fits = idx[windows.starts + 2 * 39 < windows.ends - 1][:8]
+    assert len(fits)
+    fast = windows.raw_frames(fits, np.full(len(fits), 2.0))
+    for w, s in zip(fast, windows.starts[fits]):
+        clip = windows.raw[s:s + 79]
+        np.testing.assert_allclose(w[:, LAYOUT.positions], clip[::2, LAYOUT.positions], atol=1e-6)
+        np.testing.assert_allclose(w[:, LAYOUT.root], 2 * clip[::2, LAYOUT.root], atol=1e-6)
+        ground = features_to_positions(w)[:, 0, [0, 2]]
+        truth = features_to_positions(clip)[::2, 0, [0, 2]]
+        assert np.abs(ground - truth).max() < 0.05  # the same path, from sampled per-frame motion
+
+    last = idx[windows.ends - windows.starts == 40]  # windows that end at their clip's last frame
+    assert len(last)
+    squeezed = windows.raw_frames(last, np.full(len(last), 1.25))
+    np.testing.assert_allclose(squeezed, windows.raw[windows.starts[last, None] + windows.span], atol=1e-6)
+    slow = windows.raw_frames(idx, np.full(len(idx), 0.8))
+    assert set(np.unique(slow[..., LAYOUT.contacts])) <= {0.0, 1.0}
+    # noisy contexts (no noise here) are re-derived from the same warped frames: the body's own heading
+    # against the sampled turn rate differs by at most about a centimetre
+    noisy = windows.noisy_contexts(fits, 20, 0.0, np.random.default_rng(0), speeds=np.full(len(fits), 2.0))
+    gap = np.abs(windows.norm.decode(noisy.numpy()) - fast[:, :20])[..., LAYOUT.positions]
+    assert gap.mean() < 1e-3 and gap.max() < 0.02
+
+
+def test_a_time_warped_run_trains_and_records_its_speed_range(walk_folder, tmp_path):
+    release = train(_cfg(walk_folder, tmp_path / "warp", time_warp=0.25, denoise_fraction=0.5), progress=False)
+    assert (release / "model.safetensors").exists()
+    assert '"time_warp": 0.25' in (tmp_path / "warp" / "train.log").read_text()  # the run's config, as logged
+    r = subprocess.run([sys.executable, str(REPO / "scripts" / "train.py"), "--data", str(walk_folder), "--out",
+                        str(tmp_path / "bad"), "--time-warp", "-1"], capture_output=True, text=True)
+    assert r.returncode == 2 and "--time-warp" in r.stderr and not (tmp_path / "bad").exists()
