@@ -159,6 +159,9 @@ def print_inbetween(ib: dict) -> None:
             ("foot skate cm: strnn", ib["foot_skate_cm"]["strnn"]),
             ("  strnn, foot-locked", ib["foot_skate_cm"]["strnn_locked"]),
             ("  interpolation", ib["foot_skate_cm"]["interpolation"]), ("  real takes", ib["foot_skate_cm"]["real"])]
+    share = {k: [100 * v for v in row] for k, row in ib["foot_contact_share"].items()}
+    rows += [("contact steps %: strnn", share["strnn"]), ("  strnn, foot-locked", share["strnn_locked"]),
+             ("  interpolation", share["interpolation"]), ("  real takes", share["real"])]
     for name, row in rows:
         print(f"{name:<28}" + "".join(f"{v:8.2f}" for v in row))
 

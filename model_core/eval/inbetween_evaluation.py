@@ -52,7 +52,8 @@ def evaluate_inbetween(engine, clips, gaps=(15, 30, 60)) -> dict:
     out = {"gap_frames": list(gaps), "windows": [],
            "l2p_cm": {"strnn": [], "interpolation": [], "interpolation_heading": []},
            "target_error_cm": {"strnn": []},
-           "foot_skate_cm": {"strnn": [], "strnn_locked": [], "interpolation": [], "real": []}}
+           "foot_skate_cm": {"strnn": [], "strnn_locked": [], "interpolation": [], "real": []},
+           "foot_contact_share": {"strnn": [], "strnn_locked": [], "interpolation": [], "real": []}}
     positions = [c.positions for c in clips]
     for gap in gaps:
         ctx, true, tgt = windows(positions, gap)
@@ -67,7 +68,9 @@ def evaluate_inbetween(engine, clips, gaps=(15, 30, 60)) -> dict:
         out["target_error_cm"]["strnn"].append(float(mpjpe_cm(arrive, tgt).mean()))
         locked = np.stack([lock_gap(c, g, t) for c, g, t in zip(ctx, ours, tgt)])
         for name, motion in (("strnn", ours), ("strnn_locked", locked), ("interpolation", lerp), ("real", true)):
-            out["foot_skate_cm"][name].append(_skate(ctx, motion, tgt))
+            skate, share = _skate(ctx, motion, tgt)
+            out["foot_skate_cm"][name].append(skate)
+            out["foot_contact_share"][name].append(share)
     return out
 
 
@@ -80,10 +83,18 @@ def lock_gap(ctx: np.ndarray, gap: np.ndarray, tgt: np.ndarray) -> np.ndarray:
     return foot_lock(seq, fixed=fixed)[len(ctx):len(ctx) + len(gap)]
 
 
-def _skate(ctx: np.ndarray, gap: np.ndarray, tgt: np.ndarray) -> float:
-    """Mean foot skate (cm / frame) over the gaps' contact frames, contacts detected on each window."""
-    values = []
+def _skate(ctx: np.ndarray, gap: np.ndarray, tgt: np.ndarray) -> tuple[float, float]:
+    """(foot skate in cm / frame, share of contact frames): the mean horizontal motion of the contact joints
+    over every step in the gaps where that joint is in contact at both ends (contacts detected on each
+    window), and the share of the gaps' joint-steps that are such contact steps. Pooled over the steps, not
+    averaged per window: a window whose feet never touch the floor (they float or slide fast) has no contact
+    step to score; it shows in the share, not as a window of perfect feet."""
+    moved, steps, total = 0.0, 0, 0
     for c, g, t in zip(ctx, gap, tgt):
         seq = np.concatenate([c[-1:], g, t[None]])
-        values.append(foot_skate_cm(seq, detect_contacts(np.concatenate([c, g, t[None]]))[len(c) - 1:]))
-    return float(np.mean(values))
+        contacts = detect_contacts(np.concatenate([c, g, t[None]]))[len(c) - 1:] > 0.5
+        on = contacts[:-1] & contacts[1:]
+        n = int(on.sum())
+        moved += foot_skate_cm(seq, contacts) * n
+        steps, total = steps + n, total + on.size
+    return (moved / steps if steps else 0.0), steps / max(total, 1)

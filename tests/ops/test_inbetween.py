@@ -76,7 +76,24 @@ def test_interpolation_baselines_and_the_evaluation_keys():
     assert out["gap_frames"] == [15, 30] and out["windows"][0] > 0
     assert set(out["l2p_cm"]) == {"strnn", "interpolation", "interpolation_heading"}
     assert max(out["target_error_cm"]["strnn"]) < 1.0
-    assert set(out["foot_skate_cm"]) == {"strnn", "strnn_locked", "interpolation", "real"}
+    assert set(out["foot_skate_cm"]) == set(out["foot_contact_share"]) == {"strnn", "strnn_locked", "interpolation",
+                                                                         "real"}
+    assert 0.1 < out["foot_contact_share"]["real"][0] < 0.9  # a walk has its feet down part of the time
+
+
+def test_gap_skate_is_pooled_over_contact_steps_and_floating_feet_show_in_the_share():
+    """A window whose feet never touch the floor has no contact step: it adds nothing to the skate (it
+    used to count as a window of perfect feet) and lowers the share of contact steps instead."""
+    from model_core.eval.inbetween_evaluation import _skate
+
+    walk = walking_skeleton(200, radius=4.0)
+    ctx, gap, tgt = walk[None, :20], walk[None, 20:50], walk[None, 50]
+    skate, share = _skate(ctx, gap, tgt)
+    assert skate > 0 and share > 0.1
+    floating = gap + np.array([0.0, 0.3, 0.0])  # the same motion 30 cm up: no foot near the floor
+    both = _skate(np.concatenate([ctx, ctx]), np.concatenate([gap, floating]), np.concatenate([tgt, tgt]))
+    assert both[0] == pytest.approx(skate)  # not halved by the floating window
+    assert both[1] == pytest.approx(share / 2, rel=0.1)
 
 
 @pytest.mark.parametrize("turn", [np.pi - 0.1, -np.pi + 0.05, 2.0])
