@@ -39,9 +39,9 @@ MODEL_ERROR_FLOOR_M = 0.003  # the model is never trusted beyond this accuracy
 NOISE_FLOOR_M = 0.0001  # nor the input beyond this one (clean capture reads as clean: it is kept)
 D2_NOISE_GAIN = 6.0  # variance of the 2nd difference of unit white noise
 BIAS_WINDOW_S = 0.1  # sigma of the low-pass that separates the model's error from the input's noise
-TRUST_WINDOW_S = 0.25  # sigma of the window over which the model's error is measured
+TRUST_WINDOW_S = 0.1  # half-width of the running median over which the model's error is measured
 PRIOR_WINDOW_S = 0.1  # sigma of the window over which the motion's acceleration is measured, frame by frame
-MODEL_MOTION_TRUST = 2.0  # the model's acceleration counts this much against the first pass's
+MODEL_MOTION_TRUST = 4.0  # the model's acceleration counts this much against the first pass's
 PRIOR_FLOOR = 0.02  # the acceleration allowed anywhere: at least this share of the take's mean
 BONE_PASSES = 5  # rounds of the bone-length projection
 # Capture is never free of jitter: up to about 2 mm (what clean takes measure) it is kept as part of the
