@@ -72,6 +72,7 @@ class TrainConfig:
     mirror: float = 0.0  # share of training windows mirrored left to right (augmentation)
     # Above 0: each training window is played at a speed drawn log-uniformly from [1 / (1 + this), 1 + this]
     # times the capture's (time-warp augmentation, Windows.raw_frames): motion of other paces than the data's.
+    # Rollout windows (rollout_windows) are played as captured.
     time_warp: float = 0.0
     # Before the release is written, recompute the batch norms' running statistics as the plain average
     # over this many training batches of the whole model's forward pass (0: keep them as trained).
