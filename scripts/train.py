@@ -122,6 +122,9 @@ def parse_args(argv=None) -> argparse.Namespace:
                         "(an n x m map shared by all channels; with --init from a model without: it starts at zero)")
     p.add_argument("--mirror", type=float, default=TrainConfig.mirror,
                    help="share of training windows mirrored left to right")
+    p.add_argument("--proportions", type=float, default=TrainConfig.proportions, metavar="P",
+                   help="body-proportion augmentation: each training window's torso and arms made longer or "
+                        "shorter by factors drawn from [1-P, 1+P] (0: off; the legs keep the standard length)")
     p.add_argument("--time-warp", type=float, default=TrainConfig.time_warp, metavar="W",
                    help="time-warp augmentation: play each training window at a speed drawn log-uniformly "
                         "from [1/(1+W), 1+W] times the capture's (0: off)")
@@ -140,8 +143,8 @@ def baseline_run(args, argv):
     from model_core.model.baseline_training import BaselineTrainConfig, train_baseline
     from model_core.model.baselines import MODELS
 
-    if args.export or args.init or args.time_warp:
-        raise ValueError("--export, --init and --time-warp are for STRNN runs")
+    if args.export or args.init or args.time_warp or args.proportions:
+        raise ValueError("--export, --init, --time-warp and --proportions are for STRNN runs")
     shape = dict(encode_len=args.encode_len, predict_len=args.predict_len)
     shape |= {"blocks": args.blocks} if args.arch == "simlpe" else {"width": args.width or DEFAULT_WIDTH[args.arch]}
     cfg = BaselineTrainConfig(data=args.data, out=args.out, model=MODELS[args.arch][1](**shape), steps=args.steps,
@@ -154,6 +157,8 @@ def baseline_run(args, argv):
 def strnn_run(args, argv):
     if args.time_warp < 0:
         raise ValueError(f"--time-warp {args.time_warp:g}: the speed range must be 0 (off) or more, e.g. 0.25")
+    if not 0 <= args.proportions < 1:
+        raise ValueError(f"--proportions {args.proportions:g}: the range must be from 0 (off) to below 1, e.g. 0.1")
     model = STRNNConfig(width=args.width or DEFAULT_WIDTH["strnn"], encode_len=args.encode_len,
                         predict_len=args.predict_len, residual_width=args.residual_width, dropout=args.dropout,
                         offsets=args.offsets, offset_keep=args.offset_keep, spatial_norm=args.spatial_norm,
@@ -169,7 +174,8 @@ def strnn_run(args, argv):
                       denoise_fraction=args.denoise_fraction, denoise_rotation_deg=args.denoise_rotation_deg,
                       noise_start=args.noise_start, seed=args.seed, cache=args.cache, max_minutes=args.max_minutes,
                       checkpoint_seconds=args.checkpoint_seconds, purpose=args.purpose,
-                      mirror=args.mirror, time_warp=args.time_warp, hold_out=args.hold_out,
+                      mirror=args.mirror, time_warp=args.time_warp, proportions=args.proportions,
+                      hold_out=args.hold_out,
                       command=command_line(argv))
     return export_state(cfg) if args.export else train(cfg, resume=args.resume, progress=not args.quiet)
 

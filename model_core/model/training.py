@@ -23,7 +23,13 @@ from torch.nn.parallel import DistributedDataParallel
 from ..io.checkpoint import PURPOSES, load_release, save_release
 from ..io.files import unwritable, write_atomic
 from ..motion.conventions import LAYOUT
-from ..motion.features import MIRROR_SIGN, MIRROR_SOURCE, features_to_positions, positions_to_features
+from ..motion.features import (
+    MIRROR_SIGN,
+    MIRROR_SOURCE,
+    features_to_positions,
+    positions_to_features,
+    scale_proportions,
+)
 from ..motion.noise import add_rotation_jitter
 from ..ops.seam import PREDICT_SEAM_FRAMES, seam_fade
 from .dataset import SPLITS, MotionData, Normaliser, load_folder, window_starts
@@ -74,6 +80,9 @@ class TrainConfig:
     # times the capture's (time-warp augmentation, Windows.raw_frames): motion of other paces than the data's.
     # Rollout windows (rollout_windows) are played as captured.
     time_warp: float = 0.0
+    # Above 0: each training window's torso and arms are made longer or shorter, each by a factor drawn
+    # uniformly from [1 - this, 1 + this] (motion.features.scale_proportions): bodies of other proportions.
+    proportions: float = 0.0
     # Before the release is written, recompute the batch norms' running statistics as the plain average
     # over this many training batches of the whole model's forward pass (0: keep them as trained).
     recalibrate_batches: int = 0
@@ -126,18 +135,24 @@ class Windows:
     def __len__(self):
         return len(self.starts)
 
-    def batch(self, idx: np.ndarray, speeds: np.ndarray | None = None) -> torch.Tensor:
-        """Windows ``idx``; with ``speeds``, each played that many times as fast (:meth:`raw`)."""
-        if speeds is None:
+    def batch(self, idx: np.ndarray, speeds: np.ndarray | None = None,
+              bodies: np.ndarray | None = None) -> torch.Tensor:
+        """Windows ``idx``; with ``speeds``, each played that many times as fast, and with ``bodies``
+        ``(B, 2)``, each by a body of other proportions (:meth:`raw_frames`)."""
+        if speeds is None and bodies is None:
             return torch.from_numpy(self.feats[self.starts[idx][:, None] + self.span])
-        return torch.from_numpy(self.norm.encode(self.raw_frames(idx, speeds)).astype(np.float32))
+        return torch.from_numpy(self.norm.encode(self.raw_frames(idx, speeds, bodies=bodies)).astype(np.float32))
 
-    def raw_frames(self, idx: np.ndarray, speeds: np.ndarray, length: int | None = None) -> np.ndarray:
+    def raw_frames(self, idx: np.ndarray, speeds: np.ndarray | None, length: int | None = None,
+                   bodies: np.ndarray | None = None) -> np.ndarray:
         """Un-normalised windows ``(B, length, C)`` played ``speeds`` ``(B,)`` times as fast (time-warp
         augmentation): frames sampled every ``speed`` frames of the clip, linearly between its frames, the
         root's per-frame motion scaled by the speed and contacts kept where they hold for most of the way.
-        A window that a faster speed would carry past its clip's end is played as fast as its clip allows."""
+        A window that a faster speed would carry past its clip's end is played as fast as its clip allows.
+        ``bodies`` ``(B, 2)``: the factors of each window's torso and arms (:func:`scale_proportions`)."""
         length = len(self.span) if length is None else length
+        if speeds is None:
+            speeds = np.ones(len(idx))
         starts, ends = self.starts[idx], self.ends[idx]
         speeds = np.minimum(np.asarray(speeds, np.float64), (ends - 1 - starts) / max(length - 1, 1))
         t = starts[:, None] + speeds[:, None] * np.arange(length)
@@ -147,15 +162,19 @@ class Windows:
         out = (1.0 - a) * self.raw[lo] + a * self.raw[hi]
         out[..., LAYOUT.root] *= speeds[:, None, None]
         out[..., LAYOUT.contacts] = out[..., LAYOUT.contacts] >= 0.5
+        if bodies is not None:
+            out = scale_proportions(out, bodies[:, 0], bodies[:, 1])
         return out.astype(np.float32)
 
     def noisy_contexts(self, idx: np.ndarray, m: int, max_cm: float, rng: np.random.Generator,
-                       max_deg: float = 0.0, speeds: np.ndarray | None = None) -> torch.Tensor:
+                       max_deg: float = 0.0, speeds: np.ndarray | None = None,
+                       bodies: np.ndarray | None = None) -> torch.Tensor:
         """Normalised contexts ``(B, m, C)`` re-derived, as at inference, from the windows'
         positions plus Gaussian noise of a per-window std drawn from U(0, ``max_cm``), or, with
         ``max_deg`` above 0, for half of them rotation jitter of a std drawn from U(0, ``max_deg``)."""
         out = []
-        raw = self.raw_frames(idx, speeds, m) if speeds is not None else (self.raw[s:s + m] for s in self.starts[idx])
+        raw = self.raw_frames(idx, speeds, m, bodies) if speeds is not None or bodies is not None \
+            else (self.raw[s:s + m] for s in self.starts[idx])
         for frames in raw:
             pos = features_to_positions(frames)
             if max_deg > 0 and rng.random() < 0.5:
@@ -447,11 +466,13 @@ def train(cfg: TrainConfig, resume: bool = False, progress: bool = True) -> Path
         else:
             idx = rng.integers(0, len(train_w), per_rank)
             speeds = np.exp(rng.uniform(-1, 1, per_rank) * np.log1p(cfg.time_warp)) if cfg.time_warp > 0 else None
-            window = mirror(train_w.batch(idx, speeds), flip)
+            p = cfg.proportions
+            bodies = rng.uniform(1 - p, 1 + p, (per_rank, 2)) if p > 0 else None
+            window = mirror(train_w.batch(idx, speeds, bodies), flip)
             n_heavy = int(round(cfg.denoise_fraction * len(idx))) if phase != PHASES[1] else 0
             noisy = train_w.noisy_contexts(idx[:n_heavy], cfg.model.encode_len, cfg.denoise_max_cm, rng,
-                                           cfg.denoise_rotation_deg, None if speeds is None else speeds[:n_heavy]
-                                           ) if n_heavy else None
+                                           cfg.denoise_rotation_deg, None if speeds is None else speeds[:n_heavy],
+                                           None if bodies is None else bodies[:n_heavy]) if n_heavy else None
             noisy = mirror(noisy, flip)
         loss = window_loss(model, window, cfg, phase, noise_std(cfg, step), net=net, noisy=noisy)
         scale = float(cfg.lr_final + (1 - cfg.lr_final) * 0.5 * (1 + np.cos(np.pi * phase_progress(cfg, step))))

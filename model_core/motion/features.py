@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .conventions import CONTACT_JOINTS, CONTACTS, JOINT_INDEX, JOINTS, LAYOUT, MODEL_FPS, UP_AXIS
+from .conventions import CONTACT_JOINTS, CONTACTS, JOINT_INDEX, JOINTS, LAYOUT, MODEL_FPS, PARENTS, UP_AXIS
 
 # Contact thresholds: a foot joint is in contact when it is within this height
 # of its own lowest level in the clip and moves slower than this ground speed.
@@ -173,3 +173,30 @@ def mirror_features(feats: np.ndarray) -> np.ndarray:
     becomes its right, turns to the left become turns to the right): exact, as the features of the
     mirrored positions."""
     return feats[..., MIRROR_SOURCE] * MIRROR_SIGN
+
+
+# Bones (by their lower joint) that body-proportion augmentation scales: the torso's (spine to head, and
+# the shoulders' offsets from the chest) and the arms'. The legs are not: every clip is scaled to one leg
+# length (conventions.STANDARD_LEG_LENGTH), in training and at run time alike.
+PROPORTION_BONES = {
+    "torso": np.array([JOINT_INDEX[j] for j in ("spine", "spine1", "neck", "head", "l_arm", "r_arm")]),
+    "arms": np.array([JOINT_INDEX[f"{s}_{j}"] for s in "lr" for j in ("elbow", "wrist", "fingertip")]),
+}
+
+
+def scale_proportions(feats: np.ndarray, torso: np.ndarray, arms: np.ndarray) -> np.ndarray:
+    """Raw features ``[B, T, C]`` of the same motion by a body of other proportions: window ``b``'s torso
+    bones (:data:`PROPORTION_BONES`) ``torso[b]`` times as long and its arms' ``arms[b]`` times, each bone
+    keeping its direction, the hips and legs (and so the feet and the root's motion) as they were."""
+    out = np.array(feats, dtype=np.float32, copy=True)
+    b, t = out.shape[:2]
+    pos = out[..., LAYOUT.positions].reshape(b, t, len(JOINTS), 3)
+    scale = np.ones((b, len(JOINTS)), np.float32)
+    scale[:, PROPORTION_BONES["torso"]] = np.asarray(torso, np.float32)[:, None]
+    scale[:, PROPORTION_BONES["arms"]] = np.asarray(arms, np.float32)[:, None]
+    new = pos.copy()
+    for j in range(1, len(JOINTS)):  # parents come before their children
+        p = PARENTS[j]
+        new[:, :, j] = new[:, :, p] + scale[:, None, j, None] * (pos[:, :, j] - pos[:, :, p])
+    out[..., LAYOUT.positions] = new.reshape(b, t, -1)
+    return out

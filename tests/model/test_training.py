@@ -313,3 +313,45 @@ def test_a_time_warped_run_trains_and_records_its_speed_range(walk_folder, tmp_p
     r = subprocess.run([sys.executable, str(REPO / "scripts" / "train.py"), "--data", str(walk_folder), "--out",
                         str(tmp_path / "bad"), "--time-warp", "-1"], capture_output=True, text=True)
     assert r.returncode == 2 and "--time-warp" in r.stderr and not (tmp_path / "bad").exists()
+
+
+def test_body_proportions_scale_the_torso_and_arms_and_keep_the_legs_and_the_root(walk_folder):
+    """``proportions``: a window's torso and arm bones grow or shrink by their factors, each keeping its
+    direction; the hips, legs and feet, the root's motion and the contacts stay as they were."""
+    from model_core.eval.metrics import bone_lengths_of
+    from model_core.model.dataset import Normaliser, load_folder
+    from model_core.model.training import Windows
+    from model_core.motion.conventions import JOINT_INDEX, LAYOUT, PARENTS
+    from model_core.motion.features import PROPORTION_BONES, features_to_positions, scale_proportions
+
+    data = load_folder(walk_folder, cache_dir=None, progress=False)
+    windows = Windows(data, "train", Normaliser.fit(np.concatenate([c.features for c in data.clips])), 40)
+    idx = np.arange(6)
+    raw = windows.raw_frames(idx, None)
+    np.testing.assert_allclose(scale_proportions(raw, np.ones(6), np.ones(6)), raw, atol=1e-6)
+    torso, arms = np.array([0.9, 1.1, 1.2, 0.8, 1.0, 1.05]), np.array([1.1, 0.9, 1.0, 1.2, 0.85, 1.0])
+    out = windows.raw_frames(idx, None, bodies=np.stack([torso, arms], 1))
+    legs = [JOINT_INDEX[f"{s}_{j}"] for s in "lr" for j in ("upleg", "knee", "foot", "toe")] + [JOINT_INDEX["hips"]]
+    for w in range(6):
+        before, after = features_to_positions(raw[w]), features_to_positions(out[w])
+        np.testing.assert_allclose(after[:, legs], before[:, legs], atol=1e-5)
+        ratio = bone_lengths_of(after) / bone_lengths_of(before)
+        want = np.ones(len(PARENTS))
+        want[PROPORTION_BONES["torso"]], want[PROPORTION_BONES["arms"]] = torso[w], arms[w]
+        np.testing.assert_allclose(ratio, np.broadcast_to(want[1:], ratio.shape), rtol=1e-3)  # [frames, bones]
+        bone = lambda p: (p - p[:, PARENTS.clip(0)])[:, 1:]  # noqa: E731
+        cos = (bone(after) * bone(before)).sum(-1) / (np.linalg.norm(bone(after), axis=-1)
+                                                       * np.linalg.norm(bone(before), axis=-1))
+        assert cos.min() > 1 - 1e-5  # every bone keeps its direction
+    np.testing.assert_array_equal(out[..., LAYOUT.root], raw[..., LAYOUT.root])
+    np.testing.assert_array_equal(out[..., LAYOUT.contacts], raw[..., LAYOUT.contacts])
+
+
+def test_a_run_with_body_proportions_trains_and_a_bad_range_is_refused(walk_folder, tmp_path):
+    release = train(_cfg(walk_folder, tmp_path / "bodies", proportions=0.1, time_warp=0.2, denoise_fraction=0.5),
+                    progress=False)
+    assert (release / "model.safetensors").exists()
+    assert '"proportions": 0.1' in (tmp_path / "bodies" / "train.log").read_text()
+    r = subprocess.run([sys.executable, str(REPO / "scripts" / "train.py"), "--data", str(walk_folder), "--out",
+                        str(tmp_path / "bad"), "--proportions", "1.5"], capture_output=True, text=True)
+    assert r.returncode == 2 and "--proportions" in r.stderr and not (tmp_path / "bad").exists()
