@@ -173,9 +173,7 @@ class Windows:
         positions plus Gaussian noise of a per-window std drawn from U(0, ``max_cm``), or, with
         ``max_deg`` above 0, for half of them rotation jitter of a std drawn from U(0, ``max_deg``)."""
         out = []
-        raw = self.raw_frames(idx, speeds, m, bodies) if speeds is not None or bodies is not None \
-            else (self.raw[s:s + m] for s in self.starts[idx])
-        for frames in raw:
+        for frames in self.raw_frames(idx, speeds, m, bodies):
             pos = features_to_positions(frames)
             if max_deg > 0 and rng.random() < 0.5:
                 pos = add_rotation_jitter(pos, rng.uniform(0, max_deg), rng)
