@@ -166,6 +166,16 @@ def _mirror_map() -> tuple[np.ndarray, np.ndarray]:
 
 
 MIRROR_SOURCE, MIRROR_SIGN = _mirror_map()
+# The joint that each joint's mirror image is (left and right swapped).
+MIRROR_JOINTS = MIRROR_SOURCE[LAYOUT.positions][::3] // 3
+
+
+def mirror_positions(pos: np.ndarray) -> np.ndarray:
+    """Positions ``[..., 21, 3]`` mirrored left to right in the plane X = 0 (the body's left side
+    becomes its right); its own inverse. Their features are :func:`mirror_features` of the input's."""
+    out = np.array(np.asarray(pos)[..., MIRROR_JOINTS, :])
+    out[..., 0] *= -1.0
+    return out
 
 
 def mirror_features(feats: np.ndarray) -> np.ndarray:

@@ -8,7 +8,7 @@ import numpy as np
 
 from ..inference.steps import drive
 from ..motion.conventions import MODEL_FPS
-from ..motion.features import gaussian_smooth
+from ..motion.features import gaussian_smooth, mirror_positions
 from ..motion.geometry import interpolate_frames
 from . import fusion
 from .normalise import fit_normalisation, sample_at
@@ -25,9 +25,10 @@ def denoise_positions_steps(engine, pos: np.ndarray, fps: float, strength: float
 
     Pops are found and the noise measured at the clip's own rate (:mod:`fusion`). The model reads
     the repaired clip at its own rate, once per phase of a faster clip (frames 0, 2, 4... and 1, 3,
-    5... of a 60 fps clip), and the phases' reconstructions, brought back to the clip's frames, are
-    averaged. That estimate is weighed against the input by how much each deserves: a clean take
-    comes back nearly as it was."""
+    5... of a 60 fps clip), and as its mirror image (left and right swapped, mirrored back after),
+    and these reconstructions, brought back to the clip's frames, are averaged: each reading errs
+    in its own way and the average less than either. That estimate is weighed against the input by
+    how much each deserves: a clean take comes back nearly as it was."""
     duration = (len(pos) - 1) / fps
     fixed, found = fusion.assess(np.asarray(pos, np.float64))
     # Scale and ground from a smoothed clip: noise lengthens the legs and lowers the lowest foot.
@@ -37,12 +38,14 @@ def denoise_positions_steps(engine, pos: np.ndarray, fps: float, strength: float
     frames = np.arange(len(pos)) / fps
     phases = [k / fps for k in range(max(1, int(round(fps / MODEL_FPS))))]
     phases = [p for p in phases if len(_model_times(duration, p)) >= engine.m] or [0.0]
+    readings = [(phase, mirrored) for phase in phases for mirrored in (False, True)]
     prior = np.zeros_like(fixed)
-    for i, phase in enumerate(phases):
+    for i, (phase, mirrored) in enumerate(readings):
         times = _model_times(duration, phase)
-        clean = yield from _scaled(engine.reconstruct_positions_steps(sample_at(fixed, fps, times).astype(np.float32)),
-                                   i / len(phases), 1 / len(phases))
-        prior += _sample_times(np.asarray(clean, np.float64), times, frames) / len(phases)
+        flip = mirror_positions if mirrored else np.asarray
+        seen = flip(sample_at(fixed, fps, times)).astype(np.float32)
+        clean = yield from _scaled(engine.reconstruct_positions_steps(seen), i / len(readings), 1 / len(readings))
+        prior += _sample_times(flip(np.asarray(clean, np.float64)), times, frames) / len(readings)
     out = norm.to_user(fusion.keep_bone_lengths(fusion.fuse(fixed, prior, found, fps), found.joint_noise_m))
     user = np.asarray(pos, dtype=np.float64)
     return user + strength * (out - user)

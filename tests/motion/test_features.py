@@ -9,7 +9,12 @@ from model_core.eval.metrics import bone_lengths_of as bone_lengths
 from model_core.io.bvh import read_bvh
 from model_core.model.dataset import fps_override
 from model_core.motion.conventions import JOINT_INDEX, JOINTS, LAYOUT, MODEL_FPS, STANDARD_LEG_LENGTH, UP_AXIS
-from model_core.motion.features import features_to_positions, mirror_features, positions_to_features
+from model_core.motion.features import (
+    features_to_positions,
+    mirror_features,
+    mirror_positions,
+    positions_to_features,
+)
 from model_core.motion.synthetic import walking_skeleton
 from model_core.rig.rigs import detect_rig, leg_length, load_clip
 
@@ -33,6 +38,8 @@ def test_mirrored_features_are_the_features_of_the_mirrored_motion():
     pos = walking_skeleton(120, radius=4.0)  # a walk that turns, so the yaw rate is not zero
     other = {n: ("r_" + n[2:] if n.startswith("l_") else "l_" + n[2:] if n.startswith("r_") else n) for n in JOINTS}
     mirrored = pos[:, [JOINT_INDEX[other[n]] for n in JOINTS]] * np.array([-1.0, 1.0, 1.0])
+    np.testing.assert_allclose(mirror_positions(pos), mirrored)
+    np.testing.assert_allclose(mirror_positions(mirror_positions(pos)), pos)
     feats, _ = positions_to_features(pos)
     want, _ = positions_to_features(mirrored)
     np.testing.assert_allclose(mirror_features(feats), want, atol=1e-5)
