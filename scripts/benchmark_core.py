@@ -84,11 +84,12 @@ def machine(weights: dict, threads: int) -> dict:
 
 def run(args: argparse.Namespace) -> dict:
     from model_core.eval.benchmark import model_costs, roofline, time_extrapolate
+    from model_core.inference.engine import Engine
     from model_core.io.checkpoint import load_release
 
     folder = find_model(args.model)
     ckpt = load_release(folder)
-    costs = model_costs(ckpt.weights, ckpt.config)
+    costs = model_costs(ckpt.weights, ckpt.config, readings=2 if Engine.mirrored_reading else 1)
     mach = machine(ckpt.weights, args.threads)
     results = []
     for kind in args.engines:
@@ -112,7 +113,7 @@ def report(res: dict) -> str:
         f"Model   {res['model']}  (width {cfg['width']}, m={cfg['encode_len']}, n={cfg['predict_len']}, "
         f"spatial={cfg['spatial']}, residual={cfg['residual']}; {c['weight_bytes_total'] / 1e6:.1f} MB of weights)",
         f"        {c['flops_per_frame'] / 1e6:.2f} MFLOP and {c['weight_bytes_per_frame'] / 1e6:.2f} MB of weight "
-        f"reads per generated frame (batch 1)",
+        f"reads per generated frame (batch 1; the context read {c['readings']} x: as it is and mirrored)",
         f"Machine {m['cpu']}, {m['cores']} cores, {m['threads']} BLAS thread(s): "
         f"SGEMM {m['sgemm_gflops']:.1f} GFLOP/s, memory copy {m['bandwidth_gbs']:.1f} GB/s",
         f"        (a batch-1 matmul streams the largest weight matrix at {m['gemv_stream_gbs']:.1f} GB/s)",

@@ -26,15 +26,18 @@ def _matrices(weights: dict, prefix: str, contains: str = "") -> int:
     return sum(v.size for k, v in weights.items() if k.startswith(prefix) and v.ndim == 2 and contains in k)
 
 
-def model_costs(weights: dict, config: dict) -> dict:
-    """Matmul FLOPs and weight bytes per generated frame of one extrapolation window.
+def model_costs(weights: dict, config: dict, readings: int = 1) -> dict:
+    """Matmul FLOPs and weight bytes per generated frame of one extrapolation window, the model
+    reading each context ``readings`` times (2: as it is and as its mirror image, as
+    :meth:`Engine.predict <model_core.inference.engine.Engine.predict>` does).
 
     Per window (``m`` context frames, ``n`` predicted): the encoder runs m LSTM steps over m
     spatially encoded frames; the decoder and predictor each run max(m, n) steps, each step a
     spatial decode and encode; the residual filter runs once. Bytes are for batch 1 with no
     weight kept in cache between uses: per step each LSTM matrix is read once, the spatial
     nets once for decoder and predictor together (one batch of two), the encoder's input
-    weights and the filter once per window.
+    weights and the filter once per window. The readings are rows of the same batch: they
+    multiply the FLOPs, not the weight reads.
     """
     m, n = config["encode_len"], config["predict_len"]
     steps = max(m, n)
@@ -48,8 +51,8 @@ def model_costs(weights: dict, config: dict) -> dict:
                       + steps * (macs["lstm_decoder"] + macs["lstm_predictor"]
                                  + macs["spatial_decoder"] + macs["spatial_encoder"])
                       + macs["filter"])
-    return {"flops_per_frame": flops_window / n, "weight_bytes_per_frame": 4 * entries_window / n,
-            "weight_bytes_total": 4 * sum(macs.values()), "macs_per_part": macs,
+    return {"flops_per_frame": readings * flops_window / n, "weight_bytes_per_frame": 4 * entries_window / n,
+            "weight_bytes_total": 4 * sum(macs.values()), "macs_per_part": macs, "readings": readings,
             "window": {"m": m, "n": n, "steps": steps}}
 
 

@@ -21,11 +21,12 @@ from ..motion.features import (
     continue_positions,
     features_to_positions,
     integrate_root,
+    mirror_features,
     positions_to_features,
     yaw_matrix,
 )
 from ..ops.seam import PREDICT_SEAM_FRAMES, seam_fade
-from .spatial_fold import fold_spatial
+from .spatial_fold import fold_spatial, rows_matmul, stack_matmul
 from .steps import drive
 
 
@@ -76,6 +77,7 @@ class Engine:
     """STRNN inference in NumPy. Build with :meth:`load`."""
 
     seam_frames = PREDICT_SEAM_FRAMES  # fade-out (frames) of the seam correction in predict() (ops/seam.py)
+    mirrored_reading = True  # predict() averages the context's reading and its mirror image's
 
     def __init__(self, ckpt: Checkpoint):
         ckpt.require_strnn()
@@ -125,7 +127,7 @@ class Engine:
         h = np.zeros((b, self.width), np.float32)
         cs = np.zeros_like(h)
         for t in range(m):
-            h, cs = _cell(xin[:, t] + h @ self.enc_whh, cs)
+            h, cs = _cell(xin[:, t] + rows_matmul(h, self.enc_whh), cs)
         hs, cs = np.stack([h, h]), np.stack([cs, cs])  # (2, B, H): decoder, predictor
         first = self.enc_frame(x[:, -1])  # (B, W)
         gin = np.stack([np.broadcast_to(self.start_gates, (b, self.start_gates.shape[0])),
@@ -138,7 +140,7 @@ class Engine:
         base = np.concatenate([x[:, -1], x[:, -1]]) if self.offsets else None  # (2B, C)
         skip = np.einsum("it,btc->ibc", self.skip, x - x[:, -1:]) if self.skip is not None else None
         for t in range(steps):
-            hs, cs = _cell(gin + np.matmul(hs, self.step_whh), cs)
+            hs, cs = _cell(gin + stack_matmul(hs, self.step_whh), cs)
             frames = self.dec_frame(hs.reshape(2 * b, -1))  # (2B, C)
             if base is not None:
                 frames[:b] += base[:b]
@@ -147,7 +149,7 @@ class Engine:
                 frames[b:] += skip[min(t, self.n - 1)]
             out[:, t] = frames.reshape(2, b, c)
             if t + 1 < steps:
-                gin = np.matmul(self.enc_frame(frames).reshape(2, b, -1), self.step_wih) + self.step_b
+                gin = stack_matmul(self.enc_frame(frames).reshape(2, b, -1), self.step_wih) + self.step_b
                 if extra is not None:
                     gin[1] += extra
         window = np.concatenate([out[0, : self.m][::-1], out[1, : self.n]]).transpose(1, 0, 2)  # (B, T, C)
@@ -155,7 +157,7 @@ class Engine:
             y = window.reshape(b, -1)
             z = np.concatenate([y, x.reshape(b, -1)], 1) if self.filter_context else y
             for i, (wt, bias) in enumerate(self.filter):
-                z = z @ wt + bias
+                z = rows_matmul(z, wt) + bias
                 if i < 3:
                     z = np.where(z > 0, z, np.expm1(np.minimum(z, 0)))  # ELU
             window = (y + z).reshape(window.shape)
@@ -169,11 +171,24 @@ class Engine:
     def predict(self, context: np.ndarray) -> np.ndarray:
         """Raw context ``[B, m, C]`` -> the next ``n`` raw frames ``[B, n, C]``.
 
+        With :attr:`mirrored_reading` (the default) the model reads each context twice, as it is and
+        as its mirror image (left and right swapped: :func:`mirror_features`, exact on the features),
+        in one batch, and the two predictions are averaged, the mirrored one mirrored back. Each
+        reading errs in its own way and their average less than either, and what is predicted no
+        longer depends on which side of the body was captured as the left."""
+        self.ckpt.require_generator("predict motion")
+        context = np.asarray(context, np.float32)
+        if not self.mirrored_reading:
+            return self.predict_once(context)
+        both = self.predict_once(np.concatenate([context, mirror_features(context)]))
+        return 0.5 * (both[:len(context)] + mirror_features(both[len(context):]))
+
+    def predict_once(self, context: np.ndarray) -> np.ndarray:
+        """:meth:`predict` from one reading of the context ``[B, m, C]`` (float32).
+
         Seam correction: the decoder's error on the last context frame (its offset from the
         true frame) is carried into the prediction and fades out over ``seam_frames`` frames,
         so the continuation starts where the context ends (0 turns it off)."""
-        self.ckpt.require_generator("predict motion")
-        context = np.asarray(context, np.float32)
         window = self.forward(context)
         pred = window[:, self.m:]
         if self.seam_frames > 0:

@@ -72,7 +72,9 @@ class TorchEngine:
     # predict/forward and read m, so the NumPy engine's own code runs here unchanged:
     # the two engines cannot drift apart.
     seam_frames = Engine.seam_frames
+    mirrored_reading = Engine.mirrored_reading
     predict = Engine.predict
+    predict_once = Engine.predict_once
     extrapolate = Engine.extrapolate
     reconstruct = Engine.reconstruct
     reconstruct_steps = Engine.reconstruct_steps

@@ -178,12 +178,15 @@ class BaselineEngine:
         return self.ckpt.seeds
 
     @torch.inference_mode()
-    def predict(self, context: np.ndarray) -> np.ndarray:
-        """Raw context ``[B, m, C]`` -> the next ``n`` raw frames ``[B, n, C]``."""
+    def predict_once(self, context: np.ndarray) -> np.ndarray:
+        """Raw context ``[B, m, C]`` -> the next ``n`` raw frames ``[B, n, C]``, from one reading."""
         x = torch.from_numpy(((np.asarray(context, np.float32) - self.mean) / self.std).astype(np.float32))
         return self.model(x).numpy() * self.std + self.mean
 
-    # The STRNN engine's rollout (skeleton projection, contacts rounded) and position-level
-    # wrapper only call predict and read m, so the baselines are generated exactly as STRNN is.
+    # The STRNN engine's prediction (the context read as it is and mirrored), rollout (skeleton
+    # projection, contacts rounded) and position-level wrapper only call predict_once and read m,
+    # so the baselines are generated exactly as STRNN is.
+    mirrored_reading = Engine.mirrored_reading
+    predict = Engine.predict
     extrapolate = Engine.extrapolate
     extend = Engine.extend

@@ -18,11 +18,13 @@ torch = pytest.importorskip("torch")
 from releases import random_release  # noqa: E402
 
 from model_core.inference.engine import Engine, bone_lengths, offset_weights  # noqa: E402
+from model_core.inference.spatial_fold import rows_matmul, stack_matmul  # noqa: E402
 from model_core.inference.steps import drive  # noqa: E402
 from model_core.inference.torch_engine import TorchEngine  # noqa: E402
 from model_core.io.checkpoint import DEFAULT_MODEL, REPO, CheckpointError, load_release  # noqa: E402
 from model_core.model.strnn import STRNNConfig  # noqa: E402
 from model_core.motion.conventions import LAYOUT  # noqa: E402
+from model_core.motion.features import mirror_features  # noqa: E402
 
 C = LAYOUT.size
 VARIANTS = [(s, r) for s in (True, False) for r in (True, False)]  # (spatial, residual)
@@ -52,7 +54,9 @@ def test_numpy_forward_matches_torch(tmp_path, spatial, residual, m, n):
     assert got.shape == (3, m + n, C)
     np.testing.assert_allclose(got, want, atol=1e-4, rtol=0)
     engine.seam_frames = 0  # the raw prediction, without the seam correction
-    np.testing.assert_allclose(engine.predict(raw), want[:, m:], atol=1e-4, rtol=0)
+    np.testing.assert_allclose(engine.predict_once(raw), want[:, m:], atol=1e-4, rtol=0)
+    for b in (1, 2):  # one and two contexts: few rows, each product a matrix-vector one
+        np.testing.assert_allclose(engine.forward(raw[:b]), want[:b], atol=1e-4, rtol=0)
     np.testing.assert_allclose(TorchEngine.load(tmp_path).forward(raw), want, atol=1e-5, rtol=0)
 
 
@@ -305,10 +309,37 @@ def test_seam_correction_carries_the_context_offset_into_the_prediction(tmp_path
     window = engine.forward(raw)
     offset = raw[:, -1, LAYOUT.positions] - window[:, 9, LAYOUT.positions]
     engine.seam_frames = 4.0
-    pred = engine.predict(raw)
+    pred = engine.predict_once(raw)
     np.testing.assert_allclose(pred[:, :, LAYOUT.positions] - window[:, 10:, LAYOUT.positions],
                                np.exp(-np.arange(1, 11) / 4.0)[None, :, None] * offset[:, None], atol=1e-4)
     np.testing.assert_allclose(pred[:, :, LAYOUT.velocity], window[:, 10:, LAYOUT.velocity], atol=1e-6)
+
+
+def test_prediction_reads_the_context_and_its_mirror_image(tmp_path):
+    """``predict`` averages the model's reading of each context and of its mirror image (mirrored back),
+    so predicting a mirrored context gives the mirrored prediction; a random model alone does not."""
+    random_release(tmp_path, True, True, 10, 10, offsets=True)
+    engine = Engine.load(tmp_path)
+    raw = engine.seeds
+    once, mirrored_once = engine.predict_once(raw), engine.predict_once(mirror_features(raw))
+    assert np.abs(mirror_features(mirrored_once) - once).max() > 1e-2  # one reading is not mirror-symmetric
+    for b in (1, len(raw)):  # one context (two matrix-vector passes) and a batch
+        pred = engine.predict(raw[:b])
+        np.testing.assert_allclose(pred, 0.5 * (once[:b] + mirror_features(mirrored_once[:b])), atol=1e-5)
+        np.testing.assert_allclose(engine.predict(mirror_features(raw[:b])), mirror_features(pred), atol=1e-5)
+    engine.mirrored_reading = False
+    np.testing.assert_allclose(engine.predict(raw), once, atol=1e-6)
+
+
+def test_rows_matmul_is_the_matrix_product():
+    rng = np.random.default_rng(0)
+    w = rng.normal(size=(37, 23)).astype(np.float32)
+    for rows in range(1, 7):
+        a = rng.normal(size=(rows, 37)).astype(np.float32)
+        np.testing.assert_allclose(rows_matmul(a, w), a @ w, rtol=1e-5, atol=1e-5)
+    stack = rng.normal(size=(2, 3, 37)).astype(np.float32)
+    np.testing.assert_allclose(stack_matmul(stack, np.stack([w, 2 * w])), np.matmul(stack, np.stack([w, 2 * w])),
+                               rtol=1e-5, atol=1e-5)
 
 
 def test_blend_track_keeps_consistent_data_and_takes_the_rates_when_weighted():

@@ -37,6 +37,9 @@ def test_model_costs_by_hand():
     bounds = roofline(100.0, 4, costs, gflops=10.0, bandwidth_gbs=2.0)
     assert bounds["compute_bound_fps"] == pytest.approx(10e9 / costs["flops_per_frame"])
     assert bounds["bandwidth_bound_fps"] == pytest.approx(4 * 2e9 / costs["weight_bytes_per_frame"])
+    twice = model_costs(temporal_weights(c, w, m + n, r), {"encode_len": m, "predict_len": n}, readings=2)
+    assert twice["flops_per_frame"] == pytest.approx(2 * costs["flops_per_frame"])  # mirrored reading: twice
+    assert twice["weight_bytes_per_frame"] == costs["weight_bytes_per_frame"]  # the work, the same weights
 
 
 def test_benchmark_script_smoke(tmp_path, monkeypatch):
