@@ -25,10 +25,11 @@ def denoise_positions_steps(engine, pos: np.ndarray, fps: float, strength: float
 
     Pops are found and the noise measured at the clip's own rate (:mod:`fusion`). The model reads
     the repaired clip at its own rate, once per phase of a faster clip (frames 0, 2, 4... and 1, 3,
-    5... of a 60 fps clip), and as its mirror image (left and right swapped, mirrored back after),
-    and these reconstructions, brought back to the clip's frames, are averaged: each reading errs
-    in its own way and the average less than either. That estimate is weighed against the input by
-    how much each deserves: a clean take comes back nearly as it was."""
+    5... of a 60 fps clip), and, with the engine's ``mirrored_reading``, as its mirror image (left and
+    right swapped, mirrored back after), and these reconstructions, brought back to the clip's
+    frames, are averaged: each reading errs in its own way and the average less than either. That
+    estimate is weighed against the input by how much each deserves: a clean take comes back nearly
+    as it was."""
     duration = (len(pos) - 1) / fps
     fixed, found = fusion.assess(np.asarray(pos, np.float64))
     # Scale and ground from a smoothed clip: noise lengthens the legs and lowers the lowest foot.
@@ -38,7 +39,8 @@ def denoise_positions_steps(engine, pos: np.ndarray, fps: float, strength: float
     frames = np.arange(len(pos)) / fps
     phases = [k / fps for k in range(max(1, int(round(fps / MODEL_FPS))))]
     phases = [p for p in phases if len(_model_times(duration, p)) >= engine.m] or [0.0]
-    readings = [(phase, mirrored) for phase in phases for mirrored in (False, True)]
+    sides = (False, True) if engine.mirrored_reading else (False,)  # the engine's one switch (Engine.predict)
+    readings = [(phase, mirrored) for phase in phases for mirrored in sides]
     prior = np.zeros_like(fixed)
     for i, (phase, mirrored) in enumerate(readings):
         times = _model_times(duration, phase)

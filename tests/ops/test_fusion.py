@@ -138,4 +138,11 @@ def test_denoise_of_a_mirrored_take_is_the_mirrored_denoise(denoiser, fps):
     # (read once, the two readings differ by 0.1 to 0.2 cm on average and up to 3 cm).
     diff = np.abs(mirror_positions(mirrored) - out)  # cm
     assert diff.mean() < 0.01 and diff.max() < 0.2
+    denoiser.mirrored_reading = False  # the engine's switch: one reading, and the symmetry is gone
+    try:
+        once = denoise_positions(denoiser, noisy, fps)
+        once_mirrored = denoise_positions(denoiser, mirror_positions(noisy), fps)
+    finally:
+        del denoiser.mirrored_reading
+    assert np.abs(mirror_positions(once_mirrored) - once).mean() > 0.05
     assert np.abs(out - noisy).mean() > 0.5  # and it did denoise
