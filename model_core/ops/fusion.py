@@ -28,9 +28,9 @@ import numpy as np
 
 from ..motion.conventions import PARENTS
 from ..motion.features import gaussian_smooth, gaussian_taps
+from .seam import white_noise_variance
 from .transfer import bone_lengths
 
-D4_NOISE_GAIN = np.sqrt(70.0)  # std of the 4th difference of unit white noise
 POP_FLOOR_M = 0.05  # a pop moves a joint at least this far from where its neighbours put it
 POP_FACTOR = 3.5  # ... and this many times the joint's median residual
 POP_FILL_ERROR_M = 0.005  # how far a repaired pop may be from the truth
@@ -68,9 +68,7 @@ def noise_level(pos: np.ndarray) -> np.ndarray:
     """Robust std (m) of white noise per joint and axis ``[J, 3]`` of positions ``[F, J, 3]`` (F >= 5).
     Per axis, because noise need not be the same in every direction: jitter of a joint's rotation moves
     the joints below it across their bones, not along them."""
-    d4 = np.diff(np.asarray(pos, np.float64), n=4, axis=0)
-    mad = np.median(np.abs(d4 - np.median(d4, 0)), axis=0)
-    return np.maximum(1.4826 * mad / D4_NOISE_GAIN, NOISE_FLOOR_M)
+    return np.maximum(np.sqrt(white_noise_variance(pos)), NOISE_FLOOR_M)
 
 
 def _cubic_from_neighbours(x: np.ndarray) -> np.ndarray:

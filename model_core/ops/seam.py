@@ -6,8 +6,8 @@ Every seam length lives here. Three kinds of seam:
   the decoder's offset on the last context frame is carried into the prediction, decaying as
   ``exp(-k / PREDICT_SEAM_FRAMES)`` (:func:`seam_fade`);
 - new frames after a clip (:func:`extend.extend_positions`, :func:`follow.smooth_seam`): the jump
-  from where the clip's last velocity leads fades out over :data:`SEAM_FRAMES` model frames on a
-  half cosine (:func:`blend_seam`);
+  from where the clip's last motion leads (:func:`seam_target`) fades out over :data:`SEAM_FRAMES`
+  model frames on a half cosine (:func:`blend_seam`);
 - a replaced range inside a clip (Denoise on part of an action): the new frames are blended from
   the old ones over :data:`EDGE_FADE_S` seconds at each edge (:func:`fade_edges`).
 """
@@ -19,6 +19,13 @@ import numpy as np
 PREDICT_SEAM_FRAMES = 10.0  # decay (frames) of the engine's seam correction in predict(); chosen on validation
 SEAM_FRAMES = 10  # model frames over which a jump at the start of an extension is faded out
 EDGE_FADE_S = 0.2  # a partial Denoise range fades in and out over this long where it meets untouched frames
+# The first new frame continues the clip's last velocity and this share of its last acceleration, as far as
+# the acceleration stands out of the clip's jitter (seam_target); chosen on the validation split.
+SEAM_ACCEL = 0.75
+SEAM_NOISE_MARGIN = 3.0  # the acceleration counts against this many times the jitter it carries
+ACCEL_FRAMES = 6  # recent second differences that measure how much the clip accelerates
+D4_NOISE_GAIN2 = 70.0  # variance of the 4th difference of unit white noise
+D2_NOISE_GAIN2 = 6.0  # ... and of the 2nd
 
 
 def seam_fade(n: int, frames: float = PREDICT_SEAM_FRAMES, xp=np, dtype=np.float32):
@@ -27,13 +34,38 @@ def seam_fade(n: int, frames: float = PREDICT_SEAM_FRAMES, xp=np, dtype=np.float
     return xp.exp(-xp.arange(1, n + 1, dtype=dtype) / frames)
 
 
-def blend_seam(ctx: np.ndarray, new: np.ndarray, frames: int = SEAM_FRAMES) -> np.ndarray:
+def white_noise_variance(x: np.ndarray) -> np.ndarray:
+    """Robust variance of white noise per channel ``[...]`` of ``[F, ...]`` (F >= 5) from the median absolute
+    4th difference in time, which white noise dominates and smooth motion hardly reaches."""
+    d4 = np.diff(np.asarray(x, np.float64), n=4, axis=0)
+    mad = np.median(np.abs(d4 - np.median(d4, 0)), axis=0)
+    return (1.4826 * mad) ** 2 / D4_NOISE_GAIN2
+
+
+def seam_target(ctx: np.ndarray, accel: float = SEAM_ACCEL) -> np.ndarray:
+    """Where the frame after a context ``[C, J, 3]`` should be: the last frame moved on by its velocity
+    and by ``accel`` times its acceleration, the latter shrunk by how much of it could be jitter (a
+    Wiener gain per joint and axis: the clip's recent acceleration against the noise measured on it;
+    a clean take keeps it, noisy capture falls back to the velocity alone). A body that is slowing
+    down or speeding up goes on doing so for a frame, which the velocity alone misses."""
+    ctx = np.asarray(ctx, np.float64)
+    target = 2 * ctx[-1] - ctx[-2]
+    if len(ctx) < 8 or accel == 0.0:
+        return target
+    noise = D2_NOISE_GAIN2 * white_noise_variance(ctx)
+    signal = np.maximum((np.diff(ctx[-ACCEL_FRAMES - 2:], n=2, axis=0) ** 2).mean(0) - noise, 0.0)
+    total = signal + SEAM_NOISE_MARGIN * noise
+    gain = np.divide(signal, total, out=np.zeros_like(total), where=total > 0)
+    return target + accel * gain * (ctx[-1] - 2 * ctx[-2] + ctx[-3])
+
+
+def blend_seam(ctx: np.ndarray, new: np.ndarray, frames: int = SEAM_FRAMES, accel: float = SEAM_ACCEL) -> np.ndarray:
     """Fade out the jump between a context ``[C, 21, 3]`` and its continuation ``[N, 21, 3]``
-    (same rate): the first new frame is moved to where the context's last velocity leads,
-    and that correction decays smoothly to zero over ``frames`` frames."""
+    (same rate): the first new frame is moved to where the context's last motion leads
+    (:func:`seam_target`), and that correction decays smoothly to zero over ``frames`` frames."""
     if len(ctx) < 2 or len(new) == 0:
         return new
-    offset = (2 * ctx[-1] - ctx[-2]) - new[0]  # (21, 3)
+    offset = seam_target(ctx, accel) - new[0]  # (21, 3)
     k = np.arange(len(new), dtype=np.float64)
     weight = np.where(k < frames, 0.5 * (1 + np.cos(np.pi * k / frames)), 0.0)  # 1 -> 0, flat at both ends
     return new + weight[:, None, None] * offset

@@ -8,7 +8,16 @@ import pytest
 
 from model_core.inference.engine import Engine
 from model_core.ops.follow import ControlSettings
-from model_core.ops.seam import EDGE_FADE_S, PREDICT_SEAM_FRAMES, SEAM_FRAMES, fade_edges, seam_fade
+from model_core.ops.seam import (
+    EDGE_FADE_S,
+    PREDICT_SEAM_FRAMES,
+    SEAM_ACCEL,
+    SEAM_FRAMES,
+    blend_seam,
+    fade_edges,
+    seam_fade,
+    seam_target,
+)
 
 
 def test_the_seam_lengths_are_the_ones_each_user_takes():
@@ -36,3 +45,28 @@ def test_fade_edges_blends_only_the_faded_edges():
     np.testing.assert_array_equal(fade_edges(before, after, fps, False, False), after)
     start_only = fade_edges(before, after, fps, True, False)[:, 0, 0]
     assert start_only[0] < 1.0 and np.all(start_only[k:] == 1.0)
+
+
+def test_the_seam_carries_a_clean_clips_acceleration_and_not_jitter():
+    t = np.arange(20, dtype=np.float64)
+    braking = np.zeros((20, 21, 3))
+    braking[..., 0] = (2.0 * t - 0.04 * t ** 2)[:, None]  # slowing down, no jitter at all
+    last, prev, prev2 = braking[-1], braking[-2], braking[-3]
+    velocity_only = 2 * last - prev
+    np.testing.assert_allclose(seam_target(braking), velocity_only + SEAM_ACCEL * (last - 2 * prev + prev2))
+    np.testing.assert_allclose(seam_target(braking, accel=0.0), velocity_only)
+    np.testing.assert_allclose(seam_target(braking[-7:]), 2 * last - prev)  # too short to tell jitter: velocity only
+    # Jitter on a steady glide: its frame-to-frame "acceleration" is noise, and the seam does not follow it.
+    rng = np.random.default_rng(0)
+    kicks = []
+    for _ in range(50):
+        glide = np.zeros((20, 21, 3))
+        glide[..., 0] = t[:, None]
+        glide += rng.normal(0.0, 0.05, glide.shape)
+        last, prev, prev2 = glide[-1], glide[-2], glide[-3]
+        used = seam_target(glide) - (2 * last - prev)
+        kicks.append(np.abs(used).mean() / np.abs(SEAM_ACCEL * (last - 2 * prev + prev2)).mean())
+    assert np.mean(kicks) < 0.25
+    # And a blend starts from that target.
+    new = np.zeros((12, 21, 3))
+    np.testing.assert_allclose(blend_seam(braking, new)[0], seam_target(braking))
