@@ -12,6 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..motion.features import detect_contacts, yaw_matrix
+from ..ops.familiarity import momentum_shares
 from ..ops.footlock import foot_lock, foot_skate_cm
 from ..ops.inbetween import fill_from, root_and_local, wrap_angle
 from .metrics import extend_batch, mpjpe_cm
@@ -58,7 +59,8 @@ def evaluate_inbetween(engine, clips, gaps=(15, 30, 60)) -> dict:
     for gap in gaps:
         ctx, true, tgt = windows(positions, gap)
         pred = extend_batch(engine, ctx, gap + 1)
-        bent = np.stack([fill_from(c, p, t[None]) for p, c, t in zip(pred, ctx, tgt)])
+        shares = momentum_shares(engine, ctx)
+        bent = np.stack([fill_from(c, p, t[None], k) for p, c, t, k in zip(pred, ctx, tgt, shares)])
         ours, arrive = bent[:, :-1], bent[:, -1]
         lerp = np.stack([interpolate(c[-1], t, gap) for c, t in zip(ctx, tgt)])
         turn = np.stack([interpolate(c[-1], t, gap, heading=True) for c, t in zip(ctx, tgt)])

@@ -15,6 +15,7 @@ from ..motion.features import (
     lowest_foot,
     positions_to_features,
 )
+from ..ops.familiarity import momentum_shares
 from ..ops.fusion import running_median
 from ..ops.seam import blend_seam
 
@@ -59,7 +60,8 @@ def prediction_errors(engine, clips: list[np.ndarray], horizons_ms=HORIZONS_MS,
                       extra_engines: dict | None = None) -> tuple[dict, int]:
     """MPJPE (cm) at each horizon for STRNN, zero- and constant-velocity, each of ``extra_engines``
     ``{name: engine}`` (baselines, continued as STRNN is), and for STRNN with the seam blend Extend
-    applies (``strnn_seam_blend``, :func:`seam.blend_seam`); and the window count."""
+    applies (``strnn_seam_blend``, :func:`seam.blend_seam`, with the clip's momentum where the motion is
+    unfamiliar: :func:`familiarity.momentum_shares`); and the window count."""
 
     steps = horizon_frames(horizons_ms)
     ctx, fut = prediction_windows(clips, max(steps))
@@ -70,7 +72,8 @@ def prediction_errors(engine, clips: list[np.ndarray], horizons_ms=HORIZONS_MS,
         "constant_velocity": last + (last - prev) * np.arange(1, max(steps) + 1)[None, :, None, None],
     }
     preds |= {name: extend_batch(e, ctx, max(steps)) for name, e in (extra_engines or {}).items()}
-    preds["strnn_seam_blend"] = np.stack([blend_seam(c, p) for c, p in zip(ctx, preds["strnn"])])
+    shares = momentum_shares(engine, ctx)
+    preds["strnn_seam_blend"] = np.stack([blend_seam(c, p, momentum=k) for c, p, k in zip(ctx, preds["strnn"], shares)])
     idx = [s - 1 for s in steps]
     out = {name: [float(v) for v in mpjpe_cm(p[:, idx], fut[:, idx]).mean(0)] for name, p in preds.items()}
     return out, len(ctx)

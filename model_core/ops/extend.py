@@ -7,6 +7,7 @@ import math
 import numpy as np
 
 from ..motion.conventions import MODEL_FPS
+from .familiarity import momentum_shares
 from .normalise import fit_normalisation, model_frames_available, sample_at
 from .seam import blend_seam
 
@@ -24,5 +25,7 @@ def extend_positions(engine, pos: np.ndarray, fps: float, frames: int) -> np.nda
     norm = fit_normalisation(ctx)
     n_model = int(math.ceil(frames * MODEL_FPS / fps)) + 1
     new = np.asarray(engine.extend(norm.to_model(ctx), n_model), dtype=np.float64)
-    seq = np.concatenate([ctx[-1:], blend_seam(ctx, norm.to_user(new))])  # model frame 0 = the last context frame
+    momentum = momentum_shares(engine, norm.to_model(ctx)[None])[0]
+    # model frame 0 is the last context frame
+    seq = np.concatenate([ctx[-1:], blend_seam(ctx, norm.to_user(new), momentum=momentum)])
     return sample_at(seq, MODEL_FPS, np.arange(1, frames + 1) / fps)

@@ -6,7 +6,8 @@ grows, and so does the risk that a continuation drifts away from the clip. The e
 against the model's own usual error, measured on held-back takes and kept in its model.json
 (``familiarity.reconstruction_cm_p90``: 90 % of such windows reconstruct better), so the
 operators can say when to trust a result less: a clip that rebuilds more than ``UNFAMILIAR_RATIO`` times
-worse than that is called unfamiliar.
+worse than that is called unfamiliar. Extend and Fill Gap also let an unfamiliar context's momentum carry
+on into the new frames (:func:`momentum_shares`, :func:`seam.blend_seam`).
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ import numpy as np
 from ..motion.conventions import LAYOUT, MODEL_FPS
 from ..motion.features import positions_to_features
 from .normalise import fit_normalisation, model_frames_available, sample_at
+from .seam import momentum_share
 
 KEY = "familiarity"
 # A clip reads as unfamiliar when it rebuilds this many times worse than the 90th percentile. Chosen with
@@ -54,16 +56,41 @@ def reconstruction_cm(engine, pos: np.ndarray, stride: int | None = None) -> np.
     feats, _ = positions_to_features(pos)
     m = engine.m
     starts = sorted(set(range(0, len(feats) - m + 1, stride or m // 2)) | {len(feats) - m})
-    windows = np.stack([feats[s:s + m] for s in starts])
-    decoded = engine.forward(windows)[:, :m]
-    local = (decoded - windows)[..., LAYOUT.positions].reshape(len(windows), m, -1, 3)
+    return _window_errors_cm(engine, np.stack([feats[s:s + m] for s in starts]))
+
+
+def _window_errors_cm(engine, windows: np.ndarray) -> np.ndarray:
+    decoded = engine.forward(windows)[:, :engine.m]
+    local = (decoded - windows)[..., LAYOUT.positions].reshape(len(windows), engine.m, -1, 3)
     return 100.0 * np.linalg.norm(local, axis=-1).mean((1, 2))
+
+
+def usual_cm(engine) -> float | None:
+    """The model's usual reconstruction error (its calibration's 90th percentile), None without one."""
+    meta = getattr(getattr(engine, "ckpt", None), "meta", None) or {}
+    return meta.get(KEY, {}).get("reconstruction_cm_p90")
+
+
+def context_ratios(engine, contexts: np.ndarray) -> np.ndarray | None:
+    """Familiarity ratio (reconstruction error over the usual) of the last ``m`` frames of each context
+    ``[W, C, 21, 3]`` (model units and rate, C >= m), in one batch; None for a model without calibration."""
+    usual = usual_cm(engine)
+    if not usual or np.shape(contexts)[1] < engine.m:
+        return None
+    windows = np.stack([positions_to_features(np.asarray(c)[-engine.m:])[0] for c in contexts])
+    return _window_errors_cm(engine, windows) / usual
+
+
+def momentum_shares(engine, contexts: np.ndarray) -> list[float]:
+    """How much of its clip's momentum the continuation of each context ``[W, C, 21, 3]`` (model units and
+    rate) keeps (:func:`seam.momentum_share`): none where the model knows the motion, or has no calibration."""
+    ratios = context_ratios(engine, contexts)
+    return [0.0] * len(contexts) if ratios is None else [momentum_share(float(r)) for r in ratios]
 
 
 def assess(engine, pos: np.ndarray) -> Familiarity:
     """:class:`Familiarity` of positions ``[F, 21, 3]`` (model units and rate) to ``engine``'s model."""
-    usual = engine.ckpt.meta.get(KEY, {}).get("reconstruction_cm_p90")
-    return Familiarity(float(reconstruction_cm(engine, pos).mean()), usual)
+    return Familiarity(float(reconstruction_cm(engine, pos).mean()), usual_cm(engine))
 
 
 def calibrate(engine, clips: list[np.ndarray]) -> dict:

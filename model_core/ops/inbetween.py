@@ -28,6 +28,7 @@ import numpy as np
 from ..motion.conventions import MODEL_FPS, ROOT, UP_AXIS
 from ..motion.features import heading, yaw_matrix
 from ..motion.geometry import interpolate_frames
+from .familiarity import momentum_shares
 from .normalise import fit_normalisation, sample_at
 from .seam import blend_seam
 
@@ -122,13 +123,15 @@ def inbetween(engine, context: np.ndarray, target: np.ndarray, frames: int) -> n
     if len(context) < engine.m:
         context = np.concatenate([np.repeat(context[:1], engine.m - len(context), 0), context])
     pred = np.asarray(engine.extend(context[-engine.m:].astype(np.float32), frames + 1), np.float64)
-    return fill_from(context, pred, np.asarray(target, np.float64))[:-1]
+    momentum = momentum_shares(engine, context[None, -engine.m:])[0]
+    return fill_from(context, pred, np.asarray(target, np.float64), momentum)[:-1]
 
 
-def fill_from(context: np.ndarray, pred: np.ndarray, target: np.ndarray) -> np.ndarray:
+def fill_from(context: np.ndarray, pred: np.ndarray, target: np.ndarray, momentum: float = 0.0) -> np.ndarray:
     """The model's continuation ``pred`` ``[N + 1, J, 3]`` of ``context`` ``[C, J, 3]``, its seam faded as
-    Extend fades it and bent onto ``target`` ``[T, J, 3]``: the ``N`` gap frames and the target's frame."""
-    return bend_onto(blend_seam(context, pred), context[-1], target)
+    Extend fades it (``momentum``: :func:`seam.blend_seam`) and bent onto ``target`` ``[T, J, 3]``: the ``N``
+    gap frames and the target's frame."""
+    return bend_onto(blend_seam(context, pred, momentum=momentum), context[-1], target)
 
 
 def inbetween_positions(engine, before: np.ndarray, after: np.ndarray, fps: float, frames: int) -> np.ndarray:

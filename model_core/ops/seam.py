@@ -7,7 +7,8 @@ Every seam length lives here. Three kinds of seam:
   ``exp(-k / PREDICT_SEAM_FRAMES)`` (:func:`seam_fade`);
 - new frames after a clip (:func:`extend.extend_positions`, :func:`follow.smooth_seam`): the jump
   from where the clip's last motion leads (:func:`seam_target`) fades out over :data:`SEAM_FRAMES`
-  model frames on a half cosine (:func:`blend_seam`);
+  model frames on a half cosine (:func:`blend_seam`), and on motion the model does not know the
+  clip's momentum eases into the model's over :data:`MOMENTUM_FRAMES` (:func:`momentum_share`);
 - a replaced range inside a clip (Denoise on part of an action): the new frames are blended from
   the old ones over :data:`EDGE_FADE_S` seconds at each edge (:func:`fade_edges`).
 """
@@ -26,6 +27,14 @@ SEAM_NOISE_MARGIN = 3.0  # the acceleration counts against this many times the j
 ACCEL_FRAMES = 6  # recent second differences that measure how much the clip accelerates
 D4_NOISE_GAIN2 = 70.0  # variance of the 4th difference of unit white noise
 D2_NOISE_GAIN2 = 6.0  # ... and of the 2nd
+# On motion the model does not know, its own velocity is worse than the clip's: there the clip's momentum
+# carries on into the new frames, easing into the model's motion over MOMENTUM_FRAMES (an exponential
+# time constant) and given back by MOMENTUM_FADE_FRAMES. How much: none while the clip reconstructs at
+# most as badly as 90 % of the motion the model knows (familiarity ratio 1), in full from MOMENTUM_RATIO[1].
+# Chosen on the held-out groups and the validation split (model card).
+MOMENTUM_RATIO = (1.0, 1.5)
+MOMENTUM_FRAMES = 4.0
+MOMENTUM_FADE_FRAMES = 20
 
 
 def seam_fade(n: int, frames: float = PREDICT_SEAM_FRAMES, xp=np, dtype=np.float32):
@@ -59,16 +68,40 @@ def seam_target(ctx: np.ndarray, accel: float = SEAM_ACCEL) -> np.ndarray:
     return target + accel * gain * (ctx[-1] - 2 * ctx[-2] + ctx[-3])
 
 
-def blend_seam(ctx: np.ndarray, new: np.ndarray, frames: int = SEAM_FRAMES, accel: float = SEAM_ACCEL) -> np.ndarray:
+def momentum_share(ratio: float | None) -> float:
+    """How much of the clip's momentum a continuation keeps (0 to 1) for a context whose familiarity ratio
+    (:func:`familiarity.context_ratios`) is ``ratio``; 0 where it is unknown."""
+    if ratio is None or not np.isfinite(ratio):
+        return 0.0
+    lo, hi = MOMENTUM_RATIO
+    return float(np.clip((ratio - lo) / (hi - lo), 0.0, 1.0))
+
+
+def _cosine_fade(n: int, frames: int) -> np.ndarray:
+    k = np.arange(n, dtype=np.float64)
+    return np.where(k < frames, 0.5 * (1 + np.cos(np.pi * k / frames)), 0.0)  # 1 -> 0, flat at both ends
+
+
+def blend_seam(ctx: np.ndarray, new: np.ndarray, frames: int = SEAM_FRAMES, accel: float = SEAM_ACCEL,
+               momentum: float = 0.0) -> np.ndarray:
     """Fade out the jump between a context ``[C, 21, 3]`` and its continuation ``[N, 21, 3]``
     (same rate): the first new frame is moved to where the context's last motion leads
-    (:func:`seam_target`), and that correction decays smoothly to zero over ``frames`` frames."""
+    (:func:`seam_target`), and that correction decays smoothly to zero over ``frames`` frames.
+
+    With ``momentum`` (0 to 1, :func:`momentum_share`), that share of the difference between the clip's
+    last velocity and the continuation's first carries on, decaying over :data:`MOMENTUM_FRAMES`, and
+    what it moved is given back over :data:`MOMENTUM_FADE_FRAMES`: the motion eases from the clip's
+    momentum into the model's instead of turning at once."""
     if len(ctx) < 2 or len(new) == 0:
         return new
-    offset = seam_target(ctx, accel) - new[0]  # (21, 3)
-    k = np.arange(len(new), dtype=np.float64)
-    weight = np.where(k < frames, 0.5 * (1 + np.cos(np.pi * k / frames)), 0.0)  # 1 -> 0, flat at both ends
-    return new + weight[:, None, None] * offset
+    target = seam_target(ctx, accel)
+    out = new + _cosine_fade(len(new), frames)[:, None, None] * (target - new[0])
+    if momentum > 0.0 and len(new) > 1:
+        dv = (target - np.asarray(ctx[-1], np.float64)) - (new[1] - new[0])  # (21, 3) per frame
+        k = np.arange(len(new), dtype=np.float64)
+        carried = np.cumsum(np.exp(-k / MOMENTUM_FRAMES)) - 1.0  # 0 at the first new frame
+        out = out + momentum * (carried * _cosine_fade(len(new), MOMENTUM_FADE_FRAMES))[:, None, None] * dv
+    return out
 
 
 def fade_edges(before: np.ndarray, after: np.ndarray, fps: float, fade_in: bool, fade_out: bool,

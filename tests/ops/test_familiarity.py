@@ -44,3 +44,18 @@ def test_a_clip_a_little_above_the_ninetieth_percentile_is_not_called_unfamiliar
     assert not familiarity.Familiarity(1.1 * usual, usual).unfamiliar
     assert familiarity.Familiarity(1.3 * usual, usual).unfamiliar
     assert not familiarity.Familiarity(5.0, None).unfamiliar  # an uncalibrated model says nothing
+
+
+def test_the_clip_keeps_its_momentum_only_where_the_model_does_not_know_the_motion():
+    """Extend and Fill Gap let a clip's momentum carry on where the model would not continue it well: a
+    walk of the test split keeps none, a procedural walk (far from any capture) all of it; an
+    uncalibrated model or a context shorter than the model's window keeps none."""
+    engine = Engine.load()
+    names = engine.ckpt.seed_names
+    walk = features_to_positions(engine.seeds[next(i for i, n in enumerate(names) if "_walk_" in n)])
+    procedural = walking_skeleton(20)
+    ratios = familiarity.context_ratios(engine, np.stack([walk, procedural]))
+    assert ratios[0] < 1.0 < 1.5 < ratios[1]
+    assert familiarity.momentum_shares(engine, np.stack([walk, procedural])) == [0.0, 1.0]
+    assert familiarity.context_ratios(engine, procedural[None, :10]) is None
+    assert familiarity.momentum_shares(object(), procedural[None]) == [0.0]  # no calibration to judge by

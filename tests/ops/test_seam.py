@@ -70,3 +70,21 @@ def test_the_seam_carries_a_clean_clips_acceleration_and_not_jitter():
     # And a blend starts from that target.
     new = np.zeros((12, 21, 3))
     np.testing.assert_allclose(blend_seam(braking, new)[0], seam_target(braking))
+
+
+def test_momentum_eases_from_the_clips_velocity_into_the_continuations():
+    from model_core.ops.seam import MOMENTUM_FADE_FRAMES, MOMENTUM_RATIO, momentum_share
+
+    ctx = np.zeros((20, 21, 3))
+    ctx[..., 0] = (np.arange(20) * 0.05)[:, None]  # moving +x at 0.05 per frame
+    new = np.zeros((40, 21, 3))
+    new[..., 0] = 1.0 + (np.arange(40) * 0.01)[:, None]  # the model slows at once to 0.01 per frame
+    plain, carried = blend_seam(ctx, new), blend_seam(ctx, new, momentum=1.0)
+    np.testing.assert_allclose(carried[0], plain[0])  # the first frame is the seam's either way
+    step = lambda out: np.diff(out[:6, 0, 0])  # noqa: E731
+    assert np.all(step(carried) > step(plain) + 1e-6) and np.all(np.diff(step(carried)) < 0)  # slows gradually
+    np.testing.assert_allclose(carried[MOMENTUM_FADE_FRAMES:], new[MOMENTUM_FADE_FRAMES:])  # and gives it back
+    np.testing.assert_allclose(blend_seam(ctx, new, momentum=0.0), plain)
+    lo, hi = MOMENTUM_RATIO
+    assert momentum_share(None) == momentum_share(lo) == momentum_share(0.2) == 0.0
+    assert momentum_share(hi) == momentum_share(3 * hi) == 1.0 and momentum_share((lo + hi) / 2) == 0.5
