@@ -50,6 +50,7 @@ class TorchEngine:
         self.mean, self.std = ckpt.mean, ckpt.std
         self._mean = torch.from_numpy(ckpt.mean).to(self.device)
         self._std = torch.from_numpy(ckpt.std).to(self.device)
+        self.companion = TorchEngine(ckpt.companion, device) if ckpt.companion is not None else None
 
     @classmethod
     def load(cls, folder: str | Path | None = None, device: str | torch.device = "cpu") -> TorchEngine:
@@ -75,6 +76,7 @@ class TorchEngine:
     mirrored_reading = Engine.mirrored_reading
     predict = Engine.predict
     predict_once = Engine.predict_once
+    predict_first = Engine.predict_first
     extrapolate = Engine.extrapolate
     reconstruct = Engine.reconstruct
     reconstruct_steps = Engine.reconstruct_steps

@@ -22,6 +22,9 @@ from .files import write_atomic, write_json
 
 REPO = Path(__file__).resolve().parents[2]
 DEFAULT_MODEL = REPO / "models" / "strnn_default"
+# A release may hold a second STRNN in this subfolder: the first window of every rollout is the average of
+# the two models' predictions (Engine.predict_first); each later window is the release's own.
+COMPANION = "companion"
 DENOISE_MODEL = REPO / "models" / "strnn_denoise"  # the model Denoise uses unless told otherwise
 PURPOSES = ("generate", "denoise")  # what a release is trained for (model.json "purpose"; absent: the first)
 # What a release holds (model.json "architecture"; absent: the first). The others are published
@@ -57,6 +60,7 @@ class Checkpoint:
     meta: dict
     seeds: np.ndarray
     seed_names: list[str]
+    companion: Checkpoint | None = None  # the second model of the first window (COMPANION)
 
     @property
     def purpose(self) -> str:
@@ -198,7 +202,20 @@ def load_release(folder: str | Path | None = None) -> Checkpoint:
                               f"(one of {', '.join(ARCHITECTURES)})")
     if ckpt.architecture == ARCHITECTURES[0]:
         _check_strnn_shapes(folder, ckpt)
+        if (folder / COMPANION / "model.json").exists():
+            ckpt.companion = _companion(folder, ckpt)
     return ckpt
+
+
+def _companion(folder: Path, ckpt: Checkpoint) -> Checkpoint:
+    """The release's second STRNN (:data:`COMPANION`): a generating model that reads and predicts as many frames."""
+    other = load_release(folder / COMPANION)
+    same = ("encode_len", "predict_len")
+    if other.architecture != ARCHITECTURES[0] or other.purpose != PURPOSES[0] or other.companion is not None or \
+            any(other.config.get(k) != ckpt.config.get(k) for k in same):
+        raise CheckpointError(f"{folder / COMPANION}: a companion must be a generating STRNN without a companion of "
+                              f"its own, with the same {' and '.join(same)}: copy the model folder again")
+    return other
 
 
 def _check_strnn_shapes(folder: Path, ckpt: Checkpoint) -> None:

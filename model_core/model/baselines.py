@@ -188,5 +188,7 @@ class BaselineEngine:
     # so the baselines are generated exactly as STRNN is.
     mirrored_reading = Engine.mirrored_reading
     predict = Engine.predict
+    predict_first = Engine.predict_first
+    companion = None  # a baseline release is one model
     extrapolate = Engine.extrapolate
     extend = Engine.extend

@@ -369,3 +369,42 @@ def test_fit_yaw_shift_recovers_a_known_placement():
     got_yaw, got_shift = fit_yaw_shift(body, target)
     np.testing.assert_allclose(got_yaw - got_yaw[0] + yaw[0], yaw, atol=1e-9)
     np.testing.assert_allclose(got_shift, shift, atol=1e-9)
+
+
+def test_a_companion_model_shares_the_first_window_only(tmp_path):
+    """A release with a second STRNN (checkpoint.COMPANION): the first window of a rollout is the average of
+    the two models' predictions, every later window the release's own, in both engines."""
+    from model_core.inference.engine import project_to_skeleton
+    from model_core.io.checkpoint import COMPANION
+
+    random_release(tmp_path / "alone", seed=0)
+    random_release(tmp_path / "pair", seed=0)
+    random_release(tmp_path / "pair" / COMPANION, seed=5)
+    own, pair = Engine.load(tmp_path / "alone"), Engine.load(tmp_path / "pair")
+    other = Engine.load(tmp_path / "pair" / COMPANION)
+    assert own.companion is None and pair.companion is not None and other.companion is None
+    seeds = pair.seeds
+    lengths = bone_lengths(seeds)
+    first = project_to_skeleton(0.5 * (own.predict(seeds) + other.predict(seeds)), lengths)
+    out = pair.extrapolate(seeds, 2 * pair.n)
+    np.testing.assert_allclose(out[:, :pair.n], first, atol=1e-5, rtol=0)
+    rolled = np.concatenate([seeds, first], 1)[:, -pair.m:]
+    np.testing.assert_allclose(out[:, pair.n:], project_to_skeleton(own.predict(rolled), lengths), atol=1e-5, rtol=0)
+    assert np.abs(out[:, :pair.n] - own.extrapolate(seeds, pair.n)).max() > 1e-3  # the companion counts
+    in_torch = TorchEngine.load(tmp_path / "pair").extrapolate(seeds, 2 * pair.n)
+    np.testing.assert_allclose(in_torch, out, atol=1e-4, rtol=0)
+
+
+def test_a_companion_that_predicts_another_length_is_refused(tmp_path):
+    from model_core.io.checkpoint import COMPANION
+
+    random_release(tmp_path / "pair", n=10)
+    random_release(tmp_path / "pair" / COMPANION, n=5)
+    with pytest.raises(CheckpointError, match="companion"):
+        Engine.load(tmp_path / "pair")
+
+
+def test_the_shipped_model_carries_its_companion():
+    engine = Engine.load()
+    assert engine.companion is not None and engine.companion.m == engine.m and engine.companion.n == engine.n
+    assert engine.companion.ckpt.meta["training"]  # how it was made is in its model.json
