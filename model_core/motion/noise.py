@@ -1,5 +1,6 @@
 """Corruptions of motion as capture and hand-keying make them, for training the denoiser and for
-scoring it: joint rotations with jitter (the BVH's or armature's own channels)."""
+scoring it: joint rotations with jitter (the BVH's or armature's own channels); and how much white
+jitter a motion carries (:func:`white_noise_variance`), which Denoise and Extend's seam both measure."""
 
 from __future__ import annotations
 
@@ -7,6 +8,16 @@ import numpy as np
 
 from .conventions import PARENTS
 from .rotations import euler_to_matrix
+
+D4_NOISE_GAIN2 = 70.0  # variance of the 4th difference of unit white noise
+
+
+def white_noise_variance(x: np.ndarray) -> np.ndarray:
+    """Robust variance of white noise per channel ``[...]`` of ``[F, ...]`` (F >= 5) from the median absolute
+    4th difference in time, which white noise dominates and smooth motion hardly reaches."""
+    d4 = np.diff(np.asarray(x, np.float64), n=4, axis=0)
+    mad = np.median(np.abs(d4 - np.median(d4, 0)), axis=0)
+    return (1.4826 * mad) ** 2 / D4_NOISE_GAIN2
 
 
 def add_rotation_jitter(pos: np.ndarray, deg: float, rng: np.random.Generator) -> np.ndarray:

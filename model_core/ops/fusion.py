@@ -28,7 +28,7 @@ import numpy as np
 
 from ..motion.conventions import PARENTS
 from ..motion.features import gaussian_smooth, gaussian_taps
-from .seam import white_noise_variance
+from ..motion.noise import white_noise_variance
 from .transfer import bone_lengths
 
 POP_FLOOR_M = 0.05  # a pop moves a joint at least this far from where its neighbours put it

@@ -17,6 +17,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..motion.noise import white_noise_variance
+
 PREDICT_SEAM_FRAMES = 10.0  # decay (frames) of the engine's seam correction in predict(); chosen on validation
 SEAM_FRAMES = 10  # model frames over which a jump at the start of an extension is faded out
 EDGE_FADE_S = 0.2  # a partial Denoise range fades in and out over this long where it meets untouched frames
@@ -25,8 +27,7 @@ EDGE_FADE_S = 0.2  # a partial Denoise range fades in and out over this long whe
 SEAM_ACCEL = 0.75
 SEAM_NOISE_MARGIN = 3.0  # the acceleration counts against this many times the jitter it carries
 ACCEL_FRAMES = 6  # recent second differences that measure how much the clip accelerates
-D4_NOISE_GAIN2 = 70.0  # variance of the 4th difference of unit white noise
-D2_NOISE_GAIN2 = 6.0  # ... and of the 2nd
+D2_NOISE_GAIN2 = 6.0  # variance of the 2nd difference of unit white noise
 # On motion the model does not know, its own velocity is worse than the clip's: there the clip's momentum
 # carries on into the new frames, easing into the model's motion over MOMENTUM_FRAMES (an exponential
 # time constant) and given back by MOMENTUM_FADE_FRAMES. How much: none while the clip reconstructs at
@@ -41,14 +42,6 @@ def seam_fade(n: int, frames: float = PREDICT_SEAM_FRAMES, xp=np, dtype=np.float
     """Weights ``[n]`` of the seam correction on predicted frames 1..n: ``exp(-k / frames)``.
     ``xp``: ``numpy`` or ``torch`` (with a torch ``dtype``), so the engine and training share it."""
     return xp.exp(-xp.arange(1, n + 1, dtype=dtype) / frames)
-
-
-def white_noise_variance(x: np.ndarray) -> np.ndarray:
-    """Robust variance of white noise per channel ``[...]`` of ``[F, ...]`` (F >= 5) from the median absolute
-    4th difference in time, which white noise dominates and smooth motion hardly reaches."""
-    d4 = np.diff(np.asarray(x, np.float64), n=4, axis=0)
-    mad = np.median(np.abs(d4 - np.median(d4, 0)), axis=0)
-    return (1.4826 * mad) ** 2 / D4_NOISE_GAIN2
 
 
 def seam_target(ctx: np.ndarray, accel: float = SEAM_ACCEL) -> np.ndarray:
