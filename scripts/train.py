@@ -130,6 +130,8 @@ def parse_args(argv=None) -> argparse.Namespace:
                         "from [1/(1+W), 1+W] times the capture's (0: off)")
     p.add_argument("--hold-out", action="store_true",
                    help="keep the held-out groups of configs/data.toml out of training and validation")
+    p.add_argument("--device", default=TrainConfig.device,
+                   help="torch device to train STRNN on: cpu, cuda or cuda:N (windows are drawn on the CPU)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     return p.parse_args(argv)
 
@@ -143,8 +145,8 @@ def baseline_run(args, argv):
     from model_core.model.baseline_training import BaselineTrainConfig, train_baseline
     from model_core.model.baselines import MODELS
 
-    if args.export or args.init or args.time_warp or args.proportions:
-        raise ValueError("--export, --init, --time-warp and --proportions are for STRNN runs")
+    if args.export or args.init or args.time_warp or args.proportions or args.device != "cpu":
+        raise ValueError("--export, --init, --time-warp, --proportions and --device are for STRNN runs")
     shape = dict(encode_len=args.encode_len, predict_len=args.predict_len)
     shape |= {"blocks": args.blocks} if args.arch == "simlpe" else {"width": args.width or DEFAULT_WIDTH[args.arch]}
     cfg = BaselineTrainConfig(data=args.data, out=args.out, model=MODELS[args.arch][1](**shape), steps=args.steps,
@@ -157,6 +159,9 @@ def baseline_run(args, argv):
 def strnn_run(args, argv):
     if args.time_warp < 0:
         raise ValueError(f"--time-warp {args.time_warp:g}: the speed range must be 0 (off) or more, e.g. 0.25")
+    device_problem = unusable_device(args.device)
+    if device_problem:
+        raise ValueError(f"--device {args.device}: {device_problem}")
     if not 0 <= args.proportions < 1:
         raise ValueError(f"--proportions {args.proportions:g}: the range must be from 0 (off) to below 1, e.g. 0.1")
     model = STRNNConfig(width=args.width or DEFAULT_WIDTH["strnn"], encode_len=args.encode_len,
@@ -175,9 +180,28 @@ def strnn_run(args, argv):
                       noise_start=args.noise_start, seed=args.seed, cache=args.cache, max_minutes=args.max_minutes,
                       checkpoint_seconds=args.checkpoint_seconds, purpose=args.purpose,
                       mirror=args.mirror, time_warp=args.time_warp, proportions=args.proportions,
-                      hold_out=args.hold_out,
+                      hold_out=args.hold_out, device=args.device,
                       command=command_line(argv))
     return export_state(cfg) if args.export else train(cfg, resume=args.resume, progress=not args.quiet)
+
+
+def unusable_device(name: str) -> str:
+    """Why torch cannot train on device ``name`` here, or "" when it can."""
+    import torch
+
+    try:
+        device = torch.device(name)
+    except RuntimeError as e:
+        return f"not a torch device ({e}); use cpu, cuda or cuda:N"
+    if device.type == "cpu":
+        return ""
+    if device.type != "cuda":
+        return "only cpu and cuda devices are supported"
+    if not torch.cuda.is_available():
+        return "this torch build or machine has no CUDA device; train on the CPU (--device cpu)"
+    if (device.index or 0) >= torch.cuda.device_count():
+        return f"this machine has {torch.cuda.device_count()} CUDA device(s)"
+    return ""
 
 
 def learning_rate(args) -> float:

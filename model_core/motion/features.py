@@ -55,20 +55,22 @@ def yaw_matrix(yaw: np.ndarray) -> np.ndarray:
 
 
 def facing(pos: np.ndarray) -> np.ndarray:
-    """Horizontal facing direction ``[F, 3]`` (Y-up, not normalised) from the hips and shoulders of
-    ``pos`` ``[F, 21, 3]``: square to the line across them."""
+    """Horizontal facing direction ``[F, ..., 3]`` (Y-up, not normalised) from the hips and shoulders of
+    ``pos`` ``[F, ..., 21, 3]``: square to the line across them."""
     j = JOINT_INDEX
-    across = (pos[:, j["l_upleg"]] - pos[:, j["r_upleg"]]) + (pos[:, j["l_arm"]] - pos[:, j["r_arm"]])
+    across = ((pos[..., j["l_upleg"], :] - pos[..., j["r_upleg"], :])
+              + (pos[..., j["l_arm"], :] - pos[..., j["r_arm"], :]))
     return np.cross(across, np.array([0.0, 1.0, 0.0]))
 
 
 def heading(pos: np.ndarray, sigma: float = HEADING_SIGMA_FRAMES) -> np.ndarray:
-    """Facing angle per frame ``[F]`` (radians about +Y) from hips and shoulders (:func:`facing`)."""
+    """Facing angle per frame ``[F, ...]`` (radians about +Y) from hips and shoulders (:func:`facing`) of
+    ``pos`` ``[F, ..., 21, 3]`` (frames first: a batch of clips of one length is ``[F, B, 21, 3]``)."""
     fwd = facing(pos)
-    fwd[:, UP_AXIS] = 0.0
+    fwd[..., UP_AXIS] = 0.0
     if sigma > 0 and len(fwd) > 1:
         fwd = gaussian_smooth(fwd, sigma)
-    return np.unwrap(np.arctan2(fwd[:, 0], fwd[:, 2]))
+    return np.unwrap(np.arctan2(fwd[..., 0], fwd[..., 2]), axis=0)
 
 
 def lowest_foot(pos: np.ndarray) -> np.ndarray:
@@ -82,8 +84,8 @@ def floor_height(pos: np.ndarray) -> float:
 
 
 def detect_contacts(pos: np.ndarray, fps: float = MODEL_FPS) -> np.ndarray:
-    """Foot contacts ``float32 [F, 4]`` from heights and speeds of heels and toes."""
-    feet = pos[:, CONTACT_JOINTS]  # (F, 4, 3)
+    """Foot contacts ``float32 [F, ..., 4]`` from heights and speeds of heels and toes of ``[F, ..., 21, 3]``."""
+    feet = pos[..., CONTACT_JOINTS, :]  # (F, ..., 4, 3)
     height = feet[..., UP_AXIS] - np.percentile(feet[..., UP_AXIS], 2, axis=0)
     ground = feet[..., [0, 2]]
     speed = np.zeros(height.shape)
@@ -99,45 +101,51 @@ def positions_to_features(pos: np.ndarray, fps: float = MODEL_FPS,
     """Global positions ``[F, 21, 3]`` (metres, Y-up) -> features ``float32 [F, LAYOUT.size]``.
 
     Returns the features and the :class:`RootStart` that :func:`features_to_positions`
-    needs to put the motion back where it was.
+    needs to put the motion back where it was. Clips of one length convert together frames first,
+    ``[F, B, 21, 3]`` -> ``[F, B, C]``, each as on its own (the start then holds ``[B, 3]`` and ``[B]``).
     """
     pos = np.asarray(pos, dtype=np.float64)
     n = len(pos)
     yaw = heading(pos)
-    root = pos[:, JOINT_INDEX["hips"]].copy()
-    root[:, UP_AXIS] = 0.0
-    inv = yaw_matrix(-yaw)  # (F, 3, 3) world -> local
-    local = np.einsum("fij,fkj->fki", inv, pos - root[:, None])
-    feats = np.zeros((n, LAYOUT.size), dtype=np.float64)
-    feats[:, LAYOUT.positions] = local.reshape(n, -1)
+    root = pos[..., JOINT_INDEX["hips"], :].copy()
+    root[..., UP_AXIS] = 0.0
+    inv = yaw_matrix(-yaw)  # (F, ..., 3, 3) world -> local
+    local = np.einsum("...ij,...kj->...ki", inv, pos - root[..., None, :])
+    feats = np.zeros((*pos.shape[:-2], LAYOUT.size), dtype=np.float64)
+    feats[..., LAYOUT.positions] = local.reshape(*local.shape[:-2], -1)
     if n > 1:
-        vel = np.einsum("fij,fj->fi", inv[:-1], np.diff(root, axis=0))
-        dyaw = np.diff(yaw)
-        feats[:-1, LAYOUT.velocity] = vel[:, [0, 2]]
-        feats[:-1, LAYOUT.yaw_rate] = dyaw
-        feats[-1, LAYOUT.root] = feats[-2, LAYOUT.root]
-    feats[:, LAYOUT.contacts] = detect_contacts(pos, fps) if contacts is None else contacts
-    return feats.astype(np.float32), RootStart(root[0].copy(), float(yaw[0]))
+        vel = np.einsum("...ij,...j->...i", inv[:-1], np.diff(root, axis=0))
+        dyaw = np.diff(yaw, axis=0)
+        feats[:-1, ..., LAYOUT.velocity] = vel[..., [0, 2]]
+        feats[:-1, ..., LAYOUT.yaw_rate] = dyaw
+        feats[-1, ..., LAYOUT.root] = feats[-2, ..., LAYOUT.root]
+    feats[..., LAYOUT.contacts] = detect_contacts(pos, fps) if contacts is None else contacts
+    start = RootStart(root[0].copy(), float(yaw[0]) if np.ndim(yaw[0]) == 0 else yaw[0].copy())
+    return feats.astype(np.float32), start
 
 
 def integrate_root(feats: np.ndarray, start: RootStart | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """Root ground positions ``[F, 3]`` and headings ``[F]`` integrated from features ``[F, C]``."""
+    """Root ground positions ``[F, ..., 3]`` and headings ``[F, ...]`` integrated from features ``[F, ..., C]``
+    (frames first: clips of one length integrate together)."""
     start = start or RootStart(np.zeros(3), 0.0)
     feats = np.asarray(feats, dtype=np.float64)
-    n = len(feats)
-    yaw = start.yaw + np.concatenate([[0.0], np.cumsum(feats[:-1, LAYOUT.yaw_rate])])
-    vel = np.zeros((n, 3))
-    vel[:, [0, 2]] = feats[:, LAYOUT.velocity]
-    step = np.einsum("fij,fj->fi", yaw_matrix(yaw), vel)
-    root = np.asarray(start.position, dtype=np.float64) + np.concatenate([np.zeros((1, 3)), np.cumsum(step[:-1], 0)])
+    rate = feats[..., LAYOUT.yaw_rate]
+    yaw = np.asarray(start.yaw) + np.concatenate([np.zeros_like(rate[:1]), np.cumsum(rate[:-1], 0)])
+    vel = np.zeros((*feats.shape[:-1], 3))
+    vel[..., [0, 2]] = feats[..., LAYOUT.velocity]
+    step = np.einsum("...ij,...j->...i", yaw_matrix(yaw), vel)
+    root = np.asarray(start.position, dtype=np.float64) + np.concatenate([np.zeros_like(step[:1]),
+                                                                            np.cumsum(step[:-1], 0)])
     return root, yaw
 
 
 def features_to_positions(feats: np.ndarray, start: RootStart | None = None) -> np.ndarray:
-    """Features ``[F, C]`` -> global positions ``float32 [F, 21, 3]`` by integrating the root."""
+    """Features ``[F, C]`` -> global positions ``float32 [F, 21, 3]`` by integrating the root; clips of one
+    length together frames first, ``[F, B, C]`` -> ``[F, B, 21, 3]``."""
     root, yaw = integrate_root(feats, start)
-    local = np.asarray(feats, dtype=np.float64)[:, LAYOUT.positions].reshape(len(feats), -1, 3)
-    return (np.einsum("fij,fkj->fki", yaw_matrix(yaw), local) + root[:, None]).astype(np.float32)
+    feats = np.asarray(feats, dtype=np.float64)
+    local = feats[..., LAYOUT.positions].reshape(*feats.shape[:-1], -1, 3)
+    return (np.einsum("...ij,...kj->...ki", yaw_matrix(yaw), local) + root[..., None, :]).astype(np.float32)
 
 
 def continue_positions(feats: np.ndarray, start: RootStart, new: np.ndarray) -> np.ndarray:

@@ -244,6 +244,22 @@ def test_a_run_that_cannot_start_says_why_and_leaves_no_run_folder(walk_folder, 
     assert not (tmp_path / "nothing").exists()
 
 
+def test_the_device_is_checked_before_any_work(walk_folder, tmp_path, capsys):
+    """``--device``: a device this machine lacks, or a name torch does not know, is one clear error and leaves
+    no run folder; the baselines train on the CPU only and say so."""
+    sys.path.insert(0, str(REPO / "scripts"))
+    from train import main
+
+    missing = "cuda:7" if torch.cuda.is_available() else "cuda"
+    for device, says in ((missing, "CUDA device"), ("warp9", "not a torch device")):
+        out = tmp_path / device.replace(":", "_")
+        assert main(["--data", str(walk_folder), "--out", str(out), "--steps", "1", "--device", device]) == 2
+        assert says in capsys.readouterr().err and not out.exists(), device
+    assert main(["--data", str(walk_folder), "--out", str(tmp_path / "g"), "--arch", "residual_gru",
+                 "--steps", "1", "--device", "cuda"]) == 2
+    assert "for STRNN runs" in capsys.readouterr().err and not (tmp_path / "g").exists()
+
+
 def test_noisy_contexts_with_rotation_jitter_keep_bone_lengths_and_position_noise_does_not(walk_folder):
     """``denoise_rotation_deg``: half of the noisy contexts turn the joints (bones keep their lengths), the
     others move them (bones stretch); all differ from the clean context."""

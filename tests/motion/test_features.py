@@ -55,6 +55,23 @@ def test_feature_layout_and_round_trip_on_synthetic_walk():
     assert np.abs(back - pos).max() < 1e-3  # 1 mm
 
 
+def test_clips_of_one_length_convert_together_frames_first_as_each_on_its_own():
+    """``[F, B, 21, 3]`` -> ``[F, B, C]`` and back, as training converts a batch of windows: each clip's
+    features, start and positions are exactly those of converting it alone."""
+    clips = [walking_skeleton(40, radius=r)[k:k + 30] for r, k in ((4.0, 0), (2.5, 7), (9.0, 3))]
+    clips[1] = clips[1] + np.array([1.0, 0.0, -2.0])
+    batch = np.stack(clips, 1)  # (30, 3, 21, 3)
+    feats, start = positions_to_features(batch)
+    assert feats.shape == (30, 3, LAYOUT.size) and start.position.shape == (3, 3) and start.yaw.shape == (3,)
+    for b, clip in enumerate(clips):
+        one, one_start = positions_to_features(clip)
+        np.testing.assert_array_equal(feats[:, b], one)
+        np.testing.assert_allclose(start.position[b], one_start.position)
+        assert start.yaw[b] == one_start.yaw
+        np.testing.assert_array_equal(features_to_positions(feats)[:, b], features_to_positions(one))
+    np.testing.assert_allclose(features_to_positions(feats, start), batch, atol=1e-3)
+
+
 def test_features_are_root_relative_and_heading_aligned():
     pos = walking_skeleton(120)
     feats, _ = positions_to_features(pos)
