@@ -12,6 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..motion.features import detect_contacts, yaw_matrix
+from ..ops import inbetween as fill_gap
 from ..ops.familiarity import momentum_shares
 from ..ops.footlock import foot_lock, foot_skate_cm
 from ..ops.inbetween import fill_from, root_and_local, wrap_angle
@@ -58,7 +59,7 @@ def evaluate_inbetween(engine, clips, gaps=(15, 30, 60)) -> dict:
     positions = [c.positions for c in clips]
     for gap in gaps:
         ctx, true, tgt = windows(positions, gap)
-        pred = extend_batch(engine, ctx, gap + 1)
+        pred = extend_batch(engine, ctx, gap + 1, paired_windows=fill_gap.PAIRED_WINDOWS)  # as Fill Gap
         shares = momentum_shares(engine, ctx)
         bent = np.stack([fill_from(c, p, t[None], k) for p, c, t, k in zip(pred, ctx, tgt, shares)])
         ours, arrive = bent[:, :-1], bent[:, -1]

@@ -47,12 +47,12 @@ def prediction_windows(clips: list[np.ndarray], horizon: int, context: int = CON
     return np.stack(ctx), np.stack(fut)
 
 
-def extend_batch(engine, contexts: np.ndarray, frames: int) -> np.ndarray:
+def extend_batch(engine, contexts: np.ndarray, frames: int, **kw) -> np.ndarray:
     """Continue each context ``[W, m, J, 3]`` by ``frames``: ``[W, frames, J, 3]``, as
-    :meth:`Engine.extend` does one, in one batch. Features are computed from the context alone
-    (nothing of the future leaks in)."""
+    :meth:`Engine.extend` does one, in one batch (``kw``: :meth:`Engine.extrapolate`'s). Features are
+    computed from the context alone (nothing of the future leaks in)."""
     feats, starts = zip(*(positions_to_features(c) for c in contexts))
-    new = engine.extrapolate(np.stack(feats), frames)
+    new = engine.extrapolate(np.stack(feats), frames, **kw)
     return np.stack([continue_positions(f, s, n) for f, s, n in zip(feats, starts, new)]).astype(np.float32)
 
 

@@ -207,12 +207,15 @@ class Engine:
             pred[..., LAYOUT.positions] += fade[None, :, None] * offset[:, None]
         return pred
 
-    def extrapolate(self, seed: np.ndarray, frames: int, keep_bone_lengths: bool = True) -> np.ndarray:
+    def extrapolate(self, seed: np.ndarray, frames: int, keep_bone_lengths: bool = True,
+                    paired_windows: int | None = 1) -> np.ndarray:
         """Open-loop generation: repeat (take the last m frames, predict n more).
 
         ``seed``: raw features ``[m, C]`` or ``[B, m, C]``; returns ``[frames, C]`` or
         ``[B, frames, C]``. With ``keep_bone_lengths`` each predicted window is put back on
         the seed's skeleton (bone directions kept) and contacts rounded before it is fed back.
+        ``paired_windows``: how many windows from the first are :meth:`predict_first`'s average with
+        the companion (None: all of them; a bounded gap, which Fill Gap bends onto its target).
         """
         seed = np.asarray(seed, np.float32)
         single = seed.ndim == 2
@@ -221,7 +224,8 @@ class Engine:
         lengths = bone_lengths(ctx) if keep_bone_lengths else None
         chunks, total = [], 0
         while total < frames:
-            new = self.predict(ctx) if chunks else self.predict_first(ctx)
+            paired = paired_windows is None or len(chunks) < paired_windows
+            new = self.predict_first(ctx) if paired else self.predict(ctx)
             if keep_bone_lengths:
                 new = project_to_skeleton(new, lengths)
             chunks.append(new)

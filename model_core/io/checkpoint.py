@@ -23,7 +23,9 @@ from .files import write_atomic, write_json
 REPO = Path(__file__).resolve().parents[2]
 DEFAULT_MODEL = REPO / "models" / "strnn_default"
 # A release may hold a second STRNN in this subfolder: the first window of every rollout is the average of
-# the two models' predictions (Engine.predict_first); each later window is the release's own.
+# the two models' predictions (Engine.predict_first); each later window is the release's own, but for a
+# bounded gap that Fill Gap bends onto its target, whose windows are all averaged (Engine.extrapolate's
+# paired_windows).
 COMPANION = "companion"
 DENOISE_MODEL = REPO / "models" / "strnn_denoise"  # the model Denoise uses unless told otherwise
 PURPOSES = ("generate", "denoise")  # what a release is trained for (model.json "purpose"; absent: the first)

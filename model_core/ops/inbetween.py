@@ -32,6 +32,9 @@ from .familiarity import momentum_shares
 from .normalise import fit_normalisation, sample_at
 from .seam import blend_seam
 
+# How many of the continuation's windows are the average of the release and its companion
+# (Engine.extrapolate's paired_windows; None: every window of the gap).
+PAIRED_WINDOWS = None
 MAX_GAP_S = 4.0  # longest gap the model is asked to bridge (its continuation drifts beyond a few seconds)
 
 
@@ -122,7 +125,8 @@ def inbetween(engine, context: np.ndarray, target: np.ndarray, frames: int) -> n
     context = np.asarray(context, np.float64)
     if len(context) < engine.m:
         context = np.concatenate([np.repeat(context[:1], engine.m - len(context), 0), context])
-    pred = np.asarray(engine.extend(context[-engine.m:].astype(np.float32), frames + 1), np.float64)
+    pred = np.asarray(engine.extend(context[-engine.m:].astype(np.float32), frames + 1,
+                                    paired_windows=PAIRED_WINDOWS), np.float64)
     momentum = momentum_shares(engine, context[None, -engine.m:])[0]
     return fill_from(context, pred, np.asarray(target, np.float64), momentum)[:-1]
 

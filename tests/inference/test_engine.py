@@ -393,6 +393,13 @@ def test_a_companion_model_shares_the_first_window_only(tmp_path):
     assert np.abs(out[:, :pair.n] - own.extrapolate(seeds, pair.n)).max() > 1e-3  # the companion counts
     in_torch = TorchEngine.load(tmp_path / "pair").extrapolate(seeds, 2 * pair.n)
     np.testing.assert_allclose(in_torch, out, atol=1e-4, rtol=0)
+    # paired_windows=None (Fill Gap's bounded gaps): every window is the two models' average
+    both = pair.extrapolate(seeds, 2 * pair.n, paired_windows=None)
+    np.testing.assert_allclose(both[:, :pair.n], first, atol=1e-5, rtol=0)
+    second = 0.5 * (own.predict(rolled) + other.predict(rolled))
+    np.testing.assert_allclose(both[:, pair.n:], project_to_skeleton(second, lengths), atol=1e-5, rtol=0)
+    alone = own.extrapolate(seeds, 2 * own.n, paired_windows=None)  # without a companion: nothing to pair
+    np.testing.assert_allclose(alone, own.extrapolate(seeds, 2 * own.n))
 
 
 def test_a_companion_that_predicts_another_length_is_refused(tmp_path):

@@ -11,6 +11,7 @@ from model_core.eval.inbetween_evaluation import evaluate_inbetween, interpolate
 from model_core.inference.engine import Engine
 from model_core.motion.features import heading
 from model_core.motion.synthetic import walking_skeleton
+from model_core.ops.familiarity import momentum_shares
 from model_core.ops.inbetween import bend_onto, fill_from, inbetween, inbetween_positions
 
 
@@ -52,6 +53,23 @@ def test_the_model_fills_a_gap_at_any_rate_and_unit():
     assert np.linalg.norm(gap[-1] - after[0], axis=-1).mean() < 4.0  # 1/60 s before the target, in cm
     with pytest.raises(ValueError, match="longer than"):
         inbetween_positions(engine, before, after, 60.0, 300)
+
+
+def test_every_window_of_a_gap_is_the_two_models_average():
+    """A gap is bounded and bent onto its target, so the continuation through it is the release's and its
+    companion's average window after window (Extend averages the first window only)."""
+    engine = Engine.load()
+    assert engine.companion is not None
+    walk = walking_skeleton(120)
+    context, target = walk[:20], walk[80:81]
+    out = inbetween(engine, context, target, 59)
+    paired = engine.extend(context, 60, paired_windows=None)
+    first_only = engine.extend(context, 60)
+    np.testing.assert_allclose(paired[:engine.n], first_only[:engine.n], atol=1e-5)
+    assert np.abs(paired[engine.n:] - first_only[engine.n:]).max() > 1e-3
+    momentum = momentum_shares(engine, context[None].astype(np.float32))[0]
+    np.testing.assert_allclose(out, fill_from(context.astype(np.float64), paired.astype(np.float64),
+                                              target.astype(np.float64), momentum)[:-1], atol=1e-4)
 
 
 def test_a_single_context_pose_is_enough():
