@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..motion.conventions import CONTACT_JOINTS, UP_AXIS
 from ..motion.noise import white_noise_variance
 
 PREDICT_SEAM_FRAMES = 10.0  # decay (frames) of the engine's seam correction in predict(); chosen on validation
@@ -94,6 +95,18 @@ def blend_seam(ctx: np.ndarray, new: np.ndarray, frames: int = SEAM_FRAMES, acce
         k = np.arange(len(new), dtype=np.float64)
         carried = np.cumsum(np.exp(-k / MOMENTUM_FRAMES)) - 1.0  # 0 at the first new frame
         out = out + momentum * (carried * _cosine_fade(len(new), MOMENTUM_FADE_FRAMES))[:, None, None] * dv
+    return _landed(ctx, new, out)
+
+
+def _landed(ctx: np.ndarray, new: np.ndarray, out: np.ndarray) -> np.ndarray:
+    """``out`` with no heel or toe carried by the seam below the floor it stood on in the context: a foot
+    coming down fast at the end of a clip lands, where its velocity (and acceleration) alone would carry it
+    on through the floor. Each contact joint is kept at least as high as the lower of its lowest height in
+    the context and the model's own continuation; nothing else changes."""
+    up = (slice(None), CONTACT_JOINTS, UP_AXIS)
+    floor = np.minimum(np.asarray(ctx, np.float64)[up].min(0), np.asarray(new, np.float64)[up])
+    out = np.array(out, copy=True)
+    out[up] = np.maximum(out[up], floor)
     return out
 
 

@@ -13,6 +13,7 @@ from model_core.ops.seam import (
     PREDICT_SEAM_FRAMES,
     SEAM_ACCEL,
     SEAM_FRAMES,
+    _cosine_fade,
     blend_seam,
     fade_edges,
     seam_fade,
@@ -88,3 +89,27 @@ def test_momentum_eases_from_the_clips_velocity_into_the_continuations():
     lo, hi = MOMENTUM_RATIO
     assert momentum_share(None) == momentum_share(lo) == momentum_share(0.2) == 0.0
     assert momentum_share(hi) == momentum_share(3 * hi) == 1.0 and momentum_share((lo + hi) / 2) == 0.5
+
+
+def test_a_foot_coming_down_at_the_seam_lands_on_the_floor():
+    """A heel and toe falling fast at the clip's end would be carried by the seam through the floor they
+    stood on; they land on it instead, and every other joint is placed exactly as before."""
+    from model_core.motion.conventions import CONTACT_JOINTS, UP_AXIS
+    from model_core.motion.synthetic import walking_skeleton
+
+    walk = walking_skeleton(60).astype(np.float64)
+    ctx, new = walk[:30].copy(), walk[30:50].copy()
+    feet = CONTACT_JOINTS
+    floor = ctx[:, feet, UP_AXIS].min(0)
+    drop = 0.01 + 0.03 * np.arange(5, -1, -1)[:, None]  # 16, 13 ... 1 cm above it, falling 3 cm a frame
+    ctx[-6:, feet, UP_AXIS] = floor + drop
+    new[:, feet, UP_AXIS] = floor[None] + 0.002  # the model's continuation has the feet down
+    out = blend_seam(ctx, new)
+    assert (out[:, feet, UP_AXIS] >= floor - 1e-9).all()
+    assert out[0, feet, UP_AXIS].max() < floor.max() + 0.01  # it lands rather than hovering
+    # without the floor the seam's momentum would have carried them below it
+    target = seam_target(ctx)
+    assert (target[feet, UP_AXIS] < floor - 0.015).all()
+    others = np.setdiff1d(np.arange(walk.shape[1]), feet)
+    unclamped = new + _cosine_fade(len(new), SEAM_FRAMES)[:, None, None] * (target - new[0])
+    np.testing.assert_allclose(out[:, others], unclamped[:, others], atol=1e-12)
