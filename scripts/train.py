@@ -22,7 +22,7 @@ try:
 except ImportError:
     sys.exit("error: training needs PyTorch: bash scripts/setup.sh installs it; with pip: strnn-motion[torch]")
 
-from model_core.io.checkpoint import PURPOSES  # noqa: E402
+from model_core.io.checkpoint import COMPANION, PURPOSES  # noqa: E402
 from model_core.model.dataset import DataError  # noqa: E402
 from model_core.model.strnn import STRNNConfig  # noqa: E402
 from model_core.model.training import TrainConfig, export_state, train  # noqa: E402
@@ -182,7 +182,15 @@ def strnn_run(args, argv):
                       mirror=args.mirror, time_warp=args.time_warp, proportions=args.proportions,
                       hold_out=args.hold_out, device=args.device,
                       command=command_line(argv))
-    return export_state(cfg) if args.export else train(cfg, resume=args.resume, progress=not args.quiet)
+    if args.export:
+        return export_state(cfg)
+    release = train(cfg, resume=args.resume, progress=not args.quiet)
+    if args.init and (Path(args.init) / COMPANION / "model.json").exists():
+        print(f"note: {args.init} has a companion model ({COMPANION}/) that averages the first predicted window "
+              f"with it; this run did not train it. Fine-tune it the same way (--init {Path(args.init) / COMPANION}) "
+              f"and copy that run's release folder to {Path(release) / COMPANION}, or the new release predicts "
+              "alone.", file=sys.stderr)
+    return release
 
 
 def unusable_device(name: str) -> str:

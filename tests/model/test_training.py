@@ -260,6 +260,26 @@ def test_the_device_is_checked_before_any_work(walk_folder, tmp_path, capsys):
     assert "for STRNN runs" in capsys.readouterr().err and not (tmp_path / "g").exists()
 
 
+def test_fine_tuning_a_release_with_a_companion_says_how_to_carry_it(walk_folder, tmp_path, capsys):
+    sys.path.insert(0, str(REPO / "scripts"))
+    import shutil
+
+    from train import main
+
+    tiny_run = ["--data", str(walk_folder), "--width", "16", "--residual-width", "16", "--steps", "2",
+                "--batch", "4", "--quiet"]
+    assert main([*tiny_run, "--out", str(tmp_path / "base")]) == 0
+    base = tmp_path / "base" / "release"
+    capsys.readouterr()
+    assert main([*tiny_run, "--out", str(tmp_path / "plain"), "--init", str(base)]) == 0
+    assert "companion" not in capsys.readouterr().err
+    shutil.copytree(base, base / "companion", ignore=shutil.ignore_patterns("companion"))
+    assert main([*tiny_run, "--out", str(tmp_path / "tuned"), "--init", str(base)]) == 0
+    err = capsys.readouterr().err
+    assert "companion" in err and str(tmp_path / "tuned" / "release" / "companion") in err
+    assert not (tmp_path / "tuned" / "release" / "companion").exists()
+
+
 def test_noisy_contexts_with_rotation_jitter_keep_bone_lengths_and_position_noise_does_not(walk_folder):
     """``denoise_rotation_deg``: half of the noisy contexts turn the joints (bones keep their lengths), the
     others move them (bones stretch); all differ from the clean context."""
