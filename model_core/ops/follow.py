@@ -105,7 +105,7 @@ def smooth_seam(ctx: np.ndarray, new: np.ndarray, frames: int) -> np.ndarray:
         return new
     out = new.copy()
     pose = lambda f: f[:, LAYOUT.positions].reshape(len(f), -1, 3)  # noqa: E731
-    out[:, LAYOUT.positions] = blend_seam(pose(ctx), pose(new), frames).reshape(len(new), -1)
+    out[:, LAYOUT.positions] = blend_seam(pose(ctx), pose(new), frames, land=False).reshape(len(new), -1)
     return out
 
 

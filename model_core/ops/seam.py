@@ -77,7 +77,7 @@ def _cosine_fade(n: int, frames: int) -> np.ndarray:
 
 
 def blend_seam(ctx: np.ndarray, new: np.ndarray, frames: int = SEAM_FRAMES, accel: float = SEAM_ACCEL,
-               momentum: float = 0.0) -> np.ndarray:
+               momentum: float = 0.0, land: bool = True) -> np.ndarray:
     """Fade out the jump between a context ``[C, 21, 3]`` and its continuation ``[N, 21, 3]``
     (same rate): the first new frame is moved to where the context's last motion leads
     (:func:`seam_target`), and that correction decays smoothly to zero over ``frames`` frames.
@@ -85,7 +85,10 @@ def blend_seam(ctx: np.ndarray, new: np.ndarray, frames: int = SEAM_FRAMES, acce
     With ``momentum`` (0 to 1, :func:`momentum_share`), that share of the difference between the clip's
     last velocity and the continuation's first carries on, decaying over :data:`MOMENTUM_FRAMES`, and
     what it moved is given back over :data:`MOMENTUM_FADE_FRAMES`: the motion eases from the clip's
-    momentum into the model's instead of turning at once."""
+    momentum into the model's instead of turning at once.
+
+    With ``land``, a heel or toe coming down at the context's end lands on its floor (:func:`_landed`):
+    for the seam after a user's clip; Follow Curve's seams between its own windows leave it off."""
     if len(ctx) < 2 or len(new) == 0:
         return new
     target = seam_target(ctx, accel)
@@ -95,7 +98,7 @@ def blend_seam(ctx: np.ndarray, new: np.ndarray, frames: int = SEAM_FRAMES, acce
         k = np.arange(len(new), dtype=np.float64)
         carried = np.cumsum(np.exp(-k / MOMENTUM_FRAMES)) - 1.0  # 0 at the first new frame
         out = out + momentum * (carried * _cosine_fade(len(new), MOMENTUM_FADE_FRAMES))[:, None, None] * dv
-    return _landed(ctx, new, out)
+    return _landed(ctx, new, out) if land else out
 
 
 def _landed(ctx: np.ndarray, new: np.ndarray, out: np.ndarray) -> np.ndarray:
