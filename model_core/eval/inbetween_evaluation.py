@@ -11,11 +11,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..motion.features import detect_contacts, yaw_matrix
+from ..motion.features import detect_contacts
 from ..ops import inbetween as fill_gap
 from ..ops.familiarity import momentum_shares
 from ..ops.footlock import foot_lock, foot_skate_cm
-from ..ops.inbetween import fill_from, root_and_local, wrap_angle
+from ..ops.inbetween import fill_from, interpolation
 from .metrics import extend_batch, mpjpe_cm
 
 CONTEXT = 20
@@ -43,11 +43,7 @@ def interpolate(last: np.ndarray, target: np.ndarray, gap: int, heading: bool = 
     if not heading:
         r0, r1 = last[:1], target[:1]
         return (r0 + s * (r1 - r0)) + (last - r0) + s * ((target - r1) - (last - r0))
-    (a, b) = (root_and_local(p[None]) for p in (last, target))
-    root = a[0] + s[:, 0] * (b[0] - a[0])
-    yaw = a[1][0] + s[:, 0, 0] * wrap_angle(b[1][0] - a[1][0])
-    local = a[2] + s * (b[2] - a[2])
-    return np.einsum("fij,fkj->fki", yaw_matrix(yaw), local) + root[:, None]
+    return interpolation(last, target, gap)
 
 
 def evaluate_inbetween(engine, clips, gaps=(15, 30, 60)) -> dict:

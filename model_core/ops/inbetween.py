@@ -134,8 +134,48 @@ def inbetween(engine, context: np.ndarray, target: np.ndarray, frames: int) -> n
 def fill_from(context: np.ndarray, pred: np.ndarray, target: np.ndarray, momentum: float = 0.0) -> np.ndarray:
     """The model's continuation ``pred`` ``[N + 1, J, 3]`` of ``context`` ``[C, J, 3]``, its seam faded as
     Extend fades it (``momentum``: :func:`seam.blend_seam`) and bent onto ``target`` ``[T, J, 3]``: the ``N``
-    gap frames and the target's frame."""
-    return bend_onto(blend_seam(context, pred, momentum=momentum), context[-1], target)
+    gap frames and the target's frame. Where the model does not know the context's motion (``momentum``, the
+    familiarity share of :func:`familiarity.momentum_shares`, above 0) the gap leans on the interpolation
+    from the context to the target as well (:func:`lean_on_interpolation`)."""
+    bent = bend_onto(blend_seam(context, pred, momentum=momentum), context[-1], target)
+    return lean_on_interpolation(bent, context[-1], target[0], INTERPOLATION_LEAN * momentum)
+
+
+# How far Fill Gap leans on the interpolation mid-gap where the model does not know the motion at all.
+# A continuation of unfamiliar motion and the interpolation are two guesses that err apart, and their
+# half-and-half average is nearer the truth than either (model card, "In-betweening").
+INTERPOLATION_LEAN = 0.5
+
+
+def interpolation(start: np.ndarray, end: np.ndarray, frames: int) -> np.ndarray:
+    """The ``frames`` frames ``[frames, J, 3]`` between poses ``start`` and ``end`` ``[J, 3]``, interpolated in
+    the body's own terms: its ground position along the straight line, its heading the short way round, the
+    pose in the body's frame joint by joint."""
+    s = np.arange(1, frames + 1) / (frames + 1)
+    (a_root, a_yaw, a_local), (b_root, b_yaw, b_local) = (root_and_local(p[None]) for p in (start, end))
+    root = a_root + s[:, None] * (b_root - a_root)
+    yaw = a_yaw[0] + s * wrap_angle(b_yaw[0] - a_yaw[0])
+    local = a_local + s[:, None, None] * (b_local - a_local)
+    return np.einsum("fij,fkj->fki", yaw_matrix(yaw), local) + root[:, None]
+
+
+def lean_on_interpolation(frames: np.ndarray, start: np.ndarray, end: np.ndarray, lean: float) -> np.ndarray:
+    """``frames`` ``[N + 1, J, 3]`` (a gap and the pose ``end`` after it) pulled towards :func:`interpolation`
+    from ``start`` to ``end`` by ``lean`` at mid-gap, by less towards either end and not at all at them: the
+    weight ``4 s (1 - s)`` keeps the motion's speed where it leaves the context and where it arrives. The pull
+    is in the body's own terms (ground position, heading, pose), so a body turning in the gap keeps its
+    build. ``lean`` 0 returns ``frames`` unchanged."""
+    if lean <= 0.0:
+        return frames
+    n1 = len(frames)
+    s = np.arange(1, n1 + 1) / n1
+    w = lean * 4 * s * (1 - s)
+    f_root, f_yaw, f_local = root_and_local(frames)
+    i_root, i_yaw, i_local = root_and_local(np.concatenate([interpolation(start, end, n1 - 1), end[None]]))
+    root = f_root + w[:, None] * (i_root - f_root)
+    yaw = f_yaw + w * wrap_angle(i_yaw - f_yaw)
+    local = f_local + w[:, None, None] * (i_local - f_local)
+    return (np.einsum("fij,fkj->fki", yaw_matrix(yaw), local) + root[:, None]).astype(frames.dtype)
 
 
 def inbetween_positions(engine, before: np.ndarray, after: np.ndarray, fps: float, frames: int) -> np.ndarray:
