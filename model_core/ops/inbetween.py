@@ -134,17 +134,27 @@ def inbetween(engine, context: np.ndarray, target: np.ndarray, frames: int) -> n
 def fill_from(context: np.ndarray, pred: np.ndarray, target: np.ndarray, momentum: float = 0.0) -> np.ndarray:
     """The model's continuation ``pred`` ``[N + 1, J, 3]`` of ``context`` ``[C, J, 3]``, its seam faded as
     Extend fades it (``momentum``: :func:`seam.blend_seam`) and bent onto ``target`` ``[T, J, 3]``: the ``N``
-    gap frames and the target's frame. Where the model does not know the context's motion (``momentum``, the
-    familiarity share of :func:`familiarity.momentum_shares`, above 0) the gap leans on the interpolation
-    from the context to the target as well (:func:`lean_on_interpolation`)."""
+    gap frames and the target's frame. The gap then leans a little on the interpolation from the context to
+    the target, and more where the model does not know the context's motion (``momentum``, the familiarity
+    share of :func:`familiarity.momentum_shares`): :func:`lean_on_interpolation`."""
     bent = bend_onto(blend_seam(context, pred, momentum=momentum), context[-1], target)
-    return lean_on_interpolation(bent, context[-1], target[0], INTERPOLATION_LEAN * momentum)
+    return lean_on_interpolation(bent, context[-1], target[0], lean_weights(len(bent), momentum))
 
 
-# How far Fill Gap leans on the interpolation mid-gap where the model does not know the motion at all.
-# A continuation of unfamiliar motion and the interpolation are two guesses that err apart, and their
-# half-and-half average is nearer the truth than either (model card, "In-betweening").
+# A continuation and the interpolation are two guesses that err apart, and an average of them is nearer
+# the truth than either (model card, "In-betweening"). Where the model does not know the motion, the gap
+# leans on the interpolation up to half-way, most at mid-gap; everywhere, by up to a tenth two thirds of the
+# way through the gap, where the bent continuation is furthest from the truth. Neither at either end.
 INTERPOLATION_LEAN = 0.5
+LATE_LEAN = 0.1
+
+
+def lean_weights(frames: int, share: float) -> np.ndarray:
+    """How far each of ``frames`` frames (a gap and the frame after it) leans on the interpolation, for a
+    context whose momentum share is ``share``: ``max(0.5 share 4 s (1 - s), 0.1 x 27/4 s^2 (1 - s))`` at
+    the fraction ``s`` of the way, 0 at both ends and flat at the start."""
+    s = np.arange(1, frames + 1) / frames
+    return np.maximum(INTERPOLATION_LEAN * share * 4 * s * (1 - s), LATE_LEAN * 6.75 * s ** 2 * (1 - s))
 
 
 def interpolation(start: np.ndarray, end: np.ndarray, frames: int) -> np.ndarray:
@@ -159,19 +169,17 @@ def interpolation(start: np.ndarray, end: np.ndarray, frames: int) -> np.ndarray
     return np.einsum("fij,fkj->fki", yaw_matrix(yaw), local) + root[:, None]
 
 
-def lean_on_interpolation(frames: np.ndarray, start: np.ndarray, end: np.ndarray, lean: float) -> np.ndarray:
+def lean_on_interpolation(frames: np.ndarray, start: np.ndarray, end: np.ndarray, weights: np.ndarray) -> np.ndarray:
     """``frames`` ``[N + 1, J, 3]`` (a gap and the pose ``end`` after it) pulled towards :func:`interpolation`
-    from ``start`` to ``end`` by ``lean`` at mid-gap, by less towards either end and not at all at them: the
-    weight ``4 s (1 - s)`` keeps the motion's speed where it leaves the context and where it arrives. The pull
-    is in the body's own terms (ground position, heading, pose), so a body turning in the gap keeps its
-    build. ``lean`` 0 returns ``frames`` unchanged."""
-    if lean <= 0.0:
+    from ``start`` to ``end`` by ``weights`` ``[N + 1]`` (:func:`lean_weights`, which are 0 at both ends and
+    so keep the motion's speed where it leaves the context and where it arrives). The pull is in the body's
+    own terms (ground position, heading, pose), so a body turning in the gap keeps its build. Zero weights
+    return ``frames`` unchanged."""
+    w = np.asarray(weights, np.float64)
+    if not np.any(w > 0.0):
         return frames
-    n1 = len(frames)
-    s = np.arange(1, n1 + 1) / n1
-    w = lean * 4 * s * (1 - s)
     f_root, f_yaw, f_local = root_and_local(frames)
-    i_root, i_yaw, i_local = root_and_local(np.concatenate([interpolation(start, end, n1 - 1), end[None]]))
+    i_root, i_yaw, i_local = root_and_local(np.concatenate([interpolation(start, end, len(frames) - 1), end[None]]))
     root = f_root + w[:, None] * (i_root - f_root)
     yaw = f_yaw + w * wrap_angle(i_yaw - f_yaw)
     local = f_local + w[:, None, None] * (i_local - f_local)

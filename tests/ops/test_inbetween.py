@@ -14,13 +14,16 @@ from model_core.motion.synthetic import walking_skeleton
 from model_core.ops.familiarity import momentum_shares
 from model_core.ops.inbetween import (
     INTERPOLATION_LEAN,
+    LATE_LEAN,
     bend_onto,
     fill_from,
     inbetween,
     inbetween_positions,
     interpolation,
     lean_on_interpolation,
+    lean_weights,
 )
+from model_core.ops.seam import blend_seam
 
 
 def test_bend_onto_arrives_at_the_target_and_its_velocity():
@@ -80,29 +83,35 @@ def test_every_window_of_a_gap_is_the_two_models_average():
                                               target.astype(np.float64), momentum)[:-1], atol=1e-4)
 
 
-def test_unfamiliar_motion_leans_on_the_interpolation_mid_gap_and_keeps_both_ends():
-    """Where the model does not know the motion (momentum share 1) the gap is pulled half-way towards the
-    interpolation at its middle, less towards either end; it still leaves the context without a pop and
-    arrives at the target and nearly at its velocity. Familiar motion (share 0) is left as bent."""
+def test_the_gap_leans_on_the_interpolation_late_and_unfamiliar_motion_mid_gap_keeping_both_ends():
+    """Every gap leans a tenth of the way towards the interpolation two thirds through it; where the model
+    does not know the motion (momentum share 1) half-way at its middle. Either way it leaves the context
+    without a pop and arrives at the target and about at its velocity, the body's build kept."""
     walk = walking_skeleton(120, radius=5.0).astype(np.float64)
     context = walk[20:40]
     pred = walking_skeleton(150, radius=3.0, speed=1.0)[40:71].astype(np.float64)  # a wrong continuation
     target = walk[70:72]
-    bent = fill_from(context, pred, target, 0.0)
-    np.testing.assert_array_equal(lean_on_interpolation(bent, context[-1], target[0], 0.0), bent)
-    leant = fill_from(context, pred, target, 1.0)
+    bent = bend_onto(blend_seam(context, pred), context[-1], target)
+    np.testing.assert_array_equal(lean_on_interpolation(bent, context[-1], target[0], np.zeros(len(bent))), bent)
+    w0, w1 = lean_weights(len(bent), 0.0), lean_weights(len(bent), 1.0)
+    assert w0[-1] == w1[-1] == 0.0 and w0.max() == pytest.approx(LATE_LEAN, rel=0.01)
+    assert w1.max() == pytest.approx(INTERPOLATION_LEAN, rel=0.01)
     between = np.concatenate([interpolation(context[-1], target[0], len(bent) - 1), target[:1]])
-    mid = len(bent) // 2 - 1  # s = 15/31: the weight is 4 s (1 - s) x the lean, within 0.1 % of the lean
-    d_bent, d_leant = (np.linalg.norm(x[mid] - between[mid], axis=-1).mean() for x in (bent, leant))
-    assert d_bent > 0.05, "the wrong continuation is far from the interpolation mid-gap"
-    assert d_leant == pytest.approx((1 - INTERPOLATION_LEAN) * d_bent, rel=0.1)
-    np.testing.assert_allclose(leant[-1], target[0], atol=1e-4)  # arrives
-    np.testing.assert_allclose(leant[-1] - leant[-2], target[1] - target[0], atol=0.01)  # about moving on
+
+    def far(x, f):
+        return np.linalg.norm(x[f] - between[f], axis=-1).mean()
+
     usual = np.linalg.norm(np.diff(walk, axis=0), axis=-1).max()
-    steps = np.linalg.norm(np.diff(np.concatenate([context[-2:], leant]), axis=0), axis=-1).max(1)
-    assert steps.max() < 1.5 * usual, "no pop where it leaves the context"
-    lengths = [np.linalg.norm(x[mid, 4] - x[mid, 0]) for x in (bent, leant)]  # the build is kept: no shrinking
-    assert lengths[1] == pytest.approx(lengths[0], rel=0.05)
+    for share, frame, weight in ((0.0, 20, LATE_LEAN), (1.0, 15, INTERPOLATION_LEAN)):  # s = 21/31, 16/31
+        leant = fill_from(context, pred, target, share)
+        assert far(bent, frame) > 0.05, "the wrong continuation is far from the interpolation there"
+        assert far(leant, frame) == pytest.approx((1 - weight) * far(bent, frame), rel=0.1)
+        np.testing.assert_allclose(leant[-1], target[0], atol=1e-4)  # arrives
+        np.testing.assert_allclose(leant[-1] - leant[-2], target[1] - target[0], atol=0.01)  # about moving on
+        steps = np.linalg.norm(np.diff(np.concatenate([context[-2:], leant]), axis=0), axis=-1).max(1)
+        assert steps.max() < 1.5 * usual, "no pop where it leaves the context"
+        lengths = [np.linalg.norm(x[frame, 4] - x[frame, 0]) for x in (bent, leant)]  # no limb shrinks
+        assert lengths[1] == pytest.approx(lengths[0], rel=0.05)
 
 
 def test_a_single_context_pose_is_enough():
