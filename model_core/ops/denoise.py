@@ -28,8 +28,8 @@ def denoise_positions_steps(engine, pos: np.ndarray, fps: float, strength: float
     5... of a 60 fps clip), and, with the engine's ``mirrored_reading``, as its mirror image (left and
     right swapped, mirrored back after), and these reconstructions, brought back to the clip's
     frames, are averaged: each reading errs in its own way and the average less than either. That
-    estimate is weighed against the input by how much each deserves: a clean take comes back nearly
-    as it was."""
+    estimate is weighed against the input by how much each deserves (where the two sides disagree, the
+    model is less sure: :func:`fusion.model_error2`): a clean take comes back nearly as it was."""
     duration = (len(pos) - 1) / fps
     fixed, found = fusion.assess(np.asarray(pos, np.float64))
     # Scale and ground from a smoothed clip: noise lengthens the legs and lowers the lowest foot.
@@ -42,13 +42,19 @@ def denoise_positions_steps(engine, pos: np.ndarray, fps: float, strength: float
     sides = (False, True) if engine.mirrored_reading else (False,)  # the engine's one switch (Engine.predict)
     readings = [(phase, mirrored) for phase in phases for mirrored in sides]
     prior = np.zeros_like(fixed)
+    spread2 = np.zeros(fixed.shape[:2]) if len(sides) == 2 else None  # where the two sides disagree
     for i, (phase, mirrored) in enumerate(readings):
         times = _model_times(duration, phase)
         flip = mirror_positions if mirrored else np.asarray
         seen = flip(sample_at(fixed, fps, times)).astype(np.float32)
         clean = yield from _scaled(engine.reconstruct_positions_steps(seen), i / len(readings), 1 / len(readings))
-        prior += _sample_times(flip(np.asarray(clean, np.float64)), times, frames) / len(readings)
-    out = norm.to_user(fusion.keep_bone_lengths(fusion.fuse(fixed, prior, found, fps), found.joint_noise_m))
+        reading = _sample_times(flip(np.asarray(clean, np.float64)), times, frames)
+        prior += reading / len(readings)
+        if not mirrored:
+            plain = reading
+        elif spread2 is not None:
+            spread2 += (((plain - reading) / 2.0) ** 2).mean(-1) / len(phases)
+    out = norm.to_user(fusion.keep_bone_lengths(fusion.fuse(fixed, prior, found, fps, spread2), found.joint_noise_m))
     user = np.asarray(pos, dtype=np.float64)
     return user + strength * (out - user)
 

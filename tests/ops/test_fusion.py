@@ -104,6 +104,29 @@ def test_running_median_ignores_one_outlier():
     assert out.shape == x.shape and np.all(out == 1.0)
 
 
+def test_where_the_two_readings_disagree_the_model_is_trusted_less():
+    """The readings' disagreement marks where the model errs: there it is trusted less than the gap to the
+    noisy input alone says, and where the readings agree, more, so the result keeps the model's detail
+    there instead of the noise."""
+    walk = walking_skeleton(150).astype(np.float64)
+    noisy = add_noise(walk, 3.0, np.random.default_rng(4))
+    model = walk.copy()
+    model[60:90] += [0.02, 0.0, 0.0]  # the model is 2 cm off for a second
+    found = fusion.Assessment(fusion.noise_level(noisy), np.zeros(walk.shape[:2], bool))
+    spread2 = np.full(walk.shape[:2], 0.0005 ** 2)  # the readings agree to half a millimetre ...
+    spread2[60:90] = 0.02 ** 2  # ... but where the model is off, they are 2 cm apart
+    gap, sigma2 = noisy - model, found.noise_m ** 2
+    alone, both = fusion.model_error2(gap, sigma2, 30.0), fusion.model_error2(gap, sigma2, 30.0, spread2)
+    assert np.all(both[65:85] > alone[65:85]) and both[:50].mean() < 0.5 * alone[:50].mean()
+    out_alone = fusion.fuse(noisy, model, found, 30.0)
+    out_both = fusion.fuse(noisy, model, found, 30.0, spread2)
+    err = lambda out, s: np.linalg.norm(out[s] - walk[s], axis=-1).mean()  # noqa: E731
+    off, on = slice(65, 85), np.r_[:50, 100:150]
+    assert err(out_both, on) < 0.7 * err(out_alone, on)
+    assert err(out_both, off) < 1.05 * err(out_alone, off)
+    assert err(out_both, slice(None)) < 0.9 * err(out_alone, slice(None))
+
+
 @pytest.mark.parametrize("fps", [30.0, 60.0])
 def test_denoise_leaves_a_clean_take_and_beats_the_filters(denoiser, fps):
     """Through the product path (scene units, any rate), on a procedural walk far from the motion the
