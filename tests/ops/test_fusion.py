@@ -117,13 +117,13 @@ def test_where_the_two_readings_disagree_the_model_is_trusted_less():
     spread2[60:90] = 0.02 ** 2  # ... but where the model is off, they are 2 cm apart
     gap, sigma2 = noisy - model, found.noise_m ** 2
     alone, both = fusion.model_error2(gap, sigma2, 30.0), fusion.model_error2(gap, sigma2, 30.0, spread2)
-    assert np.all(both[65:85] > alone[65:85]) and both[:50].mean() < 0.5 * alone[:50].mean()
+    assert np.all(both[65:85] > alone[65:85]) and both[:50].mean() < 0.6 * alone[:50].mean()
     out_alone = fusion.fuse(noisy, model, found, 30.0)
     out_both = fusion.fuse(noisy, model, found, 30.0, spread2)
     err = lambda out, s: np.linalg.norm(out[s] - walk[s], axis=-1).mean()  # noqa: E731
     off, on = slice(65, 85), np.r_[:50, 100:150]
-    assert err(out_both, on) < 0.7 * err(out_alone, on)
-    assert err(out_both, off) < 1.05 * err(out_alone, off)
+    assert err(out_both, on) < 0.85 * err(out_alone, on)
+    assert err(out_both, off) < err(out_alone, off)
     assert err(out_both, slice(None)) < 0.9 * err(out_alone, slice(None))
 
 
