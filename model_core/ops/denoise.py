@@ -43,6 +43,7 @@ def denoise_positions_steps(engine, pos: np.ndarray, fps: float, strength: float
     readings = [(phase, mirrored) for phase in phases for mirrored in sides]
     prior = np.zeros_like(fixed)
     spread2 = np.zeros(fixed.shape[:2]) if len(sides) == 2 else None  # where the two sides disagree
+    plain = None  # each phase's plain reading, read just before its mirrored one
     for i, (phase, mirrored) in enumerate(readings):
         times = _model_times(duration, phase)
         flip = mirror_positions if mirrored else np.asarray
@@ -50,10 +51,10 @@ def denoise_positions_steps(engine, pos: np.ndarray, fps: float, strength: float
         clean = yield from _scaled(engine.reconstruct_positions_steps(seen), i / len(readings), 1 / len(readings))
         reading = _sample_times(flip(np.asarray(clean, np.float64)), times, frames)
         prior += reading / len(readings)
-        if not mirrored:
-            plain = reading
-        elif spread2 is not None:
+        if mirrored:
             spread2 += (((plain - reading) / 2.0) ** 2).mean(-1) / len(phases)
+        else:
+            plain = reading
     out = norm.to_user(fusion.keep_bone_lengths(fusion.fuse(fixed, prior, found, fps, spread2), found.joint_noise_m))
     user = np.asarray(pos, dtype=np.float64)
     return user + strength * (out - user)

@@ -57,8 +57,8 @@ JITTER_REMOVED_M = 0.004
 # SPREAD_GAIN x spread2 ** SPREAD_POWER (m^2, model scale; the power fitted on the validation split: the
 # error grows slower than the disagreement), and the gap's estimate keeps a say of GAP_SHARE in the
 # geometric mean of the two. The gain is 12 x the validation split's regression: on motion the model has
-# not seen, its readings disagree less than it errs, and weighed against the input, its error counts
-# as what the low-pass leaves of it (chosen on the held-out groups with the model trained without them).
+# not seen its readings disagree less than it errs, and the gap's estimate is scaled the same way, to what
+# the low-pass leaves of the input's noise (chosen on the held-out groups with the model trained without them).
 SPREAD_GAIN = 0.986
 SPREAD_POWER = 0.577
 GAP_SHARE = 0.5
@@ -243,8 +243,9 @@ def model_error2(gap: np.ndarray, sigma2: np.ndarray, fps: float, spread2: np.nd
     low-passed over :data:`BIAS_WINDOW_S` (where the input's noise averages out and the model's
     own, slowly varying, error stays), less what is left of the noise, taken as a running median
     over :data:`TRUST_WINDOW_S` on each side so that one bad frame does not make the model look
-    wrong around it. With ``spread2`` ``[F, J]`` (two readings' squared half-difference per axis),
-    mostly from that instead (:data:`SPREAD_GAIN`)."""
+    wrong around it. With ``spread2`` ``[F, J]`` (two readings' squared half-difference per axis), the
+    geometric mean of that estimate and one read off the readings' disagreement (:data:`SPREAD_GAIN`,
+    :data:`GAP_SHARE`)."""
     sigma = max(1.0, BIAS_WINDOW_S * fps)
     taps = gaussian_taps(sigma)
     left = taps @ taps  # share of white noise variance left after the filter
@@ -254,8 +255,7 @@ def model_error2(gap: np.ndarray, sigma2: np.ndarray, fps: float, spread2: np.nd
     tau2 = np.maximum(running_median(bias2, int(round(TRUST_WINDOW_S * fps))), MODEL_ERROR_FLOOR_M ** 2) / left
     if spread2 is None:
         return tau2
-    spread = np.maximum(SPREAD_GAIN * np.maximum(gaussian_smooth(spread2, sigma), 0.0) ** SPREAD_POWER,
-                        MODEL_ERROR_FLOOR_M ** 2)
+    spread = np.maximum(SPREAD_GAIN * gaussian_smooth(spread2, sigma) ** SPREAD_POWER, MODEL_ERROR_FLOOR_M ** 2)
     return tau2 ** GAP_SHARE * spread ** (1.0 - GAP_SHARE)
 
 
