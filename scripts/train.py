@@ -35,6 +35,8 @@ VARIANTS = {
     "composite": dict(spatial=True, residual=True),  # the full model (paper: Composite)
     "spatiotemp": dict(spatial=True, residual=False),  # no residual filter (SpatioTemp)
     "temporal": dict(spatial=False, residual=False),  # no spatial network (Temporal)
+    # Temporal with the residual filter (a denoiser's: with --filter-context it reads the input window)
+    "temporal-filter": dict(spatial=False, residual=True),
 }
 
 
@@ -120,6 +122,9 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--temporal-skip", action="store_true",
                    help="each predicted frame also gets a learnt linear extrapolation of the context's motion "
                         "(an n x m map shared by all channels; with --init from a model without: it starts at zero)")
+    p.add_argument("--decoder-skip", action="store_true",
+                   help="the backward decoder also reads a learnt linear map of the encoder's state at the frame it "
+                        "reconstructs (with --init from a model without: it starts at zero)")
     p.add_argument("--mirror", type=float, default=TrainConfig.mirror,
                    help="share of training windows mirrored left to right")
     p.add_argument("--proportions", type=float, default=TrainConfig.proportions, metavar="P",
@@ -169,6 +174,7 @@ def strnn_run(args, argv):
                         offsets=args.offsets, offset_keep=args.offset_keep, spatial_norm=args.spatial_norm,
                         filter_context=args.filter_context,
                         predictor_context=args.predictor_context, temporal_skip=args.temporal_skip,
+                        decoder_skip=args.decoder_skip,
                         **VARIANTS[args.variant])
     cfg = TrainConfig(data=args.data, out=args.out, model=model, steps=args.steps, batch=args.batch,
                       phase_split=tuple(args.phase_split), recalibrate_batches=args.recalibrate_batches,

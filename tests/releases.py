@@ -16,14 +16,15 @@ C = LAYOUT.size
 
 def random_release(folder, spatial=True, residual=True, m=10, n=10, seed=0, purpose=None, offsets=False,
                    spatial_norm="batch", offset_keep=None, filter_context=False,
-                   predictor_context=False, temporal_skip=False):
+                   predictor_context=False, temporal_skip=False, decoder_skip=False):
     """Save a random STRNN as a release in ``folder``; return (eval-mode model, mean [C], std [C])."""
     torch.manual_seed(seed)
     rng = np.random.default_rng(seed)
     cfg = STRNNConfig(width=64, encode_len=m, predict_len=n, spatial=spatial, residual=residual,
                       residual_width=32, offsets=offsets, spatial_norm=spatial_norm,
                       offset_keep=offset_keep, filter_context=filter_context,
-                      predictor_context=predictor_context, temporal_skip=temporal_skip)
+                      predictor_context=predictor_context, temporal_skip=temporal_skip,
+                      decoder_skip=decoder_skip)
     model = STRNN(cfg)
     with torch.no_grad():
         for mod in model.modules():
@@ -37,6 +38,8 @@ def random_release(folder, spatial=True, residual=True, m=10, n=10, seed=0, purp
             model.context_in.weight.normal_(0.0, 0.05)
         if temporal_skip:
             model.skip.normal_(0.0, 0.1)
+        if decoder_skip:
+            model.dec_skip.weight.normal_(0.0, 0.2)
         if residual:
             model.filter.net[-1].weight.normal_(0.0, 0.02)
             model.filter.net[-1].bias.normal_(0.0, 0.02)

@@ -103,6 +103,10 @@ class Engine:
         # the predictor's gates through the predictor's input weights, folded into one map.
         self.context_gates = (w["context_in.weight"].T @ pred[0]).astype(np.float32) \
             if cfg.get("predictor_context") else None
+        # A decoder that reads the encoder's state at the frame it reconstructs (STRNNConfig.decoder_skip),
+        # through the decoder's input weights, folded into one map.
+        self.dec_skip_gates = (w["dec_skip.weight"].T @ dec[0]).astype(np.float32) \
+            if cfg.get("decoder_skip") else None
         self.skip = w["skip"] if cfg.get("temporal_skip") else None  # (n, m): STRNNConfig.temporal_skip
         self.filter = [(w[f"filter.net.{i}.weight"].T.copy(), w[f"filter.net.{i}.bias"]) for i in (0, 2, 4, 6)] \
             if cfg["residual"] else None
@@ -127,8 +131,14 @@ class Engine:
         xin = (xin + self.enc_b).reshape(b, m, -1)
         h = np.zeros((b, self.width), np.float32)
         cs = np.zeros_like(h)
+        states = np.empty((m, b, self.width), np.float32) if self.dec_skip_gates is not None else None
         for t in range(m):
             h, cs = _cell(xin[:, t] + rows_matmul(h, self.enc_whh), cs)
+            if states is not None:
+                states[t] = h
+        # The decoder's gates from the encoder's state at each frame, in the decoder's (backward) order.
+        dec_skip = (states[::-1].reshape(m * b, -1) @ self.dec_skip_gates).reshape(m, b, -1) \
+            if states is not None else None
         hs, cs = np.stack([h, h]), np.stack([cs, cs])  # (2, B, H): decoder, predictor
         first = self.enc_frame(x[:, -1])  # (B, W)
         gin = np.stack([np.broadcast_to(self.start_gates, (b, self.start_gates.shape[0])),
@@ -136,6 +146,8 @@ class Engine:
         extra = (x - x[:, -1:]).reshape(b, -1) @ self.context_gates if self.context_gates is not None else None
         if extra is not None:
             gin[1] += extra
+        if dec_skip is not None:
+            gin[0] += dec_skip[0]
         steps = max(self.m, self.n)
         out = np.empty((2, steps, b, c), np.float32)
         base = np.concatenate([x[:, -1], x[:, -1]]) if self.offsets else None  # (2B, C)
@@ -153,6 +165,8 @@ class Engine:
                 gin = stack_matmul(self.enc_frame(frames).reshape(2, b, -1), self.step_wih) + self.step_b
                 if extra is not None:
                     gin[1] += extra
+                if dec_skip is not None and t + 1 < m:
+                    gin[0] += dec_skip[t + 1]
         window = np.concatenate([out[0, : self.m][::-1], out[1, : self.n]]).transpose(1, 0, 2)  # (B, T, C)
         if self.filter is not None:
             y = window.reshape(b, -1)

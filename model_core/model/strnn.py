@@ -50,6 +50,11 @@ class STRNNConfig:
     # sum_t A[i, t] (x_t - x_last), one (n, m) map shared by every channel (zero and constant velocity
     # are two such maps), so the network learns what a linear extrapolation leaves over.
     temporal_skip: bool = False
+    # The backward decoder, reconstructing frame t, also reads a learnt linear map of the encoder's state at
+    # frame t: without it every reconstructed frame comes from the one code of the whole window, and detail
+    # the code has no room for (motion unlike the training data) is lost; with it the decoder and the
+    # encoder read the window from both ends, as a bidirectional network does.
+    decoder_skip: bool = False
 
     def __post_init__(self):
         if self.spatial_norm not in ("batch", "none"):
@@ -164,6 +169,9 @@ class STRNN(nn.Module):
         if cfg.predictor_context:
             self.context_in = nn.Linear(cfg.encode_len * c, w, bias=False)
             nn.init.zeros_(self.context_in.weight)  # starts as the model without it
+        if cfg.decoder_skip:
+            self.dec_skip = nn.Linear(w, w, bias=False)
+            nn.init.zeros_(self.dec_skip.weight)  # starts as the model without it
 
     def skip_frames(self, x):
         """The linear extrapolation ``(B, n, C)`` of context ``(B, m, C)`` (:attr:`STRNNConfig.temporal_skip`)."""
@@ -184,8 +192,9 @@ class STRNN(nn.Module):
     def spatio_temporal(self, x):
         """Context ``(B, m, C)`` -> decoded ``(B, m, C)`` (chronological) and predicted ``(B, n, C)``."""
         cfg = self.cfg
-        _, (h, c) = self.encoder(self.encode_frames(x))
+        states, (h, c) = self.encoder(self.encode_frames(x))
         h, c = h[0], c[0]  # (B, W)
+        dec_skip = self.dec_skip(states) if cfg.decoder_skip else None  # (B, m, W)
         dec_in = self.start.expand_as(h)
         extra = self.context_code(x)
         skip = self.skip_frames(x)
@@ -196,7 +205,8 @@ class STRNN(nn.Module):
         decoded, predicted = [], []
         for i in range(max(cfg.encode_len, cfg.predict_len)):
             if i < cfg.encode_len:
-                hd, cd = self.decoder(dec_in, (hd, cd))
+                step_in = dec_in if dec_skip is None else dec_in + dec_skip[:, cfg.encode_len - 1 - i]
+                hd, cd = self.decoder(step_in, (hd, cd))
                 frame = base + self.decode_frame(hd)
                 decoded.append(frame)
                 dec_in = self.encode_frame(frame)

@@ -97,6 +97,20 @@ def test_a_filter_that_reads_the_context_runs_the_same_in_numpy_and_torch_and_us
 
 
 @pytest.mark.parametrize("spatial", [True, False])
+def test_a_decoder_that_reads_the_encoders_states_runs_the_same_in_numpy_and_torch(tmp_path, spatial):
+    """``decoder_skip``: the backward decoder reads the encoder's state at each frame it reconstructs;
+    NumPy equals torch, the decoded frames depend on those states, and the last decoded frame (the
+    decoder's first step) on the encoder's state at the last frame."""
+    model, mean, std, raw, want = _engines_agree(tmp_path, spatial, False, decoder_skip=True)
+    with torch.no_grad():
+        model.dec_skip.weight.zero_()
+    without = torch_forward(model, raw, mean, std)
+    m = model.cfg.encode_len
+    assert np.abs(without[:, :m] - want[:, :m]).min(axis=(0, 2)).min() > 0  # every decoded frame
+    assert np.abs(without[:, m - 1] - want[:, m - 1]).max() > 1e-3
+
+
+@pytest.mark.parametrize("spatial", [True, False])
 def test_a_predictor_that_reads_the_context_runs_the_same_in_numpy_and_torch(tmp_path, spatial):
     """``predictor_context``: the context's frames less its last enter every predictor step; NumPy equals
     torch, the prediction depends on them and the decoded context does not."""

@@ -192,6 +192,9 @@ def test_a_predictor_that_reads_the_context_starts_as_the_model_it_comes_from_an
     skip = train(_cfg(walk_folder, tmp_path / "skip", model=tiny(temporal_skip=True), init=str(first)),
                  progress=False)
     assert load_file(str(skip / "model.safetensors"))["skip"].any()
+    both_ends = train(_cfg(walk_folder, tmp_path / "both_ends", model=tiny(decoder_skip=True), init=str(first)),
+                      progress=False)
+    assert load_file(str(both_ends / "model.safetensors"))["dec_skip.weight"].any()
 
 
 def test_torchrun_two_cpu_processes(walk_folder, tmp_path):
