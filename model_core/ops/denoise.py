@@ -28,8 +28,9 @@ def denoise_positions_steps(engine, pos: np.ndarray, fps: float, strength: float
     5... of a 60 fps clip), and, with the engine's ``mirrored_reading``, as its mirror image (left and
     right swapped, mirrored back after), and these reconstructions, brought back to the clip's
     frames, are averaged: each reading errs in its own way and the average less than either. That
-    estimate is weighed against the input by how much each deserves (where the two sides disagree, the
-    model is less sure: :func:`fusion.model_error2`): a clean take comes back nearly as it was."""
+    estimate, less its slow offset from the input (:func:`fusion.correct_bias`), is weighed against
+    the input by how much each deserves (where the two sides disagree, the model is less sure:
+    :func:`fusion.model_error2`): a clean take comes back nearly as it was."""
     duration = (len(pos) - 1) / fps
     fixed, found = fusion.assess(np.asarray(pos, np.float64))
     # Scale and ground from a smoothed clip: noise lengthens the legs and lowers the lowest foot.
@@ -55,6 +56,7 @@ def denoise_positions_steps(engine, pos: np.ndarray, fps: float, strength: float
             spread2 += (((plain - reading) / 2.0) ** 2).mean(-1) / len(phases)
         else:
             plain = reading
+    prior = fusion.correct_bias(fixed, prior, found, fps)
     out = norm.to_user(fusion.keep_bone_lengths(fusion.fuse(fixed, prior, found, fps, spread2), found.joint_noise_m))
     user = np.asarray(pos, dtype=np.float64)
     return user + strength * (out - user)
