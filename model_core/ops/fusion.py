@@ -66,7 +66,8 @@ SPREAD_GAIN = 0.986
 SPREAD_POWER = 0.577
 GAP_SHARE = 0.5
 # The model's offset from the input, in the body's frame, is smoothed over about this time scale (a
-# smoothing spline; chosen on the held-out groups: 0.4 s to 1.6 s within 1 %, against none 3 to 4 % worse).
+# smoothing spline; chosen on the held-out CMU subject: 0.8 s to 1.6 s within 0.3 %, 0.4 s 1 to 2 % worse;
+# without it, the subject and martial arts are 2 to 4 % worse).
 BIAS_SPLINE_S = 1.2
 JOINT_GROUP = 11  # joints measured and solved at a time: half a long take's working arrays, two passes of the solve
 
