@@ -46,6 +46,7 @@ D2_NOISE_GAIN = 6.0  # variance of the 2nd difference of unit white noise
 BIAS_WINDOW_S = 0.1  # sigma of the low-pass that separates the model's error from the input's noise
 TRUST_WINDOW_S = 0.1  # half-width of the running median over which the model's error is measured
 PRIOR_WINDOW_S = 0.1  # sigma of the window over which the motion's acceleration is measured, frame by frame
+HEADING_WINDOW_S = 0.1  # sigma of the smoothing of the body's heading, for the frame the model's offset is taken in
 MODEL_MOTION_TRUST = 4.0  # the model's acceleration counts this much against the first pass's
 PRIOR_FLOOR = 0.02  # the acceleration allowed anywhere: at least this share of the take's mean
 BONE_PASSES = 5  # rounds of the bone-length projection
@@ -158,6 +159,13 @@ def assess(pos: np.ndarray) -> tuple[np.ndarray, Assessment]:
     return fixed, Assessment(noise_level(fixed), np.concatenate([p[1] for p in parts], axis=1))
 
 
+def input_variance(var: np.ndarray, pops: np.ndarray) -> np.ndarray:
+    """The input's error variance ``[F, J, 3]`` from its noise variance ``var`` ``[J, 3]``: at a repaired
+    pop (``pops`` ``[F, J]``) the input is the cubic through its neighbours, so their noise and what the
+    cubic misses."""
+    return np.where(pops[..., None], 2.0 * var + POP_FILL_ERROR_M ** 2, var)
+
+
 def correct_bias(pos: np.ndarray, model: np.ndarray, found: Assessment, fps: float) -> np.ndarray:
     """The model's reading ``model`` ``[F, 21, 3]`` less its slowly drifting offset from the input ``pos``:
     the gap, turned into the body's heading frame (from the reading, which is free of noise), smoothed
@@ -170,14 +178,12 @@ def correct_bias(pos: np.ndarray, model: np.ndarray, found: Assessment, fps: flo
     f = len(x)
     if f < 3:
         return m
-    turn = yaw_matrix(heading(m, max(1.0, PRIOR_WINDOW_S * fps)))  # [F, 3, 3]: body frame -> world
+    turn = yaw_matrix(heading(m, max(1.0, HEADING_WINDOW_S * fps)))  # [F, 3, 3]: body frame -> world
     stiffness = (BIAS_SPLINE_S * fps) ** 4  # a smoothing spline's time scale, in frames, to the 4th
     out = m.copy()
     for g in joint_groups(x.shape[1]):
         local = np.einsum("fji,fkj->fki", turn, x[:, g] - m[:, g])  # world -> body: R^T v
-        var = np.asarray(found.noise_m[g], np.float64) ** 2  # (j, 3)
-        var = np.where(found.pops[:, g, None], 2.0 * var + POP_FILL_ERROR_M ** 2, var)  # (F, j, 3)
-        w = (1.0 / var).reshape(f, -1)
+        w = (1.0 / input_variance(np.asarray(found.noise_m[g], np.float64) ** 2, found.pops[:, g])).reshape(f, -1)
         offset = solve_smooth(w, w * local.reshape(f, -1), stiffness * w.mean(0)).reshape(local.shape)
         out[:, g] += np.einsum("fij,fkj->fki", turn, offset)
     return out
@@ -215,8 +221,7 @@ def fuse_joints(pos: np.ndarray, model: np.ndarray, found: Assessment, fps: floa
     # The input is trusted to its noise, less the capture's own jitter, which is part of the take.
     share = noise_share(found.joint_noise_m)
     kept2 = np.maximum((share[:, None] * found.noise_m) ** 2, NOISE_FLOOR_M ** 2)  # (J, 3)
-    # At a pop the input is the cubic through its neighbours: their noise and what the cubic misses.
-    w = np.where(pops[..., None], 1.0 / (2.0 * kept2 + POP_FILL_ERROR_M ** 2), 1.0 / kept2)  # (F, J, 3)
+    w = 1.0 / input_variance(kept2, pops)  # (F, J, 3)
     v = 1.0 / tau2[..., None]
     # The prior's strength: the acceleration the motion itself has, the larger of what the input shows
     # beyond its noise and what the model's (noise-free) estimate shows.
