@@ -9,7 +9,8 @@ walks at the speed and turns as the path asks, and the root stays on the path. T
 at each window's first frame is faded out (:func:`smooth_seam`) and every window is put back on
 the seed's skeleton.
 
-A character that stands away from the path's start walks there first, along a straight lead-in,
+A character that stands away from the path's start walks there first, along a lead-in that leaves
+the way it moves (or faces), meets the path along its tangent and turns no tighter than its pace allows,
 and then follows the path from its start; with no frame count it walks until it reaches the
 path's end (one lap of a closed path), however fast it walks.
 
@@ -35,6 +36,7 @@ from ..motion.conventions import CONTACT_JOINTS, LAYOUT, MODEL_FPS, UP_AXIS
 from ..motion.features import (
     RootStart,
     continue_positions,
+    facing,
     features_to_positions,
     heading,
     integrate_root,
@@ -43,11 +45,15 @@ from ..motion.features import (
 )
 from ..motion.geometry import rotate_ground
 from .normalise import fit_normalisation, model_frames_available, sample_at
-from .paths import Path, Steering, control_signal
+from .paths import Path, Steering, control_signal, turning_path
 from .seam import SEAM_FRAMES, blend_seam
 
 WALK_SPEED = 1.3  # m/s used when the seed barely moves (its own speed cannot steer anything)
 LEAD_IN = 0.3  # metres: a character farther than this from the path's start walks to it first
+LEAD_IN_STEP = 0.05  # metres between the points of a lead-in
+LEAD_IN_TURN_S = 0.35  # a lead-in turns on the distance the character covers in this many seconds,
+LEAD_IN_RADIUS = (0.3, 1.5)  # within these radii (metres)
+STILL_SPEED = 0.3  # m/s: slower than this, a character's lead-in starts the way it faces
 MAX_STRETCH = 3.0  # with no frame count, give up after this many times the frames the path should take
 ARRIVED = 0.1  # metres: with no frame count, the walk ends this close to the path's end
 PLANT_TRUST = 0.25  # weight of the control's step against a planted foot's (weight 1) in planted_steps
@@ -206,12 +212,38 @@ def align_to_path(seed: np.ndarray, path: Path) -> np.ndarray:
     return moved.astype(np.float32)
 
 
-def with_lead_in(path: Path, position: np.ndarray, distance: float = LEAD_IN) -> Path:
-    """``path``, or when ground ``position`` ``[2]`` is farther than ``distance`` from its start, the
-    straight walk from there to its start followed by the path (a closed path's whole lap)."""
-    if np.linalg.norm(path.at(0.0) - position) <= distance:
+def with_lead_in(path: Path, position: np.ndarray, distance: float = LEAD_IN,
+                 direction: np.ndarray | None = None, speed: float = 0.0) -> Path:
+    """``path``, or when ground ``position`` ``[2]`` is farther than ``distance`` from its start, the walk
+    from there to its start followed by the path (a closed path's whole lap).
+
+    The walk there leaves ``position`` along ``direction`` ``[2]`` (the way the character moves or faces;
+    None: towards the path's start) and meets the path along the path's own tangent, turning no tighter
+    than a character moving at ``speed`` (m/s) can (:func:`lead_in_radius`; :func:`paths.turning_path`):
+    a straight lead-in made a corner where it met the path, and a runner coming at it from the side
+    turned there within a frame."""
+    position = np.asarray(position, np.float64)
+    start = path.at(0.0)
+    if np.linalg.norm(start - position) <= distance:
         return path
-    return Path(np.concatenate([np.asarray(position, np.float64)[None], path.points]), cyclic=False)
+    leave = start - position if direction is None else np.asarray(direction, np.float64)
+    lead = turning_path(position, leave, start, path.tangent(0.0), lead_in_radius(speed), LEAD_IN_STEP)
+    return Path(np.concatenate([lead[:-1], path.points]), cyclic=False)
+
+
+def lead_in_radius(speed: float) -> float:
+    """The tightest turn (metres) of a lead-in for a character moving at ``speed`` (m/s): a walker at
+    1.3 m/s turns on 0.46 m, a runner at 4 m/s on 1.4 m."""
+    return float(np.clip(speed * LEAD_IN_TURN_S, *LEAD_IN_RADIUS))
+
+
+def travel(seed: np.ndarray) -> tuple[np.ndarray, float]:
+    """(ground direction ``[2]`` (x, z), speed m/s) in which positions ``[T, 21, 3]`` (30 fps, metres) move
+    over their last sixth of a second; the direction they face where they barely move."""
+    back = min(len(seed) - 1, 5)
+    step = seed[-1, 0, [0, 2]] - seed[len(seed) - 1 - back, 0, [0, 2]]
+    speed = float(np.linalg.norm(step)) * MODEL_FPS / max(back, 1)
+    return (step if speed > STILL_SPEED else facing(seed[-1:])[0, [0, 2]]), speed
 
 
 def follow_path(follower: PathFollower, seed: np.ndarray, path: Path, frames: int | None = None,
@@ -266,7 +298,8 @@ def follow_curve_positions_steps(follower: PathFollower, points: np.ndarray, cyc
         seed = walk_seed(follower.ckpt)
     path = Path(np.asarray(points, np.float64)[:, [0, 2]] * norm.scale, cyclic)
     if context is not None:
-        path = with_lead_in(path, seed[-1, 0, [0, 2]])
+        direction, moving = travel(seed)
+        path = with_lead_in(path, seed[-1, 0, [0, 2]], direction=direction, speed=moving)
     n_model = None if frames is None else int(math.ceil(frames * MODEL_FPS / fps)) + 1
     walked, _ = yield from follow_path_steps(follower, seed, path, n_model, align=context is None,
                                              speed=speed * norm.scale if speed else None)

@@ -117,6 +117,67 @@ def control_signal(path: Path, position: np.ndarray, yaw: float, s0: float, spee
     return np.concatenate([local, np.diff(psi)[:, None]], -1), aim
 
 
+def _left(d: np.ndarray) -> np.ndarray:
+    return np.array([-d[1], d[0]])
+
+
+def _angle(d: np.ndarray) -> float:
+    return float(np.arctan2(d[1], d[0]))
+
+
+def _arc(p: np.ndarray, centre: np.ndarray, turn: float, sign: float, step: float) -> np.ndarray:
+    """Points ``[K, 2]`` from ``p`` (excluded) along the circle about ``centre``, ``turn`` radians, counter-
+    clockwise in ``(x, z)`` for ``sign`` 1, clockwise for -1."""
+    radius = float(np.linalg.norm(p - centre))
+    count = max(int(np.ceil(radius * turn / step)), 1)
+    phi = sign * turn * np.arange(1, count + 1) / count
+    r = p - centre
+    c, s = np.cos(phi)[:, None], np.sin(phi)[:, None]
+    return centre + c * r + s * _left(r)
+
+
+def turning_path(start: np.ndarray, leave: np.ndarray, end: np.ndarray, arrive: np.ndarray, radius: float,
+                 step: float = 0.05) -> np.ndarray:
+    """Points ``[K, 2]`` (every ``step`` metres or closer) of the shortest way from ``start`` ``[2]``, moving
+    along ``leave`` ``[2]``, to ``end`` ``[2]``, moving along ``arrive`` ``[2]``, that turns no tighter than
+    ``radius``: an arc, a straight line and an arc (Dubins' curve of kind CSC). The first point is
+    ``start``, the last ``end``."""
+    start, end = np.asarray(start, np.float64), np.asarray(end, np.float64)
+    d0, d1 = (np.asarray(d, np.float64) / max(float(np.linalg.norm(d)), 1e-12) for d in (leave, arrive))
+    best = None
+    for s0 in (1.0, -1.0):  # 1: the first arc turns counter-clockwise (its centre on the left), -1: clockwise
+        for s1 in (1.0, -1.0):
+            c0, c1 = start + s0 * radius * _left(d0), end + s1 * radius * _left(d1)
+            v = c1 - c0
+            dist = float(np.linalg.norm(v))
+            if s0 == s1:
+                if dist < 1e-9:
+                    continue
+                straight, u = dist, v / dist
+            else:
+                if dist < 2 * radius:
+                    continue
+                straight = float(np.sqrt(dist ** 2 - 4 * radius ** 2))
+                a = _angle(v) + s0 * np.arctan2(2 * radius, straight)
+                u = np.array([np.cos(a), np.sin(a)])
+            t0, t1 = c0 - s0 * radius * _left(u), c1 - s1 * radius * _left(u)
+            turn0 = (s0 * (_angle(u) - _angle(d0))) % (2 * np.pi)
+            turn1 = (s1 * (_angle(d1) - _angle(u))) % (2 * np.pi)
+            total = radius * (turn0 + turn1) + straight
+            if best is None or total < best[0]:
+                best = (total, s0, s1, c0, c1, t0, t1, turn0, turn1, straight)
+    if best is None:  # start and end on one circle, facing round it: go straight, the path turns the rest
+        return np.stack([start, end])
+    _, s0, s1, c0, c1, t0, t1, turn0, turn1, straight = best
+    first = _arc(start, c0, turn0, s0, step) if turn0 > 1e-9 else np.empty((0, 2))
+    count = max(int(np.ceil(straight / step)), 1)
+    line = t0 + (t1 - t0) * (np.arange(1, count + 1) / count)[:, None]
+    second = _arc(t1, c1, turn1, s1, step) if turn1 > 1e-9 else np.empty((0, 2))
+    out = np.concatenate([start[None], first, line, second])
+    out[-1] = end
+    return out
+
+
 def path_errors_cm(root: np.ndarray, path: Path, window: float = 1.0) -> tuple[float, float]:
     """(mean, max) horizontal distance in cm between a root trajectory ``[F, 2]`` or ``[F, 3]``
     (Y-up) and the path, each frame matched to the path by arc length: its nearest point

@@ -232,3 +232,31 @@ def test_a_walk_follows_a_curve_that_starts_elsewhere_from_its_start_to_its_end(
         assert len(frames) - arrive > 0.8 * 2 * np.pi * 1.5 / 1.6 * 24  # a whole lap, at a walking pace
     assert np.linalg.norm(ground[-1] - end[:2]) < 0.35
     assert skate < 0.2
+
+
+def test_a_run_that_ends_heading_away_from_the_curve_turns_onto_it_without_a_pop(addon, real_model):
+    """A runner heading away from where a path starts used to walk a straight lead-in and turn 135 degrees
+    onto the path within a frame (hips 20 cm off their course, a hand flung 50 cm). The lead-in now leaves
+    the way the runner runs and turns onto the path no tighter than its pace allows: no joint moves more
+    abruptly than in the take, and it still reaches the path and walks it."""
+    from scenes import find_mocap
+
+    mocap = find_mocap()
+    if mocap is None:
+        pytest.skip("needs the real motion capture (../shared/mocap unpacked into data/mocap)")
+    obj = import_bvh(mocap / "bandai-namco/dataset-2/dataset-2_run_normal_001.bvh", global_scale=0.01,
+                     update_scene_fps=True, update_scene_duration=True)
+    last = int(action_of(obj).frame_range[1])
+    take = evaluated_joints(addon, obj, np.arange(1, last + 1))
+    path = add_curve("nurbs_path")
+    path.scale = (2.0, 2.0, 2.0)
+    bpy.context.view_layer.update()
+    bpy.context.view_layer.objects.active = obj
+    for other in bpy.context.view_layer.objects:
+        other.select_set(other is obj)
+    points, _ = curve_module(addon).curve_points(bpy.context, path)
+    assert bpy.ops.strnn.follow_curve(curve=path.name, frames=150) == {"FINISHED"}
+    joints = evaluated_joints(addon, obj, np.arange(last - 5, last + 151))
+    peak = lambda j: np.linalg.norm(np.diff(j, 2, axis=0), axis=-1).max()  # noqa: E731
+    assert peak(joints) < 1.25 * peak(take)  # the straight lead-in: 6 x
+    assert ground_distance(joints[-30:, 0], points).mean() < 0.15, "on the path by the end"

@@ -21,6 +21,7 @@ from model_core.ops.follow import (
     follow_curve_positions,
     follow_path,
     follow_path_steps,
+    lead_in_radius,
     with_lead_in,
 )
 from model_core.ops.paths import Path, evaluation_paths, path_errors_cm
@@ -100,8 +101,17 @@ def test_a_path_that_starts_away_from_the_character_is_walked_to_and_then_from_i
     mean, _ = path_errors_cm(hips[arrive:], path)
     assert mean < 10.0
     assert np.linalg.norm(hips[-1] - curve[-1, [0, 2]]) < 0.3, "walks on to the curve's end"
-    lead = with_lead_in(path, end)
-    assert lead.length == pytest.approx(2.0 + 6.0, abs=0.01)
+    for leave in (None, np.array([0.0, -1.0]), np.array([-1.0, 0.0])):  # towards it, away from it, turned round
+        lead = with_lead_in(path, end, direction=leave)
+        np.testing.assert_allclose(lead.points[0], end)
+        seg = np.diff(lead.points, axis=0)
+        yaw = np.unwrap(np.arctan2(seg[:, 0], seg[:, 1]))
+        want = np.arctan2(*(start - end if leave is None else leave))
+        assert abs((yaw[0] - want + np.pi) % (2 * np.pi) - np.pi) < 0.1, "leaves the way the character moves"
+        turn = np.abs(np.diff(yaw)) / np.linalg.norm(seg[1:], axis=-1)  # radians per metre
+        assert turn.max() < 1.05 / lead_in_radius(0.0), "no corner, where it meets the path either"
+        assert abs(yaw[-1] - yaw[-2]) < 0.05 and abs(np.sin(yaw[-1])) < 0.05, "meets the path along it (+z)"
+        assert lead.length > 2.0 + 6.0 - 1e-6
     assert with_lead_in(path, start + [0.1, 0.0]) is path  # already at the start: no lead-in
 
 

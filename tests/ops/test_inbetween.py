@@ -9,9 +9,11 @@ import pytest
 
 from model_core.eval.inbetween_evaluation import evaluate_inbetween, interpolate
 from model_core.inference.engine import Engine
+from model_core.motion.conventions import JOINT_INDEX, PARENTS
 from model_core.motion.features import heading
 from model_core.motion.synthetic import walking_skeleton
 from model_core.ops.familiarity import momentum_shares
+from model_core.ops.footlock import body_forward
 from model_core.ops.inbetween import (
     INTERPOLATION_LEAN,
     LATE_LEAN,
@@ -20,10 +22,13 @@ from model_core.ops.inbetween import (
     inbetween,
     inbetween_positions,
     interpolation,
+    knee_side,
     lean_on_interpolation,
     lean_weights,
+    on_skeleton,
 )
 from model_core.ops.seam import blend_seam
+from model_core.ops.transfer import bone_lengths as rest_lengths
 
 
 def test_bend_onto_arrives_at_the_target_and_its_velocity():
@@ -112,6 +117,48 @@ def test_the_gap_leans_on_the_interpolation_late_and_unfamiliar_motion_mid_gap_k
         assert steps.max() < 1.5 * usual, "no pop where it leaves the context"
         lengths = [np.linalg.norm(x[frame, 4] - x[frame, 0]) for x in (bent, leant)]  # no limb shrinks
         assert lengths[1] == pytest.approx(lengths[0], rel=0.05)
+
+
+def bones(pos: np.ndarray) -> np.ndarray:
+    """Bone lengths ``[F, J - 1]`` of joints ``[F, J, 3]``."""
+    return np.linalg.norm(pos[:, 1:] - pos[:, PARENTS[1:]], axis=-1)
+
+
+def test_the_gap_keeps_the_bodys_bones_where_its_legs_swing_against_the_target():
+    """A continuation out of step with the target: bending each joint by its own offset (and leaning on
+    the interpolation) shortens the swinging legs mid-gap, which a rig cannot follow (its solve misses
+    the ankle and turns the foot round). The gap keeps the body's bones from the context's lengths to the
+    target's, each leg's ankle kept by IK, and still arrives at the target."""
+    walk = walking_skeleton(200, radius=5.0).astype(np.float64)
+    context, target = walk[20:40], walk[70:72]
+    pred = walk[70:101]  # the same walk a second ahead: its legs in another phase than the target's
+    shins = [JOINT_INDEX[f"{s}_foot"] - 1 for s in "lr"]  # bone index of each shin (joint - 1)
+    bent = lean_on_interpolation(bend_onto(blend_seam(context, pred), context[-1], target), context[-1], target[0],
+                                 lean_weights(len(pred), 0.0))
+    rest = bones(context[-1:])[0]
+    assert (bones(bent)[:, shins] / rest[shins]).min() < 0.9, "bending alone shortens the legs mid-gap"
+    out = fill_from(context, pred, target)
+    np.testing.assert_allclose(bones(out), np.broadcast_to(rest, bones(out).shape), rtol=1e-3)
+    np.testing.assert_allclose(out[-1], target[0], atol=1e-4)  # still arrives
+    ankles = [JOINT_INDEX[f"{s}_foot"] for s in "lr"]
+    assert np.linalg.norm(out[:, ankles] - bent[:, ankles], axis=-1).max() < 0.03  # the feet go about where they went
+    # each knee bends the way the context's do, never through the leg (this procedural walk's bend backwards)
+    hip, knee, ankle = (out[:, [JOINT_INDEX[f"{s}_{j}"] for s in "lr"]] for j in ("upleg", "knee", "foot"))
+    axis = (ankle - hip) / np.linalg.norm(ankle - hip, axis=-1, keepdims=True)
+    off = (knee - hip) - axis * np.sum((knee - hip) * axis, -1, keepdims=True)
+    assert knee_side(context) == -1.0
+    assert (np.sum(off * body_forward(out)[:, None], -1) < 1e-6).all()
+    # with other lengths at the target, they change smoothly over the gap
+    longer = on_skeleton(bent, rest_lengths(context), 1.1 * rest_lengths(target[:1]))
+    ratio = bones(longer)[:, shins[0]] / rest[shins[0]]
+    assert ratio[0] == pytest.approx(1.0 + 0.1 / len(bent), abs=2e-3) and ratio[-1] == pytest.approx(1.1, abs=1e-3)
+
+
+def test_captured_knees_bend_forwards(mocap_root):
+    from model_core.rig.rigs import load_clip
+
+    walk = load_clip(mocap_root / "bandai-namco/dataset-2/dataset-2_walk_normal_001.bvh")
+    assert knee_side(walk) == 1.0 and knee_side(walk[:1] * 0 + walk[:1, :1]) == 1.0  # and a body that never bends
 
 
 def test_a_single_context_pose_is_enough():

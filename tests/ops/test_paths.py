@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from model_core.motion.features import yaw_matrix
-from model_core.ops.paths import Path, PathError, control_signal, evaluation_paths, path_errors_cm
+from model_core.ops.paths import Path, PathError, control_signal, evaluation_paths, path_errors_cm, turning_path
 
 
 def circle(radius=2.0, n=400):
@@ -91,3 +91,26 @@ def test_evaluation_paths_start_at_the_origin():
         path = Path(points, cyclic)
         np.testing.assert_allclose(path.at(0.0), [0.0, 0.0], atol=1e-9)
         assert path.length > 8.0
+
+
+@pytest.mark.parametrize("leave", [(0.0, 1.0), (1.0, 0.0), (0.0, -1.0), (-1.0, 0.0), (-0.7, 0.7)])
+def test_turning_path_leaves_and_arrives_as_asked_and_never_turns_tighter_than_its_radius(leave):
+    start, end, arrive, radius = np.zeros(2), np.array([2.0, 0.5]), np.array([1.0, 0.0]), 0.6
+    pts = turning_path(start, np.array(leave), end, arrive, radius, step=0.02)
+    np.testing.assert_allclose(pts[0], start)
+    np.testing.assert_allclose(pts[-1], end)
+    seg = np.diff(pts, axis=0)
+    length = np.linalg.norm(seg, axis=-1)
+    assert length.max() <= 0.02 + 1e-9
+    direction = seg / length[:, None]
+    np.testing.assert_allclose(direction[0], np.array(leave) / np.linalg.norm(leave), atol=0.03)
+    np.testing.assert_allclose(direction[-1], arrive, atol=0.03)
+    yaw = np.unwrap(np.arctan2(direction[:, 1], direction[:, 0]))
+    curvature = np.abs(np.diff(yaw)) / (0.5 * (length[1:] + length[:-1]))
+    assert curvature.max() < 1.02 / radius
+
+
+def test_turning_path_goes_straight_when_it_can():
+    pts = turning_path(np.zeros(2), np.array([1.0, 0.0]), np.array([3.0, 0.0]), np.array([1.0, 0.0]), 0.5)
+    assert np.linalg.norm(np.diff(pts, axis=0), axis=-1).sum() == pytest.approx(3.0)
+    np.testing.assert_allclose(pts[:, 1], 0.0, atol=1e-12)
