@@ -133,6 +133,9 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--time-warp", type=float, default=TrainConfig.time_warp, metavar="W",
                    help="time-warp augmentation: play each training window at a speed drawn log-uniformly "
                         "from [1/(1+W), 1+W] times the capture's (0: off)")
+    p.add_argument("--capture-phases", action="store_true",
+                   help="train on every phase of takes captured at a whole multiple of 30 fps (60 fps: frames "
+                        "0, 2, 4... and 1, 3, 5...), not only on the first")
     p.add_argument("--hold-out", action="store_true",
                    help="keep the held-out groups of configs/data.toml out of training and validation")
     p.add_argument("--device", default=TrainConfig.device,
@@ -150,8 +153,9 @@ def baseline_run(args, argv):
     from model_core.model.baseline_training import BaselineTrainConfig, train_baseline
     from model_core.model.baselines import MODELS
 
-    if args.export or args.init or args.time_warp or args.proportions or args.device != "cpu":
-        raise ValueError("--export, --init, --time-warp, --proportions and --device are for STRNN runs")
+    if args.export or args.init or args.time_warp or args.proportions or args.capture_phases or args.device != "cpu":
+        raise ValueError("--export, --init, --time-warp, --proportions, --capture-phases and --device are for "
+                         "STRNN runs")
     shape = dict(encode_len=args.encode_len, predict_len=args.predict_len)
     shape |= {"blocks": args.blocks} if args.arch == "simlpe" else {"width": args.width or DEFAULT_WIDTH[args.arch]}
     cfg = BaselineTrainConfig(data=args.data, out=args.out, model=MODELS[args.arch][1](**shape), steps=args.steps,
@@ -186,7 +190,7 @@ def strnn_run(args, argv):
                       noise_start=args.noise_start, seed=args.seed, cache=args.cache, max_minutes=args.max_minutes,
                       checkpoint_seconds=args.checkpoint_seconds, purpose=args.purpose,
                       mirror=args.mirror, time_warp=args.time_warp, proportions=args.proportions,
-                      hold_out=args.hold_out, device=args.device,
+                      capture_phases=args.capture_phases, hold_out=args.hold_out, device=args.device,
                       command=command_line(argv))
     if args.export:
         return export_state(cfg)

@@ -20,11 +20,11 @@ from pathlib import Path
 
 import numpy as np
 
-from ..io.bvh import BvhError
+from ..io.bvh import BvhError, read_bvh
 from ..io.files import write_atomic
-from ..motion.conventions import LAYOUT
+from ..motion.conventions import LAYOUT, MODEL_FPS
 from ..motion.features import positions_to_features
-from ..rig.rigs import RigError, load_clip
+from ..rig.rigs import RigError, canonical_clip, on_ground
 
 REPO = Path(__file__).resolve().parents[2]
 DATA_CONFIG = REPO / "configs" / "data.toml"
@@ -129,18 +129,33 @@ class MotionData:
         return [c for c in self.clips if held_out_group(c.name, config) == name]
 
 
+PHASE_MARK = "#phase"  # clip name "<file>#phase<p>": frames p, p + k, ... of a take at k x the model's rate
+
+
 def _load_one(args):
-    path, rel, fps = args
+    """``[(name, positions, features, error)]`` of one file: one clip, or with ``capture_phases`` one per
+    phase of a take captured at a whole multiple of the model's rate (:func:`load_folder`)."""
+    path, rel, fps, capture_phases = args
     try:
-        pos = load_clip(path, fps=fps)
-        feats, _ = positions_to_features(pos)
-        return rel, pos, feats, None
+        bvh = read_bvh(path, fps=fps)
+        k = int(round(bvh.fps / MODEL_FPS))
+        if capture_phases and k >= 2 and abs(bvh.fps - k * MODEL_FPS) < 1e-3 * MODEL_FPS:
+            full = canonical_clip(bvh, bvh.fps)
+            clips = [(rel if p == 0 else f"{rel}{PHASE_MARK}{p}", on_ground(full[p::k])) for p in range(k)]
+        else:
+            clips = [(rel, canonical_clip(bvh))]
+        return [(name, pos, positions_to_features(pos)[0], None) for name, pos in clips]
     except (BvhError, RigError) as e:
-        return rel, None, None, str(e)
+        return [(rel, None, None, str(e))]
 
 
-def _cache_path(root: Path, files: list[Path], cache_dir: Path) -> Path:
-    h = hashlib.sha1(CACHE_VERSION.encode())
+def file_of(name: str) -> str:
+    """The file (relative path) a clip name comes from (:data:`PHASE_MARK`)."""
+    return name.split(PHASE_MARK)[0]
+
+
+def _cache_path(root: Path, files: list[Path], cache_dir: Path, capture_phases: bool = False) -> Path:
+    h = hashlib.sha1(CACHE_VERSION.encode() + (b"|capture_phases" if capture_phases else b""))
     h.update(DATA_CONFIG.read_bytes() if DATA_CONFIG.exists() else b"")
     for f in files:
         st = f.stat()
@@ -149,8 +164,14 @@ def _cache_path(root: Path, files: list[Path], cache_dir: Path) -> Path:
 
 
 def load_folder(root: str | Path, cache_dir: str | Path | None = None, workers: int | None = None,
-                progress: bool = True) -> MotionData:
+                progress: bool = True, capture_phases: bool = False) -> MotionData:
     """Read every BVH under ``root`` as canonical clips; cache the arrays in ``cache_dir``.
+
+    A take is read at the model's rate, which for one captured at k times that rate (60, 120 fps) keeps
+    every k-th frame from the first. With ``capture_phases`` (for training) it gives one clip per phase
+    instead, frames p, p + k, ... for p = 0 .. k - 1 (:data:`PHASE_MARK` names the later ones), each in the
+    take's own split and held-out group: Denoise reads such a take once per phase, and the phases are as many
+    more views of the capture's own detail.
 
     Unreadable files are collected in ``failures`` (with file, line and reason);
     raises :class:`DataError` if the folder has no readable clip.
@@ -159,7 +180,7 @@ def load_folder(root: str | Path, cache_dir: str | Path | None = None, workers: 
     files = find_bvh(root)
     base = root if root.is_dir() else root.parent
     config = load_data_config()
-    cache = _cache_path(base, files, Path(cache_dir)) if cache_dir else None
+    cache = _cache_path(base, files, Path(cache_dir), capture_phases) if cache_dir else None
     if cache and cache.exists():
         with np.load(cache, allow_pickle=False) as z:
             z = {k: z[k] for k in z.files}  # read each array once
@@ -167,15 +188,17 @@ def load_folder(root: str | Path, cache_dir: str | Path | None = None, workers: 
         clips = [Clip(str(n), str(s), z["positions"][a:b], z["features"][a:b])
                  for n, s, a, b in zip(z["names"], z["splits"], bounds[:-1], bounds[1:])]
         return MotionData(str(root), clips, [str(x) for x in z["failures"]])
-    jobs = [(str(f), f.relative_to(base).as_posix(), fps_override(f.relative_to(base), config)) for f in files]
+    jobs = [(str(f), f.relative_to(base).as_posix(), fps_override(f.relative_to(base), config), capture_phases)
+            for f in files]
     workers = workers or min(4, os.cpu_count() or 1)
     clips, failures = [], []
     with ProcessPoolExecutor(workers) as pool:
-        for i, (rel, pos, feats, err) in enumerate(pool.map(_load_one, jobs, chunksize=8)):
-            if err:
-                failures.append(err)
-            else:
-                clips.append(Clip(rel, split_of(Path(rel), config), pos, feats))
+        for i, results in enumerate(pool.map(_load_one, jobs, chunksize=8)):
+            for name, pos, feats, err in results:
+                if err:
+                    failures.append(err)
+                else:
+                    clips.append(Clip(name, split_of(Path(file_of(name)), config), pos, feats))
             if progress and (i + 1) % 100 == 0:
                 print(f"\rreading {i + 1}/{len(jobs)} files", end="", file=sys.stderr, flush=True)
     if progress and len(jobs) >= 100:

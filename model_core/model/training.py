@@ -83,6 +83,9 @@ class TrainConfig:
     # Above 0: each training window's torso and arms are made longer or shorter, each by a factor drawn
     # uniformly from [1 - this, 1 + this] (motion.features.scale_proportions): bodies of other proportions.
     proportions: float = 0.0
+    # Every phase of a take captured at a whole multiple of the model's rate as a clip of its own
+    # (dataset.load_folder's capture_phases), not only the first.
+    capture_phases: bool = False
     # Before the release is written, recompute the batch norms' running statistics as the plain average
     # over this many training batches of the whole model's forward pass (0: keep them as trained).
     recalibrate_batches: int = 0
@@ -412,7 +415,8 @@ def train(cfg: TrainConfig, resume: bool = False, progress: bool = True) -> Path
         raise ValueError(f"--out {out}: cannot write there ({reason}); choose another --out")
     torch.manual_seed(cfg.seed + rank)
     rng = np.random.default_rng(cfg.seed + rank)
-    data = load_folder(cfg.data, cache_dir=cfg.cache, progress=rank == 0 and progress)
+    data = load_folder(cfg.data, cache_dir=cfg.cache, progress=rank == 0 and progress,
+                       capture_phases=cfg.capture_phases)
     if cfg.hold_out:
         data = data.without_held_out()
     norm = Normaliser.fit(np.concatenate([c.features for c in data.split("train")]))
@@ -635,7 +639,7 @@ def export_state(cfg: TrainConfig, folder: Path | None = None) -> Path:
     if not state_path.exists():
         raise ValueError(f"{state_path}: no training state to export")
     saved = torch.load(state_path, weights_only=True)
-    data = load_folder(cfg.data, cache_dir=cfg.cache, progress=False)
+    data = load_folder(cfg.data, cache_dir=cfg.cache, progress=False, capture_phases=cfg.capture_phases)
     if cfg.hold_out:
         data = data.without_held_out()
     norm = Normaliser.fit(np.concatenate([c.features for c in data.split("train")]))

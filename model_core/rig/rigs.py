@@ -181,7 +181,13 @@ def canonical_clip(bvh, rate: float = MODEL_FPS) -> np.ndarray:
     legs = leg_length(pos)
     if not np.isfinite(legs) or legs <= 1e-6:
         raise BvhError(f"{bvh.path}: legs have zero length; cannot normalise the skeleton's scale")
-    pos = resample(pos * (STANDARD_LEG_LENGTH / legs), bvh.fps, rate)
+    return on_ground(resample(pos * (STANDARD_LEG_LENGTH / legs), bvh.fps, rate))
+
+
+def on_ground(pos: np.ndarray) -> np.ndarray:
+    """``float32`` copy of canonical joints ``[F, 21, 3]`` raised or lowered so that the lowest foot's 5th
+    percentile height is 0 (the ground)."""
+    pos = np.array(pos)
     feet = pos[:, [JOINT_INDEX[j] for j in ("l_foot", "l_toe", "r_foot", "r_toe")], UP_AXIS]
     pos[..., UP_AXIS] -= np.percentile(feet.min(axis=1), 5)
     return pos.astype(np.float32)

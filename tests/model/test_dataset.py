@@ -87,6 +87,31 @@ def test_load_folder_applies_the_override_and_caches(tmp_path):
         assert a.split == b.split
 
 
+def test_capture_phases_give_one_clip_per_phase_in_the_takes_split_and_group(tmp_path):
+    """A 60 fps take is read at 30 fps from its first frame; with capture_phases (training) also from its
+    second, as a clip of its own in the take's split and held-out group. A 30 fps take stays one clip."""
+    walk = walking_skeleton(121, fps=60.0)
+    write_bvh(tmp_path / "data/cmu/iclone/006_01.bvh", walk, fps=60)  # the held-out CMU subject's folder
+    write_bvh(tmp_path / "data/bandai/walk_001.bvh", walking_skeleton(61), fps=30)
+    plain = load_folder(tmp_path / "data", cache_dir=tmp_path / "cache", workers=1, progress=False)
+    both = load_folder(tmp_path / "data", cache_dir=tmp_path / "cache", workers=1, progress=False,
+                       capture_phases=True)
+    assert sorted(c.name for c in plain.clips) == ["bandai/walk_001.bvh", "cmu/iclone/006_01.bvh"]
+    assert sorted(c.name for c in both.clips) == ["bandai/walk_001.bvh", "cmu/iclone/006_01.bvh",
+                                                   "cmu/iclone/006_01.bvh#phase1"]
+    assert len(list((tmp_path / "cache").glob("motion-*.npz"))) == 2  # cached apart
+    clips = {c.name: c for c in both.clips}
+    first, second = clips["cmu/iclone/006_01.bvh"], clips["cmu/iclone/006_01.bvh#phase1"]
+    np.testing.assert_allclose(first.positions, {c.name: c for c in plain.clips}[first.name].positions, atol=1e-6)
+    assert len(first.positions) == 61 and len(second.positions) == 60
+    # the second phase is the frames in between: each lies about half way between its neighbours
+    mid = 0.5 * (first.positions[:-1] + first.positions[1:])
+    assert np.abs(second.positions - mid).mean() < 0.25 * np.abs(first.positions[1:] - first.positions[:-1]).mean()
+    assert second.split == first.split
+    assert held_out_group(second.name) == held_out_group(first.name) == "actor"
+    assert len(MotionData("", both.clips).without_held_out().clips) == 1
+
+
 def test_window_starts_cover_every_full_window():
     starts = window_starts([45, 10, 41], window=40, stride=5)
     assert starts.tolist() == [[0, 0], [0, 5], [2, 0]]
