@@ -306,12 +306,23 @@ def two_bone_ik(hip: np.ndarray, knee: np.ndarray, ankle: np.ndarray, target: np
         lean = l1 * _STRAIGHT * np.clip(1.0 - sine / _STRAIGHT, 0.0, 1.0) ** 2  # 0 once the knee is bent
         bend0 = bend0 + lean[..., None] * _unit(fwd)[0]
     bend0 = _unit(bend0)[0]
+    axis = _unit(target - hip)[0]
+    return place_leg(hip, target, l1, l2, np.einsum("...ij,...j->...i", shortest_arc(axis0, axis), bend0), d0,
+                     softness)
+
+
+def place_leg(hip: np.ndarray, target: np.ndarray, l1: np.ndarray, l2: np.ndarray, bend: np.ndarray,
+              rest: np.ndarray, softness: float = 0.03) -> tuple[np.ndarray, np.ndarray]:
+    """Knee and ankle ``[..., 3]`` of a leg of thigh ``l1`` and shin ``l2`` ``[...]`` from ``hip`` with the
+    ankle on ``target`` (its reach eased short of straight: :func:`soft_reach`, :func:`knee_limit_reach`,
+    ``rest`` the leg's own hip-ankle distance), the knee out towards ``bend`` ``[..., 3]`` (any direction off
+    the hip-ankle line; only its part square to the line counts)."""
     axis, d = _unit(target - hip)
-    d = soft_reach(d, d0, knee_limit_reach(l1, l2, d0), softness)
+    d = soft_reach(d, rest, knee_limit_reach(l1, l2, rest), softness)
     d = np.maximum(d, np.abs(l1 - l2) + 1e-6 * (l1 + l2))
     along = (l1 ** 2 - l2 ** 2 + d ** 2) / (2.0 * np.maximum(d, 1e-12))
     height = np.sqrt(np.maximum(l1 ** 2 - along ** 2, 0.0))
-    bend = _unit(np.einsum("...ij,...j->...i", shortest_arc(axis0, axis), bend0))[0]
+    bend = _unit(bend)[0]
     bend = _unit(bend - axis * np.sum(bend * axis, -1, keepdims=True))[0]
     new_knee = hip + axis * along[..., None] + bend * height[..., None]
     return new_knee, hip + axis * d[..., None]

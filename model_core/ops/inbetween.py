@@ -29,7 +29,7 @@ from ..motion.conventions import MODEL_FPS, PARENTS, ROOT, UP_AXIS
 from ..motion.features import heading, yaw_matrix
 from ..motion.geometry import interpolate_frames, unit
 from .familiarity import momentum_shares
-from .footlock import LEGS, body_forward, knee_limit_reach, soft_reach
+from .footlock import LEGS, body_forward, place_leg
 from .normalise import fit_normalisation, sample_at
 from .seam import blend_seam
 from .transfer import bone_lengths
@@ -180,20 +180,6 @@ def bend_sides(pos: np.ndarray, side: float) -> np.ndarray:
     return unit(off + lean * ahead)  # a knee bent the right way keeps its side exactly
 
 
-def leg_ik(hip: np.ndarray, target: np.ndarray, l1: np.ndarray, l2: np.ndarray, side: np.ndarray,
-           rest: np.ndarray, softness: float = 0.03) -> tuple[np.ndarray, np.ndarray]:
-    """Knee and ankle ``[..., 3]`` of a leg of thigh ``l1`` and shin ``l2`` ``[...]`` from ``hip`` with the
-    ankle on ``target`` (reach eased short of straight as Foot Lock's IK does, ``rest`` the leg's own
-    hip-ankle distance), the knee towards ``side`` (:func:`bend_sides`)."""
-    axis = unit(target - hip)
-    d = soft_reach(np.linalg.norm(target - hip, axis=-1), rest, knee_limit_reach(l1, l2, rest), softness)
-    d = np.maximum(d, np.abs(l1 - l2) + 1e-6 * (l1 + l2))
-    along = (l1 ** 2 - l2 ** 2 + d ** 2) / (2.0 * d)
-    height = np.sqrt(np.maximum(l1 ** 2 - along ** 2, 0.0))
-    side = unit(side - axis * np.sum(side * axis, -1, keepdims=True))
-    return hip + axis * along[..., None] + side * height[..., None], hip + axis * d[..., None]
-
-
 def on_skeleton(frames: np.ndarray, start: np.ndarray, end: np.ndarray, knees: float = 1.0) -> np.ndarray:
     """``frames`` ``[N + 1, J, 3]`` (a gap and the target's frame) put back on the body's bones, whose
     lengths go from the context's ``start`` ``[J]`` to the target's ``end`` ``[J]`` over the gap.
@@ -202,10 +188,10 @@ def on_skeleton(frames: np.ndarray, start: np.ndarray, end: np.ndarray, knees: f
     offset, so that a leg swinging the other way than the target's is shortened mid-gap (a shin by a
     quarter), which a rig cannot follow: its solve keeps its bones, misses the ankle by as much and turns
     the foot round to reach the toe. So every bone keeps its direction and takes its length, from the hips
-    out, and each leg reaches the ankle that the gap has, by two-bone IK on those lengths (within a soft
-    limit short of straight, each knee bending the way ``knees`` says: :func:`knee_side`, :func:`bend_sides`);
-    the feet then point at their toes. The target's frame (the last) keeps the target's own lengths, so the
-    gap still arrives at it."""
+    out, and each leg reaches the ankle that the gap has, by Foot Lock's two-bone IK on those lengths
+    (:func:`footlock.place_leg`, within a soft limit short of straight, each knee bending the way ``knees``
+    says: :func:`knee_side`, :func:`bend_sides`); the feet then point at their toes. The target's frame (the
+    last) keeps the target's own lengths, so the gap still arrives at it."""
     frames = np.asarray(frames, np.float64)
     s = (np.arange(1, len(frames) + 1) / len(frames))[:, None]
     lengths = (1.0 - s) * start[None] + s * end[None]  # [N + 1, J]
@@ -216,7 +202,7 @@ def on_skeleton(frames: np.ndarray, start: np.ndarray, end: np.ndarray, knees: f
         out[:, j] = out[:, p] + unit(frames[:, j] - frames[:, p]) * lengths[:, j, None]
     l1, l2 = lengths[:, _KNEE], lengths[:, _ANKLE]
     side = bend_sides(frames, knees)
-    knee, ankle = leg_ik(out[:, _HIP], frames[:, _ANKLE], l1, l2, side, np.linalg.norm(
+    knee, ankle = place_leg(out[:, _HIP], frames[:, _ANKLE], l1, l2, side, np.linalg.norm(
         out[:, _ANKLE] - out[:, _HIP], axis=-1))
     toe = ankle + unit(frames[:, _TOE] - frames[:, _ANKLE]) * lengths[:, _TOE, None]
     out[:, _KNEE], out[:, _ANKLE], out[:, _TOE] = knee, ankle, toe
