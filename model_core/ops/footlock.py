@@ -17,7 +17,9 @@ after ``fixed`` frames, the whole body up and down); every bone keeps its length
   there are some, the whole clip otherwise), faded in and out like the horizontal pull, so
   generated feet neither sink into the floor nor hover above it; and no heel or toe goes below
   that height at any frame. After ``fixed`` frames, a body whose feet hover where they should
-  stand comes down as a whole first (the legs alone could only reach by straightening).
+  stand comes down as a whole first (the legs alone could only reach by straightening). Next to
+  ``fixed`` frames these height corrections ease in over ``blend_s``, so a foot that stands
+  higher or lower there than on the rest of the floor moves off it without a step.
 - Two-bone IK from the (unmoved) hip: the knee stays in its own plane (the plane of hip,
   knee and ankle, turned by the shortest arc onto the new hip-to-ankle axis), the foot
   keeps its orientation (the toe follows the ankle), and a target out of reach is eased
@@ -120,17 +122,23 @@ def _nearest(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _faded(values: np.ndarray, mask: np.ndarray, blend: float) -> tuple[np.ndarray, np.ndarray]:
-    """Each on-frame's ``values`` ``[F, K, D]`` spread to the frames around it with a cosine fade
-    over ``blend`` frames, from the nearest on-frame on either side: (sum ``[F, K, D]``, weights ``[F, K]``)."""
+    """Each on-frame's ``values`` ``[F, K, D]`` spread to the frames around it with a cosine fade over
+    ``blend`` frames: (faded values ``[F, K, D]``, their weights ``[F, K]`` in [0, 1]). Between two on-frames
+    the value passes from the one before to the one after, each counting the more the nearer it is and
+    all of it at its own frame, so a correction reaches the next span's value exactly where the span
+    starts (a plain weighted mean of the two would jump there when the last span ended close by)."""
     f, k = mask.shape
     idx, cols = np.arange(f)[:, None], np.arange(k)[None]
-    total, weight = np.zeros(values.shape), np.zeros(mask.shape)
-    for near in _nearest(mask):
-        ok = (near >= 0) & (near < f)
-        w = np.where(ok, _ramp(np.abs(idx - near), blend), 0.0)
-        total += w[..., None] * values[np.clip(near, 0, f - 1), cols]
-        weight += w
-    return total, weight
+    fades, near = [], []
+    for at in _nearest(mask):
+        ok = (at >= 0) & (at < f)
+        fades.append(np.where(ok, _ramp(np.abs(idx - at), blend), 0.0))
+        near.append(values[np.clip(at, 0, f - 1), cols])
+    (w1, w2), (v1, v2) = fades, near
+    a, b = w1 * (1.0 - w2), w2 * (1.0 - w1)  # the earlier on-frame's share: 1 at it, 0 at the later one
+    share = np.divide(a, a + b, out=np.full(a.shape, 0.5), where=a + b > 0)
+    weight = 1.0 - (1.0 - w1) * (1.0 - w2)
+    return weight[..., None] * (share[..., None] * v1 + (1.0 - share[..., None]) * v2), weight
 
 
 def plausible_spans(ground: np.ndarray, mask: np.ndarray, limit: float, weight: np.ndarray | None = None) -> np.ndarray:
@@ -203,12 +211,12 @@ def ankle_targets(pos: np.ndarray, contacts: np.ndarray, blend: float, fixed: np
 def _height_pull(ankle: np.ndarray, foot: np.ndarray, mask: np.ndarray, blend: float, fixed: np.ndarray | None,
                  rest: np.ndarray, tolerance: float) -> np.ndarray:
     """Vertical move of each ankle ``[F, 2, 3]``: :func:`span_lift`, then, at every frame, up by what
-    the heel or toe would still be below its rest height."""
+    the heel or toe would still be below its rest height; nothing on ``fixed`` frames, eased in from them
+    over ``blend`` frames (:func:`from_fixed`)."""
     heel_need, toe_need = _needs(ankle, foot, rest)
     lift = span_lift(ankle, foot, mask, blend, fixed, rest, tolerance)
     lift = lift + np.maximum(np.maximum(heel_need - lift, toe_need - lift) - tolerance, 0.0)
-    if fixed is not None:
-        lift[fixed] = 0.0
+    lift = lift * from_fixed(fixed, len(ankle), blend)[:, None]  # eased in from the frames kept: no step
     out = np.zeros(ankle.shape)
     out[..., UP_AXIS] = lift
     return out
@@ -245,9 +253,20 @@ def body_drop(pos: np.ndarray, mask: np.ndarray, blend: float, fixed: np.ndarray
     ankle = pos[:, _ANKLE]
     lift = span_lift(ankle, pos[:, _TOE] - ankle, mask, blend, fixed, rest, tolerance)
     drop = gaussian_smooth(np.minimum(lift.min(1), 0.0), max(blend / 2.0, 1.0))
-    if fixed is not None:
-        drop[fixed] = 0.0
-    return drop
+    return drop * from_fixed(fixed, len(pos), blend)
+
+
+def from_fixed(fixed: np.ndarray | None, frames: int, blend: float) -> np.ndarray:
+    """Weights ``[F]`` that ease a correction in away from ``fixed`` frames: 0 on them, rising by a cosine
+    to 1 ``blend + 1`` frames from the nearest one (1 everywhere without fixed frames), so that a contact
+    span running on from them is brought to the floor gradually instead of by a step at the seam."""
+    if fixed is None or not np.any(fixed):
+        return np.ones(frames)
+    prev, nxt = _nearest(np.asarray(fixed, bool)[:, None])
+    idx = np.arange(frames)
+    distance = np.minimum(np.where(prev[:, 0] >= 0, idx - prev[:, 0], frames),
+                          np.where(nxt[:, 0] < frames, nxt[:, 0] - idx, frames))
+    return 1.0 - _ramp(distance.astype(np.float64), blend)
 
 
 def rest_heights(pos: np.ndarray, contacts: np.ndarray, frames: np.ndarray | None = None) -> np.ndarray | None:

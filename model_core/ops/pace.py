@@ -42,11 +42,13 @@ class Pace:
         return min(RATES, key=lambda r: abs(np.log(frames / r / TYPICAL_STRIDE_S)))
 
     def note(self) -> str:
-        """A sentence for an operator's report; empty when the pace is plausible."""
-        if self.plausible:
+        """A sentence for an operator's report; empty when the pace is plausible, or when no other rate
+        would make it so (the rate read at is already the nearest: stepping that slow or fast is the
+        motion's own, as in a martial arts stance shifting its feet every few seconds)."""
+        rate = self.suggested_rate()
+        if self.plausible or abs(rate - self.fps) < 1e-6:
             return ""
         pace = "slower" if self.stride_s > STRIDE_S[1] else "faster"
-        rate = self.suggested_rate()
         return (f"Its strides take {self.stride_s:.2f} s at {self.fps:g} keys per second, {pace} than people move "
                 f"({STRIDE_S[0]:g} to {STRIDE_S[1]:g} s): the take may have been captured at {rate:g} fps. If so, "
                 f"set Keys per Second to {rate:g} (STRNN sidebar) so that the result keeps its pace")

@@ -226,3 +226,41 @@ def test_feet_evaluation_of_extended_walks():
     assert out["clips"] == 3 and out["frames"] == 90
     assert out["skate_locked_cm"] < out["skate_raw_cm"]
     assert out["sink_locked_cm"] <= 2.0 and out["straight_knees_locked"] == 0.0
+
+
+def test_feet_brought_to_the_floor_after_fixed_frames_ease_down_without_a_jump():
+    """A contact span that runs on from the fixed frames, in a take that rises slowly off the floor
+    (a smooth input): the free frames are brought down to the floor the fixed frames stand on, but
+    gradually from the seam on, never by a step at the first free frame (Fill Gap on a 120 fps martial
+    arts take dropped the whole body 1.4 cm there)."""
+    clean = walking_skeleton(150).astype(np.float64)
+    contacts = fl.detect_foot_contacts(clean)
+    rising = clean.copy()
+    rising[..., 1] += 0.002 * np.arange(150)[:, None]  # 2 mm a frame, whole body: no jump anywhere
+    keep = 47  # the seam cuts through contact spans
+    locked = fl.foot_lock(rising, MODEL_FPS, contacts, fixed=np.arange(150) < keep)
+    assert np.array_equal(locked[:keep], rising[:keep].astype(np.float32))
+    step = np.abs(np.diff(locked[:, :, 1], axis=0))  # [F - 1, J] vertical moves
+    usual = np.abs(np.diff(rising[:, :, 1], axis=0)).max(0)  # each joint's largest in the input
+    assert (step[keep - 1] <= usual + 0.002).all(), "no step at the seam"
+    later = contacts[keep + 30:] > 0.5
+    low = locked[keep + 30:][:, CONTACT_JOINTS, 1] - rising[keep + 30:][:, CONTACT_JOINTS, 1]
+    assert low[later].mean() < -0.05  # further on, the feet are brought down (the hovering is corrected)
+
+
+def test_a_lock_reaches_the_next_spans_target_without_a_step_when_the_last_one_ended_close_by():
+    """Two contact spans five frames apart on a joint sliding 1 cm a frame: the pinned joint passes from
+    the first span's spot to the second's over the frames between, and arrives there at the span's first
+    frame. (A weighted mean of the two spans' corrections stopped short and jumped there: a toe on a 120 fps
+    martial arts take snapped 6 cm in one frame as a toe span began just after the last one.)"""
+    x = np.zeros((60, 1, 3))
+    x[:, 0, 0] = 0.01 * np.arange(60)
+    mask = np.zeros((60, 1), bool)
+    mask[10:21], mask[26:41] = True, True
+    pull, weight = fl.lock_offsets(x, mask, blend=9.0)
+    out = (x + pull)[:, 0, 0]
+    np.testing.assert_allclose(out[10:21], 0.15, atol=1e-9)  # each span on its spot
+    np.testing.assert_allclose(out[26:41], 0.33, atol=1e-9)
+    steps = np.diff(out[20:27])  # 18 cm over the 6 steps between them: eased out of one spot and into the next
+    assert (steps > 0).all() and steps[0] < 0.015 and steps[-1] < 0.015 and steps.max() < 0.05, steps
+    assert (weight >= 0).all() and (weight <= 1).all()

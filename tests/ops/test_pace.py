@@ -42,6 +42,13 @@ def test_the_note_says_which_way_the_pace_is_off():
     assert Pace(sum(STRIDE_S) / 2, 30.0).note() == ""
 
 
+def test_no_note_when_the_rate_read_at_is_already_the_nearest():
+    """A 120 fps martial arts take shifting its stance every 3.7 s used to be told it "may have been
+    captured at 120 fps", the rate it was read at: no rate explains such a pace, so nothing is said."""
+    assert Pace(3.67, 120.0).suggested_rate() == 120.0 and Pace(3.67, 120.0).note() == ""
+    assert "captured at 120 fps" in Pace(3.67, 30.0).note()  # the same strides read at 30: 4 x too slow
+
+
 def test_real_walks_and_runs_read_at_their_rate_are_plausible_and_at_2_5x_are_not(mocap_root):
     """Bandai walks and runs (30 fps): every stride between 0.45 and 1.6 s; read as a 30 fps take keyed
     into a 12 fps scene would be (2.5 x slower, as 60 into 24), every one flagged."""
