@@ -173,14 +173,13 @@ def lock_offsets(x: np.ndarray, mask: np.ndarray, blend: float, fixed: np.ndarra
     mask = plausible_spans(ground, mask, limit, weight)
     span, targets = span_targets(ground, mask, weight)
     edge_fix = (targets[span] if len(targets) else ground) - ground  # at contact frames: target - position
-    total, weight = _faded(np.where(mask[..., None], edge_fix, 0.0), mask, blend)
-    pull = total / np.maximum(weight, 1.0)[..., None]
+    pull, weight = _faded(np.where(mask[..., None], edge_fix, 0.0), mask, blend)
     if border is not None:  # no jump next to fixed frames: fade out the pull they would have had
-        seam, near = _faded(pull, np.broadcast_to(border[:, None], mask.shape), blend)
-        pull = np.where(free[:, None, None], pull - seam / np.maximum(near, 1.0)[..., None], 0.0)
+        seam, _ = _faded(pull, np.broadcast_to(border[:, None], mask.shape), blend)
+        pull = np.where(free[:, None, None], pull - seam, 0.0)
     out = np.zeros(x.shape)
     out[..., list(GROUND_AXES)] = pull
-    return out, np.minimum(weight, 1.0)
+    return out, weight
 
 
 def ankle_targets(pos: np.ndarray, contacts: np.ndarray, blend: float, fixed: np.ndarray | None = None,
@@ -241,8 +240,7 @@ def span_lift(ankle: np.ndarray, foot: np.ndarray, mask: np.ndarray, blend: floa
     span, level = span_targets(need[..., None], on)
     level = np.sign(level) * np.maximum(np.abs(level) - tolerance, 0.0)  # the take's own variation stays
     per_frame = np.where(on[..., None], level[span] if len(level) else 0.0, 0.0)
-    total, weight = _faded(per_frame, on, blend)
-    return total[..., 0] / np.maximum(weight, 1.0)
+    return _faded(per_frame, on, blend)[0][..., 0]
 
 
 def body_drop(pos: np.ndarray, mask: np.ndarray, blend: float, fixed: np.ndarray | None,
