@@ -32,7 +32,8 @@ IGNORE = shutil.ignore_patterns("__pycache__", "*.pyc", "*.tmp")
 # model_core modules the extension never imports (training, evaluation, writing BVH, test data):
 # they stay out of the zip (a test walks the extension's imports to keep this list honest).
 NOT_SHIPPED = ("model_core/eval", "model_core/model/training.py", "model_core/model/baseline_training.py",
-               "model_core/model/baselines.py", "model_core/model/dataset.py", "model_core/io/bvh_export.py",
+               "model_core/model/gap_training.py", "model_core/model/baselines.py", "model_core/model/dataset.py",
+               "model_core/io/bvh_export.py",
                "model_core/motion/synthetic.py", "model_core/ops/follow_torch.py")
 DEFAULT_PLATFORMS = ("linux-x64", "macos-arm64", "windows-x64")
 

@@ -1,5 +1,6 @@
 #!/usr/bin/env python3
-"""Train STRNN, or a baseline to score it against (--arch simlpe | residual_gru), on a folder of BVH files.
+"""Train STRNN, a baseline to score it against (--arch simlpe | residual_gru), or Fill Gap's gap model
+(--arch gap), on a folder of BVH files.
 
 Single machine:   python scripts/train.py --data DIR --out runs/NAME
 Data-parallel:    torchrun --nproc_per_node N scripts/train.py --data DIR --out runs/NAME
@@ -27,9 +28,9 @@ from model_core.model.dataset import DataError  # noqa: E402
 from model_core.model.strnn import STRNNConfig  # noqa: E402
 from model_core.model.training import TrainConfig, export_state, train  # noqa: E402
 
-ARCHS = ("strnn", "simlpe", "residual_gru")
-DEFAULT_WIDTH = {"strnn": 128, "residual_gru": 512}
-DEFAULT_LR = {"strnn": 1e-3, "simlpe": 3e-4, "residual_gru": 1e-3}
+ARCHS = ("strnn", "simlpe", "residual_gru", "gap")
+DEFAULT_WIDTH = {"strnn": 128, "residual_gru": 512, "gap": 768}
+DEFAULT_LR = {"strnn": 1e-3, "simlpe": 3e-4, "residual_gru": 1e-3, "gap": 1e-3}
 
 VARIANTS = {
     "composite": dict(spatial=True, residual=True),  # the full model (paper: Composite)
@@ -45,12 +46,15 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--data", required=True, help="folder of .bvh files (searched recursively)")
     p.add_argument("--out", default=TrainConfig.out, help="output folder (state, log, release)")
     p.add_argument("--arch", choices=ARCHS, default="strnn",
-                   help="STRNN, or a baseline: siMLPe (Guo et al. 2023) or the residual GRU (Martinez et al. "
-                        "2017); the STRNN-only options below are ignored for a baseline")
+                   help="STRNN, a baseline: siMLPe (Guo et al. 2023) or the residual GRU (Martinez et al. "
+                        "2017), or the gap model Fill Gap uses (its release goes into a release folder as gap/); "
+                        "the STRNN-only options below are ignored for the others")
     p.add_argument("--variant", choices=VARIANTS, default="composite", help="architecture (paper's ablations)")
     p.add_argument("--width", type=int, default=None,
-                   help="STRNN: L4 width and LSTM size (default 128, paper: 512); residual GRU: units (default 512)")
-    p.add_argument("--blocks", type=int, default=48, help="siMLPe: temporal MLP blocks")
+                   help="STRNN: L4 width and LSTM size (default 128, paper: 512); residual GRU: units (default 512); "
+                        "gap model: width of its residual MLP (default 768)")
+    p.add_argument("--blocks", type=int, default=None, help="siMLPe: temporal MLP blocks (default 48); gap model: "
+                                                            "residual blocks (default 4)")
     p.add_argument("--encode-len", type=int, default=STRNNConfig.encode_len, help="context frames m")
     p.add_argument("--predict-len", type=int, default=STRNNConfig.predict_len, help="predicted frames n")
     p.add_argument("--residual-width", type=int, default=STRNNConfig.residual_width,
@@ -157,12 +161,29 @@ def baseline_run(args, argv):
         raise ValueError("--export, --init, --time-warp, --proportions, --capture-phases and --device are for "
                          "STRNN runs")
     shape = dict(encode_len=args.encode_len, predict_len=args.predict_len)
-    shape |= {"blocks": args.blocks} if args.arch == "simlpe" else {"width": args.width or DEFAULT_WIDTH[args.arch]}
+    if args.arch == "simlpe":
+        shape |= {"blocks": args.blocks or 48}
+    else:
+        shape |= {"width": args.width or DEFAULT_WIDTH[args.arch]}
     cfg = BaselineTrainConfig(data=args.data, out=args.out, model=MODELS[args.arch][1](**shape), steps=args.steps,
                               batch=args.batch, lr=learning_rate(args), seed=args.seed, cache=args.cache,
                               max_minutes=args.max_minutes, checkpoint_seconds=args.checkpoint_seconds,
                               command=command_line(argv), mirror=args.mirror, hold_out=args.hold_out)
     return train_baseline(cfg, resume=args.resume, progress=not args.quiet)
+
+
+def gap_run(args, argv):
+    """Train the gap model (imported here: other runs never load its module)."""
+    from model_core.model.gap_training import GapTrainConfig, train_gap
+
+    if args.export or args.init or args.device != "cpu":
+        raise ValueError("--export, --init and --device are for STRNN runs")
+    cfg = GapTrainConfig(data=args.data, out=args.out, width=args.width or DEFAULT_WIDTH["gap"],
+                         blocks=args.blocks or 4, steps=args.steps, batch=args.batch, lr=learning_rate(args),
+                         seed=args.seed, mirror=args.mirror > 0, hold_out=args.hold_out, cache=args.cache,
+                         max_minutes=args.max_minutes, checkpoint_seconds=args.checkpoint_seconds,
+                         command=command_line(argv))
+    return train_gap(cfg, resume=args.resume)
 
 
 def strnn_run(args, argv):
@@ -233,7 +254,8 @@ def main(argv=None) -> int:
 
         torch.set_num_threads(args.threads)
     try:
-        release = (strnn_run if args.arch == "strnn" else baseline_run)(args, argv)
+        run = {"strnn": strnn_run, "gap": gap_run}.get(args.arch, baseline_run)
+        release = run(args, argv)
     except (DataError, ValueError) as e:
         print(f"error: {e}", file=sys.stderr)
         return 2

@@ -57,7 +57,8 @@ def evaluate_inbetween(engine, clips, gaps=(15, 30, 60)) -> dict:
         ctx, true, tgt = windows(positions, gap)
         pred = extend_batch(engine, ctx, gap + 1, paired_windows=fill_gap.PAIRED_WINDOWS)  # as Fill Gap
         shares = momentum_shares(engine, ctx)
-        bent = np.stack([fill_from(c, p, t[None], k) for p, c, t, k in zip(pred, ctx, tgt, shares)])
+        bent = np.stack([fill_gap.with_gap_model(engine, c, t[None], fill_from(c, p, t[None], k), k)
+                         for p, c, t, k in zip(pred, ctx, tgt, shares)])
         ours, arrive = bent[:, :-1], bent[:, -1]
         lerp = np.stack([interpolate(c[-1], t, gap) for c, t in zip(ctx, tgt)])
         turn = np.stack([interpolate(c[-1], t, gap, heading=True) for c, t in zip(ctx, tgt)])

@@ -112,6 +112,7 @@ class Engine:
             if cfg["residual"] else None
         self.filter_context = bool(cfg.get("filter_context", False))
         self.companion = Engine(ckpt.companion) if ckpt.companion is not None else None
+        self.gap = ckpt.gap  # the release's gap model (Fill Gap's in-betweener), or None
 
     @classmethod
     def load(cls, folder: str | Path | None = None) -> Engine:

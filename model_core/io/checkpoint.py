@@ -27,6 +27,9 @@ DEFAULT_MODEL = REPO / "models" / "strnn_default"
 # bounded gap that Fill Gap bends onto its target, whose windows are all averaged (Engine.extrapolate's
 # paired_windows).
 COMPANION = "companion"
+# A release may hold its gap model in this subfolder: the learnt in-betweener Fill Gap uses
+# (model_core/inference/gap_engine.py); without it Fill Gap bends the STRNN's continuation onto the target.
+GAP = "gap"
 DENOISE_MODEL = REPO / "models" / "strnn_denoise"  # the model Denoise uses unless told otherwise
 PURPOSES = ("generate", "denoise")  # what a release is trained for (model.json "purpose"; absent: the first)
 # What a release holds (model.json "architecture"; absent: the first). The others are published
@@ -63,6 +66,7 @@ class Checkpoint:
     seeds: np.ndarray
     seed_names: list[str]
     companion: Checkpoint | None = None  # the second model of the first window (COMPANION)
+    gap: object | None = None  # the gap model (GAP): a gap_engine.GapModel
 
     @property
     def purpose(self) -> str:
@@ -206,6 +210,10 @@ def load_release(folder: str | Path | None = None) -> Checkpoint:
         _check_strnn_shapes(folder, ckpt)
         if (folder / COMPANION / "model.json").exists():
             ckpt.companion = _companion(folder, ckpt)
+        if (folder / GAP / "model.json").exists():
+            from ..inference.gap_engine import GapModel  # it reads its files with this module's reader
+
+            ckpt.gap = GapModel.load(folder / GAP)
     return ckpt
 
 

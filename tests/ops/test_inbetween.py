@@ -19,6 +19,8 @@ from model_core.ops.inbetween import (
     LATE_LEAN,
     bend_onto,
     fill_from,
+    gap_fill,
+    gap_model_share,
     inbetween,
     inbetween_positions,
     interpolation,
@@ -76,6 +78,7 @@ def test_every_window_of_a_gap_is_the_two_models_average():
     companion's average window after window (Extend averages the first window only)."""
     engine = Engine.load()
     assert engine.companion is not None
+    engine.gap = None  # the STRNN's continuation alone (the gap model's share: the next test)
     walk = walking_skeleton(120)
     context, target = walk[:20], walk[80:81]
     out = inbetween(engine, context, target, 59)
@@ -86,6 +89,44 @@ def test_every_window_of_a_gap_is_the_two_models_average():
     momentum = momentum_shares(engine, context[None].astype(np.float32))[0]
     np.testing.assert_allclose(out, fill_from(context.astype(np.float64), paired.astype(np.float64),
                                               target.astype(np.float64), momentum)[:-1], atol=1e-4)
+
+
+def test_the_releases_gap_model_takes_its_share_more_in_long_gaps_and_less_in_unfamiliar_motion():
+    """Fill Gap blends the STRNN's bent continuation with the release's gap model (a learnt in-betweener):
+    more of the gap model the longer the gap, less where the context is unfamiliar; the blend keeps the body's
+    bones and still arrives at the target."""
+    engine = Engine.load()
+    assert engine.gap is not None, "the default release ships its gap model (models/strnn_default/gap)"
+    assert gap_model_share(15, 0.0) < gap_model_share(30, 0.0) < gap_model_share(60, 0.0) <= 1.0
+    assert gap_model_share(30, 1.0) == pytest.approx(0.5 * gap_model_share(30, 0.0))
+    walk = walking_skeleton(200, radius=4.0)
+    context, target = walk[:20].astype(np.float64), walk[60:62].astype(np.float64)
+    out = inbetween(engine, context, target, 39)
+    pred = engine.extend(context.astype(np.float32), 40, paired_windows=None).astype(np.float64)
+    momentum = momentum_shares(engine, context[None].astype(np.float32))[0]
+    alone = fill_from(context, pred, target, momentum)
+    other = gap_fill(engine.gap, context, target, 39)
+    share = gap_model_share(39, momentum)
+    assert 0.0 < share < 1.0
+    mid = np.linalg.norm(out[20] - alone[20], axis=-1).mean()
+    assert mid == pytest.approx(share * np.linalg.norm(other[20] - alone[20], axis=-1).mean(), rel=0.2)
+    np.testing.assert_allclose(bones(out), np.broadcast_to(bones(context[-1:])[0], bones(out).shape), rtol=2e-3)
+    last = np.concatenate([out[-1:], target[:1]])
+    assert np.linalg.norm(np.diff(last, axis=0), axis=-1).max() < 0.1  # one frame before the target
+
+
+def test_the_gap_model_is_nearer_a_real_take_than_interpolation(mocap_root):
+    """The shipped gap model on a test-split take it never learnt from, at gaps of 30 frames (1 s)."""
+    from model_core.rig.rigs import load_clip
+
+    engine = Engine.load()
+    walk = load_clip(mocap_root / "bandai-namco/dataset-2/dataset-2_walk-turn-left_active_032.bvh").astype(np.float64)
+    ours, lerp = [], []
+    for s in range(0, len(walk) - 51, 15):
+        context, truth, target = walk[s:s + 20], walk[s + 20:s + 50], walk[s + 50:s + 52]
+        ours.append(np.linalg.norm(gap_fill(engine.gap, context, target, 30)[:-1] - truth, axis=-1).mean())
+        lerp.append(np.linalg.norm(interpolate(context[-1], target[0], 30) - truth, axis=-1).mean())
+    assert len(ours) >= 3 and np.mean(ours) < 0.7 * np.mean(lerp)
 
 
 def test_the_gap_leans_on_the_interpolation_late_and_unfamiliar_motion_mid_gap_keeping_both_ends():
