@@ -180,6 +180,7 @@ def gap_run(args, argv):
         raise ValueError("--export, --init and --device are for STRNN runs")
     cfg = GapTrainConfig(data=args.data, out=args.out, width=args.width or DEFAULT_WIDTH["gap"],
                          blocks=args.blocks or 4, steps=args.steps, batch=args.batch, lr=learning_rate(args),
+                         dropout=args.dropout, capture_phases=args.capture_phases,
                          seed=args.seed, mirror=args.mirror > 0, hold_out=args.hold_out, cache=args.cache,
                          max_minutes=args.max_minutes, checkpoint_seconds=args.checkpoint_seconds,
                          command=command_line(argv))

@@ -41,6 +41,8 @@ class GapTrainConfig:
     paces: tuple = (0.8, 0.9, 1.0, 1.1, 1.25)  # each take also read at these multiples of its pace
     mirror: bool = True
     jitter: float = 0.01  # std (m, standard body) of noise on the context's terms, in a random share of windows
+    dropout: float = 0.0  # dropout inside each residual block
+    capture_phases: bool = False  # every phase of a 60 or 120 fps take a clip of its own (dataset.load_folder)
     hold_out: bool = False
     val_every: int = 500
     checkpoint_seconds: float = 300.0
@@ -64,6 +66,7 @@ class GapNet(nn.Module):
             b.fc1, b.fc2 = nn.Linear(cfg.width, cfg.width), nn.Linear(cfg.width, cfg.width)
             self.blocks.append(b)
         self.norm = nn.LayerNorm(cfg.width)
+        self.drop = nn.Dropout(cfg.dropout) if cfg.dropout > 0 else nn.Identity()
         self.out = nn.Linear(cfg.width, cfg.sines * ge.TERMS)
         nn.init.zeros_(self.out.weight)
         nn.init.zeros_(self.out.bias)
@@ -71,7 +74,7 @@ class GapNet(nn.Module):
     def forward(self, x):
         h = self.inp((x - self.in_mean) / self.in_std)
         for b in self.blocks:
-            h = h + b.fc2(nn.functional.gelu(b.fc1(b.norm(h)), approximate="tanh"))
+            h = h + b.fc2(self.drop(nn.functional.gelu(b.fc1(b.norm(h)), approximate="tanh")))
         out = self.out(self.norm(h)).reshape(len(x), self.k, ge.TERMS)
         return out * self.out_scale
 
@@ -158,7 +161,7 @@ def train_gap(cfg: GapTrainConfig, resume: bool = False) -> Path:
     log = setup_logging(out, 0)
     torch.manual_seed(cfg.seed)
     rng = np.random.default_rng(cfg.seed)
-    data = load_folder(cfg.data, cache_dir=cfg.cache or None, progress=False)
+    data = load_folder(cfg.data, cache_dir=cfg.cache or None, progress=False, capture_phases=cfg.capture_phases)
     if cfg.hold_out:
         data = data.without_held_out()
     train = Windows(data.split("train"), cfg.paces, cfg.mirror, cfg.jitter)

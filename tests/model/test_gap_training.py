@@ -39,6 +39,15 @@ def test_train_py_writes_a_gap_model_that_fills_a_gap_and_resumes(walk_folder, t
     assert json.loads((out / "release" / "model.json").read_text())["steps"] == 9
 
 
+def test_a_gap_run_takes_dropout_and_capture_phases(walk_folder, tmp_path):
+    out = tmp_path / "gap_do"
+    argv = ["--arch", "gap", "--data", str(walk_folder), "--out", str(out), "--steps", "2", "--batch", "4",
+            "--width", "16", "--blocks", "1", "--cache", "", "--threads", "1", "--dropout", "0.1", "--capture-phases"]
+    assert train_script.main(argv) == 0
+    training = json.loads((out / "release" / "model.json").read_text())["training"]
+    assert training["dropout"] == 0.1 and training["capture_phases"] is True
+
+
 def test_a_gap_run_refuses_strnn_only_options(walk_folder, tmp_path, capsys):
     argv = ["--arch", "gap", "--data", str(walk_folder), "--out", str(tmp_path / "g"), "--init", str(tmp_path)]
     assert train_script.main(argv) == 2
