@@ -20,8 +20,8 @@ from pathlib import Path
 import numpy as np
 
 from ..io.checkpoint import CheckpointError, read_safetensors
-from ..motion.conventions import ROOT, STANDARD_LEG_LENGTH, UP_AXIS
-from ..motion.features import heading, yaw_matrix
+from ..motion.conventions import STANDARD_LEG_LENGTH
+from ..motion.features import root_and_local, wrap_angle, yaw_matrix
 from ..rig.rigs import leg_length
 
 FORMAT = "strnn-gap-1"
@@ -40,13 +40,10 @@ def body_scale(pos: np.ndarray) -> float:
 
 def terms(pos: np.ndarray) -> np.ndarray:
     """``[F, 66]`` body terms of positions ``[F, 21, 3]`` (Y-up): the hips' ground position (x, z), the
-    heading (radians about +Y, unwrapped over the frames) and the joints in the body's frame."""
-    pos = np.asarray(pos, np.float64)
-    yaw = heading(pos, sigma=0.0)
-    root = pos[:, ROOT].copy()
-    root[:, UP_AXIS] = 0.0
-    local = np.einsum("fij,fkj->fki", yaw_matrix(-yaw), pos - root[:, None])
-    return np.concatenate([root[:, [0, 2]], yaw[:, None], local.reshape(len(pos), -1)], 1)
+    heading (radians about +Y, unwrapped over the frames) and the joints in the body's frame
+    (:func:`features.root_and_local`, flattened)."""
+    root, yaw, local = root_and_local(pos)
+    return np.concatenate([root[:, [0, 2]], yaw[:, None], local.reshape(len(local), -1)], 1)
 
 
 def positions(t: np.ndarray) -> np.ndarray:
@@ -79,17 +76,13 @@ def absolute(t: np.ndarray, origin: np.ndarray) -> np.ndarray:
     return out
 
 
-def wrap(angle):
-    return (angle + np.pi) % (2 * np.pi) - np.pi
-
-
 def interpolate_terms(last: np.ndarray, target: np.ndarray, n: np.ndarray, frames: int) -> np.ndarray:
     """``[B, frames, 66]`` interpolation from ``last`` to ``target`` ``[B, 66]`` over gaps of ``n`` ``[B]``
     frames (frames past a gap's end repeat its target): the heading the short way round."""
     i = np.arange(1, frames + 1)[None]
     s = np.minimum(i / (np.asarray(n)[:, None] + 1.0), 1.0)[..., None]
     delta = target - last
-    delta[:, 2] = wrap(delta[:, 2])
+    delta[:, 2] = wrap_angle(delta[:, 2])
     return last[:, None] + s * delta[:, None]
 
 
@@ -108,7 +101,7 @@ def inputs(ctx: np.ndarray, target: np.ndarray, moves_on: np.ndarray, n: np.ndar
     step is known ``moves_on`` ``[B]`` (0 or 1; if not, it is given as 0), and the gap's length ``n``."""
     step = (target[:, 1] - target[:, 0]) * moves_on[:, None]
     tgt = target[:, 0].copy()
-    tgt[:, 2] = wrap(tgt[:, 2])
+    tgt[:, 2] = wrap_angle(tgt[:, 2])
     b = len(ctx)
     return np.concatenate([ctx.reshape(b, -1), tgt, step, moves_on[:, None], np.asarray(n, np.float64)[:, None]
                            / 60.0], 1)
@@ -150,7 +143,8 @@ class GapModel:
             if name not in weights or tuple(weights[name].shape) != shape:
                 raise CheckpointError(f"{folder / 'model.safetensors'}: {name} is missing or not {shape}: the "
                                       "weights do not match model.json (copy the model folder again)")
-        return cls({n: a.astype(np.float64) if n in ("in_mean", "in_std") else a for n, a in weights.items()}, doc)
+        return cls({n: a.astype(np.float64 if n in ("in_mean", "in_std") else np.float32) for n, a in weights.items()},
+                   doc)
 
     @property
     def k(self) -> int:
@@ -159,7 +153,7 @@ class GapModel:
     def coefficients(self, x: np.ndarray) -> np.ndarray:
         """Sine coefficients ``[B, k, 66]`` for inputs ``[B, INPUTS]``."""
         w = self.weights
-        h = (x - w["in_mean"]) / w["in_std"]
+        h = ((x - w["in_mean"]) / w["in_std"]).astype(np.float32)  # in the weights' precision: no float64 copies
         h = h @ w["inp.weight"].T + w["inp.bias"]
         for b in range(int(self.config["config"]["blocks"])):
             p = f"blocks.{b}."

@@ -19,6 +19,7 @@ from torch import nn
 
 from ..inference import gap_engine as ge
 from ..io.files import write_atomic, write_json
+from ..motion.conventions import MODEL_FPS
 from ..motion.features import mirror_positions
 from ..motion.geometry import interpolate_frames
 from .dataset import DataError, load_folder
@@ -231,7 +232,7 @@ def save_gap_release(folder: Path, model: GapNet, cfg: GapTrainConfig, step: int
     write_atomic(folder / "model.safetensors", lambda p: save_file(weights, str(p)))
     doc = {"format": ge.FORMAT, "config": {"sines": cfg.sines, "blocks": cfg.blocks, "width": cfg.width,
                                            "context": ge.CONTEXT, "max_gap": ge.MAX_GAP},
-           "fps": 30, "units": "metres", "up_axis": "y", "steps": step, "training": asdict(cfg),
+           "fps": MODEL_FPS, "units": "metres", "up_axis": "y", "steps": step, "training": asdict(cfg),
            "history": history[-5:], "licence": licence_of(data) if data is not None else None}
     write_json(folder / "model.json", doc)
     return folder

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .conventions import CONTACT_JOINTS, CONTACTS, JOINT_INDEX, JOINTS, LAYOUT, MODEL_FPS, PARENTS, UP_AXIS
+from .conventions import CONTACT_JOINTS, CONTACTS, JOINT_INDEX, JOINTS, LAYOUT, MODEL_FPS, PARENTS, ROOT, UP_AXIS
 
 # Contact thresholds: a foot joint is in contact when it is within this height
 # of its own lowest level in the clip and moves slower than this ground speed.
@@ -71,6 +71,21 @@ def heading(pos: np.ndarray, sigma: float = HEADING_SIGMA_FRAMES) -> np.ndarray:
     if sigma > 0 and len(fwd) > 1:
         fwd = gaussian_smooth(fwd, sigma)
     return np.unwrap(np.arctan2(fwd[..., 0], fwd[..., 2]), axis=0)
+
+
+def root_and_local(pos: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(ground position of the hips ``[F, 3]``, heading ``[F]``, joints in the body's frame ``[F, J, 3]``)."""
+    pos = np.asarray(pos, np.float64)
+    yaw = heading(pos, sigma=0.0)
+    root = pos[:, ROOT].copy()
+    root[:, UP_AXIS] = 0.0
+    local = np.einsum("fij,fkj->fki", yaw_matrix(-yaw), pos - root[:, None])
+    return root, yaw, local
+
+
+def wrap_angle(angle: np.ndarray) -> np.ndarray:
+    """Angles (radians) brought into [-pi, pi)."""
+    return (angle + np.pi) % (2 * np.pi) - np.pi
 
 
 def lowest_foot(pos: np.ndarray) -> np.ndarray:

@@ -25,8 +25,8 @@ import math
 
 import numpy as np
 
-from ..motion.conventions import MODEL_FPS, PARENTS, ROOT, UP_AXIS
-from ..motion.features import heading, yaw_matrix
+from ..motion.conventions import MODEL_FPS, PARENTS, ROOT
+from ..motion.features import root_and_local, wrap_angle, yaw_matrix
 from ..motion.geometry import interpolate_frames, unit
 from .familiarity import momentum_shares
 from .footlock import LEGS, body_forward, place_leg
@@ -39,16 +39,6 @@ from .transfer import bone_lengths
 PAIRED_WINDOWS = None
 _HIP, _KNEE, _ANKLE, _TOE = (np.array([leg[k] for leg in LEGS]) for k in range(4))  # [2]: left, right
 MAX_GAP_S = 4.0  # longest gap the model is asked to bridge (its continuation drifts beyond a few seconds)
-
-
-def root_and_local(pos: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(ground position of the hips ``[F, 3]``, heading ``[F]``, joints in the body's frame ``[F, J, 3]``)."""
-    pos = np.asarray(pos, np.float64)
-    yaw = heading(pos, sigma=0.0)
-    root = pos[:, ROOT].copy()
-    root[:, UP_AXIS] = 0.0
-    local = np.einsum("fij,fkj->fki", yaw_matrix(-yaw), pos - root[:, None])
-    return root, yaw, local
 
 
 def _hermite(s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -75,10 +65,6 @@ def _chord_fit(reach: np.ndarray, want: np.ndarray) -> tuple[float, float]:
     angle = wrap_angle(np.arctan2(want[0], want[2]) - np.arctan2(reach[0], reach[2]))
     scale = np.clip(b / a, 1 / MAX_PATH_SCALE, MAX_PATH_SCALE)
     return float(weight * angle), float(1 + weight * (scale - 1))
-
-
-def wrap_angle(angle: np.ndarray) -> np.ndarray:
-    return (angle + np.pi) % (2 * np.pi) - np.pi
 
 
 def _arrive(q: np.ndarray, end, step, h_end: np.ndarray, h_slope: np.ndarray) -> np.ndarray:
