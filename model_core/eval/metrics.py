@@ -15,6 +15,7 @@ from ..motion.features import (
     lowest_foot,
     positions_to_features,
 )
+from ..motion.geometry import cubic_frames
 from ..ops.familiarity import momentum_shares
 from ..ops.fusion import running_median
 from ..ops.seam import blend_seam
@@ -224,15 +225,8 @@ def best_median(clean: list[np.ndarray], noisy: list[np.ndarray], sizes=(3, 5, 7
 
 def upsample(pos: np.ndarray, factor: float) -> np.ndarray:
     """``[F, ...]`` resampled at ``factor`` times the rate with a Catmull-Rom cubic (passes every frame)."""
-    x = np.asarray(pos, np.float64)
-    t = np.arange(int(np.floor((len(x) - 1) * factor + 1e-9)) + 1) / factor
-    i = np.minimum(np.floor(t).astype(int), len(x) - 2)
-    u = (t - i).reshape((-1,) + (1,) * (x.ndim - 1))
-    p0, p1 = x[np.maximum(i - 1, 0)], x[i]
-    p2, p3 = x[i + 1], x[np.minimum(i + 2, len(x) - 1)]
-    out = 0.5 * (2 * p1 + (p2 - p0) * u + (2 * p0 - 5 * p1 + 4 * p2 - p3) * u ** 2
-                 + (3 * p1 - p0 - 3 * p2 + p3) * u ** 3)
-    return out.astype(np.float32)
+    t = np.arange(int(np.floor((len(pos) - 1) * factor + 1e-9)) + 1) / factor
+    return cubic_frames(pos, t).astype(np.float32)
 
 
 def butterworth(pos: np.ndarray, cutoff_hz: float, fps: float = MODEL_FPS) -> np.ndarray:

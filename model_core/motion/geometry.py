@@ -47,6 +47,21 @@ def rotate_ground(yaw, xz, xp=np):
     return xp.stack([c * xz[..., 0] + s * xz[..., 1], -s * xz[..., 0] + c * xz[..., 1]], -1)
 
 
+def cubic_frames(x: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """``x`` ``[N, ...]`` (N >= 2) at fractional frame indices ``t`` ``[M]`` by a Catmull-Rom cubic, which
+    passes every frame and follows the curve between them (a straight line cuts a fast arc's corner),
+    clamped to the first and last frame -> ``float64 [M, ...]``."""
+    x = np.asarray(x, np.float64)
+    n = len(x)
+    t = np.clip(np.asarray(t, np.float64), 0, n - 1)
+    i = np.clip(np.floor(t + 1e-9).astype(int), 0, max(n - 2, 0))
+    u = np.maximum(t - i, 0.0).reshape((-1,) + (1,) * (x.ndim - 1))
+    p0, p1 = x[np.maximum(i - 1, 0)], x[i]
+    p2, p3 = x[np.minimum(i + 1, n - 1)], x[np.minimum(i + 2, n - 1)]
+    return 0.5 * (2 * p1 + (p2 - p0) * u + (2 * p0 - 5 * p1 + 4 * p2 - p3) * u ** 2
+                  + (3 * p1 - p0 - 3 * p2 + p3) * u ** 3)
+
+
 def interpolate_frames(x: np.ndarray, t: np.ndarray, snap: float = 1e-9) -> np.ndarray:
     """``x`` ``[N, ...]`` linearly interpolated at fractional frame indices ``t`` ``[M]``, clamped to
     the first and last frame -> ``float64 [M, ...]``. A ``t`` within ``snap`` below a whole frame

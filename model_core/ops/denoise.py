@@ -9,7 +9,7 @@ import numpy as np
 from ..inference.steps import drive
 from ..motion.conventions import MODEL_FPS
 from ..motion.features import gaussian_smooth, mirror_positions
-from ..motion.geometry import interpolate_frames
+from ..motion.geometry import cubic_frames
 from . import fusion
 from .normalise import fit_normalisation, sample_at
 
@@ -82,5 +82,7 @@ def _scaled(steps, start: float, share: float):
 
 
 def _sample_times(x: np.ndarray, src_times: np.ndarray, times: np.ndarray) -> np.ndarray:
-    """Linear interpolation of ``x`` ``[N, ...]`` sampled at increasing ``src_times`` ``[N]`` at ``times`` ``[M]``."""
-    return interpolate_frames(x, np.interp(times, src_times, np.arange(len(src_times))))
+    """``x`` ``[N, ...]`` sampled at increasing ``src_times`` ``[N]``, at ``times`` ``[M]``: a Catmull-Rom cubic
+    over the samples, so that a 60 fps take's frames between a reading's follow its arcs (a straight line
+    between them cuts a fast hand's corner)."""
+    return cubic_frames(x, np.interp(times, src_times, np.arange(len(src_times))))

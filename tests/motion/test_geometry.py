@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from model_core.motion.features import facing, heading, yaw_matrix
-from model_core.motion.geometry import interpolate_frames, rotate_ground, shortest_arc
+from model_core.motion.geometry import cubic_frames, interpolate_frames, rotate_ground, shortest_arc
 from model_core.motion.synthetic import walking_skeleton
 
 
@@ -60,3 +60,16 @@ def test_heading_is_the_angle_of_facing():
     pos = walking_skeleton(40)
     fwd = facing(pos)
     np.testing.assert_allclose(heading(pos, sigma=0), np.unwrap(np.arctan2(fwd[:, 0], fwd[:, 2])), atol=1e-12)
+
+
+def test_cubic_frames_passes_every_frame_and_follows_an_arc():
+    t = np.arange(12.0)
+    x = np.stack([np.cos(0.4 * t), np.sin(0.4 * t), 0.3 * t ** 2], -1)  # an arc, rising faster and faster
+    np.testing.assert_allclose(cubic_frames(x, t), x, atol=1e-12)
+    np.testing.assert_allclose(cubic_frames(x, np.array([-1.0, 20.0])), x[[0, -1]])  # clamped
+    mid = np.arange(1, 10) + 0.5  # between frames that have a neighbour on each side
+    true = np.stack([np.cos(0.4 * mid), np.sin(0.4 * mid), 0.3 * mid ** 2], -1)
+    np.testing.assert_allclose(cubic_frames(x, mid)[:, 2], true[:, 2], atol=1e-12)  # exact on a quadratic
+    cubic_err = np.linalg.norm(cubic_frames(x, mid)[:, :2] - true[:, :2], axis=-1).max()
+    line_err = np.linalg.norm(interpolate_frames(x, mid)[:, :2] - true[:, :2], axis=-1).max()
+    assert cubic_err < 0.1 * line_err  # a straight line cuts the arc's corner
