@@ -73,6 +73,9 @@ def offset_weights(n: int, keep: int | None) -> np.ndarray:
     return w
 
 
+_UNREAD = object()  # Engine.gap before it is first asked for
+
+
 class Engine:
     """STRNN inference in NumPy. Build with :meth:`load`."""
 
@@ -112,7 +115,19 @@ class Engine:
             if cfg["residual"] else None
         self.filter_context = bool(cfg.get("filter_context", False))
         self.companion = Engine(ckpt.companion) if ckpt.companion is not None else None
-        self.gap = ckpt.gap  # the release's gap model (Fill Gap's in-betweener), or None
+        self._gap = _UNREAD  # the release's gap model (Fill Gap's in-betweener): read on first use (gap)
+
+    @property
+    def gap(self):
+        """The release's gap model (Fill Gap's in-betweener, :meth:`Checkpoint.load_gap`), or None: read the
+        first time it is asked for, and kept. Assign None to fill gaps with the STRNN alone."""
+        if self._gap is _UNREAD:
+            self._gap = self.ckpt.load_gap()
+        return self._gap
+
+    @gap.setter
+    def gap(self, model) -> None:
+        self._gap = model
 
     @classmethod
     def load(cls, folder: str | Path | None = None) -> Engine:

@@ -66,7 +66,17 @@ class Checkpoint:
     seeds: np.ndarray
     seed_names: list[str]
     companion: Checkpoint | None = None  # the second model of the first window (COMPANION)
-    gap: object | None = None  # the gap model (GAP): a gap_engine.GapModel
+    gap_folder: Path | None = None  # the release's gap model's folder (GAP), read by load_gap on first use
+
+    def load_gap(self):
+        """The release's gap model (:data:`GAP`, a :class:`gap_engine.GapModel`), or None without one. Read when
+        first needed, not with the release: only Fill Gap uses it, so Extend and Follow Curve neither wait for
+        its weights nor fail on a damaged copy of them (Fill Gap does, with :class:`CheckpointError`)."""
+        if self.gap_folder is None:
+            return None
+        from ..inference.gap_engine import GapModel  # it reads its files with this module's reader
+
+        return GapModel.load(self.gap_folder)
 
     @property
     def purpose(self) -> str:
@@ -211,9 +221,7 @@ def load_release(folder: str | Path | None = None) -> Checkpoint:
         if (folder / COMPANION / "model.json").exists():
             ckpt.companion = _companion(folder, ckpt)
         if (folder / GAP / "model.json").exists():
-            from ..inference.gap_engine import GapModel  # it reads its files with this module's reader
-
-            ckpt.gap = GapModel.load(folder / GAP)
+            ckpt.gap_folder = folder / GAP
     return ckpt
 
 

@@ -5,13 +5,15 @@ and model folders that are refused with a clear error."""
 from __future__ import annotations
 
 import json
+import shutil
 
 import numpy as np
 import pytest
 import torch
 
 from model_core.inference import gap_engine as ge
-from model_core.io.checkpoint import CheckpointError
+from model_core.inference.engine import Engine
+from model_core.io.checkpoint import DEFAULT_MODEL, GAP, CheckpointError
 from model_core.model.gap_training import GapNet, GapTrainConfig, positions_torch, save_gap_release
 from model_core.motion.synthetic import walking_skeleton
 from model_core.ops.inbetween import interpolation
@@ -104,3 +106,23 @@ def test_a_damaged_or_foreign_folder_is_refused(tmp_path):
     with pytest.raises(CheckpointError, match="unreadable|too short"):
         ge.GapModel.load(folder)
     assert model.k == 6
+
+
+def test_the_gap_model_is_read_when_fill_gap_first_needs_it(tmp_path):
+    """A release's gap model is read on first use and kept: Extend and Follow Curve neither wait for it nor fail
+    on a damaged copy of it, and Fill Gap gets the damage as a CheckpointError that names the folder."""
+    release = tmp_path / "release"
+    release.mkdir()
+    for name in ("model.json", "model.safetensors", "seeds.npz"):
+        shutil.copy(DEFAULT_MODEL / name, release / name)
+    shutil.copytree(DEFAULT_MODEL / GAP, release / GAP)
+    engine = Engine.load(release)
+    assert engine._gap is not None and not isinstance(engine._gap, ge.GapModel)  # not read yet
+    assert isinstance(engine.gap, ge.GapModel) and engine.gap is engine.gap  # read once, then kept
+    (release / GAP / "model.safetensors").write_bytes(b"\x80\x04pickle")
+    damaged = Engine.load(release)
+    assert damaged.extrapolate(damaged.seeds[0], 10).shape == (10, damaged.seeds.shape[-1])
+    with pytest.raises(CheckpointError, match="gap"):
+        _ = damaged.gap
+    damaged.gap = None  # the STRNN alone
+    assert damaged.gap is None
