@@ -20,6 +20,7 @@ import bpy
 import numpy as np
 
 from ...model_core.inference.steps import drive
+from ...model_core.io.checkpoint import CheckpointError
 from ...model_core.ops import footlock
 from ...model_core.ops.pace import Pace, stride_period
 from .. import engine_bridge
@@ -43,6 +44,8 @@ def model_errors():
         yield
     except engine_bridge.EngineError as e:
         raise UserError(str(e)) from e
+    except CheckpointError as e:  # a part of the model read when first needed (the gap model) is damaged
+        raise UserError(f"Could not read the model: {e}") from e
     except ValueError as e:
         raise UserError(f"The model could not run on this clip: {e}") from e
 

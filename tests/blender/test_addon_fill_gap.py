@@ -3,6 +3,8 @@ into a new action; the gap from the playhead, a frame range or the first one; ba
 
 from __future__ import annotations
 
+import shutil
+
 import bpy
 import numpy as np
 import pytest
@@ -73,6 +75,23 @@ def test_bad_gaps_are_refused_and_change_nothing(addon, real_model, gapped):
     cut(obj, 71, 120)
     bpy.context.scene.frame_set(55)
     refuse("No key on the mapped bones .* after frame 40")
+
+
+def test_a_damaged_gap_model_stops_fill_gap_alone(addon, real_model, gapped, tmp_path):
+    """The release's gap model is read when Fill Gap first needs it: a damaged copy leaves Extend working and
+    makes Fill Gap refuse, naming the file, with nothing changed."""
+    if not (real_model / "gap" / "model.json").exists():
+        pytest.skip("this release has no gap model")
+    copy = tmp_path / "release"
+    shutil.copytree(real_model, copy)
+    (copy / "gap" / "model.safetensors").write_bytes(b"\x80\x04pickle")
+    prefs = bpy.context.preferences.addons[addon.__name__].preferences
+    prefs.model_folder = str(copy)
+    bpy.context.scene.frame_set(55)
+    refuse(r"Could not read the model: .*gap.*model\.safetensors")
+    obj, _ = gapped
+    cut(obj, 41, 120)  # a clip to extend: its last key is frame 40
+    assert bpy.ops.strnn.extend_clip(frames=10) == {"FINISHED"}
 
 
 def test_nothing_to_fill(addon, real_model, tmp_path):
