@@ -8,6 +8,11 @@ against the model's own usual error, measured on held-back takes and kept in its
 operators can say when to trust a result less: a clip that rebuilds more than ``UNFAMILIAR_RATIO`` times
 worse than that is called unfamiliar. Extend and Fill Gap also let an unfamiliar context's momentum carry
 on into the new frames (:func:`momentum_shares`, :func:`seam.blend_seam`).
+
+It is the motion that is judged, not the body: a clip is first moved onto the model's own body
+(:func:`on_model_body`: the bone lengths of the training takes, the clip's bone directions), so that a
+familiar walk on a rig of other proportions (a generated Rigify rig reads its spine and legs quite
+differently) reads as familiar.
 """
 
 from __future__ import annotations
@@ -20,6 +25,7 @@ from ..motion.conventions import LAYOUT, MODEL_FPS
 from ..motion.features import positions_to_features
 from .normalise import fit_normalisation, model_frames_available, sample_at
 from .seam import momentum_share
+from .transfer import bone_lengths, retarget
 
 KEY = "familiarity"
 # A clip reads as unfamiliar when it rebuilds this many times worse than the 90th percentile. Chosen with
@@ -50,10 +56,29 @@ class Familiarity:
                 f"the motion it knows): the result may drift from the clip's style, so check it")
 
 
+def model_body(engine) -> np.ndarray | None:
+    """The body the model learnt, ``[21, 3]`` (model units): the first frame of the release's seed window whose
+    bone lengths are nearest the seeds' median (seeds are training windows); None for a release without seeds."""
+    seeds = getattr(engine, "seeds", None)
+    if seeds is None or len(seeds) == 0:
+        return None
+    frames = np.asarray(seeds, np.float64)[:, 0, LAYOUT.positions].reshape(len(seeds), -1, 3)
+    lengths = np.stack([bone_lengths(f[None]) for f in frames])
+    return frames[int(np.argmin(np.abs(lengths - np.median(lengths, 0)).sum(1)))]
+
+
+def on_model_body(engine, pos: np.ndarray) -> np.ndarray:
+    """Positions ``[F, 21, 3]`` (model units) moved onto :func:`model_body` (:func:`transfer.retarget`: its bone
+    lengths, ``pos``'s bone directions and path), so that familiarity judges the motion, not the proportions."""
+    body = model_body(engine)
+    return np.asarray(pos) if body is None else retarget(pos, body).astype(np.float32)
+
+
 def reconstruction_cm(engine, pos: np.ndarray, stride: int | None = None) -> np.ndarray:
     """Per-window reconstruction error (cm, root-local joints) of positions ``[F, 21, 3]`` (model
-    units and rate, F >= m): each ``m``-frame window through the model and back."""
-    feats, _ = positions_to_features(pos)
+    units and rate, F >= m), on the model's own body (:func:`on_model_body`): each ``m``-frame window
+    through the model and back."""
+    feats, _ = positions_to_features(on_model_body(engine, pos))
     m = engine.m
     starts = sorted(set(range(0, len(feats) - m + 1, stride or m // 2)) | {len(feats) - m})
     return _window_errors_cm(engine, np.stack([feats[s:s + m] for s in starts]))
@@ -77,7 +102,7 @@ def context_ratios(engine, contexts: np.ndarray) -> np.ndarray | None:
     usual = usual_cm(engine)
     if not usual or np.shape(contexts)[1] < engine.m:
         return None
-    windows = np.stack([positions_to_features(np.asarray(c)[-engine.m:])[0] for c in contexts])
+    windows = np.stack([positions_to_features(on_model_body(engine, np.asarray(c)[-engine.m:]))[0] for c in contexts])
     return _window_errors_cm(engine, windows) / usual
 
 
