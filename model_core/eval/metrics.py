@@ -8,6 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.signal import butter, filtfilt
 
+from ..inference.engine import on_learnt_body
 from ..motion.conventions import LAYOUT, MODEL_FPS, PARENTS, ROOT
 from ..motion.features import (
     continue_positions,
@@ -52,9 +53,11 @@ def extend_batch(engine, contexts: np.ndarray, frames: int, **kw) -> np.ndarray:
     """Continue each context ``[W, m, J, 3]`` by ``frames``: ``[W, frames, J, 3]``, as
     :meth:`Engine.extend` does one, in one batch (``kw``: :meth:`Engine.extrapolate`'s). Features are
     computed from the context alone (nothing of the future leaks in)."""
-    feats, starts = zip(*(positions_to_features(c) for c in contexts))
+    seen, backs = zip(*(on_learnt_body(engine, c) for c in contexts))  # read on the model's body, as Extend does
+    feats, starts = zip(*(positions_to_features(c) for c in seen))
     new = engine.extrapolate(np.stack(feats), frames, **kw)
-    return np.stack([continue_positions(f, s, n) for f, s, n in zip(feats, starts, new)]).astype(np.float32)
+    return np.stack([back(continue_positions(f, s, n)) for f, s, n, back in zip(feats, starts, new, backs)]
+                    ).astype(np.float32)
 
 
 def prediction_errors(engine, clips: list[np.ndarray], horizons_ms=HORIZONS_MS,

@@ -172,6 +172,36 @@ def continue_positions(feats: np.ndarray, start: RootStart, new: np.ndarray) -> 
     return features_to_positions(joined, RootStart(root[-1], float(yaw[-1])))[1:]
 
 
+def body_lengths(pos: np.ndarray) -> np.ndarray:
+    """Median length ``[..., 21]`` of each bone (joint to its parent; 0 for the hips) of joints ``[..., F, 21, 3]``."""
+    pos = np.asarray(pos, np.float64)
+    bones = np.linalg.norm(pos[..., 1:, :] - pos[..., PARENTS[1:], :], axis=-1)
+    return np.concatenate([np.zeros(bones.shape[:-2] + (1,)), np.median(bones, -2)], -1)
+
+
+def with_bone_lengths(pos: np.ndarray, lengths: np.ndarray) -> np.ndarray:
+    """Joints ``[F, 21, 3]`` with each bone ``lengths[j]`` ``[21]`` long and pointing as in ``pos``, the hips where
+    they are: the same motion on a body of other proportions, and back again with the first body's lengths."""
+    pos = np.asarray(pos, np.float64)
+    out = np.empty_like(pos)
+    out[..., 0, :] = pos[..., 0, :]
+    for j in range(1, len(PARENTS)):  # parents first
+        d = pos[..., j, :] - pos[..., PARENTS[j], :]
+        out[..., j, :] = out[..., PARENTS[j], :] + d / np.maximum(np.linalg.norm(d, axis=-1, keepdims=True), 1e-12) \
+            * lengths[j]
+    return out
+
+
+def learnt_body(seeds: np.ndarray | None) -> np.ndarray | None:
+    """Bone lengths ``[21]`` of the body a model learnt: those of its seed window (training windows, raw features
+    ``[K, m, C]``) nearest the seeds' median; None without seeds."""
+    if seeds is None or len(seeds) == 0:
+        return None
+    seeds = np.asarray(seeds, np.float64)
+    lengths = body_lengths(seeds[..., LAYOUT.positions].reshape(*seeds.shape[:2], -1, 3))  # (K, 21)
+    return lengths[int(np.argmin(np.abs(lengths - np.median(lengths, 0)).sum(1)))]
+
+
 def _mirror_map() -> tuple[np.ndarray, np.ndarray]:
     """(source channel ``[C]``, sign ``[C]``) of the left-right mirror of a feature frame."""
     swap = {"l_": "r_", "r_": "l_"}
