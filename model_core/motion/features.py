@@ -192,13 +192,21 @@ def with_bone_lengths(pos: np.ndarray, lengths: np.ndarray) -> np.ndarray:
     return out
 
 
-def learnt_body(seeds: np.ndarray | None) -> np.ndarray | None:
-    """Bone lengths ``[21]`` of the body a model learnt: those of its seed window (training windows, raw features
-    ``[K, m, C]``) nearest the seeds' median; None without seeds."""
+def learnt_bodies(seeds: np.ndarray | None) -> np.ndarray | None:
+    """Bone lengths ``[K, 21]`` of the bodies a model's seed windows (training windows, raw features ``[K, m, C]``)
+    move, one per window; None without seeds."""
     if seeds is None or len(seeds) == 0:
         return None
     seeds = np.asarray(seeds, np.float64)
-    lengths = body_lengths(seeds[..., LAYOUT.positions].reshape(*seeds.shape[:2], -1, 3))  # (K, 21)
+    return body_lengths(seeds[..., LAYOUT.positions].reshape(*seeds.shape[:2], -1, 3))
+
+
+def learnt_body(seeds: np.ndarray | None) -> np.ndarray | None:
+    """Bone lengths ``[21]`` of the body a model learnt most: those of its seed window nearest the seeds' median
+    (:func:`learnt_bodies`); None without seeds."""
+    lengths = learnt_bodies(seeds)
+    if lengths is None:
+        return None
     return lengths[int(np.argmin(np.abs(lengths - np.median(lengths, 0)).sum(1)))]
 
 
