@@ -183,14 +183,17 @@ def joint_speed(joints: np.ndarray) -> float:
 
 
 def test_extend_with_the_model_stays_alive(walking_rig, addon, real_model):
+    """A real walk on the generated rig, extended by 10 s, still walks in its last 5 s. The rig's proportions,
+    as the bone map reads them, are unlike any body the model learnt; read as they were, the walk slowed to a
+    third of its pace within 10 s (the model reads it on the body it learnt: engine.on_learnt_body)."""
     if find_mocap() is None:
         pytest.skip("needs a real walk (../shared/mocap unpacked): the procedural walk is not motion the model learnt")
     rig = walking_rig
     last = int(action_of(rig).frame_range[1])
-    run_on_rig(rig, "extend_clip", last, frames=60)
-    before = joint_speed(evaluated_joints(addon, rig, np.arange(last - 29, last + 1)))
-    after = joint_speed(evaluated_joints(addon, rig, np.arange(last + 1, last + 61)))
-    assert 0.3 < after / before < 3.0, (before, after)
+    run_on_rig(rig, "extend_clip", last, frames=300)
+    before = joint_speed(evaluated_joints(addon, rig, np.arange(last - 59, last + 1)))
+    after = joint_speed(evaluated_joints(addon, rig, np.arange(last + 151, last + 301)))
+    assert 0.6 < after / before < 1.7, (before, after)
 
 
 @pytest.mark.parametrize("op, kw", [("denoise_action", {}), ("foot_lock", {}),
