@@ -29,7 +29,7 @@ from pathlib import Path as FilePath
 
 import numpy as np
 
-from ..inference.engine import Engine, bone_lengths, project_to_skeleton
+from ..inference.engine import Engine, bone_lengths, on_learnt_body, project_to_skeleton
 from ..inference.steps import drive
 from ..io.checkpoint import Checkpoint, walk_seed_index
 from ..motion.conventions import CONTACT_JOINTS, LAYOUT, MODEL_FPS, UP_AXIS
@@ -256,11 +256,14 @@ def follow_path(follower: PathFollower, seed: np.ndarray, path: Path, frames: in
 
 def follow_path_steps(follower: PathFollower, seed: np.ndarray, path: Path, frames: int | None = None,
                       align: bool = True, speed: float | None = None):
-    """:func:`follow_path` as a step generator: yields the fraction done after each window."""
+    """:func:`follow_path` as a step generator: yields the fraction done after each window. A seed on a rig unlike
+    every body the model learnt walks on the body it learnt most and comes back on its own bones
+    (:func:`engine.on_learnt_body`; the features returned are the model's, on that body)."""
     seed = align_to_path(seed, path) if align else np.asarray(seed, np.float32)
-    feats, start = positions_to_features(seed)
+    seen, back = on_learnt_body(follower.engine, seed)
+    feats, start = positions_to_features(seen)
     new = yield from follower.follow_steps(feats, start, path, frames, speed)
-    return continue_positions(feats, start, new), new
+    return back(continue_positions(feats, start, new)), new
 
 
 def walk_seed(ckpt: Checkpoint) -> np.ndarray:

@@ -211,6 +211,27 @@ def test_follow_curve_keys_the_controls(walking_rig, addon, real_model):
     run_on_rig(walking_rig, "follow_curve", last, curve=path.name, frames=60)
 
 
+def test_follow_curve_on_the_rig_walks_rather_than_glides(walking_rig, addon, real_model):
+    """A real walk on the generated rig, continued along a 20 m curve for 8 s, still moves its limbs in its last
+    3 s (relative to the hips: the path sets where the hips go); read on the rig's own proportions, the body
+    glided along the curve at a quarter of its limbs' motion."""
+    if find_mocap() is None:
+        pytest.skip("needs a real walk (../shared/mocap unpacked): the procedural walk is not motion the model learnt")
+    bpy.ops.curve.primitive_nurbs_path_add()
+    path = bpy.context.active_object
+    path.scale = (5.0, 5.0, 5.0)
+    bpy.context.view_layer.objects.active = walking_rig
+    last = int(action_of(walking_rig).frame_range[1])
+    run_on_rig(walking_rig, "follow_curve", last, curve=path.name, frames=240)
+
+    def limbs(joints: np.ndarray) -> float:
+        return float(np.linalg.norm(np.diff(joints - joints[:, :1], axis=0), axis=-1).mean())
+
+    before = limbs(evaluated_joints(addon, walking_rig, np.arange(last - 59, last + 1)))
+    after = limbs(evaluated_joints(addon, walking_rig, np.arange(last + 151, last + 241)))
+    assert 0.5 < after / before < 2.0, (before, after)
+
+
 def transfer(source, target, **kw):
     for obj in bpy.context.view_layer.objects:
         obj.select_set(obj in (source, target))
