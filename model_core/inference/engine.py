@@ -396,10 +396,8 @@ def on_learnt_body(engine, positions: np.ndarray):
 
 
 def bone_lengths(feats: np.ndarray) -> np.ndarray:
-    """Median bone lengths ``[B, J]`` (0 for the root) of raw features ``[B, T, C]``."""
-    local = feats[..., LAYOUT.positions].reshape(*feats.shape[:-1], -1, 3)
-    bones = local[..., 1:, :] - local[..., PARENTS[1:], :]
-    return np.concatenate([np.zeros(feats.shape[:1] + (1,)), np.median(np.linalg.norm(bones, axis=-1), 1)], -1)
+    """Median bone lengths ``[B, J]`` (0 for the root) of raw features ``[B, T, C]`` (:func:`features.body_lengths`)."""
+    return body_lengths(feats[..., LAYOUT.positions].reshape(*feats.shape[:-1], -1, 3))
 
 
 def _chain_matrices() -> tuple[np.ndarray, np.ndarray]:

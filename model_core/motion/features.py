@@ -201,13 +201,19 @@ def learnt_bodies(seeds: np.ndarray | None) -> np.ndarray | None:
     return body_lengths(seeds[..., LAYOUT.positions].reshape(*seeds.shape[:2], -1, 3))
 
 
-def learnt_body(seeds: np.ndarray | None) -> np.ndarray | None:
-    """Bone lengths ``[21]`` of the body a model learnt most: those of its seed window nearest the seeds' median
-    (:func:`learnt_bodies`); None without seeds."""
+def learnt_seed(seeds: np.ndarray | None) -> int | None:
+    """Index of the seed window whose body is nearest the seeds' median (:func:`learnt_bodies`): the body a model
+    learnt most; None without seeds."""
     lengths = learnt_bodies(seeds)
     if lengths is None:
         return None
-    return lengths[int(np.argmin(np.abs(lengths - np.median(lengths, 0)).sum(1)))]
+    return int(np.argmin(np.abs(lengths - np.median(lengths, 0)).sum(1)))
+
+
+def learnt_body(seeds: np.ndarray | None) -> np.ndarray | None:
+    """Bone lengths ``[21]`` of the body a model learnt most (:func:`learnt_seed`'s); None without seeds."""
+    k = learnt_seed(seeds)
+    return None if k is None else learnt_bodies(seeds)[k]
 
 
 def _mirror_map() -> tuple[np.ndarray, np.ndarray]:

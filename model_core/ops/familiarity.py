@@ -22,10 +22,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..motion.conventions import LAYOUT, MODEL_FPS
-from ..motion.features import positions_to_features
+from ..motion.features import learnt_seed, positions_to_features
 from .normalise import fit_normalisation, model_frames_available, sample_at
 from .seam import momentum_share
-from .transfer import bone_lengths, retarget
+from .transfer import retarget
 
 KEY = "familiarity"
 # A clip reads as unfamiliar when it rebuilds this many times worse than the 90th percentile. Chosen with
@@ -60,11 +60,8 @@ def model_body(engine) -> np.ndarray | None:
     """The body the model learnt, ``[21, 3]`` (model units): the first frame of the release's seed window whose
     bone lengths are nearest the seeds' median (seeds are training windows); None for a release without seeds."""
     seeds = getattr(engine, "seeds", None)
-    if seeds is None or len(seeds) == 0:
-        return None
-    frames = np.asarray(seeds, np.float64)[:, 0, LAYOUT.positions].reshape(len(seeds), -1, 3)
-    lengths = np.stack([bone_lengths(f[None]) for f in frames])
-    return frames[int(np.argmin(np.abs(lengths - np.median(lengths, 0)).sum(1)))]
+    k = learnt_seed(seeds)
+    return None if k is None else np.asarray(seeds[k][0, LAYOUT.positions], np.float64).reshape(-1, 3)
 
 
 def on_model_body(engine, pos: np.ndarray) -> np.ndarray:

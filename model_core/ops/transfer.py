@@ -15,19 +15,15 @@ from __future__ import annotations
 import numpy as np
 
 from ..motion.conventions import GROUND_AXES, JOINT_INDEX, JOINTS, PARENTS, UP_AXIS
-from ..motion.features import floor_height, lowest_foot
+from ..motion.features import body_lengths, floor_height, lowest_foot
 from ..motion.geometry import unit
 from ..rig.rigs import leg_length
 
 
 def bone_lengths(pos: np.ndarray) -> np.ndarray:
     """Median length ``[21]`` of each canonical bone (joint to its parent; 0 for the hips) over
-    frames ``[F, 21, 3]``."""
-    pos = np.asarray(pos, dtype=np.float64)
-    out = np.zeros(len(JOINTS))
-    child = PARENTS >= 0
-    out[child] = np.median(np.linalg.norm(pos[:, child] - pos[:, PARENTS[child]], axis=-1), axis=0)
-    return out
+    frames ``[F, 21, 3]`` (:func:`features.body_lengths`)."""
+    return body_lengths(pos)
 
 
 # Rigid parts: (parent joint, (left, right) joints that span it, the torso joint above it).
