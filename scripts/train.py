@@ -23,7 +23,7 @@ try:
 except ImportError:
     sys.exit("error: training needs PyTorch: bash scripts/setup.sh installs it; with pip: strnn-motion[torch]")
 
-from model_core.io.checkpoint import COMPANION, PURPOSES  # noqa: E402
+from model_core.io.checkpoint import COMPANION, PURPOSES, SIMLPE  # noqa: E402
 from model_core.model.dataset import DataError  # noqa: E402
 from model_core.model.strnn import STRNNConfig  # noqa: E402
 from model_core.model.training import TrainConfig, export_state, train  # noqa: E402
@@ -222,6 +222,10 @@ def strnn_run(args, argv):
               f"with it; this run did not train it. Fine-tune it the same way (--init {Path(args.init) / COMPANION}) "
               f"and copy that run's release folder to {Path(release) / COMPANION}, or the new release predicts "
               "alone.", file=sys.stderr)
+    if args.init and (Path(args.init) / SIMLPE / "model.json").exists():
+        print(f"note: {args.init} has a siMLPe ({SIMLPE}/) that shares the first predicted window; this run did not "
+              f"train it. Copy it to {Path(release) / SIMLPE} (or train one on this run's data with --arch simlpe), "
+              "or the new release predicts without it.", file=sys.stderr)
     return release
 
 

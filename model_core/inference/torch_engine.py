@@ -17,6 +17,7 @@ import torch
 from ..io.checkpoint import Checkpoint, CheckpointError, load_release
 from ..model.strnn import STRNN, STRNNConfig
 from .engine import Engine
+from .simlpe_engine import SiMLPeEngine
 
 # State-dict entries a release may leave out: integer counters, not weights.
 _OPTIONAL = ("num_batches_tracked",)
@@ -51,6 +52,7 @@ class TorchEngine:
         self._mean = torch.from_numpy(ckpt.mean).to(self.device)
         self._std = torch.from_numpy(ckpt.std).to(self.device)
         self.companion = TorchEngine(ckpt.companion, device) if ckpt.companion is not None else None
+        self.simlpe = SiMLPeEngine(ckpt.simlpe) if ckpt.simlpe is not None else None  # tiny: NumPy is as quick
 
     @classmethod
     def load(cls, folder: str | Path | None = None, device: str | torch.device = "cpu") -> TorchEngine:

@@ -27,13 +27,18 @@ DEFAULT_MODEL = REPO / "models" / "strnn_default"
 # bounded gap that Fill Gap bends onto its target, whose windows are all averaged (Engine.extrapolate's
 # paired_windows).
 COMPANION = "companion"
+# A release may hold a siMLPe in this subfolder (model_core/inference/simlpe_engine.py): the first window of every
+# rollout is then a weighted average of the STRNN's prediction (and its companion's) with the siMLPe's
+# (Engine.predict_first, SIMLPE_SHARE), which predicts the next 20 frames of motion unlike the training data better.
+SIMLPE = "simlpe"
 # A release may hold its gap model in this subfolder: the learnt in-betweener Fill Gap uses
 # (model_core/inference/gap_engine.py); without it Fill Gap bends the STRNN's continuation onto the target.
 GAP = "gap"
 DENOISE_MODEL = REPO / "models" / "strnn_denoise"  # the model Denoise uses unless told otherwise
 PURPOSES = ("generate", "denoise")  # what a release is trained for (model.json "purpose"; absent: the first)
 # What a release holds (model.json "architecture"; absent: the first). The others are published
-# baselines (model_core/model/baselines.py), scored by scripts/evaluate.py and never run by the engines.
+# baselines (model_core/model/baselines.py), scored by scripts/evaluate.py; the engines run none on its own, and a
+# siMLPe only as a release's partner in the first window (SIMLPE).
 ARCHITECTURES = ("strnn", "simlpe", "residual_gru")
 
 
@@ -66,6 +71,7 @@ class Checkpoint:
     seeds: np.ndarray
     seed_names: list[str]
     companion: Checkpoint | None = None  # the second model of the first window (COMPANION)
+    simlpe: Checkpoint | None = None  # the siMLPe that shares the first window (SIMLPE)
     gap_folder: Path | None = None  # the release's gap model's folder (GAP), read by load_gap on first use
 
     def load_gap(self):
@@ -219,20 +225,23 @@ def load_release(folder: str | Path | None = None) -> Checkpoint:
     if ckpt.architecture == ARCHITECTURES[0]:
         _check_strnn_shapes(folder, ckpt)
         if (folder / COMPANION / "model.json").exists():
-            ckpt.companion = _companion(folder, ckpt)
+            ckpt.companion = _partner(folder, ckpt, COMPANION, ARCHITECTURES[0])
+        if (folder / SIMLPE / "model.json").exists():
+            ckpt.simlpe = _partner(folder, ckpt, SIMLPE, ARCHITECTURES[1])
         if (folder / GAP / "model.json").exists():
             ckpt.gap_folder = folder / GAP
     return ckpt
 
 
-def _companion(folder: Path, ckpt: Checkpoint) -> Checkpoint:
-    """The release's second STRNN (:data:`COMPANION`): a generating model that reads and predicts as many frames."""
-    other = load_release(folder / COMPANION)
+def _partner(folder: Path, ckpt: Checkpoint, sub: str, architecture: str) -> Checkpoint:
+    """A model the release shares its first window with (:data:`COMPANION`, an STRNN; :data:`SIMLPE`, a siMLPe):
+    a generating ``architecture`` model without partners of its own that reads and predicts as many frames."""
+    other = load_release(folder / sub)
     same = ("encode_len", "predict_len")
-    if other.architecture != ARCHITECTURES[0] or other.purpose != PURPOSES[0] or other.companion is not None or \
-            any(other.config.get(k) != ckpt.config.get(k) for k in same):
-        raise CheckpointError(f"{folder / COMPANION}: a companion must be a generating STRNN without a companion of "
-                              f"its own, with the same {' and '.join(same)}: copy the model folder again")
+    if other.architecture != architecture or other.purpose != PURPOSES[0] or other.companion is not None or \
+            other.simlpe is not None or any(other.config.get(k) != ckpt.config.get(k) for k in same):
+        raise CheckpointError(f"{folder / sub}: a {sub} must be a generating {architecture} model without a companion "
+                              f"or siMLPe of its own, with the same {' and '.join(same)}: copy the model folder again")
     return other
 
 

@@ -189,6 +189,6 @@ class BaselineEngine:
     mirrored_reading = Engine.mirrored_reading
     predict = Engine.predict
     predict_first = Engine.predict_first
-    companion = None  # a baseline release is one model
+    companion = simlpe = None  # a baseline release is one model
     extrapolate = Engine.extrapolate
     extend = Engine.extend

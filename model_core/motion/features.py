@@ -252,6 +252,16 @@ def mirror_features(feats: np.ndarray) -> np.ndarray:
     return feats[..., MIRROR_SOURCE] * MIRROR_SIGN
 
 
+def read_mirrored(predict_once, context: np.ndarray) -> np.ndarray:
+    """``predict_once`` (raw context ``[B, m, C]`` -> raw frames ``[B, n, C]``) of the context as it is and of its
+    mirror image, in one batch, the two predictions averaged (the mirrored one mirrored back). A model trained
+    on mirrored windows too errs differently on each reading, and what it predicts no longer depends on which
+    side of the body was captured as the left."""
+    context = np.asarray(context, np.float32)
+    both = predict_once(np.concatenate([context, mirror_features(context)]))
+    return 0.5 * (both[:len(context)] + mirror_features(both[len(context):]))
+
+
 # Bones (by their lower joint) that body-proportion augmentation scales: the torso's (spine to head, and
 # the shoulders' offsets from the chest) and the arms'. The legs are not: every clip is scaled to one leg
 # length (conventions.STANDARD_LEG_LENGTH), in training and at run time alike.

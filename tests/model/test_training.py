@@ -263,7 +263,7 @@ def test_the_device_is_checked_before_any_work(walk_folder, tmp_path, capsys):
     assert "for STRNN runs" in capsys.readouterr().err and not (tmp_path / "g").exists()
 
 
-def test_fine_tuning_a_release_with_a_companion_says_how_to_carry_it(walk_folder, tmp_path, capsys):
+def test_fine_tuning_a_release_with_partners_says_how_to_carry_them(walk_folder, tmp_path, capsys):
     sys.path.insert(0, str(REPO / "scripts"))
     import shutil
 
@@ -281,6 +281,11 @@ def test_fine_tuning_a_release_with_a_companion_says_how_to_carry_it(walk_folder
     err = capsys.readouterr().err
     assert "companion" in err and str(tmp_path / "tuned" / "release" / "companion") in err
     assert not (tmp_path / "tuned" / "release" / "companion").exists()
+    assert "siMLPe" not in err
+    shutil.copytree(REPO / "models" / "baseline_simlpe", base / "simlpe")
+    assert main([*tiny_run, "--out", str(tmp_path / "tuned2"), "--init", str(base)]) == 0
+    err = capsys.readouterr().err
+    assert "siMLPe (simlpe/)" in err and str(tmp_path / "tuned2" / "release" / "simlpe") in err
 
 
 def test_noisy_contexts_with_rotation_jitter_keep_bone_lengths_and_position_noise_does_not(walk_folder):
