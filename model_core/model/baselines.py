@@ -1,5 +1,6 @@
-"""Two published motion-prediction baselines, to score STRNN against (never shipped: the
-engines the add-on uses refuse their release folders).
+"""Two published motion-prediction baselines, to score STRNN against. The engines the add-on uses refuse
+their release folders; a release may carry the project's siMLPe to share its first predicted window
+(``checkpoint.SIMLPE``), which the NumPy twin of :class:`SiMLPe` runs (``inference/simlpe_engine.py``).
 
 - siMLPe (Guo et al. 2023, "Back to MLP: A Simple Baseline for Human Motion Prediction"):
   the context's DCT along time, a stack of temporal fully connected blocks with a layer
