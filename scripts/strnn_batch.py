@@ -102,6 +102,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help=opts.CONTEXT_FRAMES.help())
     p.add_argument("--from-frame", type=int, default=None, metavar="FRAME",
                    help="continue after this frame instead of the clip's last, replacing the motion after it")
+    p.add_argument("--no-follow-clip", dest="follow_clip", action="store_false",
+                   help="the model alone: do not lean on the clip's own motion after the model's first 20 "
+                        "frames (by default the continuation does, wherever it comes back to something the clip did)")
     foot_lock_flag(p, "extend_clip")
 
     p = sub.add_parser("denoise", parents=[common], help="clean each clip (strnn.denoise_action)",
@@ -161,7 +164,8 @@ def operator_call(args) -> tuple[str, dict]:
     """The operator (``strnn.<name>``) and its keyword arguments for ``args``."""
     if args.command == "extend":
         return "extend_clip", {"frames": args.frames, "context_frames": args.context_frames,
-                               "foot_lock": args.foot_lock, "from_current": args.from_frame is not None}
+                               "follow_clip": args.follow_clip, "foot_lock": args.foot_lock,
+                               "from_current": args.from_frame is not None}
     if args.command == "denoise":
         return "denoise_action", {"strength": args.strength, "foot_lock": args.foot_lock}
     if args.command == "footlock":

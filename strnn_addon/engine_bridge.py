@@ -202,12 +202,13 @@ def bpy_path(path: str) -> str:
     return path
 
 
-def run_extend(prefs, positions: np.ndarray, fps: float, frames: int) -> np.ndarray:
-    """Continue ``positions`` ``[F, 21, 3]`` (Y-up scene units at ``fps``) by ``frames`` -> ``[frames, 21, 3]``."""
+def run_extend(prefs, positions: np.ndarray, fps: float, frames: int, memory: np.ndarray | None = None) -> np.ndarray:
+    """Continue ``positions`` ``[F, 21, 3]`` (Y-up scene units at ``fps``) by ``frames`` -> ``[frames, 21, 3]``;
+    ``memory``: more of the clip, ending where ``positions`` ends, that long continuations lean on."""
     engine = generator_from_prefs(prefs)
     with threads(prefs):
-        return _kept(_key("extend", engine, positions, fps, frames),
-                     lambda: extend_positions(engine, positions, fps, frames))
+        return _kept(_key("extend", engine, positions, fps, frames, memory),
+                     lambda: extend_positions(engine, positions, fps, frames, memory))
 
 
 def run_inbetween(prefs, before: np.ndarray, after: np.ndarray, fps: float, frames: int) -> np.ndarray:

@@ -149,6 +149,7 @@ class STRNN_OT_extend_clip(_Staged, bpy.types.Operator):
 
     frames: options.frames_to_add()
     context_frames: options.context_frames()
+    follow_clip: options.follow_clip()
     from_current: options.from_current()
     foot_lock: options.foot_lock("extend_clip")
     scene_range: options.scene_range()
@@ -158,7 +159,8 @@ class STRNN_OT_extend_clip(_Staged, bpy.types.Operator):
     def steps(self, context):
         start = context.scene.frame_current if self.from_current else None
         return extend_steps(context, context.active_object, frames=self.frames, context_frames=self.context_frames,
-                            foot_lock=self.foot_lock, from_frame=start, scene_range=self.scene_range)
+                            follow_clip=self.follow_clip, foot_lock=self.foot_lock, from_frame=start,
+                            scene_range=self.scene_range)
 
     def done(self, action) -> str:
         if self.from_current:

@@ -38,6 +38,10 @@ def context_frames():
     return IntProperty(**opts.CONTEXT_FRAMES.blender())
 
 
+def follow_clip():
+    return BoolProperty(**opts.FOLLOW_CLIP.blender())
+
+
 def from_current():
     return BoolProperty(name="From Current Frame", default=False,
                         description="Continue after the current frame instead of the action's last, replacing "

@@ -82,6 +82,7 @@ class STRNN_PT_extend(_OperatorPanel, bpy.types.Panel):
     def draw_options(self, col, opts, context):
         col.prop(opts, "frames")
         col.prop(opts, "context_frames")
+        col.prop(opts, "follow_clip")
         col.prop(opts, "from_current")
         col.prop(opts, "foot_lock")
 

@@ -30,6 +30,7 @@ from ..motion.features import (
     yaw_matrix,
 )
 from ..ops.seam import PREDICT_SEAM_FRAMES, seam_fade
+from .memory import ClipMemory
 from .simlpe_engine import SiMLPeEngine
 from .spatial_fold import fold_spatial, rows_matmul, stack_matmul
 from .steps import drive
@@ -258,7 +259,7 @@ class Engine:
         return pred
 
     def extrapolate(self, seed: np.ndarray, frames: int, keep_bone_lengths: bool = True,
-                    paired_windows: int | None = 1) -> np.ndarray:
+                    paired_windows: int | None = 1, memory: ClipMemory | None = None) -> np.ndarray:
         """Open-loop generation: repeat (take the last m frames, predict n more).
 
         ``seed``: raw features ``[m, C]`` or ``[B, m, C]``; returns ``[frames, C]`` or
@@ -266,6 +267,8 @@ class Engine:
         the seed's skeleton (bone directions kept) and contacts rounded before it is fed back.
         ``paired_windows``: how many windows from the first are :meth:`predict_first`'s average with
         the companion (None: all of them; a bounded gap, which Fill Gap bends onto its target).
+        ``memory`` (a single seed's clip, :class:`memory.ClipMemory`): each window after the first leans on
+        what the clip did after its stretch most like the continuation's last frames.
         """
         seed = np.asarray(seed, np.float32)
         single = seed.ndim == 2
@@ -276,6 +279,8 @@ class Engine:
         while total < frames:
             paired = paired_windows is None or len(chunks) < paired_windows
             new = self.predict_first(ctx) if paired else self.predict(ctx)
+            if memory is not None and chunks:
+                new = np.stack([memory.lean(c, w) for c, w in zip(ctx, new)])
             if keep_bone_lengths:
                 new = project_to_skeleton(new, lengths)
             chunks.append(new)
@@ -312,13 +317,17 @@ class Engine:
         return acc / norm
 
     # ------------------------------------------------------ position level
-    def extend(self, positions: np.ndarray, frames: int, **kw) -> np.ndarray:
+    def extend(self, positions: np.ndarray, frames: int, memory: np.ndarray | None = None, **kw) -> np.ndarray:
         """Continue global positions ``[F, 21, 3]`` (metres, Y-up, 30 fps, F >= m) by
         ``frames`` new frames ``[frames, 21, 3]``, root motion continuing. The model reads the clip on
-        the body it learnt (:func:`on_learnt_body`) and its frames come back on the clip's own."""
+        the body it learnt (:func:`on_learnt_body`) and its frames come back on the clip's own. ``memory``
+        ``[M, 21, 3]`` (the same space and rate, ending on ``positions``' last frame; usually more of the clip):
+        the clip's own motion, which each window after the first leans on (:class:`memory.ClipMemory`)."""
         seen, back = on_learnt_body(self, positions)
         feats, start = positions_to_features(seen)
-        return back(continue_positions(feats, start, self.extrapolate(feats[-self.m:], frames, **kw)))
+        clip = None if memory is None else \
+            ClipMemory(positions_to_features(on_learnt_body(self, memory)[0])[0], self.m, self.n, self.std)
+        return back(continue_positions(feats, start, self.extrapolate(feats[-self.m:], frames, memory=clip, **kw)))
 
     def reconstruct_positions(self, positions: np.ndarray, root_weight: float = 3.0,
                           yaw_weight: float = 10.0) -> np.ndarray:

@@ -11,21 +11,32 @@ from .familiarity import momentum_shares
 from .normalise import fit_normalisation, model_frames_available, sample_at
 from .seam import blend_seam
 
+# Seconds of the clip before its end that Extend Clip reads as the clip's own motion, which long
+# continuations lean on (inference/memory.py): several strides of a walk, without reading a long take whole.
+MEMORY_S = 20.0
 
-def extend_positions(engine, pos: np.ndarray, fps: float, frames: int) -> np.ndarray:
+
+def extend_positions(engine, pos: np.ndarray, fps: float, frames: int, memory: np.ndarray | None = None) -> np.ndarray:
     """Continue a clip ``[F, 21, 3]`` (Y-up, scene units, ``fps``) by ``frames`` scene frames.
 
     The context is resampled to the model's rate aligned on its LAST frame, so the new
-    frames follow it at exactly 1 / fps. Returns ``[frames, 21, 3]`` in the same space.
+    frames follow it at exactly 1 / fps. ``memory`` ``[M, 21, 3]`` (the same space and rate, ending on the
+    same frame as ``pos``; usually more of the clip before it): the clip's own motion, which each predicted
+    window after the first leans on where the continuation comes back to something the clip did
+    (:class:`inference.memory.ClipMemory`). Returns ``[frames, 21, 3]`` in the same space.
     """
-    duration = (len(pos) - 1) / fps
-    n_ctx = model_frames_available(len(pos), fps)
-    ctx_times = duration - np.arange(n_ctx)[::-1] / MODEL_FPS
-    ctx = sample_at(pos, fps, ctx_times)
+    ctx = _at_model_rate(pos, fps)
     norm = fit_normalisation(ctx)
     n_model = int(math.ceil(frames * MODEL_FPS / fps)) + 1
-    new = np.asarray(engine.extend(norm.to_model(ctx), n_model), dtype=np.float64)
+    kw = {} if memory is None else {"memory": norm.to_model(_at_model_rate(memory, fps))}
+    new = np.asarray(engine.extend(norm.to_model(ctx), n_model, **kw), dtype=np.float64)
     momentum = momentum_shares(engine, norm.to_model(ctx)[None])[0]
     # model frame 0 is the last context frame
     seq = np.concatenate([ctx[-1:], blend_seam(ctx, norm.to_user(new), momentum=momentum)])
     return sample_at(seq, MODEL_FPS, np.arange(1, frames + 1) / fps)
+
+
+def _at_model_rate(pos: np.ndarray, fps: float) -> np.ndarray:
+    """A clip ``[F, 21, 3]`` at ``fps`` resampled to the model's rate, aligned on its last frame."""
+    duration = (len(pos) - 1) / fps
+    return sample_at(pos, fps, duration - np.arange(model_frames_available(len(pos), fps))[::-1] / MODEL_FPS)

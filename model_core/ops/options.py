@@ -32,6 +32,9 @@ class Option:
 EXTEND_FRAMES = Option("Frames", 120, "How many frames to add after the last frame", min=1, soft_max=2000)
 CONTEXT_FRAMES = Option("Context", 0, "Frames before the end the model reads; 0: just enough (20 at 30 fps)",
                         min=0, soft_max=600)
+FOLLOW_CLIP = Option("Follow the Clip", True,
+                     "After the model's first 20 frames, lean on the clip's own motion wherever the continuation "
+                     "comes back to something the clip did (a walk keeps its gait); off: the model alone")
 STRENGTH = Option("Strength", 1.0, "Blend between the original (0) and the model's output (1)", min=0.0, max=1.0)
 LOCK_BLEND = Option("Blend", 0.15, "Seconds over which each lock fades in before a contact and out after it",
                     min=0.0, max=2.0, soft_max=0.5)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ...model_core.ops.extend import MEMORY_S
 from ...model_core.rig.solve import solve
 from .. import engine_bridge
 from ..scene import pipeline
@@ -34,11 +35,20 @@ def context_range(clip, context_frames: int, frames: int, end: int) -> np.ndarra
     return np.arange(end - n_ctx + 1, end + 1, dtype=np.float64)
 
 
-def extend_steps(context, obj, *, frames: int = 120, context_frames: int = 0, foot_lock: bool = False,
-                 from_frame: int | None = None, scene_range: bool = True):
+def memory_range(clip, ctx_frames: np.ndarray) -> np.ndarray:
+    """Scene frames ``[M]`` of the clip's own motion the continuation leans on (:data:`extend.MEMORY_S` seconds
+    up to the context's last frame, within the action; at least the context's frames)."""
+    end = int(ctx_frames[-1])
+    first = max(clip.first, end - int(round(MEMORY_S * clip.fps)) + 1)
+    return np.arange(min(first, int(ctx_frames[0])), end + 1, dtype=np.float64)
+
+
+def extend_steps(context, obj, *, frames: int = 120, context_frames: int = 0, follow_clip: bool = True,
+                 foot_lock: bool = False, from_frame: int | None = None, scene_range: bool = True):
     """Continue ``obj``'s action by ``frames`` scene frames from its last ``context_frames``
-    (0: just enough for the model's 20-frame context), feet locked on the new frames when
-    ``foot_lock``. ``from_frame``: continue after this frame instead of the action's last, the
+    (0: just enough for the model's 20-frame context), leaning after the model's first window on the
+    clip's own motion (up to :data:`extend.MEMORY_S` seconds of it) when ``follow_clip``, feet locked on the
+    new frames when ``foot_lock``. ``from_frame``: continue after this frame instead of the action's last, the
     written bones' keys after it replaced. ``scene_range``: widen the scene's range to the new
     end. A generator: yields each stage's name before running it (so a caller can report
     progress or stop), returns the new action."""
@@ -46,11 +56,14 @@ def extend_steps(context, obj, *, frames: int = 120, context_frames: int = 0, fo
     end = clip.last if from_frame is None else int(from_frame)
     ctx_frames = context_range(clip, context_frames, frames, end)
     yield "read"
-    pos = pipeline.joint_positions(context, clip, ctx_frames)
+    mem_frames = memory_range(clip, ctx_frames) if follow_clip else ctx_frames
+    memory = pipeline.joint_positions(context, clip, mem_frames)
+    pos = memory[len(mem_frames) - len(ctx_frames):]
     held_loc, held_rot = pipeline.reference_pose(context, clip, ctx_frames[-1:])
     previous = pipeline.raw_rotations(clip, end)
     yield "model"
-    new_pos = model_call(engine_bridge.run_extend, prefs(context), pos, clip.fps, frames)
+    new_pos = model_call(engine_bridge.run_extend, prefs(context), pos, clip.fps, frames,
+                         memory if len(mem_frames) > len(ctx_frames) else None)
     if foot_lock:
         new_pos = lock(np.concatenate([pos, new_pos]), clip.fps, fixed=np.arange(len(pos) + frames) < len(pos))
         new_pos = new_pos[len(pos):]
@@ -60,7 +73,8 @@ def extend_steps(context, obj, *, frames: int = 120, context_frames: int = 0, fo
     yield "write"
     new_frames = end + 1 + np.arange(frames, dtype=np.float64)
     record = made_by("Extend Clip", clip, engine_bridge.model_used(prefs(context)), frames=frames,
-                     context_frames=len(ctx_frames), foot_lock=foot_lock, from_frame=from_frame)
+                     context_frames=len(ctx_frames), follow_clip_frames=len(mem_frames) if follow_clip else 0,
+                     foot_lock=foot_lock, from_frame=from_frame)
     record.update(familiarity_record(model_call(engine_bridge.run_familiarity, prefs(context), pos, clip.fps)))
     record.update(pace_record(context, clip, end))
     replace = None if end == clip.last else (end + 0.5, float("inf"))  # the old tail goes

@@ -206,3 +206,42 @@ def test_extend_says_when_the_motion_is_unfamiliar(real_model, addon):
     assert "unlike what the model learnt" in found["note"]
     common = importlib.import_module(addon.__name__ + ".strnn_addon.stages.common")
     assert common.report_note(action_of(obj)).startswith(". This motion is unlike")
+
+
+def test_an_unseen_walk_extended_by_20_s_still_walks_when_it_follows_the_clip(real_model, addon):
+    """A 60 fps walk of an actor the model never saw (the held-out CMU subject's 006_01, 4 s), extended by
+    1,200 frames: with Follow the Clip (the default) the last 5 s still step (the feet swing past each other
+    and stay on the floor, as in the take); the model alone turns it into a two-footed hop. The first model
+    window is the same either way, and the record says how much of the clip was followed."""
+    mocap = find_mocap()
+    if mocap is None:
+        pytest.skip("needs the motion-capture data (data/mocap)")
+    results = {}
+    for follow in (True, False):
+        bpy.ops.wm.read_homefile(use_empty=True)
+        obj = import_bvh(mocap / "cmu/iclone/006_01.bvh", global_scale=0.01, update_scene_fps=True)
+        last = int(action_of(obj).frame_range[1])
+        assert bpy.ops.strnn.extend_clip(frames=1200, follow_clip=follow) == {"FINISHED"}
+        record = action_of(obj)["strnn"].to_dict()
+        assert (record["settings"]["follow_clip_frames"] == last) if follow else \
+            (record["settings"]["follow_clip_frames"] == 0)
+        take = evaluated_joints(addon, obj, np.arange(1, last + 1))
+        new = evaluated_joints(addon, obj, np.arange(last + 1, last + 1201))
+        results[follow] = take, new
+    (take, new), (_, alone) = results[True], results[False]
+    np.testing.assert_allclose(new[:30], alone[:30], atol=0.01)  # the model's first window (0.5 s)
+    up = 2  # Blender's Z
+    floor = np.percentile(take[:, [7, 8, 11, 12], up].min(1), 5)
+
+    def stepping(pos):
+        way = pos[-1, 0, :2] - pos[0, 0, :2]
+        lead = (pos[:, 7, :2] - pos[:, 11, :2]) @ (way / np.linalg.norm(way))
+        airborne = np.mean(pos[:, [7, 8, 11, 12], up].min(1) - floor > 0.05)
+        return lead.std(), airborne
+
+    take_lead, _ = stepping(take)
+    lead, airborne = stepping(new[-300:])
+    assert lead > 0.5 * take_lead and airborne < 0.03
+    alone_lead, alone_airborne = stepping(alone[-300:])
+    print(f"last 5 s: feet lead sd {lead:.2f} m, airborne {airborne:.2f} (take {take_lead:.2f}); model alone "
+          f"{alone_lead:.2f}, {alone_airborne:.2f}")

@@ -43,14 +43,15 @@ def hips_speed(addon, obj, frames) -> float:
 
 
 def extended_pace(addon, path, scene_fps: int, keys_per_second: float, native: bool) -> tuple[float, dict]:
-    """Hips ground speed per frame of 120 frames Extend adds to the take at ``path``, and the pace the
-    new action's record read from the take."""
+    """Hips ground speed per frame of 120 frames Extend adds to the take at ``path`` with the model alone (Follow
+    the Clip off: leaning on the take's own motion as it was read keeps its pace, right or wrong), and the pace
+    the new action's record read from the take."""
     bpy.ops.wm.read_homefile(use_empty=True)
     bpy.context.scene.render.fps = scene_fps
     obj = import_bvh(path, update_scene_fps=native)
     obj.strnn_keys_per_second = keys_per_second
     last = int(action_of(obj).frame_range[1])
-    assert bpy.ops.strnn.extend_clip(frames=120) == {"FINISHED"}
+    assert bpy.ops.strnn.extend_clip(frames=120, follow_clip=False) == {"FINISHED"}
     record = action_of(obj)["strnn"].to_dict()
     assert record["keys_per_second"] == (keys_per_second or bpy.context.scene.render.fps)
     return hips_speed(addon, obj, range(last + 1, last + 121)), record["pace"]

@@ -25,7 +25,8 @@ def test_extend_then_denoise_then_lock(addon, tmp_path, real_model):
     made = record(obj)
     assert set(made.pop("familiarity")) >= {"reconstruction_cm", "usual_cm_p90"}
     assert made == {"operation": "Extend Clip", "version": VERSION, "source_action": "walk",
-                    "model": str(real_model), "settings": {"frames": 30, "context_frames": need, "foot_lock": True},
+                    "model": str(real_model),
+                    "settings": {"frames": 30, "context_frames": need, "follow_clip_frames": 60, "foot_lock": True},
                     "keys_per_second": 24.0, "frames_written": [61, 90]}
     extended = action_of(obj).name
     assert bpy.ops.strnn.denoise_action(strength=0.5, use_range=True, frame_start=5, frame_end=70) == {"FINISHED"}

@@ -1,0 +1,68 @@
+"""The clip's own motion as a memory for long continuations (no torch needed).
+
+Window after window, a continuation of motion the model has not seen settles into motion it knows: an
+unseen actor's walk, extended by 20 s, turned into a two-footed hop or a stand within seconds. The clip
+itself shows how this person moves. So each predicted window after the first leans on the clip: the
+stretch of the clip whose last :data:`MATCH_FRAMES` frames are most like the continuation's last ones is
+found (features normalised by the model's own spread), and the frames that followed it in the clip are
+blended into the model's window by ``SHARE * exp(-distance / SCALE)``: much where the clip has been here
+before (a walk's next step), nothing where it has not (a clip that ends in a pose it never held before).
+The frames that followed are first moved to start where the continuation stands (their jump from it fades
+out over :data:`ALIGN_FRAMES`), so no window pops. The features are the body's own (root-local joints,
+the root's velocity in the body's frame, the turn rate), so a stretch of the clip fits wherever the
+continuation has walked to. Chosen on the held-out groups (model card, "The clip's own motion").
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..motion.conventions import LAYOUT
+
+SHARE = 0.8  # the clip's share of a window where its frames match the continuation's exactly
+SCALE = 1.0  # the mean squared normalised distance at which the share has fallen to SHARE / e
+MATCH_FRAMES = 10  # how many of the continuation's last frames are compared with the clip's
+ALIGN_FRAMES = 10  # over how many frames the followed stretch's jump from the continuation fades out
+# The channels compared: joint positions and root motion (contacts follow the motion, they are not matched).
+_CHANNELS = np.r_[np.arange(LAYOUT.size)[LAYOUT.positions], np.arange(LAYOUT.size)[LAYOUT.root]]
+
+
+class ClipMemory:
+    """What a clip ``[F, C]`` (raw features at the model's rate) did after each of its stretches, for a model
+    that reads ``m`` frames and predicts ``n`` (``std``: its features' spread, ``[C]``)."""
+
+    def __init__(self, feats: np.ndarray, m: int, n: int, std: np.ndarray):
+        self.feats = np.asarray(feats, np.float32)
+        self.n = n
+        self.scale = np.asarray(std, np.float32)[_CHANNELS]
+        first = max(m, MATCH_FRAMES)  # a stretch ends at frame e - 1 and is followed by frames e .. e + n - 1
+        self.ends = np.arange(first, len(self.feats) - n + 1)
+        self.keys = np.stack([self.feats[e - MATCH_FRAMES:e, _CHANNELS] for e in self.ends]) / self.scale \
+            if len(self.ends) else np.zeros((0, MATCH_FRAMES, len(_CHANNELS)), np.float32)
+
+    def __len__(self) -> int:
+        """How many stretches the clip offers (0: too short to lean on)."""
+        return len(self.ends)
+
+    def follow(self, context: np.ndarray) -> tuple[float, np.ndarray]:
+        """(the clip's share, the ``n`` frames ``[n, C]`` that followed its stretch nearest ``context`` ``[T, C]``,
+        moved to start where ``context`` ends); share 0 (and the context's last frame held) without stretches."""
+        last = np.asarray(context[-1], np.float32)
+        if not len(self.ends):
+            return 0.0, np.repeat(last[None], self.n, 0)
+        probe = np.asarray(context[-MATCH_FRAMES:, _CHANNELS], np.float32) / self.scale
+        distance = ((self.keys - probe) ** 2).mean((1, 2))
+        best = int(np.argmin(distance))
+        end = self.ends[best]
+        frames = self.feats[end:end + self.n].copy()
+        jump = last - self.feats[end - 1]
+        jump[LAYOUT.contacts] = 0.0
+        fade = np.clip(1.0 - np.arange(1, self.n + 1) / ALIGN_FRAMES, 0.0, 1.0)
+        frames += fade[:, None] * jump
+        return float(SHARE * np.exp(-distance[best] / SCALE)), frames
+
+    def lean(self, context: np.ndarray, predicted: np.ndarray) -> np.ndarray:
+        """``predicted`` ``[n, C]`` (the model's window after ``context`` ``[T, C]``) blended with what followed the
+        clip's nearest stretch by its share (:meth:`follow`)."""
+        share, frames = self.follow(context)
+        return predicted + share * (frames[:len(predicted)] - predicted) if share > 0 else predicted
