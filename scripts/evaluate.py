@@ -30,6 +30,7 @@ from model_core.eval.evaluation import (  # noqa: E402
     evaluate_rotation_jitter,
     select_clips,
 )
+from model_core.eval.extend_evaluation import evaluate_long_extend  # noqa: E402
 from model_core.eval.feet_evaluation import evaluate_feet  # noqa: E402
 from model_core.eval.inbetween_evaluation import evaluate_inbetween  # noqa: E402
 from model_core.inference.engine import Engine  # noqa: E402
@@ -72,6 +73,9 @@ def parse_args(argv=None):
     p.add_argument("--feet", action="store_true",
                    help="feet of extended motion before and after Foot Lock: skate beside the real takes', sink "
                         "below the take's floor, knees left fully straight")
+    p.add_argument("--long-extend", action="store_true",
+                   help="long extensions as Extend Clip makes them: each clip's first 10 s extended by 20 s, following "
+                        "the clip and with the model alone; the last 5 s' speed, hops and steps against the take")
     p.add_argument("--denoise-fps", type=float, default=30.0, metavar="FPS",
                    help="denoise at this frame rate: clips captured at least this fast are read from their files at "
                         "it, the others upsampled from 30 fps by a cubic")
@@ -143,8 +147,25 @@ def print_table(result: dict, extra: dict):
               f"Foot Lock: skate {ft['skate_raw_cm']:.2f} -> {ft['skate_locked_cm']:.2f} cm/frame on contact frames "
               f"(real takes {ft['skate_real_cm']:.2f}), deepest sink below the take's floor {ft['sink_raw_cm']:.1f} "
               f"-> {ft['sink_locked_cm']:.1f} cm, knees left fully straight {100 * ft['straight_knees_locked']:.1f} %")
+    if "long_extend" in result:
+        print_long_extend(result["long_extend"])
     if "paths" in result:
         print_paths(result["paths"])
+
+
+def print_long_extend(le: dict) -> None:
+    print(f"\nLong extensions as Extend Clip makes them: each of {len(le['clips'])} clips' first {le['take_s']:g} s "
+          f"extended by {le['extend_s']:g} s; the last {le['last_s']:g} s against the take: joint speed, both feet "
+          f"off the floor (the take's), feet lead spread / the take's, following the clip | the model alone")
+    for i, name in enumerate(le["clips"]):
+        cells = " | ".join(f"{le[k]['speed_ratio'][i]:5.2f} {le[k]['airborne_fraction'][i]:5.2f} "
+                           f"{le[k]['feet_lead_ratio'][i]:5.2f}" for k in ("follow", "alone"))
+        print(f"  {cells}   take: airborne {le['take_airborne_fraction'][i]:4.2f}, feet lead "
+              f"{100 * le['take_feet_lead_m'][i]:3.0f} cm  {name}")
+    for k, label in (("follow", "following the clip"), ("alone", "the model alone")):
+        r = le[k]
+        print(f"{label}: slowed under 0.4 x {r['slowed']}, hopping {r['hopping']}, stepping {r['stepping']} of "
+              f"{le['walking_takes']} walking takes")
 
 
 def print_inbetween(ib: dict) -> None:
@@ -234,6 +255,8 @@ def run(args) -> dict:
         result["inbetween"] = evaluate_inbetween(engine, clips, args.inbetween)
     if args.feet:
         result["feet"] = evaluate_feet(engine, clips)
+    if args.long_extend:
+        result["long_extend"] = evaluate_long_extend(engine, clips)
     if args.paths:
         result["paths"] = run_paths(args, clips)
     print_table(result, extra)

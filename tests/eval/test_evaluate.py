@@ -178,3 +178,20 @@ def test_denoise_at_60_fps_reads_takes_captured_that_fast_from_their_files(tmp_p
     dn = json.loads(out.read_text())["denoise"]
     assert (dn["fps"], dn["clips"], dn["clips_captured_at_fps"]) == (60.0, 2, 1)
     assert "1 of 2 clips captured at that rate or faster" in capsys.readouterr().out
+
+
+def test_long_extend_measures_the_last_seconds_with_and_without_following_the_clip(walks, tmp_path, capsys):
+    """--long-extend: each clip's first 10 s extended by 20 s as Extend Clip does, following the clip and with
+    the model alone, measured against the take; walking takes counted by how far their feet swing."""
+    out = tmp_path / "eval.json"
+    assert evaluate.main(["--data", str(walks), "--cache", "", "--long-extend", "--json", str(out)]) == 0
+    le = json.loads(out.read_text())["long_extend"]
+    n = len(le["clips"])
+    assert n > 0 and le["extend_s"] == 20.0 and len(le["take_feet_lead_m"]) == n
+    assert le["walking_takes"] == n  # procedural walks: the feet swing past each other
+    for key in ("follow", "alone"):
+        r = le[key]
+        assert len(r["speed_ratio"]) == len(r["airborne_fraction"]) == len(r["feet_lead_ratio"]) == n
+        assert all(v > 0 for v in r["speed_ratio"]) and 0 <= r["stepping"] <= n and 0 <= r["hopping"] <= n
+    assert le["follow"]["speed_ratio"] != le["alone"]["speed_ratio"]  # following the clip changes the continuation
+    assert "Long extensions as Extend Clip makes them" in capsys.readouterr().out
