@@ -10,7 +10,7 @@ before (a walk's next step), nothing where it has not (a clip that ends in a pos
 The frames that followed are first moved to start where the continuation stands (their jump from it fades
 out over :data:`ALIGN_FRAMES`), so no window pops. The features are the body's own (root-local joints,
 the root's velocity in the body's frame, the turn rate), so a stretch of the clip fits wherever the
-continuation has walked to. Chosen on the held-out groups (model card, "The clip's own motion").
+continuation has walked to. Chosen on the held-out groups (model card, "Extend follows the clip").
 """
 
 from __future__ import annotations
