@@ -15,33 +15,30 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..motion.conventions import CONTACT_JOINTS, JOINT_INDEX, MODEL_FPS, UP_AXIS
+from ..motion.conventions import GROUND_AXES, JOINT_INDEX, MODEL_FPS
+from ..motion.features import floor_height
 from ..ops.extend import extend_positions
+from .metrics import airborne_fraction
 
 TAKE_S, EXTEND_S, LAST_S = 10.0, 20.0, 5.0
 CONTEXT = 20  # the frames the model reads; the rest of the take is what Extend follows
-AIRBORNE_M, HOP_SHARE = 0.05, 0.03
+HOP_SHARE = 0.03  # both feet off the floor (metrics.airborne_fraction) in more of the frames than this: a hop
 STEP_SHARE, SLOW, WALKING_M = 0.4, 0.4, 0.1
 SETTINGS = ("follow", "alone")
 
 
-def joint_speed(pos: np.ndarray) -> float:
+def limb_speed(pos: np.ndarray) -> float:
     """Mean speed of the joints relative to the hips (m per frame) of ``[F, 21, 3]``."""
     return float(np.linalg.norm(np.diff(pos - pos[:, :1], axis=0), axis=-1).mean())
 
 
 def feet_lead(pos: np.ndarray) -> float:
     """How far the feet swing past each other along the way walked (m, the sd of the left foot's lead)."""
-    ground = [a for a in range(3) if a != UP_AXIS]
+    ground = list(GROUND_AXES)
     way = pos[-1, 0, ground] - pos[0, 0, ground]
     way = way / (np.linalg.norm(way) + 1e-9)
     lead = (pos[:, JOINT_INDEX["l_foot"]][:, ground] - pos[:, JOINT_INDEX["r_foot"]][:, ground]) @ way
     return float(lead.std())
-
-
-def airborne(pos: np.ndarray, floor: float) -> float:
-    """The share of frames of ``pos`` with every heel and toe more than 5 cm over ``floor``."""
-    return float(np.mean(pos[:, CONTACT_JOINTS, UP_AXIS].min(1) - floor > AIRBORNE_M))
 
 
 def evaluate_long_extend(engine, clips, count: int = 20) -> dict:
@@ -57,15 +54,15 @@ def evaluate_long_extend(engine, clips, count: int = 20) -> dict:
     last, frames = int(LAST_S * MODEL_FPS), int(EXTEND_S * MODEL_FPS)
     for clip in picks:
         take = np.asarray(clip.positions[:int(TAKE_S * MODEL_FPS)], np.float64)
-        floor = float(np.percentile(take[:, CONTACT_JOINTS, UP_AXIS].min(1), 5))
+        floor = floor_height(take)
         lead = feet_lead(take[-last:])
-        out["take_airborne_fraction"].append(airborne(take, floor))
+        out["take_airborne_fraction"].append(airborne_fraction(take, floor))
         out["take_feet_lead_m"].append(lead)
         for key in SETTINGS:
             new = extend_positions(engine, take[-CONTEXT:], MODEL_FPS, frames,
                                    memory=take if key == "follow" else None)[-last:]
-            out[key]["speed_ratio"].append(joint_speed(new) / joint_speed(take))
-            out[key]["airborne_fraction"].append(airborne(new, floor))
+            out[key]["speed_ratio"].append(limb_speed(new) / limb_speed(take))
+            out[key]["airborne_fraction"].append(airborne_fraction(new, floor))
             out[key]["feet_lead_ratio"].append(feet_lead(new) / max(lead, 1e-3))
     take_air = np.array(out["take_airborne_fraction"])
     walking = np.array(out["take_feet_lead_m"]) >= WALKING_M

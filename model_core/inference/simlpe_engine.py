@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..io.checkpoint import Checkpoint, CheckpointError
+from ..io.checkpoint import ARCHITECTURES, Checkpoint, CheckpointError
 from ..motion.features import read_mirrored
 
 _LAYER_NORM_EPS = 1e-5  # torch.nn.LayerNorm's
@@ -34,7 +34,7 @@ class SiMLPeEngine:
     mirrored_reading = True  # predict() averages the context's reading and its mirror image's, as Engine does
 
     def __init__(self, ckpt: Checkpoint):
-        if ckpt.architecture != "simlpe":
+        if ckpt.architecture != ARCHITECTURES[1]:
             raise CheckpointError(f"this model folder holds a {ckpt.architecture} model, not a siMLPe")
         self.ckpt = ckpt
         self.m, self.n = ckpt.config["encode_len"], ckpt.config["predict_len"]

@@ -24,6 +24,7 @@ import torch
 from torch import nn
 
 from ..inference.engine import Engine
+from ..inference.simlpe_engine import dct_matrix
 from ..io.checkpoint import ARCHITECTURES, Checkpoint, CheckpointError, load_release
 from ..motion.conventions import LAYOUT
 
@@ -60,15 +61,6 @@ class ResidualGRUConfig:
         return asdict(self)
 
 
-def dct_matrix(length: int) -> torch.Tensor:
-    """Orthonormal DCT-II ``[length, length]`` (row k: frequency k); its transpose is its inverse."""
-    k = torch.arange(length, dtype=torch.float64)[:, None]
-    t = torch.arange(length, dtype=torch.float64)[None]
-    d = torch.cos(torch.pi * (2 * t + 1) * k / (2 * length)) * (2.0 / length) ** 0.5
-    d[0] /= 2.0 ** 0.5
-    return d.float()
-
-
 class TemporalBlock(nn.Module):
     """``x + norm(fc(x))`` on ``(T, B, C)`` (time first, so that mixing along it is one plain matrix
     product): ``fc`` mixes along time, ``norm`` is siMLPe's layer norm over the channels."""
@@ -89,7 +81,7 @@ class SiMLPe(nn.Module):
         super().__init__()
         self.cfg = cfg
         c, m = cfg.frame_size, cfg.encode_len
-        self.register_buffer("dct", dct_matrix(m), persistent=False)
+        self.register_buffer("dct", torch.from_numpy(dct_matrix(m)), persistent=False)
         self.fc_in = nn.Linear(c, c)
         self.blocks = nn.Sequential(*(TemporalBlock(c, m) for _ in range(cfg.blocks)))
         self.fc_out = nn.Linear(c, c)

@@ -8,7 +8,7 @@ import pytest
 from model_core.inference import memory as mem
 from model_core.inference.engine import Engine
 from model_core.inference.memory import ClipMemory
-from model_core.motion.conventions import CONTACT_JOINTS, JOINT_INDEX, LAYOUT
+from model_core.motion.conventions import CONTACT_JOINTS, LAYOUT
 from model_core.motion.features import positions_to_features
 from model_core.motion.synthetic import walking_skeleton
 
@@ -64,19 +64,12 @@ def test_the_first_window_is_the_models_and_later_windows_lean_on_the_clip():
     assert np.abs(leaning[engine.n:] - plain[engine.n:]).max() > 0.01
 
 
-def fore_aft_spread(pos: np.ndarray) -> float:
-    """How far the feet swing past each other along the way walked (sd of the left foot's lead, m)."""
-    way = pos[-1, 0, [0, 2]] - pos[0, 0, [0, 2]]
-    way /= np.linalg.norm(way) + 1e-9
-    lead = (pos[:, JOINT_INDEX["l_foot"], [0, 2]] - pos[:, JOINT_INDEX["r_foot"], [0, 2]]) @ way
-    return float(lead.std())
-
-
 def test_an_unseen_actors_walk_extended_by_20_s_still_steps(mocap_root):
     """The held-out CMU subject's first walk (60 fps; a take the model never saw), its first 10 s extended by 20 s
     as Extend Clip does: without the memory its last 5 s are a two-footed hop (the feet side by side, both
     off the floor a fifth of the time); with it the feet still swing past each other and stay on the floor."""
     from model_core.eval.evaluation import _at_rate
+    from model_core.eval.extend_evaluation import feet_lead
     from model_core.model.dataset import load_folder
     from model_core.ops.extend import extend_positions
 
@@ -88,6 +81,6 @@ def test_an_unseen_actors_walk_extended_by_20_s_still_steps(mocap_root):
     floor = np.percentile(pos[:, CONTACT_JOINTS, 1].min(1), 5)
     airborne = np.mean(last[:, CONTACT_JOINTS, 1].min(1) - floor > 0.05)
     assert airborne < 0.03
-    assert fore_aft_spread(last) > 0.4 * fore_aft_spread(pos[-300:])
+    assert feet_lead(last) > 0.4 * feet_lead(pos[-300:])
     speed = lambda p: np.linalg.norm(np.diff(p - p[:, :1], axis=0), axis=-1).mean()  # noqa: E731
     assert 0.5 < speed(last) / speed(pos) < 1.5
