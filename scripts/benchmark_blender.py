@@ -22,6 +22,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import os
+import shutil
 import sys
 import tempfile
 import time
@@ -59,7 +60,7 @@ def untrained_release(folder: Path) -> Path:
                         {"licence": "untrained, for benchmarks only"}, seeds, ["zeros"])
 
 
-def find_model(args) -> Path:
+def find_model(args, work: Path) -> Path:
     if args.model:
         return args.model
     for candidate in [REPO / "models" / "strnn_default", *sorted(REPO.glob("runs/*/release"))]:
@@ -67,7 +68,7 @@ def find_model(args) -> Path:
             return candidate
     if not args.untrained:
         raise SystemExit("no trained model (models/strnn_default or runs/*/release): pass --model or --untrained")
-    return untrained_release(Path(tempfile.mkdtemp()) / "untrained")
+    return untrained_release(work / "untrained")
 
 
 def install(out: Path) -> str:
@@ -279,8 +280,16 @@ def main(argv: list[str] | None = None) -> dict:
                              "or Fill Gap")
     parser.add_argument("--gap", type=int, default=30, help="Fill Gap: frames cut out of the clip's middle (30)")
     args = parser.parse_args(argv)
-    model = find_model(args)
-    package = install(Path(tempfile.mkdtemp()))
+    work = Path(tempfile.mkdtemp(prefix="strnn_bench_blender_"))
+    try:
+        return measure(args, work)
+    finally:
+        shutil.rmtree(work, ignore_errors=True)  # the built extension and any untrained model
+
+
+def measure(args, work: Path) -> dict:
+    model = find_model(args, work)
+    package = install(work)
     bpy.context.preferences.addons[package].preferences.model_folder = str(model)
     extend = importlib.import_module(package + ".strnn_addon.stages.extend")
     denoise = importlib.import_module(package + ".strnn_addon.stages.denoise")

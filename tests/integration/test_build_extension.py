@@ -104,11 +104,11 @@ def test_the_zip_holds_only_what_the_extension_imports(tmp_path):
 
 
 INSTALL_FROM_URL = """
-import bpy, json, pathlib, sys, tempfile
+import bpy, json, pathlib, sys
 bpy.ops.wm.read_factory_settings(use_empty=True)
 prefs = bpy.context.preferences
 prefs.system.use_online_access = True  # installing from a repository URL asks for it, even for file://
-repo = prefs.extensions.repos.new(name="local", module="local_repo", custom_directory=tempfile.mkdtemp(),
+repo = prefs.extensions.repos.new(name="local", module="local_repo", custom_directory=sys.argv[2],
                                   remote_url=sys.argv[1], source="USER")
 index = list(prefs.extensions.repos).index(repo)
 synced = bpy.ops.extensions.repo_sync(repo_directory=repo.directory, repo_index=index)
@@ -135,7 +135,8 @@ def test_a_built_repository_installs_the_extension_from_its_url(tmp_path):
     [entry] = index["data"]
     assert entry["id"] == "strnn_motion" and (repo / entry["archive_url"]).is_file()
     assert (repo / "index.html").is_file()
-    done = subprocess.run([sys.executable, "-c", INSTALL_FROM_URL, (repo / "index.json").as_uri()],
+    done = subprocess.run([sys.executable, "-c", INSTALL_FROM_URL, (repo / "index.json").as_uri(),
+                           str(tmp_path / "installed")],
                           capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, done.stderr[-2000:]
     got = json.loads(done.stdout.strip().splitlines()[-1])
