@@ -176,6 +176,7 @@ def print_inbetween(ib: dict) -> None:
     rows = [("L2P cm: strnn", ib["l2p_cm"]["strnn"]), ("  interpolation", ib["l2p_cm"]["interpolation"]),
             ("  interpolation, heading", ib["l2p_cm"]["interpolation_heading"]),
             ("  strnn / interpolation", [a / b for a, b in zip(ib["l2p_cm"]["strnn"], ib["l2p_cm"]["interpolation"])]),
+            ("  strnn without the take", ib["l2p_cm"]["strnn_without_take"]),
             ("target error cm: strnn", ib["target_error_cm"]["strnn"]),
             ("foot skate cm: strnn", ib["foot_skate_cm"]["strnn"]),
             ("  strnn, foot-locked", ib["foot_skate_cm"]["strnn_locked"]),

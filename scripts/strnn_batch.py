@@ -121,6 +121,9 @@ def build_parser() -> argparse.ArgumentParser:
                        "around them; without it, the first run of frames without keys is filled.")
     p.add_argument("--gap", type=int, nargs=2, default=None, metavar=("START", "END"),
                    help="the frames to fill (their keys are replaced); default: the first gap between keys")
+    p.add_argument("--no-follow-take", dest="follow_take", action="store_false",
+                   help="the models alone: do not lean on the rest of the take (by default the gap does, where the "
+                        "take did what the gap must elsewhere: a walk's other steps, a repeated move)")
     foot_lock_flag(p, "inbetween")
 
     p = sub.add_parser("footlock", parents=[common], help="pin the feet while they touch the ground "
@@ -173,7 +176,7 @@ def operator_call(args) -> tuple[str, dict]:
     if args.command == "inbetween":
         start, end = args.gap or (1, 250)
         return "inbetween", {"use_range": args.gap is not None, "frame_start": start, "frame_end": end,
-                             "foot_lock": args.foot_lock}
+                             "follow_take": args.follow_take, "foot_lock": args.foot_lock}
     if args.command == "transfer":
         return "transfer_motion", {"foot_lock": args.foot_lock}
     return "follow_curve", {"frames": args.frames, "speed": args.speed, "foot_lock": args.foot_lock}

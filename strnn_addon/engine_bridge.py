@@ -211,13 +211,15 @@ def run_extend(prefs, positions: np.ndarray, fps: float, frames: int, memory: np
                      lambda: extend_positions(engine, positions, fps, frames, memory))
 
 
-def run_inbetween(prefs, before: np.ndarray, after: np.ndarray, fps: float, frames: int) -> np.ndarray:
+def run_inbetween(prefs, before: np.ndarray, after: np.ndarray, fps: float, frames: int,
+                  follow_take: bool = True) -> np.ndarray:
     """The ``frames`` frames ``[frames, 21, 3]`` between ``before`` and ``after`` ``[F, 21, 3]`` (Y-up
-    scene units at ``fps``), made by the main model."""
+    scene units at ``fps``), made by the main model; ``follow_take``: leaning on the rest of ``before`` and
+    ``after`` where the take did what the gap must."""
     engine = generator_from_prefs(prefs)
     with threads(prefs):
-        return _kept(_key("inbetween", engine, before, after, fps, frames),
-                     lambda: inbetween_positions(engine, before, after, fps, frames))
+        return _kept(_key("inbetween", engine, before, after, fps, frames, follow_take),
+                     lambda: inbetween_positions(engine, before, after, fps, frames, follow_take))
 
 
 def run_familiarity(prefs, positions: np.ndarray, fps: float):

@@ -179,6 +179,7 @@ class STRNN_OT_fill_gap(_Staged, bpy.types.Operator):
     use_range: options.use_range("Fill")
     frame_start: options.range_start("Fill")
     frame_end: options.range_end("Fill")
+    follow_take: options.follow_take()
     foot_lock: options.foot_lock("inbetween")
     output: options.output()
     simplify: options.simplify()
@@ -186,7 +187,7 @@ class STRNN_OT_fill_gap(_Staged, bpy.types.Operator):
     def steps(self, context):
         start, end = (self.frame_start, self.frame_end) if self.use_range else (None, None)
         return inbetween_steps(context, context.active_object, frame_start=start, frame_end=end,
-                               foot_lock=self.foot_lock)
+                               follow_take=self.follow_take, foot_lock=self.foot_lock)
 
     def done(self, action) -> str:
         record = action.get(RECORD, {}).get("settings", {})

@@ -42,6 +42,10 @@ def follow_clip():
     return BoolProperty(**opts.FOLLOW_CLIP.blender())
 
 
+def follow_take():
+    return BoolProperty(**opts.FOLLOW_TAKE.blender())
+
+
 def from_current():
     return BoolProperty(name="From Current Frame", default=False,
                         description="Continue after the current frame instead of the action's last, replacing "

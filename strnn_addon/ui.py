@@ -94,6 +94,7 @@ class STRNN_PT_fill_gap(_OperatorPanel, bpy.types.Panel):
     def draw_options(self, col, opts, context):
         col.label(text="The gap around the current frame, or the first", icon="INFO")
         _frame_range(col, opts)
+        col.prop(opts, "follow_take")
         col.prop(opts, "foot_lock")
 
 

@@ -11,8 +11,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..motion.conventions import MODEL_FPS
 from ..motion.features import detect_contacts
-from ..ops import inbetween as fill_gap
+from ..ops import gap_memory, inbetween as fill_gap
 from ..ops.familiarity import momentum_shares
 from ..ops.footlock import foot_lock, foot_skate_cm
 from ..ops.inbetween import fill_from, interpolation
@@ -22,17 +23,21 @@ CONTEXT = 20
 STRIDE = 15
 
 
-def windows(clips: list[np.ndarray], gap: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(contexts ``[W, 20, J, 3]``, true gaps ``[W, gap, J, 3]``, targets ``[W, J, 3]``)."""
-    ctx, mid, tgt = [], [], []
+def windows(clips: list[np.ndarray], gap: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, list]:
+    """(contexts ``[W, 20, J, 3]``, true gaps ``[W, gap, J, 3]``, targets ``[W, J, 3]``, and each window's take
+    outside the gap as Fill Gap reads it: the frames up to the gap and from the target on, up to
+    :data:`gap_memory.MEMORY_S` seconds of each)."""
+    ctx, mid, tgt, takes = [], [], [], []
+    most = int(gap_memory.MEMORY_S * MODEL_FPS)
     for pos in clips:
         for s in range(0, len(pos) - CONTEXT - gap, STRIDE):
             ctx.append(pos[s:s + CONTEXT])
             mid.append(pos[s + CONTEXT:s + CONTEXT + gap])
             tgt.append(pos[s + CONTEXT + gap])
+            takes.append([pos[max(0, s + CONTEXT - most):s + CONTEXT], pos[s + CONTEXT + gap:s + CONTEXT + gap + most]])
     if not ctx:
         raise ValueError(f"no clip has the {CONTEXT + gap + 1} frames an in-betweening window of {gap} needs")
-    return np.stack(ctx), np.stack(mid), np.stack(tgt)
+    return np.stack(ctx), np.stack(mid), np.stack(tgt), takes
 
 
 def interpolate(last: np.ndarray, target: np.ndarray, gap: int, heading: bool = False) -> np.ndarray:
@@ -48,18 +53,21 @@ def interpolate(last: np.ndarray, target: np.ndarray, gap: int, heading: bool = 
 
 def evaluate_inbetween(engine, clips, gaps=(15, 30, 60)) -> dict:
     out = {"gap_frames": list(gaps), "windows": [],
-           "l2p_cm": {"strnn": [], "interpolation": [], "interpolation_heading": []},
+           "l2p_cm": {"strnn": [], "interpolation": [], "interpolation_heading": [], "strnn_without_take": []},
            "target_error_cm": {"strnn": []},
            "foot_skate_cm": {"strnn": [], "strnn_locked": [], "interpolation": [], "real": []},
            "foot_contact_share": {"strnn": [], "strnn_locked": [], "interpolation": [], "real": []}}
     positions = [c.positions for c in clips]
     for gap in gaps:
-        ctx, true, tgt = windows(positions, gap)
+        ctx, true, tgt, takes = windows(positions, gap)
         pred = extend_batch(engine, ctx, gap + 1, paired_windows=fill_gap.PAIRED_WINDOWS)  # as Fill Gap
         shares = momentum_shares(engine, ctx)
-        bent = np.stack([fill_gap.with_gap_model(engine, c, t[None], fill_from(c, p, t[None], k), k)
-                         for p, c, t, k in zip(pred, ctx, tgt, shares)])
+        alone = np.stack([fill_gap.with_gap_model(engine, c, t[None], fill_from(c, p, t[None], k), k)
+                          for p, c, t, k in zip(pred, ctx, tgt, shares)])
+        bent = np.stack([fill_gap.with_take(c, t[None], a, take, k)
+                         for a, c, t, take, k in zip(alone, ctx, tgt, takes, shares)])
         ours, arrive = bent[:, :-1], bent[:, -1]
+        out["l2p_cm"]["strnn_without_take"].append(float(mpjpe_cm(alone[:, :-1], true).mean()))
         lerp = np.stack([interpolate(c[-1], t, gap) for c, t in zip(ctx, tgt)])
         turn = np.stack([interpolate(c[-1], t, gap, heading=True) for c, t in zip(ctx, tgt)])
         out["windows"].append(int(len(ctx)))

@@ -21,16 +21,15 @@ Y-up, at the model's rate; :func:`inbetween_positions` takes a user's clip at an
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 from ..motion.conventions import MODEL_FPS, PARENTS, ROOT
 from ..motion.features import root_and_local, wrap_angle, yaw_matrix
 from ..motion.geometry import interpolate_frames, unit
+from . import gap_memory
 from .familiarity import momentum_shares
 from .footlock import LEGS, body_forward, place_leg
-from .normalise import fit_normalisation, sample_at
+from .normalise import fit_normalisation, model_frames_available, sample_at
 from .seam import blend_seam
 from .transfer import bone_lengths
 
@@ -107,17 +106,40 @@ def bend_onto(pred: np.ndarray, start: np.ndarray, target: np.ndarray) -> np.nda
     return out.astype(np.float32)
 
 
-def inbetween(engine, context: np.ndarray, target: np.ndarray, frames: int) -> np.ndarray:
+def inbetween(engine, context: np.ndarray, target: np.ndarray, frames: int,
+              memory: list[np.ndarray] | None = None) -> np.ndarray:
     """``frames`` frames ``[frames, J, 3]`` between ``context`` ``[C, J, 3]`` (C >= 1; up to the model's
     ``m`` last frames are read, fewer are padded by holding the first) and ``target`` ``[T, J, 3]``
-    (T >= 1), all at the model's rate and scale."""
+    (T >= 1), all at the model's rate and scale. ``memory``: the rest of the take, as runs of frames outside
+    the gap (:func:`with_take`)."""
     context, target = np.asarray(context, np.float64), np.asarray(target, np.float64)
+    given = context
     if len(context) < engine.m:
         context = np.concatenate([np.repeat(context[:1], engine.m - len(context), 0), context])
     pred = np.asarray(engine.extend(context[-engine.m:].astype(np.float32), frames + 1,
                                     paired_windows=PAIRED_WINDOWS), np.float64)
     momentum = momentum_shares(engine, context[None, -engine.m:])[0]
-    return with_gap_model(engine, context, target, fill_from(context, pred, target, momentum), momentum)[:-1]
+    filled = with_gap_model(engine, context, target, fill_from(context, pred, target, momentum), momentum)
+    return with_take(given, target, filled, memory, momentum)[:-1]
+
+
+def with_take(context: np.ndarray, target: np.ndarray, filled: np.ndarray, memory: list[np.ndarray] | None,
+              momentum: float = 0.0) -> np.ndarray:
+    """``filled`` ``[N + 1, J, 3]`` (a gap and the target's frame) blended with the stretch of the take
+    (``memory``: runs of frames ``[S, J, 3]`` outside the gap) that best fits the gap's two ends
+    (:func:`gap_memory.best_stretch`), bent onto ``target`` as the model's continuation is, by the fit's
+    :func:`gap_memory.share`; unchanged without a memory or a stretch that fits. Both reach the target, and so
+    does the blend."""
+    if not memory:
+        return filled
+    distance, stretch = gap_memory.best_stretch(memory, context, target, len(filled) - 1)
+    weight = gap_memory.share(distance, len(filled) - 1, momentum)
+    if stretch is None or weight < 1e-3:
+        return filled
+    lengths, end_lengths, side = bone_lengths(context), bone_lengths(target[:1]), knee_side(context)
+    followed = on_skeleton(bend_onto(blend_seam(context, stretch, momentum=momentum), context[-1], target),
+                           lengths, end_lengths, side)
+    return on_skeleton(filled + weight * (followed - filled), lengths, end_lengths, side)
 
 
 # How far Fill Gap goes from the STRNN's bent continuation towards the gap model's in-between, where the
@@ -274,25 +296,35 @@ def lean_on_interpolation(frames: np.ndarray, start: np.ndarray, end: np.ndarray
     return (np.einsum("fij,fkj->fki", yaw_matrix(yaw), local) + root[:, None]).astype(frames.dtype)
 
 
-def inbetween_positions(engine, before: np.ndarray, after: np.ndarray, fps: float, frames: int) -> np.ndarray:
+def inbetween_positions(engine, before: np.ndarray, after: np.ndarray, fps: float, frames: int,
+                        follow_take: bool = True) -> np.ndarray:
     """Fill a gap of ``frames`` scene frames between ``before`` ``[B, 21, 3]`` (the frames up to the gap)
     and ``after`` ``[A, 21, 3]`` (the frames from its end on), Y-up scene units at ``fps``.
 
     Both sides are read at the model's rate, aligned on the gap's edges; the model's in-between is
-    brought back to the scene's frames. Returns ``[frames, 21, 3]`` in the same space."""
+    brought back to the scene's frames. With ``follow_take`` the gap leans on the rest of the take where it
+    did what the gap must (:func:`with_take`): all of ``before`` and ``after``, up to
+    :data:`gap_memory.MEMORY_S` seconds of each, is looked through. Returns ``[frames, 21, 3]`` in the same
+    space."""
     if frames < 1:
         raise ValueError("the gap has no frame to fill")
     gap_s = (frames + 1) / fps
     if gap_s > MAX_GAP_S:
         raise ValueError(f"the gap of {frames} frames ({gap_s:.1f} s) is longer than the {MAX_GAP_S:g} s the model "
                          "can bridge: key a pose inside it and fill the two shorter gaps")
-    n_before = int(math.floor((len(before) - 1) * MODEL_FPS / fps + 1e-6)) + 1
+    n_before = model_frames_available(len(before), fps)
     ctx = sample_at(before, fps, (len(before) - 1) / fps - np.arange(min(n_before, engine.m))[::-1] / MODEL_FPS)
-    n_after = min(int(math.floor((len(after) - 1) * MODEL_FPS / fps + 1e-6)) + 1, 2)
+    n_after = min(model_frames_available(len(after), fps), 2)
     tgt = sample_at(after, fps, np.arange(n_after) / MODEL_FPS)
     norm = fit_normalisation(np.concatenate([ctx, tgt]))
     n_model = max(int(round(gap_s * MODEL_FPS)) - 1, 1)
-    inner = inbetween(engine, norm.to_model(ctx), norm.to_model(tgt), n_model)
+    memory = None
+    if follow_take:  # the take either side of the gap, aligned on its edges, as far back and on as it is followed
+        most = int(gap_memory.MEMORY_S * MODEL_FPS)
+        back, on = min(n_before, most), min(model_frames_available(len(after), fps), most)
+        memory = [norm.to_model(sample_at(before, fps, (len(before) - 1) / fps - np.arange(back)[::-1] / MODEL_FPS)),
+                  norm.to_model(sample_at(after, fps, np.arange(on) / MODEL_FPS))]
+    inner = inbetween(engine, norm.to_model(ctx), norm.to_model(tgt), n_model, memory)
     seq = np.concatenate([ctx[-1:], norm.to_user(inner), tgt[:1]])  # model frames 0 .. n_model + 1
     # the model's frames are spread evenly over the gap's duration, a little stretched to fit it
     return interpolate_frames(seq, np.arange(1, frames + 1) / fps * (n_model + 1) / gap_s)

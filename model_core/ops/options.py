@@ -35,6 +35,9 @@ CONTEXT_FRAMES = Option("Context", 0, "Frames before the end the model reads; 0:
 FOLLOW_CLIP = Option("Follow the Clip", True,
                      "After the model's first 20 frames, lean on the clip's own motion wherever the continuation "
                      "comes back to something the clip did (a walk keeps its gait); off: the model alone")
+FOLLOW_TAKE = Option("Follow the Take", True,
+                     "Lean on the rest of the action where it did what the gap must (a walk's other steps, a "
+                     "drill's repeated kick), up to 20 s either side; off: the models alone")
 STRENGTH = Option("Strength", 1.0, "Blend between the original (0) and the model's output (1)", min=0.0, max=1.0)
 LOCK_BLEND = Option("Blend", 0.15, "Seconds over which each lock fades in before a contact and out after it",
                     min=0.0, max=2.0, soft_max=0.5)

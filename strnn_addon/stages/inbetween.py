@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ...model_core.ops.gap_memory import MEMORY_S
 from ...model_core.ops.inbetween import MAX_GAP_S
 from .. import engine_bridge
 from ..scene import pipeline, rig_io
@@ -75,26 +76,41 @@ def check_gap(clip, keys: np.ndarray, start: int, end: int) -> None:
                         "can bridge: key a pose inside it and fill the two shorter gaps")
 
 
+def take_ranges(clip, start: int, end: int, follow_take: bool) -> tuple[np.ndarray, np.ndarray]:
+    """Scene frames read before and after the gap ``start..end``: what the model needs (its context, the target
+    and the frame after it) or, when ``follow_take``, up to :data:`gap_memory.MEMORY_S` seconds either side,
+    within the action."""
+    most = int(round(MEMORY_S * clip.fps)) if follow_take else 0
+    need_before = max(pipeline.min_scene_frames(clip.fps), most)
+    need_after = max(int(np.ceil(clip.fps / 30.0)) + 1, most)
+    return (np.arange(max(clip.first, start - need_before), start, dtype=np.float64),
+            np.arange(end + 1, min(clip.last, end + need_after) + 1, dtype=np.float64))
+
+
 def inbetween_steps(context, obj, *, frame_start: int | None = None, frame_end: int | None = None,
-                    from_playhead: bool = True, foot_lock: bool = True):
+                    from_playhead: bool = True, follow_take: bool = True, foot_lock: bool = True):
     """Fill frames ``frame_start..frame_end`` of ``obj``'s action (default: the gap between keys around
-    the current frame when ``from_playhead``, else the first gap) with the model's in-between, feet
-    locked when ``foot_lock``. A generator like :func:`stages.extend.extend_steps`."""
+    the current frame when ``from_playhead``, else the first gap) with the model's in-between, leaning on the
+    rest of the action where it did what the gap must when ``follow_take``, feet locked when ``foot_lock``.
+    A generator like :func:`stages.extend.extend_steps`."""
     clip = pipeline.prepare(context, obj)
     keys = key_frames(clip)
     current = context.scene.frame_current if from_playhead else None
     start, end = find_gap(clip, keys, frame_start, frame_end, current)
     check_gap(clip, keys, start, end)
     need = pipeline.min_scene_frames(clip.fps)
-    before = np.arange(max(clip.first, start - need), start, dtype=np.float64)
-    after = np.arange(end + 1, min(clip.last, end + 1 + int(np.ceil(clip.fps / 30.0))) + 1, dtype=np.float64)
+    read_before, read_after = take_ranges(clip, start, end, follow_take)
     gap = np.arange(start, end + 1, dtype=np.float64)
     yield "read"
-    pos_before = pipeline.joint_positions(context, clip, before)
-    pos_after = pipeline.joint_positions(context, clip, after)
+    taken_before = pipeline.joint_positions(context, clip, read_before)
+    taken_after = pipeline.joint_positions(context, clip, read_after)
     previous = pipeline.raw_rotations(clip, start - 1)
     yield "model"
-    new_pos = model_call(engine_bridge.run_inbetween, prefs(context), pos_before, pos_after, clip.fps, len(gap))
+    new_pos = model_call(engine_bridge.run_inbetween, prefs(context), taken_before, taken_after, clip.fps, len(gap),
+                         follow_take)
+    # Foot Lock and the familiarity read the frames next to the gap only
+    before, after = read_before[-need:], read_after[:int(np.ceil(clip.fps / 30.0)) + 1]
+    pos_before, pos_after = taken_before[-need:], taken_after[:len(after)]
     if foot_lock:
         seq = np.concatenate([pos_before, new_pos, pos_after])
         fixed = np.ones(len(seq), bool)
@@ -104,7 +120,7 @@ def inbetween_steps(context, obj, *, frame_start: int | None = None, frame_end: 
     loc, rot = pipeline.solve_frames(context, clip, gap, new_pos)
     yield "write"
     record = made_by("Fill Gap", clip, engine_bridge.model_used(prefs(context)), frame_start=start, frame_end=end,
-                     foot_lock=foot_lock)
+                     follow_take_frames=len(read_before) + len(read_after) if follow_take else 0, foot_lock=foot_lock)
     if len(before) >= need:  # how well the model knows the motion before the gap, as Extend reports it
         record.update(familiarity_record(model_call(engine_bridge.run_familiarity, prefs(context), pos_before,
                                                     clip.fps)))

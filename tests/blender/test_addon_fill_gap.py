@@ -54,7 +54,8 @@ def test_fill_a_frame_range_and_the_first_gap(addon, real_model, gapped):
     obj, _ = gapped
     bpy.context.scene.frame_set(1)  # not in a gap: the first gap is filled
     assert bpy.ops.strnn.inbetween(foot_lock=False) == {"FINISHED"}
-    assert action_of(obj)["strnn"]["settings"].to_dict() == {"frame_start": 41, "frame_end": 70, "foot_lock": False}
+    assert action_of(obj)["strnn"]["settings"].to_dict() == {"frame_start": 41, "frame_end": 70,
+                                                             "follow_take_frames": 90, "foot_lock": False}
     assert bpy.ops.strnn.inbetween(use_range=True, frame_start=90, frame_end=99) == {"FINISHED"}
     assert action_of(obj)["strnn"]["settings"]["frame_start"] == 90
 
@@ -65,6 +66,23 @@ def refuse(match: str, **kw) -> None:
         bpy.ops.strnn.inbetween(**kw)
     after = {a.name: key_snapshot(bpy.context.active_object, a) for a in bpy.data.actions}
     assert before.keys() == after.keys() and all(same_keys(before[k], after[k]) for k in before)
+
+
+def test_the_gap_follows_the_rest_of_the_take_unless_told_not_to(addon, real_model, gapped):
+    """The walk steps on outside the gap: Fill Gap finds the steps that fit both ends of the gap there and
+    follows them (nearer the cut frames than the models alone); with Follow the Take off it reads only the
+    frames next to the gap, as the record says."""
+    obj, truth = gapped
+    original = action_of(obj)
+    assert bpy.ops.strnn.inbetween(use_range=True, frame_start=41, frame_end=70) == {"FINISHED"}
+    followed = evaluated_joints(addon, obj, np.arange(41, 71))
+    assert action_of(obj)["strnn"]["settings"]["follow_take_frames"] == 90
+    obj.animation_data.action = original
+    assert bpy.ops.strnn.inbetween(use_range=True, frame_start=41, frame_end=70, follow_take=False) == {"FINISHED"}
+    alone = evaluated_joints(addon, obj, np.arange(41, 71))
+    assert action_of(obj)["strnn"]["settings"]["follow_take_frames"] == 0
+    error = lambda joints: float(np.linalg.norm(joints - truth[40:70], axis=-1).mean())
+    assert error(followed) < 0.6 * error(alone), (error(followed), error(alone))
 
 
 def test_bad_gaps_are_refused_and_change_nothing(addon, real_model, gapped):

@@ -66,6 +66,16 @@ def test_help_documents_every_command(capsys):
         assert option in text and "--out" in text and "--jobs" in text
 
 
+def test_follow_flags_reach_their_operators():
+    """Extend's --no-follow-clip and Fill Gap's --no-follow-take turn the option off; both are on by default."""
+    parse = strnn_batch.build_parser().parse_args
+    assert strnn_batch.operator_call(parse(["extend", "a.bvh"]))[1]["follow_clip"] is True
+    assert strnn_batch.operator_call(parse(["extend", "--no-follow-clip", "a.bvh"]))[1]["follow_clip"] is False
+    name, kw = strnn_batch.operator_call(parse(["inbetween", "--gap", "3", "9", "a.bvh"]))
+    assert name == "inbetween" and kw["follow_take"] is True and kw["use_range"] is True
+    assert strnn_batch.operator_call(parse(["inbetween", "--no-follow-take", "a.bvh"]))[1]["follow_take"] is False
+
+
 def test_good_file_processed_corrupt_one_reported(clips, tmp_path, extension, capsys):
     before = snapshot(clips)
     out = tmp_path / "out"
