@@ -26,6 +26,7 @@ from ..motion.features import mirror_positions, root_and_local, wrap_angle, yaw_
 
 MEMORY_S = 20.0  # seconds of the action read either side of the gap
 MATCH_FRAMES = 10  # how many of the context's last frames a stretch is compared with
+TARGET_WEIGHT = 1.0  # the weight of the fit at the target beside the fit before the gap
 # Weights of the hips' velocity in the body's frame (m per frame) and of the turn rate (radians per frame)
 # beside the pose (m) in a frame's descriptor: a step of a walk weighs about as much as its pose.
 VELOCITY_WEIGHT, TURN_WEIGHT = 3.0, 0.3
@@ -76,7 +77,7 @@ def best_stretch(segments: list[np.ndarray], context: np.ndarray, target: np.nda
         desc, s_root, s_yaw, s_local = descriptors(seg)
         windows = np.lib.stride_tricks.sliding_window_view(desc, MATCH_FRAMES, axis=0)[ends - MATCH_FRAMES]
         distance = ((windows - probe.T[None]) ** 2).mean((1, 2)) \
-            + ((relation(s_root, s_yaw, s_local, ends - 1, ends + frames) - want) ** 2).mean(1)
+            + TARGET_WEIGHT * ((relation(s_root, s_yaw, s_local, ends - 1, ends + frames) - want) ** 2).mean(1)
         i = int(np.argmin(distance))
         if distance[i] < best:
             best, found = float(distance[i]), (seg, int(ends[i]))
