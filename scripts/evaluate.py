@@ -97,13 +97,16 @@ def print_prediction(result: dict):
     pred, rows = result["prediction"], dict(result["prediction"]["mpjpe_cm"])
     print(f"\nPrediction MPJPE (cm), {result['clips']} clips, {result['windows']} windows")
     print(f"{'horizon ms':<20}" + "".join(f"{h:>8}" for h in pred["horizons_ms"]))
-    seam = rows.pop("strnn_as_extend")  # what Extend Clip delivers: STRNN with its seam blend
+    seam = rows.pop("strnn_as_extend")  # what Extend Clip delivers: the take before as its clip, the seam blend
+    alone = rows.pop("strnn_as_extend_context_only", None)
     for name, row in rows.items():
         print(f"{name:<20}" + "".join(f"{v:8.2f}" for v in row))
     best = [min(v) for v in zip(*(row for name, row in rows.items() if name != "strnn"))]
     print(f"{'strnn / best base':<20}" + "".join(f"{s / b:8.2f}" for s, b in zip(rows["strnn"], best)))
-    print(f"{'as Extend (seam)':<20}" + "".join(f"{v:8.2f}" for v in seam))
+    print(f"{'as Extend':<20}" + "".join(f"{v:8.2f}" for v in seam))
     print(f"{'  / best base':<20}" + "".join(f"{s / b:8.2f}" for s, b in zip(seam, best)))
+    if alone is not None:
+        print(f"{'  context only':<20}" + "".join(f"{v:8.2f}" for v in alone))
 
 
 def print_table(result: dict, extra: dict):

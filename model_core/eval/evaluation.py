@@ -15,14 +15,18 @@ from ..motion.conventions import MODEL_FPS
 from ..motion.features import floor_height, positions_to_features
 from ..motion.noise import add_rotation_jitter
 from ..ops.denoise import denoise_positions
+from ..ops.extend import MEMORY_S, extend_positions
 from ..rig.rigs import canonical_clip
 from .metrics import (
+    CONTEXT,
     HORIZONS_MS,
+    STRIDE,
     add_noise,
     add_pops,
     airborne_fraction,
     best_butterworth,
     best_median,
+    horizon_frames,
     joint_speed,
     mpjpe_cm,
     pose_vectors,
@@ -48,10 +52,32 @@ def select_clips(data: MotionData, split: str, group: str | None = None) -> list
 
 def evaluate_prediction(engine, clips, baselines: dict | None = None) -> dict:
     """Prediction MPJPE (cm) per horizon of STRNN, the simple baselines, the ``baselines``
-    ``{name: engine}`` models and STRNN as Extend delivers it (``strnn_as_extend``, with its seam blend)."""
-    errors, windows = prediction_errors(engine, [c.positions for c in clips], extra_engines=baselines)
-    errors["strnn_as_extend"] = errors.pop("strnn_seam_blend")
+    ``{name: engine}`` models and STRNN as Extend delivers it: ``strnn_as_extend``, each window's take up to
+    the context's end as the clip (:func:`as_extend_errors`), and ``strnn_as_extend_context_only``, a clip of
+    the 20 context frames alone (the seam blend on the model's own continuation)."""
+    positions = [c.positions for c in clips]
+    errors, windows = prediction_errors(engine, positions, extra_engines=baselines)
+    errors["strnn_as_extend_context_only"] = errors.pop("strnn_seam_blend")
+    errors["strnn_as_extend"] = as_extend_errors(engine, positions)
     return {"horizons_ms": list(HORIZONS_MS), "mpjpe_cm": errors, "windows": windows}
+
+
+def as_extend_errors(engine, clips: list[np.ndarray]) -> list[float]:
+    """MPJPE (cm) per horizon of Extend Clip (:func:`extend.extend_positions`, *Follow the Clip* on) on the
+    windows :func:`metrics.prediction_windows` makes, each clip being the take up to the context's end (at most
+    :data:`extend.MEMORY_S` seconds of it): what an animator gets extending the take from that frame."""
+    steps = horizon_frames(HORIZONS_MS)
+    horizon, most = max(steps), int(MEMORY_S * MODEL_FPS)
+    errors = []
+    for pos in clips:
+        pos = np.asarray(pos, np.float64)
+        for s in range(0, len(pos) - CONTEXT - horizon + 1, STRIDE):
+            end = s + CONTEXT
+            clip = pos[max(0, end - most):end]
+            new = extend_positions(engine, clip[-CONTEXT:], MODEL_FPS, horizon,
+                                   memory=clip if len(clip) > CONTEXT else None)
+            errors.append(mpjpe_cm(new[[k - 1 for k in steps]], pos[[end + k - 1 for k in steps]]))
+    return [float(v) for v in np.mean(errors, 0)]
 
 
 def data_speed(clips, statistic=np.mean) -> float:

@@ -279,8 +279,8 @@ class Engine:
         while total < frames:
             paired = paired_windows is None or len(chunks) < paired_windows
             new = self.predict_first(ctx) if paired else self.predict(ctx)
-            if memory is not None and chunks:
-                new = np.stack([memory.lean(c, w) for c, w in zip(ctx, new)])
+            if memory is not None and (chunks or memory.first_scale is not None):
+                new = np.stack([memory.lean(c, w, first=not chunks) for c, w in zip(ctx, new)])
             if keep_bone_lengths:
                 new = project_to_skeleton(new, lengths)
             chunks.append(new)
@@ -317,16 +317,18 @@ class Engine:
         return acc / norm
 
     # ------------------------------------------------------ position level
-    def extend(self, positions: np.ndarray, frames: int, memory: np.ndarray | None = None, **kw) -> np.ndarray:
+    def extend(self, positions: np.ndarray, frames: int, memory: np.ndarray | None = None,
+               first_scale: float | None = None, **kw) -> np.ndarray:
         """Continue global positions ``[F, 21, 3]`` (metres, Y-up, 30 fps, F >= m) by
         ``frames`` new frames ``[frames, 21, 3]``, root motion continuing. The model reads the clip on
         the body it learnt (:func:`on_learnt_body`) and its frames come back on the clip's own. ``memory``
         ``[M, 21, 3]`` (the same space and rate, ending on ``positions``' last frame; usually more of the clip):
-        the clip's own motion, which each window after the first leans on (:class:`memory.ClipMemory`)."""
+        the clip's own motion, which each window after the first leans on (:class:`memory.ClipMemory`), and the
+        first too with ``first_scale`` (:func:`memory.first_scale`)."""
         seen, back = on_learnt_body(self, positions)
         feats, start = positions_to_features(seen)
         clip = None if memory is None else \
-            ClipMemory(positions_to_features(on_learnt_body(self, memory)[0])[0], self.m, self.n, self.std)
+            ClipMemory(positions_to_features(on_learnt_body(self, memory)[0])[0], self.m, self.n, self.std, first_scale)
         return back(continue_positions(feats, start, self.extrapolate(feats[-self.m:], frames, memory=clip, **kw)))
 
     def reconstruct_positions(self, positions: np.ndarray, root_weight: float = 3.0,

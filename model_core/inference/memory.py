@@ -8,7 +8,9 @@ found (features normalised by the model's own spread), and the frames that follo
 blended into the model's window by ``SHARE * exp(-distance / SCALE)``: much where the clip has been here
 before (a walk's next step), nothing where it has not (a clip that ends in a pose it never held before).
 The frames that followed are first moved to start where the continuation stands (their jump from it fades
-out over :data:`ALIGN_FRAMES`), so no window pops. The features are the body's own (root-local joints,
+out over :data:`ALIGN_FRAMES`), so no window pops. The first window leans on the clip as well where Extend
+Clip asks it to (:func:`first_scale`): only where the clip did just this before, and less where the model
+knows the motion. The features are the body's own (root-local joints,
 the root's velocity in the body's frame, the turn rate), so a stretch of the clip fits wherever the
 continuation has walked to. Chosen on the held-out groups (model card, "Extend follows the clip").
 """
@@ -23,6 +25,11 @@ SHARE = 0.8  # the clip's share of a window where its frames match the continuat
 SCALE = 1.0  # the mean squared normalised distance at which the share has fallen to SHARE / e
 MATCH_FRAMES = 10  # how many of the continuation's last frames are compared with the clip's
 ALIGN_FRAMES = 10  # over how many frames the followed stretch's jump from the continuation fades out
+# The first window leans on the clip too, where the clip did just this before (a drill's next kick, a walk's
+# next step): by exp(-distance / scale), the scale FIRST_SCALE where the model does not know the context's
+# motion (momentum share 1) and FIRST_FAMILIAR x that where it does (0), so that familiar motion is left to
+# the models unless the clip matches almost exactly. 0: the first window is the models' alone.
+FIRST_SCALE, FIRST_FAMILIAR = 0.3, 0.1
 # The channels compared: joint positions and root motion (contacts follow the motion, they are not matched).
 _CHANNELS = np.r_[np.arange(LAYOUT.size)[LAYOUT.positions], np.arange(LAYOUT.size)[LAYOUT.root]]
 
@@ -31,9 +38,10 @@ class ClipMemory:
     """What a clip ``[F, C]`` (raw features at the model's rate) did after each of its stretches, for a model
     that reads ``m`` frames and predicts ``n`` (``std``: its features' spread, ``[C]``)."""
 
-    def __init__(self, feats: np.ndarray, m: int, n: int, std: np.ndarray):
+    def __init__(self, feats: np.ndarray, m: int, n: int, std: np.ndarray, first_scale: float | None = None):
         self.feats = np.asarray(feats, np.float32)
         self.n = n
+        self.first_scale = first_scale  # the first window's scale (:func:`first_scale`; None: not leant on)
         self.scale = np.asarray(std, np.float32)[_CHANNELS]
         first = max(m, MATCH_FRAMES)  # a stretch ends at frame e - 1 and is followed by frames e .. e + n - 1
         self.ends = np.arange(first, len(self.feats) - n + 1)
@@ -44,7 +52,7 @@ class ClipMemory:
         """How many stretches the clip offers (0: too short to lean on)."""
         return len(self.ends)
 
-    def follow(self, context: np.ndarray) -> tuple[float, np.ndarray]:
+    def follow(self, context: np.ndarray, first: bool = False) -> tuple[float, np.ndarray]:
         """(the clip's share, the ``n`` frames ``[n, C]`` that followed its stretch nearest ``context`` ``[T, C]``,
         moved to start where ``context`` ends); share 0 (and the context's last frame held) without stretches."""
         last = np.asarray(context[-1], np.float32)
@@ -59,10 +67,19 @@ class ClipMemory:
         jump[LAYOUT.contacts] = 0.0
         fade = np.clip(1.0 - np.arange(1, self.n + 1) / ALIGN_FRAMES, 0.0, 1.0)
         frames += fade[:, None] * jump
+        if first:
+            return float(np.exp(-distance[best] / self.first_scale)) if self.first_scale else 0.0, frames
         return float(SHARE * np.exp(-distance[best] / SCALE)), frames
 
-    def lean(self, context: np.ndarray, predicted: np.ndarray) -> np.ndarray:
-        """``predicted`` ``[n, C]`` (the model's window after ``context`` ``[T, C]``) blended with what followed the
-        clip's nearest stretch by its share (:meth:`follow`)."""
-        share, frames = self.follow(context)
+    def lean(self, context: np.ndarray, predicted: np.ndarray, first: bool = False) -> np.ndarray:
+        """``predicted`` ``[n, C]`` (the model's window after ``context`` ``[T, C]``; ``first``: the rollout's
+        first) blended with what followed the clip's nearest stretch by its share (:meth:`follow`)."""
+        share, frames = self.follow(context, first)
         return predicted + share * (frames[:len(predicted)] - predicted) if share > 0 else predicted
+
+
+def first_scale(momentum: float) -> float | None:
+    """The first window's scale for a context whose momentum share is ``momentum`` (:data:`FIRST_SCALE`)."""
+    if FIRST_SCALE <= 0.0:
+        return None
+    return FIRST_SCALE * (FIRST_FAMILIAR + (1.0 - FIRST_FAMILIAR) * float(np.clip(momentum, 0.0, 1.0)))

@@ -6,6 +6,7 @@ import math
 
 import numpy as np
 
+from ..inference.memory import first_scale
 from ..motion.conventions import MODEL_FPS
 from .familiarity import momentum_shares
 from .normalise import fit_normalisation, model_frames_available, sample_at
@@ -28,9 +29,10 @@ def extend_positions(engine, pos: np.ndarray, fps: float, frames: int, memory: n
     ctx = _at_model_rate(pos, fps)
     norm = fit_normalisation(ctx)
     n_model = int(math.ceil(frames * MODEL_FPS / fps)) + 1
-    kw = {} if memory is None else {"memory": norm.to_model(_at_model_rate(memory, fps))}
-    new = np.asarray(engine.extend(norm.to_model(ctx), n_model, **kw), dtype=np.float64)
     momentum = momentum_shares(engine, norm.to_model(ctx)[None])[0]
+    kw = {} if memory is None else {"memory": norm.to_model(_at_model_rate(memory, fps)),
+                                    "first_scale": first_scale(momentum)}
+    new = np.asarray(engine.extend(norm.to_model(ctx), n_model, **kw), dtype=np.float64)
     # model frame 0 is the last context frame
     seq = np.concatenate([ctx[-1:], blend_seam(ctx, norm.to_user(new), momentum=momentum)])
     return sample_at(seq, MODEL_FPS, np.arange(1, frames + 1) / fps)

@@ -211,8 +211,8 @@ def test_extend_says_when_the_motion_is_unfamiliar(real_model, addon):
 def test_an_unseen_walk_extended_by_20_s_still_walks_when_it_follows_the_clip(real_model, addon):
     """A 60 fps walk of an actor the model never saw (the held-out CMU subject's 006_01, 4 s), extended by
     1,200 frames: with Follow the Clip (the default) the last 5 s still step (the feet swing past each other
-    and stay on the floor, as in the take); the model alone turns it into a two-footed hop. The first model
-    window is the same either way, and the record says how much of the clip was followed."""
+    and stay on the floor, as in the take); the model alone turns it into a two-footed hop. The record says how much
+    of the clip was followed."""
     mocap = find_mocap()
     if mocap is None:
         pytest.skip("needs the motion-capture data (data/mocap)")
@@ -229,7 +229,11 @@ def test_an_unseen_walk_extended_by_20_s_still_walks_when_it_follows_the_clip(re
         new = evaluated_joints(addon, obj, np.arange(last + 1, last + 1201))
         results[follow] = take, new
     (take, new), (_, alone) = results[True], results[False]
-    np.testing.assert_allclose(new[:30], alone[:30], atol=0.01)  # the model's first window (0.5 s)
+    # the first window leans on the clip too (the walk's next step), and both leave the clip without a pop
+    assert np.abs(new[:30] - alone[:30]).max() > 0.01
+    usual = np.linalg.norm(np.diff(take, axis=0), axis=-1).max()
+    for joints in (new, alone):
+        assert np.linalg.norm(np.diff(np.concatenate([take[-1:], joints[:30]]), axis=0), axis=-1).max() < 1.5 * usual
     up = 2  # Blender's Z
     floor = np.percentile(take[:, [7, 8, 11, 12], up].min(1), 5)
 

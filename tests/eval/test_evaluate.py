@@ -35,7 +35,10 @@ def test_one_run_writes_exactly_the_metric_keys(walks, tmp_path, capsys):
     assert set(doc) == {"checkpoint", "data", "clips", "windows", "prediction", "long_horizon", "denoise"}
     assert doc["clips"] == 3 and doc["windows"] > 0
     assert doc["prediction"]["horizons_ms"] == [80, 160, 320, 400, 560, 1000]
-    assert set(doc["prediction"]["mpjpe_cm"]) == {"strnn", "zero_velocity", "constant_velocity", "strnn_as_extend"}
+    assert set(doc["prediction"]["mpjpe_cm"]) == {"strnn", "zero_velocity", "constant_velocity", "strnn_as_extend",
+                                                  "strnn_as_extend_context_only"}
+    rows = doc["prediction"]["mpjpe_cm"]  # periodic walks: Extend following the take before each window gains
+    assert rows["strnn_as_extend"][-1] < rows["strnn_as_extend_context_only"][-1]
     assert all(len(v) == 6 for v in doc["prediction"]["mpjpe_cm"].values())
     zero, const = doc["prediction"]["mpjpe_cm"]["zero_velocity"], doc["prediction"]["mpjpe_cm"]["constant_velocity"]
     assert zero[-1] > zero[0] and const[-1] > const[0]  # errors grow with the horizon
@@ -53,7 +56,7 @@ def test_one_run_writes_exactly_the_metric_keys(walks, tmp_path, capsys):
     assert set(dn["mpjpe_cm"]) == {"strnn", "butterworth_best", "noisy"}
     assert dn["mpjpe_cm"]["butterworth_best"][0] < dn["mpjpe_cm"]["noisy"][0]  # the filter removes noise
     assert 4.0 < dn["mpjpe_cm"]["noisy"][0] < 5.6  # |N(0, 3 cm I3)| has mean 4.8 cm
-    for heading in ("Long horizon", "Denoising", "speed / its take", "walk_0.bvh", "as Extend (seam)"):
+    for heading in ("Long horizon", "Denoising", "speed / its take", "walk_0.bvh", "as Extend", "  context only"):
         assert heading in printed
 
 
@@ -87,9 +90,10 @@ def test_baseline_models_get_their_rows_and_the_ratio_uses_the_best(walks, tmp_p
     printed = capsys.readouterr().out
     doc, before = json.loads(out.read_text()), json.loads(plain.read_text())
     rows = doc["prediction"]["mpjpe_cm"]
-    assert list(rows) == ["strnn", "zero_velocity", "constant_velocity", "simlpe", "residual_gru", "strnn_as_extend"]
+    assert list(rows) == ["strnn", "zero_velocity", "constant_velocity", "simlpe", "residual_gru",
+                          "strnn_as_extend_context_only", "strnn_as_extend"]
     assert all(len(v) == 6 for v in rows.values())
-    for name in ("strnn", "zero_velocity", "constant_velocity", "strnn_as_extend"):
+    for name in ("strnn", "zero_velocity", "constant_velocity", "strnn_as_extend", "strnn_as_extend_context_only"):
         assert rows[name] == before["prediction"]["mpjpe_cm"][name]  # the baselines change nothing else
     assert doc["baseline_models"] == {"simlpe": str(simlpe), "residual_gru": str(gru)}
     best = [min(v) for v in zip(*(rows[k] for k in ("zero_velocity", "constant_velocity", "simlpe", "residual_gru")))]

@@ -64,6 +64,34 @@ def test_the_first_window_is_the_models_and_later_windows_lean_on_the_clip():
     assert np.abs(leaning[engine.n:] - plain[engine.n:]).max() > 0.01
 
 
+def test_the_first_window_leans_on_the_clip_when_asked_as_far_as_the_model_does_not_know_the_motion():
+    """With a first-window scale the first window leans on the clip too (Extend Clip passes it); the scale is
+    FIRST_FAMILIAR x smaller where the model knows the motion (momentum share 0) than where it does not."""
+    engine = Engine.load()
+    walk = walking_skeleton(300, radius=4.0)
+    clip, truth = walk[:200], walk[200:220]
+    plain = engine.extend(clip[-20:], 20, memory=clip)
+    leaning = engine.extend(clip[-20:], 20, memory=clip, first_scale=mem.first_scale(1.0))
+    assert np.abs(leaning - plain).max() > 0.01
+    error = lambda p: np.linalg.norm(p - truth, axis=-1).mean()
+    assert error(leaning) < 0.7 * error(plain)  # the clip walked this very step before
+    assert mem.first_scale(0.0) == pytest.approx(mem.FIRST_FAMILIAR * mem.first_scale(1.0))
+    assert mem.first_scale(1.0) == mem.FIRST_SCALE > 0
+
+
+def test_extend_clip_follows_the_clip_from_its_first_frame():
+    """extend_positions (Extend Clip's maths) passes the first-window scale for the context's familiarity."""
+    from model_core.ops.extend import extend_positions
+
+    engine = Engine.load()
+    walk = 100 * walking_skeleton(300, radius=4.0)  # centimetres, as a scene may be
+    clip, truth = walk[:200], walk[200:230]
+    followed = extend_positions(engine, clip[-20:], 30.0, 30, memory=clip)
+    alone = extend_positions(engine, clip[-20:], 30.0, 30)
+    error = lambda p: np.linalg.norm(p - truth, axis=-1).mean()
+    assert error(followed) < 0.7 * error(alone)
+
+
 def test_an_unseen_actors_walk_extended_by_20_s_still_steps(mocap_root):
     """The held-out CMU subject's first walk (60 fps; a take the model never saw), its first 10 s extended by 20 s
     as Extend Clip does: without the memory its last 5 s are a two-footed hop (the feet side by side, both
