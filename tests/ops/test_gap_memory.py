@@ -37,6 +37,8 @@ def test_segments_too_short_for_the_gap_offer_nothing():
     context, target = walk[80:100], walk[130:132]
     assert gap_memory.best_stretch([walk[60:100], walk[130:160]], context, target, 30) == (float("inf"), None)
     assert gap_memory.share(float("inf"), 30, 1.0) == 0.0
+    # a context of fewer frames than are matched (a keyed pose or two) is not matched at all
+    assert gap_memory.best_stretch([walk], context[-3:], target, 30) == (float("inf"), None)
 
 
 def test_a_gap_leans_on_the_take_only_as_far_as_the_take_did_the_same():
