@@ -13,9 +13,8 @@ in the take as it is and mirrored (the other foot's steps).
 
 How much Fill Gap leans on it (:func:`share`) falls with the fit's distance: all the way where the take
 did exactly this elsewhere, nothing where it never did (a single bow); less in long gaps and in motion the
-model knows. Positions are ``[F, J, 3]`` metres,
-Y-up, at the model's rate. Chosen on the held-out groups and the validation split (model card,
-"Fill Gap follows the take").
+model knows. Positions are ``[F, J, 3]`` metres, Y-up, at the model's rate. Chosen on the held-out groups and
+the validation split (model card, "Fill Gap follows the take").
 """
 
 from __future__ import annotations
