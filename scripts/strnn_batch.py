@@ -103,8 +103,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--from-frame", type=int, default=None, metavar="FRAME",
                    help="continue after this frame instead of the clip's last, replacing the motion after it")
     p.add_argument("--no-follow-clip", dest="follow_clip", action="store_false",
-                   help="the model alone: do not lean on the clip's own motion after the model's first 20 "
-                        "frames (by default the continuation does, wherever it comes back to something the clip did)")
+                   help="the model alone: do not lean on the clip's own motion (by default the continuation does, "
+                        "wherever it comes back to something the clip did)")
     foot_lock_flag(p, "extend_clip")
 
     p = sub.add_parser("denoise", parents=[common], help="clean each clip (strnn.denoise_action)",

@@ -13,7 +13,8 @@ import numpy as np
 
 from ..motion.conventions import MODEL_FPS
 from ..motion.features import detect_contacts
-from ..ops import gap_memory, inbetween as fill_gap
+from ..ops import inbetween as fill_gap
+from ..ops.extend import MEMORY_S
 from ..ops.familiarity import momentum_shares
 from ..ops.footlock import foot_lock, foot_skate_cm
 from ..ops.inbetween import fill_from, interpolation
@@ -26,9 +27,9 @@ STRIDE = 15
 def windows(clips: list[np.ndarray], gap: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, list]:
     """(contexts ``[W, 20, J, 3]``, true gaps ``[W, gap, J, 3]``, targets ``[W, J, 3]``, and each window's take
     outside the gap as Fill Gap reads it: the frames up to the gap and from the target on, up to
-    :data:`gap_memory.MEMORY_S` seconds of each)."""
+    :data:`extend.MEMORY_S` seconds of each)."""
     ctx, mid, tgt, takes = [], [], [], []
-    most = int(gap_memory.MEMORY_S * MODEL_FPS)
+    most = int(MEMORY_S * MODEL_FPS)
     for pos in clips:
         for s in range(0, len(pos) - CONTEXT - gap, STRIDE):
             ctx.append(pos[s:s + CONTEXT])

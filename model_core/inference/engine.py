@@ -267,8 +267,9 @@ class Engine:
         the seed's skeleton (bone directions kept) and contacts rounded before it is fed back.
         ``paired_windows``: how many windows from the first are :meth:`predict_first`'s average with
         the companion (None: all of them; a bounded gap, which Fill Gap bends onto its target).
-        ``memory`` (a single seed's clip, :class:`memory.ClipMemory`): each window after the first leans on
-        what the clip did after its stretch most like the continuation's last frames.
+        ``memory`` (a single seed's clip, :class:`memory.ClipMemory`): each window after the first (and the first
+        where the memory has a ``first_scale``) leans on what the clip did after its stretch most like the
+        continuation's last frames.
         """
         seed = np.asarray(seed, np.float32)
         single = seed.ndim == 2

@@ -23,8 +23,9 @@ def extend_positions(engine, pos: np.ndarray, fps: float, frames: int, memory: n
     The context is resampled to the model's rate aligned on its LAST frame, so the new
     frames follow it at exactly 1 / fps. ``memory`` ``[M, 21, 3]`` (the same space and rate, ending on the
     same frame as ``pos``; usually more of the clip before it): the clip's own motion, which each predicted
-    window after the first leans on where the continuation comes back to something the clip did
-    (:class:`inference.memory.ClipMemory`). Returns ``[frames, 21, 3]`` in the same space.
+    window leans on where the continuation comes back to something the clip did (the first only as far as the
+    model does not know the context's motion: :func:`inference.memory.first_scale`). Returns ``[frames, 21, 3]``
+    in the same space.
     """
     ctx = _at_model_rate(pos, fps)
     norm = fit_normalisation(ctx)

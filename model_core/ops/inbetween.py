@@ -27,6 +27,7 @@ from ..motion.conventions import MODEL_FPS, PARENTS, ROOT
 from ..motion.features import root_and_local, wrap_angle, yaw_matrix
 from ..motion.geometry import interpolate_frames, unit
 from . import gap_memory
+from .extend import MEMORY_S
 from .familiarity import momentum_shares
 from .footlock import LEGS, body_forward, place_leg
 from .normalise import fit_normalisation, model_frames_available, sample_at
@@ -304,7 +305,7 @@ def inbetween_positions(engine, before: np.ndarray, after: np.ndarray, fps: floa
     Both sides are read at the model's rate, aligned on the gap's edges; the model's in-between is
     brought back to the scene's frames. With ``follow_take`` the gap leans on the rest of the take where it
     did what the gap must (:func:`with_take`): all of ``before`` and ``after``, up to
-    :data:`gap_memory.MEMORY_S` seconds of each, is looked through. Returns ``[frames, 21, 3]`` in the same
+    :data:`extend.MEMORY_S` seconds of each, is looked through. Returns ``[frames, 21, 3]`` in the same
     space."""
     if frames < 1:
         raise ValueError("the gap has no frame to fill")
@@ -320,7 +321,7 @@ def inbetween_positions(engine, before: np.ndarray, after: np.ndarray, fps: floa
     n_model = max(int(round(gap_s * MODEL_FPS)) - 1, 1)
     memory = None
     if follow_take:  # the take either side of the gap, aligned on its edges, as far back and on as it is followed
-        most = int(gap_memory.MEMORY_S * MODEL_FPS)
+        most = int(MEMORY_S * MODEL_FPS)
         back, on = min(n_before, most), min(model_frames_available(len(after), fps), most)
         memory = [norm.to_model(sample_at(before, fps, (len(before) - 1) / fps - np.arange(back)[::-1] / MODEL_FPS)),
                   norm.to_model(sample_at(after, fps, np.arange(on) / MODEL_FPS))]

@@ -33,8 +33,9 @@ EXTEND_FRAMES = Option("Frames", 120, "How many frames to add after the last fra
 CONTEXT_FRAMES = Option("Context", 0, "Frames before the end the model reads; 0: just enough (20 at 30 fps)",
                         min=0, soft_max=600)
 FOLLOW_CLIP = Option("Follow the Clip", True,
-                     "After the model's first 20 frames, lean on the clip's own motion wherever the continuation "
-                     "comes back to something the clip did (a walk keeps its gait); off: the model alone")
+                     "Lean on the clip's own motion wherever the continuation comes back to something the clip did "
+                     "(a walk keeps its gait; from the first frame where the model does not know the motion); off: "
+                     "the model alone")
 FOLLOW_TAKE = Option("Follow the Take", True,
                      "Lean on the rest of the action where it did what the gap must (a walk's other steps, a "
                      "drill's repeated kick), up to 20 s either side; off: the models alone")

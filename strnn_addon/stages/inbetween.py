@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ...model_core.ops.gap_memory import MEMORY_S
+from ...model_core.ops.extend import MEMORY_S
 from ...model_core.ops.inbetween import MAX_GAP_S
 from .. import engine_bridge
 from ..scene import pipeline, rig_io
@@ -76,13 +76,18 @@ def check_gap(clip, keys: np.ndarray, start: int, end: int) -> None:
                         "can bridge: key a pose inside it and fill the two shorter gaps")
 
 
+def frames_after(fps: float) -> int:
+    """Scene frames after the gap the model reads: the target and the frame after it at the model's rate."""
+    return int(np.ceil(fps / 30.0)) + 1
+
+
 def take_ranges(clip, start: int, end: int, follow_take: bool) -> tuple[np.ndarray, np.ndarray]:
     """Scene frames read before and after the gap ``start..end``: what the model needs (its context, the target
-    and the frame after it) or, when ``follow_take``, up to :data:`gap_memory.MEMORY_S` seconds either side,
+    and the frame after it) or, when ``follow_take``, up to :data:`extend.MEMORY_S` seconds either side,
     within the action."""
     most = int(round(MEMORY_S * clip.fps)) if follow_take else 0
     need_before = max(pipeline.min_scene_frames(clip.fps), most)
-    need_after = max(int(np.ceil(clip.fps / 30.0)) + 1, most)
+    need_after = max(frames_after(clip.fps), most)
     return (np.arange(max(clip.first, start - need_before), start, dtype=np.float64),
             np.arange(end + 1, min(clip.last, end + need_after) + 1, dtype=np.float64))
 
@@ -109,7 +114,7 @@ def inbetween_steps(context, obj, *, frame_start: int | None = None, frame_end: 
     new_pos = model_call(engine_bridge.run_inbetween, prefs(context), taken_before, taken_after, clip.fps, len(gap),
                          follow_take)
     # Foot Lock and the familiarity read the frames next to the gap only
-    before, after = read_before[-need:], read_after[:int(np.ceil(clip.fps / 30.0)) + 1]
+    before, after = read_before[-need:], read_after[:frames_after(clip.fps)]
     pos_before, pos_after = taken_before[-need:], taken_after[:len(after)]
     if foot_lock:
         seq = np.concatenate([pos_before, new_pos, pos_after])
