@@ -20,7 +20,6 @@ from ..rig.rigs import canonical_clip
 from .metrics import (
     CONTEXT,
     HORIZONS_MS,
-    STRIDE,
     add_noise,
     add_pops,
     airborne_fraction,
@@ -34,6 +33,7 @@ from .metrics import (
     rollout_report,
     segments,
     upsample,
+    window_starts,
 )
 
 
@@ -69,14 +69,12 @@ def as_extend_errors(engine, clips: list[np.ndarray]) -> list[float]:
     steps = horizon_frames(HORIZONS_MS)
     horizon, most = max(steps), int(MEMORY_S * MODEL_FPS)
     errors = []
-    for pos in clips:
-        pos = np.asarray(pos, np.float64)
-        for s in range(0, len(pos) - CONTEXT - horizon + 1, STRIDE):
-            end = s + CONTEXT
-            clip = pos[max(0, end - most):end]
-            new = extend_positions(engine, clip[-CONTEXT:], MODEL_FPS, horizon,
-                                   memory=clip if len(clip) > CONTEXT else None)
-            errors.append(mpjpe_cm(new[[k - 1 for k in steps]], pos[[end + k - 1 for k in steps]]))
+    for pos, s in window_starts([np.asarray(p, np.float64) for p in clips], CONTEXT + horizon):
+        end = s + CONTEXT
+        clip = pos[max(0, end - most):end]
+        new = extend_positions(engine, clip[-CONTEXT:], MODEL_FPS, horizon,
+                               memory=clip if len(clip) > CONTEXT else None)
+        errors.append(mpjpe_cm(new[[k - 1 for k in steps]], pos[[end + k - 1 for k in steps]]))
     return [float(v) for v in np.mean(errors, 0)]
 
 

@@ -36,14 +36,20 @@ def mpjpe_cm(pred: np.ndarray, true: np.ndarray) -> np.ndarray:
     return 100.0 * np.linalg.norm(pred - true, axis=-1).mean(-1)
 
 
+def window_starts(clips: list[np.ndarray], frames: int, stride: int = STRIDE):
+    """Every ``(clip, start)`` of a window of ``frames`` frames, stride ``stride``, clip by clip."""
+    for pos in clips:
+        for s in range(0, len(pos) - frames + 1, stride):
+            yield pos, s
+
+
 def prediction_windows(clips: list[np.ndarray], horizon: int, context: int = CONTEXT, stride: int = STRIDE):
     """Every (clip, start) with ``context + horizon`` frames, stride ``stride``: ``(contexts, futures)``
     as ``[W, context, J, 3]`` and ``[W, horizon, J, 3]``."""
     ctx, fut = [], []
-    for pos in clips:
-        for s in range(0, len(pos) - context - horizon + 1, stride):
-            ctx.append(pos[s:s + context])
-            fut.append(pos[s + context:s + context + horizon])
+    for pos, s in window_starts(clips, context + horizon, stride):
+        ctx.append(pos[s:s + context])
+        fut.append(pos[s + context:s + context + horizon])
     if not ctx:
         raise ValueError(f"no clip has the {context + horizon} frames a prediction window needs")
     return np.stack(ctx), np.stack(fut)
