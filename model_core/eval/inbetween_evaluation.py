@@ -16,7 +16,7 @@ from ..motion.features import detect_contacts
 from ..ops import inbetween as fill_gap
 from ..ops.extend import MEMORY_S
 from ..ops.familiarity import momentum_shares
-from ..ops.footlock import foot_lock, foot_skate_cm
+from ..ops.footlock import SETTLE_PASSES, FootLockSettings, foot_lock, foot_skate_cm
 from ..ops.inbetween import fill_from, interpolation
 from .metrics import extend_batch, mpjpe_cm
 
@@ -84,12 +84,12 @@ def evaluate_inbetween(engine, clips, gaps=(15, 30, 60)) -> dict:
 
 
 def lock_gap(ctx: np.ndarray, gap: np.ndarray, tgt: np.ndarray) -> np.ndarray:
-    """The gap ``[N, J, 3]`` after Foot Lock with the context and the target frame fixed, as Fill Gap's
-    Foot Lock option runs it."""
+    """The gap ``[N, J, 3]`` after a settled Foot Lock with the context and the target frame fixed, as Fill
+    Gap's Foot Lock option runs it."""
     seq = np.concatenate([ctx, gap, tgt[None]])
     fixed = np.ones(len(seq), bool)
     fixed[len(ctx):len(ctx) + len(gap)] = False
-    return foot_lock(seq, fixed=fixed)[len(ctx):len(ctx) + len(gap)]
+    return foot_lock(seq, fixed=fixed, settings=FootLockSettings(passes=SETTLE_PASSES))[len(ctx):len(ctx) + len(gap)]
 
 
 def _skate(ctx: np.ndarray, gap: np.ndarray, tgt: np.ndarray) -> tuple[float, float]:

@@ -20,6 +20,8 @@ after ``fixed`` frames, the whole body up and down); every bone keeps its length
   stand comes down as a whole first (the legs alone could only reach by straightening). Next to
   ``fixed`` frames these height corrections ease in over ``blend_s``, so a foot that stands
   higher or lower there than on the rest of the floor moves off it without a step.
+- Settling (``passes`` > 1): the result is locked again, along the ground only, on the contacts it has
+  (the first pass's and any detected on the result), until its feet rest.
 - Two-bone IK from the (unmoved) hip: the knee stays in its own plane (the plane of hip,
   knee and ankle, turned by the shortest arc onto the new hip-to-ankle axis), the foot
   keeps its orientation (the toe follows the ankle), and a target out of reach is eased
@@ -29,7 +31,7 @@ after ``fixed`` frames, the whole body up and down); every bone keeps its length
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -57,6 +59,15 @@ _HEEL_CHANNELS = [[name for name, _ in CONTACTS].index(f"{s}_heel") for s in ("l
 _TOE_CHANNELS = [[name for name, _ in CONTACTS].index(f"{s}_toe") for s in ("l", "r")]
 
 
+# Passes of a settled lock (Fill Gap's). One pass pins the contacts the input has; where the input's foot
+# pitches while heel and toe are both down (the foot keeps its length, so one end slides), where a foot is
+# lifted or lowered to the floor, or where it drifts slowly near the floor just outside a contact, the
+# result still creeps. Locked again on the contacts the result has, its feet come to rest (the model card's
+# Fill Gap section gives the creep after 1, 4 and 8 passes).
+SETTLE_PASSES = 8
+_SETTLED = 1e-5  # legs' lengths: a pass that moves no joint further than this ends the settling
+
+
 @dataclass
 class FootLockSettings:
     blend_s: float = 0.15  # seconds over which a lock fades in before a span and out after it
@@ -65,6 +76,7 @@ class FootLockSettings:
     max_offset: float = 0.6  # legs' lengths: a span needing a bigger correction is no contact, left alone
     floor_tolerance: float = 0.01  # metres (for a standard body): contacts this close to the floor stay
     lower_body: bool = True  # after fixed frames, a body whose feet hover may come down as a whole
+    passes: int = 1  # > 1: lock the result again on its own contacts until its feet rest (see SETTLE_PASSES)
 
 
 def contacts_from_features(feats: np.ndarray) -> np.ndarray:
@@ -307,12 +319,14 @@ def soft_reach(dist: np.ndarray, rest: np.ndarray, reach: np.ndarray, softness: 
 
 
 def two_bone_ik(hip: np.ndarray, knee: np.ndarray, ankle: np.ndarray, target: np.ndarray,
-                softness: float = 0.03, forward: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+                softness: float = 0.03, forward: np.ndarray | None = None,
+                rest: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Analytic two-bone IK: new knee and ankle ``[..., 3]`` putting the ankle on ``target``.
 
     ``hip``, ``knee``, ``ankle``, ``target`` ``[..., 3]``; the bone lengths of each frame are
     kept, the knee stays in the plane of the original leg (turned onto the new axis) and
-    ``forward`` ``[..., 3]`` (optional) picks the bend direction of a nearly straight leg."""
+    ``forward`` ``[..., 3]`` (optional) picks the bend direction of a nearly straight leg. ``rest`` ``[...]``:
+    the hip-to-ankle distance up to which the leg may stretch without easing (default: the input's own)."""
     l1 = np.linalg.norm(knee - hip, axis=-1)
     l2 = np.linalg.norm(ankle - knee, axis=-1)
     axis0, d0 = _unit(ankle - hip)
@@ -324,8 +338,8 @@ def two_bone_ik(hip: np.ndarray, knee: np.ndarray, ankle: np.ndarray, target: np
         bend0 = bend0 + lean[..., None] * _unit(fwd)[0]
     bend0 = _unit(bend0)[0]
     axis = _unit(target - hip)[0]
-    return place_leg(hip, target, l1, l2, np.einsum("...ij,...j->...i", shortest_arc(axis0, axis), bend0), d0,
-                     softness)
+    return place_leg(hip, target, l1, l2, np.einsum("...ij,...j->...i", shortest_arc(axis0, axis), bend0),
+                     d0 if rest is None else rest, softness)
 
 
 def place_leg(hip: np.ndarray, target: np.ndarray, l1: np.ndarray, l2: np.ndarray, bend: np.ndarray,
@@ -368,7 +382,9 @@ def foot_lock(pos: np.ndarray, fps: float = MODEL_FPS, contacts: np.ndarray | No
 
     ``contacts`` ``[F, 4]`` (0/1, :data:`conventions.CONTACTS` order; default: detected).
     ``fixed`` bool ``[F]``: frames left exactly as they are (say, the part of a clip already in
-    the scene); locks next to them continue from where their feet are, without a jump."""
+    the scene); locks next to them continue from where their feet are, without a jump.
+    ``settings.passes`` > 1 locks the result again, on its contacts and those detected on it, until no joint
+    moves or the passes are spent: a settled lock (:data:`SETTLE_PASSES`)."""
     cfg = settings or FootLockSettings()
     pos = np.asarray(pos, np.float64)
     if pos.ndim != 3 or pos.shape[1:] != (len(JOINT_INDEX), 3):
@@ -377,9 +393,28 @@ def foot_lock(pos: np.ndarray, fps: float = MODEL_FPS, contacts: np.ndarray | No
     fixed = np.zeros(len(pos), bool) if fixed is None else np.asarray(fixed, bool)
     if len(pos) < 2 or fixed.all():
         return pos.astype(np.float32)
+    out = _lock(pos, fps, contacts, cfg, fixed)
+    # Settling: each pass locks the last one's result on the contacts it has now, along the ground only (the
+    # heights came right in the first pass; pulled again, a foot that cannot quite reach would be pulled
+    # further each time and snap back), no leg stretching further than the input's did, the body not lowered
+    reach = np.linalg.norm(pos[:, _ANKLE] - pos[:, _HIP], axis=-1)
+    for _ in range(cfg.passes - 1):
+        contacts = np.maximum(contacts, detect_foot_contacts(out, fps))
+        settled = _lock(out, fps, contacts, replace(cfg, lower_body=False), fixed, reach)
+        moved = np.abs(settled - out).max()
+        out = settled
+        if moved < _SETTLED * leg_length(pos):
+            break
+    return out.astype(np.float32)
+
+
+def _lock(pos: np.ndarray, fps: float, contacts: np.ndarray, cfg: FootLockSettings, fixed: np.ndarray,
+          reach: np.ndarray | None = None) -> np.ndarray:
+    """One pass of :func:`foot_lock` (float64 out). With ``reach`` ``[F, 2]`` (:func:`two_bone_ik`'s ``rest``),
+    a settling pass: the feet move along the ground only."""
     mask = fill_gaps(contacts > 0.5, int(round(cfg.min_gap_s * fps)))
     limit = cfg.max_offset * leg_length(pos)
-    rest = rest_heights(pos, mask, fixed if fixed.any() else None)
+    rest = None if reach is not None else rest_heights(pos, mask, fixed if fixed.any() else None)
     tolerance = cfg.floor_tolerance * leg_length(pos) / STANDARD_LEG_LENGTH
     if rest is not None and fixed.any() and cfg.lower_body:  # after the frames kept, a hovering body comes down
         pos = pos.copy()
@@ -388,7 +423,7 @@ def foot_lock(pos: np.ndarray, fps: float = MODEL_FPS, contacts: np.ndarray | No
     target, toe = ankle_targets(pos, mask, cfg.blend_s * fps, fixed if fixed.any() else None, limit, rest,
                                 tolerance)
     fwd = body_forward(pos)[:, None].repeat(2, 1)
-    knee, ankle = two_bone_ik(pos[:, _HIP], pos[:, _KNEE], pos[:, _ANKLE], target, cfg.softness, fwd)
+    knee, ankle = two_bone_ik(pos[:, _HIP], pos[:, _KNEE], pos[:, _ANKLE], target, cfg.softness, fwd, reach)
     out = pos.copy()
     # The foot points at its toe target with its own length (its orientation where the toe is free);
     # where that would put the toe below the floor, it only turns about the vertical to face it.
@@ -400,7 +435,7 @@ def foot_lock(pos: np.ndarray, fps: float = MODEL_FPS, contacts: np.ndarray | No
     out[:, _TOE] = ankle + aimed
     out[:, _KNEE], out[:, _ANKLE] = knee, ankle
     out[fixed] = pos[fixed]
-    return out.astype(np.float32)
+    return out
 
 
 def _check_contacts(pos: np.ndarray, fps: float, contacts: np.ndarray | None) -> np.ndarray:

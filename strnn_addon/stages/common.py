@@ -85,11 +85,12 @@ def frame_range(clip, frame_start: int | None, frame_end: int | None, need: int,
     return a, b
 
 
-def lock(pos, fps, *, blend: float | None = None, detect_only: bool = False, lower_body: bool = True, **kw):
+def lock(pos, fps, *, blend: float | None = None, detect_only: bool = False, lower_body: bool = True,
+         passes: int = 1, **kw):
     """:func:`footlock.foot_lock` of scene positions ``[F, 21, 3]`` (or, with ``detect_only``, their
     contacts ``[F, 4]``), its errors as :class:`UserError`; ``lower_body`` False when only the legs
-    will be written (the body stays at its height)."""
-    settings = footlock.FootLockSettings(lower_body=lower_body)
+    will be written (the body stays at its height); ``passes`` > 1 settles the lock."""
+    settings = footlock.FootLockSettings(lower_body=lower_body, passes=passes)
     if blend is not None:
         settings.blend_s = max(float(blend), 0.0)
     try:

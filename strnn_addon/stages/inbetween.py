@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from ...model_core.ops.extend import MEMORY_S
+from ...model_core.ops.footlock import SETTLE_PASSES
 from ...model_core.ops.inbetween import MAX_GAP_S
 from .. import engine_bridge
 from ..scene import pipeline, rig_io
@@ -120,7 +121,7 @@ def inbetween_steps(context, obj, *, frame_start: int | None = None, frame_end: 
         seq = np.concatenate([pos_before, new_pos, pos_after])
         fixed = np.ones(len(seq), bool)
         fixed[len(before):len(before) + len(gap)] = False
-        new_pos = lock(seq, clip.fps, fixed=fixed)[len(before):len(before) + len(gap)]
+        new_pos = lock(seq, clip.fps, fixed=fixed, passes=SETTLE_PASSES)[len(before):len(before) + len(gap)]
     yield "solve"
     loc, rot = pipeline.solve_frames(context, clip, gap, new_pos)
     yield "write"

@@ -149,3 +149,23 @@ def test_a_gap_in_a_real_walk_keeps_the_rigs_bones_and_feet_without_a_pop(addon,
     assert peak_acceleration(filled) < 1.25 * peak_acceleration(take)  # the bones bent: 5 x
     legs = np.linalg.norm(filled[:, [6, 7, 10, 11]] - filled[:, [5, 6, 9, 10]], axis=-1)  # thighs and shins
     np.testing.assert_allclose(legs, np.broadcast_to(legs[0], legs.shape), rtol=1e-3)
+
+
+def test_the_gaps_feet_settle_on_the_floor(addon, real_model, gapped):
+    """With Foot Lock (the default) the filled gap's feet rest where they touch the floor: on the contact
+    frames detected on the result itself, the heels and toes creep a fraction of what the models' gap does
+    unlocked, and under a millimetre per frame."""
+    from model_core.motion.conventions import zup_to_yup
+    from model_core.ops import footlock as fl
+
+    obj, _ = gapped
+    original = action_of(obj)
+    creep = {}
+    for lock in (False, True):
+        obj.animation_data.action = original
+        assert bpy.ops.strnn.inbetween(use_range=True, frame_start=41, frame_end=70, foot_lock=lock) == {"FINISHED"}
+        pos = zup_to_yup(evaluated_joints(addon, obj, np.arange(1, 121)))
+        contacts = fl.detect_foot_contacts(pos, 30.0)
+        creep[lock] = fl.foot_skate_cm(pos[39:71], contacts[39:71])
+    print("gap creep unlocked / locked (cm per frame):", creep)
+    assert creep[True] < 0.2 * creep[False] and creep[True] < 0.1

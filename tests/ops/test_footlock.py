@@ -264,3 +264,35 @@ def test_a_lock_reaches_the_next_spans_target_without_a_step_when_the_last_one_e
     steps = np.diff(out[20:27])  # 18 cm over the 6 steps between them: eased out of one spot and into the next
     assert (steps > 0).all() and steps[0] < 0.015 and steps[-1] < 0.015 and steps.max() < 0.05, steps
     assert (weight >= 0).all() and (weight <= 1).all()
+
+
+@pytest.mark.parametrize("speed", [0.5, 1.4])
+def test_a_settled_lock_leaves_the_feet_of_its_own_result_at_rest(speed):
+    """One pass pins the contacts the input has; the result's own resting feet (detected on it, as Fill Gap
+    is measured) still creep. Settled, they creep at most half as much, the feet stay at the heights the
+    first pass gave them (settling moves them along the ground), and the settled lock keeps every bone's
+    length, the fixed frames, and the seam free of jumps."""
+    slid = sliding(walking_skeleton(150, speed=speed), 0.05).astype(np.float64)
+    keep = 47
+    fixed = np.arange(150) < keep
+    creep, feet = [], []
+    for passes in (1, fl.SETTLE_PASSES):
+        out = fl.foot_lock(slid, MODEL_FPS, fixed=fixed, settings=fl.FootLockSettings(passes=passes))
+        creep.append(fl.foot_skate_cm(out[keep - 1:], fl.detect_foot_contacts(out)[keep - 1:]))
+        feet.append(out[:, CONTACT_JOINTS, 1])
+    assert creep[1] < creep[0] / 2.0, creep
+    assert np.abs(feet[1] - feet[0]).mean() < 0.002 and np.abs(feet[1] - feet[0]).max() < 0.02
+    assert np.array_equal(out[:keep], slid[:keep].astype(np.float32))
+    assert np.abs(bone_lengths(out) - bone_lengths(slid)).max() < 1e-5
+    jump = np.linalg.norm(np.diff(out[keep - 3:keep + 3], axis=0), axis=-1).max()
+    assert jump <= np.linalg.norm(np.diff(slid, axis=0), axis=-1).max()
+
+
+def test_settling_keeps_the_contacts_it_was_given():
+    """Given contacts (the model's channels, say) stay pinned in every pass of a settled lock."""
+    clean = walking_skeleton(150)
+    contacts = fl.detect_foot_contacts(clean)
+    slid = sliding(clean)
+    one = fl.foot_skate_cm(fl.foot_lock(slid, MODEL_FPS, contacts), contacts)
+    settled = fl.foot_lock(slid, MODEL_FPS, contacts, settings=fl.FootLockSettings(passes=fl.SETTLE_PASSES))
+    assert fl.foot_skate_cm(settled, contacts) <= min(one + 0.01, 0.5)
