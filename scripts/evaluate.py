@@ -147,7 +147,7 @@ def print_table(result: dict, extra: dict):
     if "feet" in result:
         ft = result["feet"]
         print(f"\nFeet of {ft['frames']} extended frames after each of {ft['clips']} clips' first 20, before -> after "
-              f"Foot Lock: skate {ft['skate_raw_cm']:.2f} -> {ft['skate_locked_cm']:.2f} cm/frame on contact frames "
+              f"Foot Lock: skate {ft['skate_raw_cm']:.2f} -> {ft['skate_locked_cm']:.3f} cm/frame on contact frames "
               f"(real takes {ft['skate_real_cm']:.2f}), deepest sink below the take's floor {ft['sink_raw_cm']:.1f} "
               f"-> {ft['sink_locked_cm']:.1f} cm, knees left fully straight {100 * ft['straight_knees_locked']:.1f} %")
     if "long_extend" in result:
@@ -180,15 +180,16 @@ def print_inbetween(ib: dict) -> None:
             ("  interpolation, heading", ib["l2p_cm"]["interpolation_heading"]),
             ("  strnn / interpolation", [a / b for a, b in zip(ib["l2p_cm"]["strnn"], ib["l2p_cm"]["interpolation"])]),
             ("  strnn without the take", ib["l2p_cm"]["strnn_without_take"]),
-            ("target error cm: strnn", ib["target_error_cm"]["strnn"]),
-            ("foot skate cm: strnn", ib["foot_skate_cm"]["strnn"]),
-            ("  strnn, foot-locked", ib["foot_skate_cm"]["strnn_locked"]),
-            ("  interpolation", ib["foot_skate_cm"]["interpolation"]), ("  real takes", ib["foot_skate_cm"]["real"])]
+            ("target error cm: strnn", ib["target_error_cm"]["strnn"])]
+    skate = [("foot skate cm: strnn", ib["foot_skate_cm"]["strnn"]),  # fractions of a millimetre: 3 decimals
+             ("  strnn, foot-locked", ib["foot_skate_cm"]["strnn_locked"]),
+             ("  interpolation", ib["foot_skate_cm"]["interpolation"]), ("  real takes", ib["foot_skate_cm"]["real"])]
     share = {k: [100 * v for v in row] for k, row in ib["foot_contact_share"].items()}
+    rows += [(name, row, 3) for name, row in skate]
     rows += [("contact steps %: strnn", share["strnn"]), ("  strnn, foot-locked", share["strnn_locked"]),
              ("  interpolation", share["interpolation"]), ("  real takes", share["real"])]
-    for name, row in rows:
-        print(f"{name:<28}" + "".join(f"{v:8.2f}" for v in row))
+    for name, row, *digits in rows:
+        print(f"{name:<28}" + "".join(f"{v:8.{digits[0] if digits else 2}f}" for v in row))
 
 
 def print_seeds(lh: dict) -> None:

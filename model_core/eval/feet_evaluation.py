@@ -1,6 +1,6 @@
 """Feet of generated motion (``scripts/evaluate.py --feet``): each clip's first 20 frames are
 extended as Extend Clip does it (:func:`extend.extend_positions`), then foot-locked with the
-context frames fixed, as the Extend operator's Foot Lock option runs it. Reported beside the real
+context frames fixed and the lock settled, as the Extend operator's Foot Lock option runs it. Reported beside the real
 takes: foot skate on contact frames, how far contact feet go below the floor of the take, and how
 often the lock leaves a knee fully straight where the generated leg was bent.
 
@@ -15,7 +15,15 @@ import numpy as np
 
 from ..motion.conventions import CONTACT_JOINTS, MODEL_FPS, UP_AXIS
 from ..ops.extend import extend_positions
-from ..ops.footlock import detect_foot_contacts, foot_lock, foot_skate_cm, knee_angles, rest_heights
+from ..ops.footlock import (
+    SETTLE_PASSES,
+    FootLockSettings,
+    detect_foot_contacts,
+    foot_lock,
+    foot_skate_cm,
+    knee_angles,
+    rest_heights,
+)
 
 CONTEXT = 20
 STRAIGHT_DEG = 1.0  # a knee bent less than this is fully straight
@@ -39,7 +47,7 @@ def one_clip(engine, pos: np.ndarray, frames: int) -> dict:
     raw = np.concatenate([ctx, new])
     fixed = np.arange(len(raw)) < CONTEXT
     contacts = detect_foot_contacts(raw)
-    locked = foot_lock(raw, MODEL_FPS, contacts, fixed=fixed)
+    locked = foot_lock(raw, MODEL_FPS, contacts, fixed=fixed, settings=FootLockSettings(passes=SETTLE_PASSES))
     after = detect_foot_contacts(locked)
     rest = rest_heights(raw, contacts, fixed)
     gen = ~fixed

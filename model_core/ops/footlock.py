@@ -196,15 +196,15 @@ def lock_offsets(x: np.ndarray, mask: np.ndarray, blend: float, fixed: np.ndarra
 
 def ankle_targets(pos: np.ndarray, contacts: np.ndarray, blend: float, fixed: np.ndarray | None = None,
                   limit: float = np.inf, rest: np.ndarray | None = None,
-                  tolerance: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+                  tolerance: float = 0.0, spans: bool = True) -> tuple[np.ndarray, np.ndarray]:
     """Where each ankle and each toe should be, ``[F, 2, 3]`` each (left, right). Heels first: each heel span pins the
     ankle. Then toes, on the heel-locked foot (kept at its orientation): each toe span pins the
     toe, moving the ankle with it, so a heel lifting off rolls the foot about a planted toe; where
     the heel is held too, the heel stays and the foot turns about it to point at the planted toe
     (the toe target is returned beside the ankle's), so a flat foot slides at neither end.
     ``rest`` ``[4]``: the height of each contact joint (l_heel, l_toe, r_heel, r_toe) standing on
-    the floor; contacts further than ``tolerance`` from it are brought to it and no heel or toe goes
-    further than that below it (None: heights unchanged)."""
+    the floor; contacts further than ``tolerance`` from it are brought to it (``spans`` False: not) and no
+    heel or toe goes further than that below it (None: heights unchanged)."""
     mask = np.asarray(contacts) > 0.5
     ankle = pos[:, _ANKLE]
     foot = pos[:, _TOE] - ankle  # [F, 2, 3] ankle-to-toe, kept
@@ -214,18 +214,18 @@ def ankle_targets(pos: np.ndarray, contacts: np.ndarray, blend: float, fixed: np
     toe = ankle + foot + pull  # where the toe is pinned
     ankle = ankle + (1.0 - held)[..., None] * pull  # a held heel stays where it is
     if rest is not None:
-        lift = _height_pull(ankle, foot, mask, blend, fixed, rest, tolerance)
+        lift = _height_pull(ankle, foot, mask, blend, fixed, rest, tolerance, spans)
         ankle, toe = ankle + lift, toe + lift
     return ankle, toe
 
 
 def _height_pull(ankle: np.ndarray, foot: np.ndarray, mask: np.ndarray, blend: float, fixed: np.ndarray | None,
-                 rest: np.ndarray, tolerance: float) -> np.ndarray:
+                 rest: np.ndarray, tolerance: float, spans: bool = True) -> np.ndarray:
     """Vertical move of each ankle ``[F, 2, 3]``: :func:`span_lift`, then, at every frame, up by what
     the heel or toe would still be below its rest height; nothing on ``fixed`` frames, eased in from them
     over ``blend`` frames (:func:`from_fixed`)."""
     heel_need, toe_need = _needs(ankle, foot, rest)
-    lift = span_lift(ankle, foot, mask, blend, fixed, rest, tolerance)
+    lift = span_lift(ankle, foot, mask, blend, fixed, rest, tolerance) if spans else np.zeros(heel_need.shape)
     lift = lift + np.maximum(np.maximum(heel_need - lift, toe_need - lift) - tolerance, 0.0)
     lift = lift * from_fixed(fixed, len(ankle), blend)[:, None]  # eased in from the frames kept: no step
     out = np.zeros(ankle.shape)
@@ -393,14 +393,16 @@ def foot_lock(pos: np.ndarray, fps: float = MODEL_FPS, contacts: np.ndarray | No
     fixed = np.zeros(len(pos), bool) if fixed is None else np.asarray(fixed, bool)
     if len(pos) < 2 or fixed.all():
         return pos.astype(np.float32)
-    out = _lock(pos, fps, contacts, cfg, fixed)
+    rest = rest_heights(pos, fill_gaps(contacts > 0.5, _min_gap(cfg, fps)), fixed if fixed.any() else None)
+    out = _lock(pos, fps, contacts, cfg, fixed, rest)
     # Settling: each pass locks the last one's result on the contacts it has now, along the ground only (the
     # heights came right in the first pass; pulled again, a foot that cannot quite reach would be pulled
-    # further each time and snap back), no leg stretching further than the input's did, the body not lowered
+    # further each time and snap back; no heel or toe goes below the floor still), no leg stretching further
+    # than the input's did, the body not lowered again
     reach = np.linalg.norm(pos[:, _ANKLE] - pos[:, _HIP], axis=-1)
     for _ in range(cfg.passes - 1):
         contacts = np.maximum(contacts, detect_foot_contacts(out, fps))
-        settled = _lock(out, fps, contacts, replace(cfg, lower_body=False), fixed, reach)
+        settled = _lock(out, fps, contacts, replace(cfg, lower_body=False), fixed, rest, reach)
         moved = np.abs(settled - out).max()
         out = settled
         if moved < _SETTLED * leg_length(pos):
@@ -408,20 +410,23 @@ def foot_lock(pos: np.ndarray, fps: float = MODEL_FPS, contacts: np.ndarray | No
     return out.astype(np.float32)
 
 
+def _min_gap(cfg: FootLockSettings, fps: float) -> int:
+    return int(round(cfg.min_gap_s * fps))
+
+
 def _lock(pos: np.ndarray, fps: float, contacts: np.ndarray, cfg: FootLockSettings, fixed: np.ndarray,
-          reach: np.ndarray | None = None) -> np.ndarray:
-    """One pass of :func:`foot_lock` (float64 out). With ``reach`` ``[F, 2]`` (:func:`two_bone_ik`'s ``rest``),
-    a settling pass: the feet move along the ground only."""
-    mask = fill_gaps(contacts > 0.5, int(round(cfg.min_gap_s * fps)))
+          rest: np.ndarray | None, reach: np.ndarray | None = None) -> np.ndarray:
+    """One pass of :func:`foot_lock` (float64 out); ``rest``: :func:`rest_heights`. With ``reach`` ``[F, 2]``
+    (:func:`two_bone_ik`'s ``rest``), a settling pass: contact spans are not brought to the floor again."""
+    mask = fill_gaps(contacts > 0.5, _min_gap(cfg, fps))
     limit = cfg.max_offset * leg_length(pos)
-    rest = None if reach is not None else rest_heights(pos, mask, fixed if fixed.any() else None)
     tolerance = cfg.floor_tolerance * leg_length(pos) / STANDARD_LEG_LENGTH
     if rest is not None and fixed.any() and cfg.lower_body:  # after the frames kept, a hovering body comes down
         pos = pos.copy()
         drop = body_drop(pos, mask, cfg.blend_s * fps, fixed if fixed.any() else None, rest, tolerance)
         pos[..., UP_AXIS] += drop[:, None]
     target, toe = ankle_targets(pos, mask, cfg.blend_s * fps, fixed if fixed.any() else None, limit, rest,
-                                tolerance)
+                                tolerance, spans=reach is None)
     fwd = body_forward(pos)[:, None].repeat(2, 1)
     knee, ankle = two_bone_ik(pos[:, _HIP], pos[:, _KNEE], pos[:, _ANKLE], target, cfg.softness, fwd, reach)
     out = pos.copy()

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from ...model_core.ops.extend import MEMORY_S
+from ...model_core.ops.footlock import SETTLE_PASSES
 from ...model_core.rig.solve import solve
 from .. import engine_bridge
 from ..scene import pipeline
@@ -65,7 +66,8 @@ def extend_steps(context, obj, *, frames: int = 120, context_frames: int = 0, fo
     new_pos = model_call(engine_bridge.run_extend, prefs(context), pos, clip.fps, frames,
                          memory if len(mem_frames) > len(ctx_frames) else None)
     if foot_lock:
-        new_pos = lock(np.concatenate([pos, new_pos]), clip.fps, fixed=np.arange(len(pos) + frames) < len(pos))
+        new_pos = lock(np.concatenate([pos, new_pos]), clip.fps, fixed=np.arange(len(pos) + frames) < len(pos),
+                       passes=SETTLE_PASSES)
         new_pos = new_pos[len(pos):]
     yield "solve"
     targets = pipeline.to_armature(clip, new_pos)

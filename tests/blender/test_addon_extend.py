@@ -249,3 +249,23 @@ def test_an_unseen_walk_extended_by_20_s_still_walks_when_it_follows_the_clip(re
     alone_lead, alone_airborne = stepping(alone[-300:])
     print(f"last 5 s: feet lead sd {lead:.2f} m, airborne {airborne:.2f} (take {take_lead:.2f}); model alone "
           f"{alone_lead:.2f}, {alone_airborne:.2f}")
+
+
+def test_foot_lock_leaves_the_extensions_feet_at_rest(real_model, addon, tmp_path):
+    """With Foot Lock the extended frames' feet rest where they touch the floor (the lock settles): on the
+    contact frames detected on the result itself, the heels and toes creep a fraction of what the
+    extension does unlocked, under a millimetre per frame."""
+    from model_core.motion.conventions import zup_to_yup
+    from model_core.ops import footlock as fl
+
+    obj = import_bvh(walk_bvh(tmp_path, frames=60))
+    original = action_of(obj)
+    creep = {}
+    for lock in (False, True):
+        obj.animation_data.action = original
+        assert bpy.ops.strnn.extend_clip(frames=60, foot_lock=lock) == {"FINISHED"}
+        pos = zup_to_yup(evaluated_joints(addon, obj, np.arange(1, 121)))
+        contacts = fl.detect_foot_contacts(pos, 30.0)
+        creep[lock] = fl.foot_skate_cm(pos[59:], contacts[59:])
+    print("extension creep unlocked / locked (cm per frame):", creep)
+    assert creep[True] < 0.2 * creep[False] and creep[True] < 0.1

@@ -270,8 +270,8 @@ def test_a_lock_reaches_the_next_spans_target_without_a_step_when_the_last_one_e
 def test_a_settled_lock_leaves_the_feet_of_its_own_result_at_rest(speed):
     """One pass pins the contacts the input has; the result's own resting feet (detected on it, as Fill Gap
     is measured) still creep. Settled, they creep at most half as much, the feet stay at the heights the
-    first pass gave them (settling moves them along the ground), and the settled lock keeps every bone's
-    length, the fixed frames, and the seam free of jumps."""
+    first pass gave them (settling moves them along the ground) and go no deeper below the floor, and the
+    settled lock keeps every bone's length, the fixed frames, and the seam free of jumps."""
     slid = sliding(walking_skeleton(150, speed=speed), 0.05).astype(np.float64)
     keep = 47
     fixed = np.arange(150) < keep
@@ -282,6 +282,8 @@ def test_a_settled_lock_leaves_the_feet_of_its_own_result_at_rest(speed):
         feet.append(out[:, CONTACT_JOINTS, 1])
     assert creep[1] < creep[0] / 2.0, creep
     assert np.abs(feet[1] - feet[0]).mean() < 0.002 and np.abs(feet[1] - feet[0]).max() < 0.02
+    rest = fl.rest_heights(slid, fl.detect_foot_contacts(slid) > 0.5, fixed)[None]
+    assert (rest - feet[1]).max() <= max((rest - feet[0]).max(), 0.01) + 1e-6, "no deeper below the floor"
     assert np.array_equal(out[:keep], slid[:keep].astype(np.float32))
     assert np.abs(bone_lengths(out) - bone_lengths(slid)).max() < 1e-5
     jump = np.linalg.norm(np.diff(out[keep - 3:keep + 3], axis=0), axis=-1).max()
