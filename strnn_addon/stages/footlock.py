@@ -32,7 +32,8 @@ def foot_lock_steps(context, obj, *, frame_start: int | None = None, frame_end: 
     if not contacts[inside].any():
         raise UserError(f"No foot touches the ground in frames {a}-{b} of {clip.action.name!r} (feet near their "
                         "lowest height and slower than 0.6 m/s): nothing to lock")
-    locked = lock(pos, clip.fps, contacts=contacts, fixed=~inside, blend=blend, lower_body=False)
+    locked = lock(pos, clip.fps, contacts=contacts, fixed=~inside, blend=blend, lower_body=False,
+                  passes=footlock.SETTLE_PASSES)
     yield "solve"
     loc, rot = pipeline.solve_frames(context, clip, frames, locked)
     yield "write"

@@ -60,8 +60,9 @@ def test_foot_lock_reduces_skate_on_a_sliding_clip(addon, tmp_path):
     old, new = lock()
     after = joints(addon, obj, frames)
     skate_before, skate_after = fl.foot_skate_cm(before, contacts), fl.foot_skate_cm(after, contacts)
-    print(f"skate {skate_before:.2f} -> {skate_after:.2f} cm/frame")
-    assert skate_before > 0.8 and skate_after <= 0.5
+    own = fl.foot_skate_cm(after, fl.detect_foot_contacts(after))  # the lock settles: its own resting feet too
+    print(f"skate {skate_before:.2f} -> {skate_after:.2f} cm/frame, on the result's own contacts {own:.3f}")
+    assert skate_before > 0.8 and skate_after <= 0.05 and own <= 0.06  # one pass: 0.07 and 0.09
     assert fl.knee_pops(after) <= fl.knee_pops(before)
     np.testing.assert_allclose(leg_lengths(after), leg_lengths(before), atol=1e-4)
     body = np.setdiff1d(np.arange(21), LEG_JOINTS)
