@@ -59,11 +59,11 @@ _HEEL_CHANNELS = [[name for name, _ in CONTACTS].index(f"{s}_heel") for s in ("l
 _TOE_CHANNELS = [[name for name, _ in CONTACTS].index(f"{s}_toe") for s in ("l", "r")]
 
 
-# Passes of a settled lock (Fill Gap's). One pass pins the contacts the input has; where the input's foot
-# pitches while heel and toe are both down (the foot keeps its length, so one end slides), where a foot is
-# lifted or lowered to the floor, or where it drifts slowly near the floor just outside a contact, the
-# result still creeps. Locked again on the contacts the result has, its feet come to rest (the model card's
-# Fill Gap section gives the creep after 1, 4 and 8 passes).
+# Passes of a settled lock (the Foot Lock operator's, Fill Gap's and Extend's). One pass pins the contacts the
+# input has; where the input's foot pitches while heel and toe are both down (the foot keeps its length, so
+# one end slides), where a foot is lifted or lowered to the floor, or where it drifts slowly near the floor
+# just outside a contact, the result still creeps. Locked again on the contacts the result has, its feet come
+# to rest (the model card's section "The feet settle" gives the creep after 1, 4 and 8 passes).
 SETTLE_PASSES = 8
 _SETTLED = 1e-5  # legs' lengths: a pass that moves no joint further than this ends the settling
 
