@@ -400,12 +400,13 @@ def foot_lock(pos: np.ndarray, fps: float = MODEL_FPS, contacts: np.ndarray | No
     # further each time and snap back; no heel or toe goes below the floor still), no leg stretching further
     # than the input's did, the body not lowered again
     reach = np.linalg.norm(pos[:, _ANKLE] - pos[:, _HIP], axis=-1)
+    again, still = replace(cfg, lower_body=False), _SETTLED * leg_length(pos)
     for _ in range(cfg.passes - 1):
         contacts = np.maximum(contacts, detect_foot_contacts(out, fps))
-        settled = _lock(out, fps, contacts, replace(cfg, lower_body=False), fixed, rest, reach)
+        settled = _lock(out, fps, contacts, again, fixed, rest, reach)
         moved = np.abs(settled - out).max()
         out = settled
-        if moved < _SETTLED * leg_length(pos):
+        if moved < still:
             break
     return out.astype(np.float32)
 

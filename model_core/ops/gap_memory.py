@@ -1,15 +1,15 @@
 """The take's own motion for Fill Gap (no torch needed).
 
-A take often does again what it did elsewhere: a walk's
-next steps are like its last ones, a drill kicks the same kick again. A gap in such a take is best filled with
-what the take did the other time, and no model that has not seen this person or this motion does as well. So
-Fill Gap looks through the rest of the action (outside the gap, up to :data:`extend.MEMORY_S` seconds either
-side, as much as Extend reads) for the stretch that fits both ends of the gap: its last :data:`MATCH_FRAMES`
-frames before are most like the context's last ones (the pose in the body's frame, the hips' velocity in it,
-the turn rate), and its frame ``N + 1`` later stands to it as the target stands to the context's last frame
-(how far the body went, in its own frame, how far it turned, the target's pose). Moved to start where the
-context ends, that stretch is a second continuation of the context, which Fill Gap bends onto the target as it
-bends the model's. The stretch is looked for in the take as it is and mirrored (the other foot's steps).
+A take often does again what it did elsewhere: a walk's next steps are like its last ones, a drill kicks the
+same kick again. A gap in such a take is best filled with what the take did the other time, and no model that
+has not seen this person or this motion does as well. So Fill Gap looks through the rest of the action
+(outside the gap, up to :data:`extend.MEMORY_S` seconds either side, as much as Extend reads) for the stretch
+that fits both ends of the gap: its last :data:`MATCH_FRAMES` frames before are most like the context's last
+ones (the pose in the body's frame, the hips' velocity in it, the turn rate), and its frame ``N + 1`` later
+stands to it as the target stands to the context's last frame (how far the body went, in its own frame, how
+far it turned, the target's pose). Moved to start where the context ends, that stretch is a second
+continuation of the context, which Fill Gap bends onto the target as it bends the model's. The stretch is
+looked for in the take as it is and mirrored (the other foot's steps).
 
 How much Fill Gap leans on it (:func:`share`) falls with the fit's distance: all the way where the take
 did exactly this elsewhere, nothing where it never did (a single bow); less in long gaps and in motion the

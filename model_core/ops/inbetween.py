@@ -309,6 +309,8 @@ def inbetween_positions(engine, before: np.ndarray, after: np.ndarray, fps: floa
     space."""
     if frames < 1:
         raise ValueError("the gap has no frame to fill")
+    if not len(before) or not len(after):
+        raise ValueError("the gap needs at least one frame before it and one after it: key a pose on each side")
     gap_s = (frames + 1) / fps
     if gap_s > MAX_GAP_S:
         raise ValueError(f"the gap of {frames} frames ({gap_s:.1f} s) is longer than the {MAX_GAP_S:g} s the model "

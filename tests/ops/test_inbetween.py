@@ -71,6 +71,8 @@ def test_the_model_fills_a_gap_at_any_rate_and_unit():
     assert np.linalg.norm(gap[-1] - after[0], axis=-1).mean() < 4.0  # 1/60 s before the target, in cm
     with pytest.raises(ValueError, match="longer than"):
         inbetween_positions(engine, before, after, 60.0, 300)
+    with pytest.raises(ValueError, match="one after it"):  # nothing after the gap: said, not an IndexError
+        inbetween_positions(engine, before, after[:0], 60.0, 59)
 
 
 def test_every_window_of_a_gap_is_the_two_models_average():
