@@ -107,6 +107,15 @@ def print_prediction(result: dict):
     print(f"{'  / best base':<20}" + "".join(f"{s / b:8.2f}" for s, b in zip(seam, best)))
     if alone is not None:
         print(f"{'  context only':<20}" + "".join(f"{v:8.2f}" for v in alone))
+    parts = pred.get("as_extend_parts")
+    if parts:
+        print(f"{'  take track':<20}" + "".join(f"{v:8.2f}" for v in parts["true_track_cm"]))
+        print(f"{'  take pose':<20}" + "".join(f"{v:8.2f}" for v in parts["true_pose_cm"]))
+        if parts["travel_ratio"] is not None:
+            print(f"  as Extend, {parts['moving_windows']} windows that move: "
+                  f"{parts['travel_ratio']:.2f} x the take's way in {pred['horizons_ms'][-1]} ms (median)")
+        print("  (take track: the take's own hips track under Extend's pose, the pose's error alone; take pose: "
+              "the take's pose on Extend's track)")
 
 
 def print_table(result: dict, extra: dict):

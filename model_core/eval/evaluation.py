@@ -11,7 +11,7 @@ import numpy as np
 
 from ..io.bvh import read_bvh
 from ..model.dataset import MotionData, fps_override
-from ..motion.conventions import MODEL_FPS
+from ..motion.conventions import GROUND_AXES, MODEL_FPS
 from ..motion.features import floor_height, positions_to_features
 from ..motion.noise import add_rotation_jitter
 from ..ops.denoise import denoise_positions
@@ -53,29 +53,60 @@ def select_clips(data: MotionData, split: str, group: str | None = None) -> list
 def evaluate_prediction(engine, clips, baselines: dict | None = None) -> dict:
     """Prediction MPJPE (cm) per horizon of STRNN, the simple baselines, the ``baselines``
     ``{name: engine}`` models and STRNN as Extend delivers it: ``strnn_as_extend``, each window's take up to
-    the context's end as the clip (:func:`as_extend_errors`), and ``strnn_as_extend_context_only``, a clip of
-    the 20 context frames alone (the seam blend on the model's own continuation)."""
+    the context's end as the clip (:func:`as_extend_predictions`), and ``strnn_as_extend_context_only``, a clip of
+    the 20 context frames alone (the seam blend on the model's own continuation); and what the first is made of
+    (``as_extend_parts``, :func:`error_parts`)."""
     positions = [c.positions for c in clips]
     errors, windows = prediction_errors(engine, positions, extra_engines=baselines)
     errors["strnn_as_extend_context_only"] = errors.pop("strnn_seam_blend")
-    errors["strnn_as_extend"] = as_extend_errors(engine, positions)
-    return {"horizons_ms": list(HORIZONS_MS), "mpjpe_cm": errors, "windows": windows}
+    last, new, truth = as_extend_predictions(engine, positions)
+    errors["strnn_as_extend"] = horizon_errors(new, truth)
+    return {"horizons_ms": list(HORIZONS_MS), "mpjpe_cm": errors, "windows": windows,
+            "as_extend_parts": error_parts(last, new, truth)}
 
 
-def as_extend_errors(engine, clips: list[np.ndarray]) -> list[float]:
-    """MPJPE (cm) per horizon of Extend Clip (:func:`extend.extend_positions`, *Follow the Clip* on) on the
-    windows :func:`metrics.prediction_windows` makes, each clip being the take up to the context's end (at most
-    :data:`extend.MEMORY_S` seconds of it): what an animator gets extending the take from that frame."""
-    steps = horizon_frames(HORIZONS_MS)
-    horizon, most = max(steps), int(MEMORY_S * MODEL_FPS)
-    errors = []
+def as_extend_predictions(engine, clips: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Extend Clip (:func:`extend.extend_positions`, *Follow the Clip* on) on the windows
+    :func:`metrics.prediction_windows` makes, each clip being the take up to the context's end (at most
+    :data:`extend.MEMORY_S` seconds of it): what an animator gets extending the take from that frame. Returns
+    each window's last context frame ``[W, J, 3]``, its continuation and the take's ``[W, horizon, J, 3]``."""
+    horizon, most = max(horizon_frames(HORIZONS_MS)), int(MEMORY_S * MODEL_FPS)
+    last, new, truth = [], [], []
     for pos, s in window_starts([np.asarray(p, np.float64) for p in clips], CONTEXT + horizon):
         end = s + CONTEXT
         clip = pos[max(0, end - most):end]
-        new = extend_positions(engine, clip[-CONTEXT:], MODEL_FPS, horizon,
-                               memory=clip if len(clip) > CONTEXT else None)
-        errors.append(mpjpe_cm(new[[k - 1 for k in steps]], pos[[end + k - 1 for k in steps]]))
-    return [float(v) for v in np.mean(errors, 0)]
+        new.append(extend_positions(engine, clip[-CONTEXT:], MODEL_FPS, horizon,
+                                    memory=clip if len(clip) > CONTEXT else None))
+        last.append(pos[end - 1])
+        truth.append(pos[end:end + horizon])
+    return np.stack(last), np.stack(new), np.stack(truth)
+
+
+def horizon_errors(new: np.ndarray, truth: np.ndarray) -> list[float]:
+    """MPJPE (cm) at each of :data:`HORIZONS_MS` of continuations ``[W, F, J, 3]`` against the take's."""
+    idx = [k - 1 for k in horizon_frames(HORIZONS_MS)]
+    return [float(v) for v in mpjpe_cm(new[:, idx], truth[:, idx]).mean(0)]
+
+
+# A window *moves* when the take's hips travel this far over the ground in the horizon (20 cm in a second).
+MOVING_M = 0.2
+
+
+def error_parts(last: np.ndarray, new: np.ndarray, truth: np.ndarray) -> dict:
+    """What Extend's error (:func:`as_extend_predictions`) is made of: the MPJPE per horizon with the take's own
+    track of the hips over the floor under the continuation's pose (``true_track_cm``: the error of the pose
+    alone) and with the take's pose on the continuation's track (``true_pose_cm``: of the track alone); over the
+    windows that move (the hips travel :data:`MOVING_M` or more), the median of how far the continuation travels
+    along the take's way over the horizon against the take (``travel_ratio``: under 1, it slows down)."""
+    ground = list(GROUND_AXES)
+    track = lambda p: p[:, :, :1] * np.array([1.0, 0.0, 1.0])  # the hips' place on the ground, under every joint
+    way = truth[:, -1, 0, ground] - last[:, 0, ground]
+    moving = np.linalg.norm(way, axis=-1) >= MOVING_M
+    along = ((new[moving, -1, 0][:, ground] - last[moving, 0][:, ground]) * way[moving]).sum(-1)
+    return {"true_track_cm": horizon_errors(new - track(new) + track(truth), truth),
+            "true_pose_cm": horizon_errors(truth - track(truth) + track(new), truth),
+            "moving_windows": int(moving.sum()),
+            "travel_ratio": float(np.median(along / (way[moving] ** 2).sum(-1))) if moving.any() else None}
 
 
 def data_speed(clips, statistic=np.mean) -> float:

@@ -40,6 +40,11 @@ def test_one_run_writes_exactly_the_metric_keys(walks, tmp_path, capsys):
     rows = doc["prediction"]["mpjpe_cm"]  # periodic walks: Extend following the take before each window gains
     assert rows["strnn_as_extend"][-1] < rows["strnn_as_extend_context_only"][-1]
     assert all(len(v) == 6 for v in doc["prediction"]["mpjpe_cm"].values())
+    parts = doc["prediction"]["as_extend_parts"]  # the walks' own hips track under Extend's pose: only the pose errs
+    assert set(parts) == {"true_track_cm", "true_pose_cm", "moving_windows", "travel_ratio"}
+    assert parts["true_track_cm"][-1] < rows["strnn_as_extend"][-1]
+    assert parts["true_pose_cm"][-1] < rows["strnn_as_extend"][-1]
+    assert parts["moving_windows"] == doc["windows"] and 0.5 < parts["travel_ratio"] < 1.5  # walks at 1-1.4 m/s
     zero, const = doc["prediction"]["mpjpe_cm"]["zero_velocity"], doc["prediction"]["mpjpe_cm"]["constant_velocity"]
     assert zero[-1] > zero[0] and const[-1] > const[0]  # errors grow with the horizon
     lh = doc["long_horizon"]
@@ -56,7 +61,8 @@ def test_one_run_writes_exactly_the_metric_keys(walks, tmp_path, capsys):
     assert set(dn["mpjpe_cm"]) == {"strnn", "butterworth_best", "noisy"}
     assert dn["mpjpe_cm"]["butterworth_best"][0] < dn["mpjpe_cm"]["noisy"][0]  # the filter removes noise
     assert 4.0 < dn["mpjpe_cm"]["noisy"][0] < 5.6  # |N(0, 3 cm I3)| has mean 4.8 cm
-    for heading in ("Long horizon", "Denoising", "speed / its take", "walk_0.bvh", "as Extend", "  context only"):
+    for heading in ("Long horizon", "Denoising", "speed / its take", "walk_0.bvh", "as Extend", "  context only",
+                    "  take track", "x the take's way"):
         assert heading in printed
 
 
