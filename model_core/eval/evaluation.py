@@ -99,7 +99,8 @@ def error_parts(last: np.ndarray, new: np.ndarray, truth: np.ndarray) -> dict:
     windows that move (the hips travel :data:`MOVING_M` or more), the median of how far the continuation travels
     along the take's way over the horizon against the take (``travel_ratio``: under 1, it slows down)."""
     ground = list(GROUND_AXES)
-    track = lambda p: p[:, :, :1] * np.array([1.0, 0.0, 1.0])  # the hips' place on the ground, under every joint
+    on_ground = np.isin(np.arange(3), ground)
+    track = lambda p: p[:, :, :1] * on_ground  # the hips' place on the ground, under every joint
     way = truth[:, -1, 0, ground] - last[:, 0, ground]
     moving = np.linalg.norm(way, axis=-1) >= MOVING_M
     along = ((new[moving, -1, 0][:, ground] - last[moving, 0][:, ground]) * way[moving]).sum(-1)
