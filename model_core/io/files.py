@@ -16,10 +16,12 @@ from pathlib import Path
 
 def write_atomic(path: str | Path, write: Callable[[Path], object]) -> Path:
     """Make ``path`` by ``write(temporary path)`` then a rename; returns ``path``. The folder is
-    created if missing; the temporary file is removed when ``write`` fails."""
+    created if missing; the temporary file is removed when ``write`` fails. The temporary name holds the
+    process id, so that two processes making the same file (two trainings filling one cache) do not write
+    into one temporary file: the last rename wins, and both are whole."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp")
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
     try:
         write(tmp)
         os.replace(tmp, path)

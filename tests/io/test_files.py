@@ -1,8 +1,12 @@
-"""files.unwritable: why files could not be written somewhere, found without creating anything."""
+"""files.unwritable: why files could not be written somewhere, found without creating anything; files.write_atomic
+from two processes at once."""
 
 from __future__ import annotations
 
-from model_core.io.files import unwritable
+import multiprocessing
+import time
+
+from model_core.io.files import unwritable, write_atomic
 
 
 def test_a_folder_to_be_made_under_a_writable_one_is_fine_and_nothing_is_created(tmp_path):
@@ -15,3 +19,28 @@ def test_a_path_under_a_file_is_refused_naming_the_file(tmp_path):
     blocked = tmp_path / "file"
     blocked.write_text("")
     assert unwritable(blocked / "out") == f"{blocked} is not a folder"
+
+
+def _write_slowly(path: str, text: str, started) -> None:
+    def write(tmp):
+        tmp.write_text(text[: len(text) // 2])
+        started.wait(5)  # both processes are part way through their temporary file
+        time.sleep(0.1)
+        with open(tmp, "a") as f:
+            f.write(text[len(text) // 2:])
+    write_atomic(path, write)
+
+
+def test_two_processes_writing_one_file_at_once_both_finish_and_leave_a_whole_file(tmp_path):
+    target = tmp_path / "cache.npz"
+    ctx = multiprocessing.get_context("fork")
+    started = ctx.Barrier(2)
+    texts = ["a" * 1000, "b" * 1000]
+    procs = [ctx.Process(target=_write_slowly, args=(str(target), t, started)) for t in texts]
+    for p in procs:
+        p.start()
+    for p in procs:
+        p.join(20)
+    assert [p.exitcode for p in procs] == [0, 0]
+    assert target.read_text() in texts
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["cache.npz"]
