@@ -57,6 +57,9 @@ def parse_args(argv=None) -> argparse.Namespace:
                                                             "residual blocks (default 4)")
     p.add_argument("--encode-len", type=int, default=STRNNConfig.encode_len, help="context frames m")
     p.add_argument("--predict-len", type=int, default=STRNNConfig.predict_len, help="predicted frames n")
+    p.add_argument("--decode-len", type=int, default=None, metavar="R",
+                   help="STRNN: the backward decoder reconstructs only the context's last R frames (default: all m); "
+                        "a long --encode-len then costs little more per window")
     p.add_argument("--residual-width", type=int, default=STRNNConfig.residual_width,
                    help="hidden units of the residual filter")
     p.add_argument("--dropout", type=float, default=STRNNConfig.dropout,
@@ -196,7 +199,8 @@ def strnn_run(args, argv):
     if not 0 <= args.proportions < 1:
         raise ValueError(f"--proportions {args.proportions:g}: the range must be from 0 (off) to below 1, e.g. 0.1")
     model = STRNNConfig(width=args.width or DEFAULT_WIDTH["strnn"], encode_len=args.encode_len,
-                        predict_len=args.predict_len, residual_width=args.residual_width, dropout=args.dropout,
+                        predict_len=args.predict_len, decode_len=args.decode_len, residual_width=args.residual_width,
+                        dropout=args.dropout,
                         offsets=args.offsets, offset_keep=args.offset_keep, spatial_norm=args.spatial_norm,
                         filter_context=args.filter_context,
                         predictor_context=args.predictor_context, temporal_skip=args.temporal_skip,

@@ -16,7 +16,7 @@ C = LAYOUT.size
 
 def random_release(folder, spatial=True, residual=True, m=10, n=10, seed=0, purpose=None, offsets=False,
                    spatial_norm="batch", offset_keep=None, filter_context=False,
-                   predictor_context=False, temporal_skip=False, decoder_skip=False):
+                   predictor_context=False, temporal_skip=False, decoder_skip=False, decode_len=None):
     """Save a random STRNN as a release in ``folder``; return (eval-mode model, mean [C], std [C])."""
     torch.manual_seed(seed)
     rng = np.random.default_rng(seed)
@@ -24,7 +24,7 @@ def random_release(folder, spatial=True, residual=True, m=10, n=10, seed=0, purp
                       residual_width=32, offsets=offsets, spatial_norm=spatial_norm,
                       offset_keep=offset_keep, filter_context=filter_context,
                       predictor_context=predictor_context, temporal_skip=temporal_skip,
-                      decoder_skip=decoder_skip)
+                      decoder_skip=decoder_skip, decode_len=decode_len)
     model = STRNN(cfg)
     with torch.no_grad():
         for mod in model.modules():

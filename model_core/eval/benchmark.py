@@ -40,7 +40,7 @@ def model_costs(weights: dict, config: dict, readings: int = 1) -> dict:
     multiply the FLOPs, not the weight reads.
     """
     m, n = config["encode_len"], config["predict_len"]
-    steps = max(m, n)
+    steps = max(config.get("decode_len") or m, n)  # the decoder reconstructs the context's last decode_len frames
     macs = {k: _matrices(weights, p) for k, p in _PARTS.items()}
     enc_ih = _matrices(weights, "encoder.", "weight_ih")
     flops_window = 2 * (m * (macs["spatial_encoder"] + macs["lstm_encoder"])

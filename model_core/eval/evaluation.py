@@ -128,7 +128,7 @@ def evaluate_long_horizon(engine, clips, frames: int, seeds: int, reference=None
     ref_clips = reference or clips
     speed, median = data_speed(ref_clips), data_speed(ref_clips, np.median)
     ref = np.concatenate([segments(pose_vectors(c.features)) for c in ref_clips if len(c.features) >= 40])
-    chosen = pick_seed_windows(clips, seeds)
+    chosen = pick_seed_windows(clips, seeds, length=max(20, engine.m))  # as many frames as the model reads
     by_name = {c.name: c.positions for c in clips}
     seed_feats = np.stack([positions_to_features(p)[0] for _, p in chosen])
     log(f"long horizon: {seeds} seeds x {frames} frames open loop")

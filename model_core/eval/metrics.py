@@ -55,6 +55,25 @@ def prediction_windows(clips: list[np.ndarray], horizon: int, context: int = CON
     return np.stack(ctx), np.stack(fut)
 
 
+def reading_contexts(clips: list[np.ndarray], horizon: int, frames: int, context: int = CONTEXT,
+                     stride: int = STRIDE) -> np.ndarray:
+    """The contexts of :func:`prediction_windows`' windows as a model that reads ``frames`` frames gets them: the
+    take's last ``frames`` frames up to each context's end ``[W, frames, J, 3]``, a window too near the take's
+    start led in by the take's first frame (as a short clip is: :meth:`Engine.full_context`)."""
+    out = []
+    for pos, s in window_starts(clips, context + horizon, stride):
+        end = s + context
+        seen = pos[max(0, end - frames):end]
+        out.append(np.concatenate([np.repeat(seen[:1], frames - len(seen), 0), seen]))
+    return np.stack(out)
+
+
+def _read(engine, clips: list[np.ndarray], ctx: np.ndarray, horizon: int) -> np.ndarray:
+    """``ctx`` (the 20-frame contexts), or the longer ones of :func:`reading_contexts` for a model that reads more."""
+    m = getattr(engine, "m", CONTEXT)
+    return ctx if m <= ctx.shape[1] else reading_contexts(clips, horizon, m)
+
+
 def extend_batch(engine, contexts: np.ndarray, frames: int, **kw) -> np.ndarray:
     """Continue each context ``[W, m, J, 3]`` by ``frames``: ``[W, frames, J, 3]``, as
     :meth:`Engine.extend` does one, in one batch (``kw``: :meth:`Engine.extrapolate`'s). Features are
@@ -69,7 +88,8 @@ def extend_batch(engine, contexts: np.ndarray, frames: int, **kw) -> np.ndarray:
 def prediction_errors(engine, clips: list[np.ndarray], horizons_ms=HORIZONS_MS,
                       extra_engines: dict | None = None) -> tuple[dict, int]:
     """MPJPE (cm) at each horizon for STRNN, zero- and constant-velocity, each of ``extra_engines``
-    ``{name: engine}`` (baselines, continued as STRNN is), and for STRNN with the seam blend Extend
+    ``{name: engine}`` (baselines, continued as STRNN is; a model that reads more than the windows' 20 context
+    frames reads the take before them: :func:`reading_contexts`), and for STRNN with the seam blend Extend
     applies (``strnn_seam_blend``, :func:`seam.blend_seam`, with the clip's momentum where the motion is
     unfamiliar: :func:`familiarity.momentum_shares`); and the window count."""
 
@@ -77,12 +97,13 @@ def prediction_errors(engine, clips: list[np.ndarray], horizons_ms=HORIZONS_MS,
     ctx, fut = prediction_windows(clips, max(steps))
     last, prev = ctx[:, -1:], ctx[:, -2:-1]
     preds = {
-        "strnn": extend_batch(engine, ctx, max(steps)),
+        "strnn": extend_batch(engine, _read(engine, clips, ctx, max(steps)), max(steps)),
         "zero_velocity": np.repeat(last, max(steps), 1),
         "constant_velocity": last + (last - prev) * np.arange(1, max(steps) + 1)[None, :, None, None],
     }
-    preds |= {name: extend_batch(e, ctx, max(steps)) for name, e in (extra_engines or {}).items()}
-    shares = momentum_shares(engine, ctx)
+    preds |= {name: extend_batch(e, _read(e, clips, ctx, max(steps)), max(steps))
+              for name, e in (extra_engines or {}).items()}
+    shares = momentum_shares(engine, _read(engine, clips, ctx, max(steps)))
     preds["strnn_seam_blend"] = np.stack([blend_seam(c, p, momentum=k) for c, p, k in zip(ctx, preds["strnn"], shares)])
     idx = [s - 1 for s in steps]
     out = {name: [float(v) for v in mpjpe_cm(p[:, idx], fut[:, idx]).mean(0)] for name, p in preds.items()}

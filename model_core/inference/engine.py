@@ -105,6 +105,7 @@ class Engine:
         cfg = ckpt.config
         self.ckpt = ckpt
         self.m, self.n, self.width = cfg["encode_len"], cfg["predict_len"], cfg["width"]
+        self.r = cfg.get("decode_len") or self.m  # the context's last frames the decoder reconstructs
         self.offsets = bool(cfg.get("offsets", False))
         self.base_weights = offset_weights(self.n, cfg.get("offset_keep")).astype(np.float32)  # per predicted frame
         self.mean, self.std = ckpt.mean, ckpt.std
@@ -160,8 +161,10 @@ class Engine:
 
     # ----------------------------------------------------------------- core
     def _window(self, x: np.ndarray) -> np.ndarray:
-        """Normalised context ``(B, m, C)`` -> normalised window ``(B, m + n, C)``."""
+        """Normalised context ``(B, m, C)`` -> normalised window ``(B, r + n, C)``: the context's last r frames
+        decoded, then the prediction."""
         b, m, c = x.shape
+        r = self.r
         xin = self.enc_frame(x.reshape(b * m, c)) @ self.enc_wih
         xin = (xin + self.enc_b).reshape(b, m, -1)
         h = np.zeros((b, self.width), np.float32)
@@ -183,7 +186,7 @@ class Engine:
             gin[1] += extra
         if dec_skip is not None:
             gin[0] += dec_skip[0]
-        steps = max(self.m, self.n)
+        steps = max(r, self.n)
         out = np.empty((2, steps, b, c), np.float32)
         base = np.concatenate([x[:, -1], x[:, -1]]) if self.offsets else None  # (2B, C)
         skip = np.einsum("it,btc->ibc", self.skip, x - x[:, -1:]) if self.skip is not None else None
@@ -200,9 +203,9 @@ class Engine:
                 gin = stack_matmul(self.enc_frame(frames).reshape(2, b, -1), self.step_wih) + self.step_b
                 if extra is not None:
                     gin[1] += extra
-                if dec_skip is not None and t + 1 < m:
+                if dec_skip is not None and t + 1 < r:
                     gin[0] += dec_skip[t + 1]
-        window = np.concatenate([out[0, : self.m][::-1], out[1, : self.n]]).transpose(1, 0, 2)  # (B, T, C)
+        window = np.concatenate([out[0, :r][::-1], out[1, : self.n]]).transpose(1, 0, 2)  # (B, T, C)
         if self.filter is not None:
             y = window.reshape(b, -1)
             z = np.concatenate([y, x.reshape(b, -1)], 1) if self.filter_context else y
@@ -214,7 +217,7 @@ class Engine:
         return window
 
     def forward(self, context: np.ndarray) -> np.ndarray:
-        """Raw context ``[B, m, C]`` -> raw decoded context + prediction ``[B, m + n, C]``."""
+        """Raw context ``[B, m, C]`` -> raw decoded context (its last r frames) + prediction ``[B, r + n, C]``."""
         x = ((np.asarray(context, np.float32) - self.mean) / self.std).astype(np.float32)
         return self._window(x) * self.std + self.mean
 
@@ -236,12 +239,13 @@ class Engine:
         (:data:`checkpoint.SIMLPE`), that weighted with the siMLPe's by :data:`SIMLPE_SHARE`. Models trained
         apart err differently, and their average is nearer the truth over the next 20 frames (the siMLPe is
         the nearer on motion unlike the training data); but window after window an average drifts towards
-        a slower, lower idle, so each later window is this model's own (model card)."""
+        a slower, lower idle, so each later window is this model's own (model card). A partner that reads
+        fewer frames than this model reads the last of them."""
         own = self.predict(context)
         if self.companion is not None:
-            own = 0.5 * (own + self.companion.predict(context))
+            own = 0.5 * (own + self.companion.predict(context[:, -self.companion.m:]))
         if self.simlpe is not None:
-            own = (1.0 - SIMLPE_SHARE) * own + SIMLPE_SHARE * self.simlpe.predict(context)
+            own = (1.0 - SIMLPE_SHARE) * own + SIMLPE_SHARE * self.simlpe.predict(context[:, -self.simlpe.m:])
         return own
 
     def predict_once(self, context: np.ndarray) -> np.ndarray:
@@ -251,12 +255,22 @@ class Engine:
         true frame) is carried into the prediction and fades out over ``seam_frames`` frames,
         so the continuation starts where the context ends (0 turns it off)."""
         window = self.forward(context)
-        pred = window[:, self.m:]
+        pred = window[:, self.r:]
         if self.seam_frames > 0:
-            offset = context[:, -1, LAYOUT.positions] - window[:, self.m - 1, LAYOUT.positions]
+            offset = context[:, -1, LAYOUT.positions] - window[:, self.r - 1, LAYOUT.positions]
             fade = seam_fade(self.n, self.seam_frames)
             pred[..., LAYOUT.positions] += fade[None, :, None] * offset[:, None]
         return pred
+
+    def full_context(self, ctx: np.ndarray) -> np.ndarray:
+        """The last ``m`` frames of contexts ``[B, F, C]``; one of fewer frames is led in by its first frame's
+        features (the first pose, moving as it moves there), so that a model that reads a longer context than the
+        product asks of a clip (:data:`pipeline.MIN_MODEL_FRAMES`) continues a short clip too."""
+        if ctx.shape[1] >= self.m:
+            return ctx[:, -self.m:]
+        if ctx.shape[1] < 1:
+            raise ValueError("a rollout needs at least one context frame")
+        return np.concatenate([np.repeat(ctx[:, :1], self.m - ctx.shape[1], 1), ctx], 1)
 
     def extrapolate(self, seed: np.ndarray, frames: int, keep_bone_lengths: bool = True,
                     paired_windows: int | None = 1, memory: ClipMemory | None = None) -> np.ndarray:
@@ -274,7 +288,7 @@ class Engine:
         seed = np.asarray(seed, np.float32)
         single = seed.ndim == 2
         ctx = seed[None] if single else seed
-        ctx = ctx[:, -self.m:]
+        ctx = self.full_context(ctx)
         lengths = bone_lengths(ctx) if keep_bone_lengths else None
         chunks, total = [], 0
         while total < frames:
@@ -292,7 +306,8 @@ class Engine:
 
     def reconstruct(self, feats: np.ndarray, stride: int | None = None) -> np.ndarray:
         """Project raw features ``[F, C]`` (F >= m) onto the manifold: overlapping m-frame
-        windows through encoder and decoder, blended with a Hann weight."""
+        windows through encoder and decoder, blended with a Hann weight (over the r frames each window
+        reconstructs: its last; a take is led in by its first frame so that its first frames are too)."""
         return drive(self.reconstruct_steps(feats, stride))
 
     def reconstruct_steps(self, feats: np.ndarray, stride: int | None = None, batch: int = 256):
@@ -300,22 +315,24 @@ class Engine:
         done after each ``batch`` of them, returns the features. Each batch is blended in as it comes,
         so a long take holds one batch of windows at a time."""
         feats = np.asarray(feats, np.float32)
+        if len(feats) < self.m:
+            raise ValueError(f"denoising needs at least {self.m} frames, got {len(feats)}")
+        lead = self.m - self.r  # frames before each window's reconstructed ones
+        feats = np.concatenate([np.repeat(feats[:1], lead, 0), feats]) if lead else feats
         f = len(feats)
-        if f < self.m:
-            raise ValueError(f"denoising needs at least {self.m} frames, got {f}")
-        stride = stride or max(1, self.m // 4)
+        stride = stride or max(1, self.r // 4)
         starts = sorted(set(range(0, f - self.m + 1, stride)) | {f - self.m})
-        weight = np.hanning(self.m + 2)[1:-1].astype(np.float32)[:, None]
+        weight = np.hanning(self.r + 2)[1:-1].astype(np.float32)[:, None]
         acc = np.zeros_like(feats)
         norm = np.zeros((f, 1), np.float32)
         for i in range(0, len(starts), batch):
             part = starts[i:i + batch]
             decoded = self.forward(np.stack([feats[s:s + self.m] for s in part]))
             for s, d in zip(part, decoded):
-                acc[s:s + self.m] += weight * d[: self.m]
-                norm[s:s + self.m] += weight
+                acc[s + lead:s + self.m] += weight * d[: self.r]
+                norm[s + lead:s + self.m] += weight
             yield min(i + batch, len(starts)) / len(starts)
-        return acc / norm
+        return acc[lead:] / norm[lead:]
 
     # ------------------------------------------------------ position level
     def extend(self, positions: np.ndarray, frames: int, memory: np.ndarray | None = None,

@@ -48,6 +48,7 @@ class TorchEngine:
         self.model = build_model(ckpt).to(self.device)
         cfg = ckpt.config
         self.m, self.n, self.width = cfg["encode_len"], cfg["predict_len"], cfg["width"]
+        self.r = cfg.get("decode_len") or self.m  # the context's last frames the decoder reconstructs
         self.mean, self.std = ckpt.mean, ckpt.std
         self._mean = torch.from_numpy(ckpt.mean).to(self.device)
         self._std = torch.from_numpy(ckpt.std).to(self.device)
@@ -66,19 +67,20 @@ class TorchEngine:
 
     @torch.inference_mode()
     def forward(self, context: np.ndarray) -> np.ndarray:
-        """Raw context ``[B, m, C]`` -> raw decoded context + prediction ``[B, m + n, C]``."""
+        """Raw context ``[B, m, C]`` -> raw decoded context (its last r frames) + prediction ``[B, r + n, C]``."""
         x = torch.as_tensor(np.asarray(context, np.float32), device=self.device)
         out = self.model((x - self._mean) / self._std)
         return (out * self._std + self._mean).cpu().numpy()
 
     # The rollout, the windowed denoiser and the position-level wrappers only call
-    # predict/forward and read m, so the NumPy engine's own code runs here unchanged:
+    # predict/forward and read m and r, so the NumPy engine's own code runs here unchanged:
     # the two engines cannot drift apart.
     seam_frames = Engine.seam_frames
     mirrored_reading = Engine.mirrored_reading
     predict = Engine.predict
     predict_once = Engine.predict_once
     predict_first = Engine.predict_first
+    full_context = Engine.full_context
     extrapolate = Engine.extrapolate
     reconstruct = Engine.reconstruct
     reconstruct_steps = Engine.reconstruct_steps

@@ -235,13 +235,16 @@ def load_release(folder: str | Path | None = None) -> Checkpoint:
 
 def _partner(folder: Path, ckpt: Checkpoint, sub: str, architecture: str) -> Checkpoint:
     """A model the release shares its first window with (:data:`COMPANION`, an STRNN; :data:`SIMLPE`, a siMLPe):
-    a generating ``architecture`` model without partners of its own that reads and predicts as many frames."""
+    a generating ``architecture`` model without partners of its own that predicts as many frames and reads no
+    more of the context (it reads the last of the release's context frames)."""
     other = load_release(folder / sub)
-    same = ("encode_len", "predict_len")
+    m, n = other.config.get("encode_len"), other.config.get("predict_len")
     if other.architecture != architecture or other.purpose != PURPOSES[0] or other.companion is not None or \
-            other.simlpe is not None or any(other.config.get(k) != ckpt.config.get(k) for k in same):
+            other.simlpe is not None or n != ckpt.config.get("predict_len") or \
+            not isinstance(m, int) or not 1 <= m <= ckpt.config.get("encode_len", 0):
         raise CheckpointError(f"{folder / sub}: a {sub} must be a generating {architecture} model without a companion "
-                              f"or siMLPe of its own, with the same {' and '.join(same)}: copy the model folder again")
+                              "or siMLPe of its own that predicts as many frames (predict_len) and reads no more "
+                              "(encode_len): copy the model folder again")
     return other
 
 
@@ -253,7 +256,7 @@ def _check_strnn_shapes(folder: Path, ckpt: Checkpoint) -> None:
     if cfg.get("residual") and "filter.net.0.weight" in w:
         frames = w["filter.net.0.weight"].shape[1] // max(cfg.get("frame_size", LAYOUT.size), 1)
         found["window"] = frames - (m or 0) * bool(cfg.get("filter_context"))
-    wanted = {"width": width, "window": (m or 0) + (n or 0)}
+    wanted = {"width": width, "window": (cfg.get("decode_len") or m or 0) + (n or 0)}
     for key, value in found.items():
         if value is None:
             raise CheckpointError(f"{folder / 'model.safetensors'} holds no STRNN predictor: it belongs to another "

@@ -183,5 +183,6 @@ class BaselineEngine:
     predict = Engine.predict
     predict_first = Engine.predict_first
     companion = simlpe = None  # a baseline release is one model
+    full_context = Engine.full_context
     extrapolate = Engine.extrapolate
     extend = Engine.extend

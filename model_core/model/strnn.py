@@ -55,13 +55,28 @@ class STRNNConfig:
     # the code has no room for (motion unlike the training data) is lost; with it the decoder and the
     # encoder read the window from both ends, as a bidirectional network does.
     decoder_skip: bool = False
+    # The backward decoder reconstructs only the context's last this many frames (None: all m), and the residual
+    # filter runs over them and the prediction. A model that reads a long context (a walk's whole cycle and more)
+    # then costs little more per window than one that reads 20 frames: the encoder's steps are cheap, the
+    # decoder's (a frame decoded and encoded again each step) are not.
+    decode_len: int | None = None
 
     def __post_init__(self):
         if self.spatial_norm not in ("batch", "none"):
             raise ValueError(f"spatial_norm must be 'batch' or 'none', not {self.spatial_norm!r}")
+        if self.decode_len is not None and not 1 <= self.decode_len <= self.encode_len:
+            raise ValueError(f"decode_len must be 1 to encode_len ({self.encode_len}), not {self.decode_len}")
+
+    @property
+    def recon_len(self) -> int:
+        """r: the context frames the decoder reconstructs (its last; the window is r + n frames)."""
+        return self.encode_len if self.decode_len is None else self.decode_len
 
     def to_dict(self) -> dict:
-        return asdict(self)
+        out = asdict(self)
+        if self.decode_len is None:  # every frame reconstructed: as releases without the option record it
+            del out["decode_len"]
+        return out
 
 
 class Block(nn.Sequential):
@@ -131,7 +146,7 @@ class ResidualFilter(nn.Module):
 
     def __init__(self, cfg: STRNNConfig):
         super().__init__()
-        n = (cfg.encode_len + cfg.predict_len) * cfg.frame_size
+        n = (cfg.recon_len + cfg.predict_len) * cfg.frame_size
         n_in = n + (cfg.encode_len * cfg.frame_size if cfg.filter_context else 0)
         w = cfg.residual_width
         self.reads_context = cfg.filter_context
@@ -141,7 +156,7 @@ class ResidualFilter(nn.Module):
         nn.init.zeros_(self.net[-1].bias)
 
     def forward(self, x, context=None):
-        """Window ``(B, m + n, C)`` (and, where the filter reads it, the true context ``(B, m, C)``)."""
+        """Window ``(B, r + n, C)`` (and, where the filter reads it, the true context ``(B, m, C)``)."""
         y = x.flatten(1)
         if self.reads_context:
             if context is None:
@@ -151,7 +166,8 @@ class ResidualFilter(nn.Module):
 
 
 class STRNN(nn.Module):
-    """Encode m frames, decode them backwards and predict n frames forwards."""
+    """Encode m frames, decode them (their last r: :attr:`STRNNConfig.recon_len`) backwards and predict n frames
+    forwards."""
 
     def __init__(self, cfg: STRNNConfig):
         super().__init__()
@@ -190,8 +206,10 @@ class STRNN(nn.Module):
         return self.encode_frame(x.reshape(b * t, c)).view(b, t, -1)  # (B, T, W)
 
     def spatio_temporal(self, x):
-        """Context ``(B, m, C)`` -> decoded ``(B, m, C)`` (chronological) and predicted ``(B, n, C)``."""
+        """Context ``(B, m, C)`` -> decoded ``(B, r, C)`` (the last r frames, chronological) and predicted
+        ``(B, n, C)``."""
         cfg = self.cfg
+        r = cfg.recon_len
         states, (h, c) = self.encoder(self.encode_frames(x))
         h, c = h[0], c[0]  # (B, W)
         dec_skip = self.dec_skip(states) if cfg.decoder_skip else None  # (B, m, W)
@@ -203,8 +221,8 @@ class STRNN(nn.Module):
         base = x[:, -1] if cfg.offsets else 0.0
         keep = offset_weights(cfg.predict_len, cfg.offset_keep)
         decoded, predicted = [], []
-        for i in range(max(cfg.encode_len, cfg.predict_len)):
-            if i < cfg.encode_len:
+        for i in range(max(r, cfg.predict_len)):
+            if i < r:
                 step_in = dec_in if dec_skip is None else dec_in + dec_skip[:, cfg.encode_len - 1 - i]
                 hd, cd = self.decoder(step_in, (hd, cd))
                 frame = base + self.decode_frame(hd)
@@ -220,7 +238,8 @@ class STRNN(nn.Module):
         return torch.stack(decoded[::-1], 1), torch.stack(predicted, 1)
 
     def forward(self, x, use_filter: bool = True):
-        """Context ``(B, m, C)`` -> window ``(B, m + n, C)``: decoded context then prediction."""
+        """Context ``(B, m, C)`` -> window ``(B, r + n, C)``: decoded context (its last r frames) then
+        prediction."""
         decoded, predicted = self.spatio_temporal(x)
         out = torch.cat([decoded, predicted], 1)
         if self.filter is not None and use_filter:

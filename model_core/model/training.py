@@ -208,16 +208,18 @@ class Mirror:
 
 def window_loss(model: STRNN, window: torch.Tensor, cfg: TrainConfig, phase: str, noise: float, net=None,
                 noisy: torch.Tensor | None = None):
-    """The loss of one phase on a batch of clean windows ``(B, m + n, C)``.
+    """The loss of one phase on a batch of clean windows ``(B, m + n, C)``; the model's output is the window's
+    last r + n frames (r: :attr:`STRNNConfig.recon_len`).
 
     ``noisy`` replaces the first contexts with ones derived from noisy positions; ``net`` is
     the (possibly data-parallel) wrapper that runs the first phase's forward.
     """
-    m = cfg.model.encode_len
+    m, r = cfg.model.encode_len, cfg.model.recon_len
     if phase == PHASES[1]:
         noisy = window + cfg.residual_noise * torch.randn_like(window)
-        return (model.filter(noisy, noisy[:, :m]) - window).pow(2).mean()
+        return (model.filter(noisy[:, m - r:], noisy[:, :m]) - window[:, m - r:]).pow(2).mean()
     context = window[:, :m]
+    window = window[:, m - r:]
     if noisy is not None:
         context = torch.cat([noisy, context[len(noisy):]])
     if noise > 0:
@@ -228,11 +230,11 @@ def window_loss(model: STRNN, window: torch.Tensor, cfg: TrainConfig, phase: str
         return (model.filter(torch.cat([decoded, predicted], 1), context) - window).pow(2).mean()
     out = (net or model)(context, use_filter=False)
     w = torch.ones(out.shape[1], dtype=out.dtype, device=out.device)
-    w[:m] = cfg.recon_weight  # decoded frames against predicted ones
+    w[:r] = cfg.recon_weight  # decoded frames against predicted ones
     mse = ((out - window).pow(2).mean((0, 2)) * w).sum() / w.sum()
     loss = mse + cfg.smooth_weight * smoothness_cost(out)
     if cfg.velocity_weight:
-        loss = loss + cfg.velocity_weight * velocity_error(out[:, m:], window[:, m - 1:])
+        loss = loss + cfg.velocity_weight * velocity_error(out[:, r:], window[:, r - 1:])
     return loss
 
 
@@ -249,7 +251,7 @@ def rolled_context(model: STRNN, window: torch.Tensor, k: int,
                    seam_frames: float = PREDICT_SEAM_FRAMES) -> torch.Tensor:
     """The model's own context after ``k`` open-loop windows from the first m frames of ``window``
     ``(B, m + k n + ..., C)``, generated as the engine does (eval mode, seam correction), without gradient."""
-    m, n = model.cfg.encode_len, model.cfg.predict_len
+    m, n, r = model.cfg.encode_len, model.cfg.predict_len, model.cfg.recon_len
     modes = [mod.training for mod in model.modules()]
     model.eval()
     ctx = window[:, :m]
@@ -258,8 +260,8 @@ def rolled_context(model: STRNN, window: torch.Tensor, k: int,
     with torch.no_grad():
         for _ in range(k):
             out = model(ctx)
-            pred = out[:, m:].clone()
-            pred[..., pos] += fade * (ctx[:, -1:, pos] - out[:, m - 1:m, pos])
+            pred = out[:, r:].clone()
+            pred[..., pos] += fade * (ctx[:, -1:, pos] - out[:, r - 1:r, pos])
             ctx = torch.cat([ctx, pred], 1)[:, -m:]
     for mod, mode in zip(model.modules(), modes):
         mod.training = mode
@@ -318,7 +320,8 @@ def trainable(model: STRNN, phase: str) -> list[torch.nn.Parameter]:
 def initial_weights(path: str | Path, model: STRNN) -> dict[str, torch.Tensor]:
     """``model``'s weights taken from a training state (``train_state.pt``) or a release folder, for
     ``--init``; the residual filter keeps its fresh weights where its width differs (a new filter on a
-    trained net). Any other difference is an error that names it."""
+    trained net), and is grown into its place where the window is longer (a longer context,
+    ``--encode-len``: :func:`_grown_filter`). Any other difference is an error that names it."""
     path = Path(path)
     if path.is_dir():
         release = load_release(path)
@@ -334,6 +337,8 @@ def initial_weights(path: str | Path, model: STRNN) -> dict[str, torch.Tensor]:
             # A filter that reads the context, from one that did not: it starts as the old filter,
             # the true context's weights at zero.
             w = torch.cat([w, torch.zeros(v.shape[0], v.shape[1] - w.shape[1], dtype=w.dtype)], 1)
+        if w.shape != v.shape and k.startswith("filter.") and not model.cfg.filter_context:
+            w = _grown_filter(k, w, v, model.cfg.frame_size)
         if w.shape != v.shape:
             if not k.startswith("filter."):
                 raise ValueError(f"--init {path}: {k} has shape {tuple(w.shape)}, this model's {tuple(v.shape)}: "
@@ -341,6 +346,22 @@ def initial_weights(path: str | Path, model: STRNN) -> dict[str, torch.Tensor]:
             w = v
         out[k] = w
     return out
+
+
+def _grown_filter(key: str, old: torch.Tensor, new: torch.Tensor, frame_size: int) -> torch.Tensor:
+    """The residual filter's first or last layer ``old`` of a shorter window, set into the place of the
+    window's last frames in ``new``'s shape (a longer context reads more frames before the same window): the
+    frames before it start with zero weights, so the filter starts as the old one on the frames it knew.
+    ``old`` itself where the two differ otherwise."""
+    first, last = key == "filter.net.0.weight", key in ("filter.net.6.weight", "filter.net.6.bias")
+    axis = 1 if first else 0
+    if not (first or last) or old.dim() != new.dim() or old.shape[axis] >= new.shape[axis] or \
+            (new.shape[axis] - old.shape[axis]) % frame_size or \
+            any(a != b for i, (a, b) in enumerate(zip(old.shape, new.shape)) if i != axis):
+        return old
+    grown = torch.zeros(new.shape, dtype=old.dtype)
+    grown.narrow(axis, new.shape[axis] - old.shape[axis], old.shape[axis]).copy_(old)
+    return grown
 
 
 # The temporal skip's map (STRNNConfig.temporal_skip) holds extrapolation weights of order 1 to 10 (constant
@@ -363,8 +384,8 @@ def make_optimizer(cfg: TrainConfig, params, fast=()):
 
 def validate(model: STRNN, val: Windows, cfg: TrainConfig, limit: int = 1024) -> float:
     """Mean squared error of the full model's prediction on fixed validation windows."""
-    m = cfg.model.encode_len
-    return validation_mse(model, lambda context: model(context)[:, m:], val, m, limit)
+    m, r = cfg.model.encode_len, cfg.model.recon_len
+    return validation_mse(model, lambda context: model(context)[:, r:], val, m, limit)
 
 
 def validation_mse(model, predict, val: Windows, m: int, limit: int = 1024) -> float:

@@ -28,6 +28,9 @@ def extend_positions(engine, pos: np.ndarray, fps: float, frames: int, memory: n
     in the same space.
     """
     ctx = _at_model_rate(pos, fps)
+    if memory is not None and len(ctx) < engine.m:  # a model that reads more than the clip's context: more of it
+        longer = _at_model_rate(memory, fps)
+        ctx = longer[-engine.m:] if len(longer) > len(ctx) else ctx
     norm = fit_normalisation(ctx)
     n_model = int(math.ceil(frames * MODEL_FPS / fps)) + 1
     momentum = momentum_shares(engine, norm.to_model(ctx)[None])[0]

@@ -82,8 +82,9 @@ def reconstruction_cm(engine, pos: np.ndarray, stride: int | None = None) -> np.
 
 
 def _window_errors_cm(engine, windows: np.ndarray) -> np.ndarray:
-    decoded = engine.forward(windows)[:, :engine.m]
-    local = (decoded - windows)[..., LAYOUT.positions].reshape(len(windows), engine.m, -1, 3)
+    r = getattr(engine, "r", engine.m)  # the window's last frames the model reconstructs
+    decoded = engine.forward(windows)[:, :r]
+    local = (decoded - windows[:, -r:])[..., LAYOUT.positions].reshape(len(windows), r, -1, 3)
     return 100.0 * np.linalg.norm(local, axis=-1).mean((1, 2))
 
 

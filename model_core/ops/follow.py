@@ -162,7 +162,8 @@ class PathFollower:
         goal = path.length if path.cyclic else path.length - s  # arc length still to walk
         planned = max(1, int(math.ceil(goal / speed * MODEL_FPS)))
         limit = planned * MAX_STRETCH if frames is None else frames
-        ctx, lengths = seed[-self.m:], bone_lengths(seed[None, -self.m:])
+        # a seed shorter than the model reads is led in by its first frame (Engine.full_context)
+        ctx, lengths = self.engine.full_context(seed[None])[0], bone_lengths(seed[None, -self.m:])
         out, total, walked = [], 0, 0.0
         while total < limit and (frames is not None or not out or walked < goal - ARRIVED):
             control, aim = control_signal(path, p[[0, 2]], theta, s, speed, self.n + 1, MODEL_FPS,

@@ -136,7 +136,8 @@ class TorchPathFollower(PathFollower):
         last, rest = torch.from_numpy(np.asarray(ctx[-1], np.float32)), torch.from_numpy(lengths.astype(np.float32))
         goal = None if aim is None else torch.from_numpy(np.asarray(aim, np.float32))
         weights = {"ctr": cfg.w_ctr, "bone": cfg.w_bone, "fp": cfg.w_fp, "pos": cfg.w_pos}
-        forward = self._predictor_pass(x) if cfg.tune == "predictor" else lambda: self.model(x)[0, self.m:]
+        r = self.model.cfg.recon_len  # the window's decoded frames before the prediction
+        forward = self._predictor_pass(x) if cfg.tune == "predictor" else lambda: self.model(x)[0, r:]
         try:
             with self._threads():
                 if cfg.steps > 0:
@@ -165,11 +166,11 @@ class TorchPathFollower(PathFollower):
             # An offsets model's frames are offsets from the context's last frame (STRNNConfig.offsets).
             base = x[:, -1] if model.cfg.offsets else torch.zeros_like(x[:, -1])
             keep = offset_weights(self.n, model.cfg.offset_keep)
-            for _ in range(self.m):  # the backward decoder, as STRNN.spatio_temporal runs it
+            for _ in range(model.cfg.recon_len):  # the backward decoder, as STRNN.spatio_temporal runs it
                 state = model.decoder(step, state)
                 decoded.append(base + dec(state[0]))
                 step = enc(decoded[-1])
-            decoded = torch.stack(decoded[::-1], 1)  # (1, m, C), chronological
+            decoded = torch.stack(decoded[::-1], 1)  # (1, r, C), chronological
             extra = model.context_code(x)
             skip = model.skip_frames(x)
             skip = torch.zeros(1, self.n, x.shape[-1]) if skip is None else skip
@@ -181,8 +182,8 @@ class TorchPathFollower(PathFollower):
                 state = model.predictor(step, state)
                 frames.append(base * float(keep[i]) + dec(state[0]) + skip[:, i])
                 step = enc(frames[-1]) + extra
-            window = torch.cat([decoded, torch.stack(frames, 1)], 1)  # (1, m + n, C)
-            return (model.filter(window, x) if model.filter is not None else window)[0, self.m:]
+            window = torch.cat([decoded, torch.stack(frames, 1)], 1)  # (1, r + n, C)
+            return (model.filter(window, x) if model.filter is not None else window)[0, model.cfg.recon_len:]
 
         return forward
 

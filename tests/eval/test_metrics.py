@@ -137,3 +137,18 @@ def test_rotation_jitter_turns_joints_and_keeps_bones():
     moved = np.linalg.norm(out - walk, axis=-1).mean(0)
     assert moved[0] < 1e-6 and 0.005 < moved.mean() < 0.1
     assert moved[JOINT_INDEX["l_fingertip"]] > moved[JOINT_INDEX["spine"]]
+
+
+def test_a_model_that_reads_more_frames_gets_the_take_before_each_window():
+    """reading_contexts: the same windows as prediction_windows (their last 20 frames the same contexts), each with
+    the take's frames before it as far as the model reads, a window near the take's start led in by its first."""
+    from model_core.eval.metrics import prediction_windows, reading_contexts
+
+    clips = [walking_skeleton(150, speed=1.2), walking_skeleton(90, speed=0.8)]
+    ctx, _ = prediction_windows(clips, 20)
+    np.testing.assert_array_equal(reading_contexts(clips, 20, 20), ctx)
+    longer = reading_contexts(clips, 20, 50)
+    assert longer.shape == (len(ctx), 50) + ctx.shape[2:]
+    np.testing.assert_array_equal(longer[:, -20:], ctx)
+    np.testing.assert_array_equal(longer[0, :30], np.repeat(clips[0][:1], 30, 0))  # the take's first window
+    np.testing.assert_array_equal(longer[3], clips[0][15:65])  # starts at frame 45: 50 frames of take before

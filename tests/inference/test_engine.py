@@ -25,6 +25,7 @@ from model_core.io.checkpoint import DEFAULT_MODEL, REPO, CheckpointError, load_
 from model_core.model.strnn import STRNNConfig  # noqa: E402
 from model_core.motion.conventions import LAYOUT  # noqa: E402
 from model_core.motion.features import mirror_features  # noqa: E402
+from model_core.ops.seam import seam_fade  # noqa: E402
 
 C = LAYOUT.size
 VARIANTS = [(s, r) for s in (True, False) for r in (True, False)]  # (spatial, residual)
@@ -94,6 +95,33 @@ def test_a_filter_that_reads_the_context_runs_the_same_in_numpy_and_torch_and_us
         assert not torch.allclose(model.filter(window, x), model.filter(window, torch.zeros_like(x)))
     with pytest.raises(ValueError, match="context"):
         model.filter(window)
+
+
+@pytest.mark.parametrize("spatial,residual", VARIANTS)
+@pytest.mark.parametrize("decoder_skip", [False, True])
+def test_a_model_that_decodes_the_contexts_last_frames_runs_the_same_in_numpy_and_torch(tmp_path, spatial, residual,
+                                                                                        decoder_skip):
+    """``decode_len``: a model that reads 12 frames and reconstructs their last 5 gives a window of those 5 and the
+    prediction, the same in NumPy and torch; its prediction depends on the frames it does not reconstruct; its
+    seam correction is taken at the last decoded frame; the windowed reconstruction covers a take's every frame,
+    its first ones too."""
+    model, mean, std, raw, want = _engines_agree(tmp_path, spatial, residual, m=12, n=10, decode_len=5,
+                                                 decoder_skip=decoder_skip)
+    engine = Engine.load(tmp_path)
+    assert want.shape == (3, 15, C) and (engine.m, engine.r, engine.n) == (12, 5, 10)
+    early = raw.copy()
+    early[:, :7] += 0.5
+    assert np.abs(torch_forward(model, early, mean, std)[:, 5:] - want[:, 5:]).max() > 1e-3
+    fade = seam_fade(engine.n, engine.seam_frames)
+    seam = (raw[:, -1] - want[:, 4])[:, LAYOUT.positions]  # the last decoded frame's error
+    np.testing.assert_allclose(engine.predict_once(raw)[..., LAYOUT.positions],
+                               want[:, 5:, LAYOUT.positions] + fade[None, :, None] * seam[:, None], atol=1e-4, rtol=0)
+    engine.seam_frames = 0
+    np.testing.assert_allclose(engine.predict_once(raw), want[:, 5:], atol=1e-4, rtol=0)
+    take = np.concatenate(list(raw))
+    rebuilt = engine.reconstruct(take)
+    assert rebuilt.shape == take.shape and np.isfinite(rebuilt).all()
+    np.testing.assert_allclose(rebuilt, TorchEngine.load(tmp_path).reconstruct(take), atol=1e-4, rtol=0)
 
 
 @pytest.mark.parametrize("spatial", [True, False])
@@ -423,6 +451,43 @@ def test_a_companion_that_predicts_another_length_is_refused(tmp_path):
     random_release(tmp_path / "pair" / COMPANION, n=5)
     with pytest.raises(CheckpointError, match="companion"):
         Engine.load(tmp_path / "pair")
+
+
+def test_a_companion_that_reads_fewer_frames_reads_the_last_of_the_context_and_one_that_reads_more_is_refused(
+        tmp_path):
+    """A release that reads a longer context than its companion (a release trained with ``--encode-len 50`` beside
+    a 20-frame companion): the companion reads the context's last frames; a companion that would need more
+    frames than the release reads is refused, naming what to do."""
+    from model_core.io.checkpoint import COMPANION
+
+    random_release(tmp_path / "pair", m=12, n=10, seed=0)
+    random_release(tmp_path / "pair" / COMPANION, m=6, n=10, seed=5)
+    pair, other = Engine.load(tmp_path / "pair"), Engine.load(tmp_path / "pair" / COMPANION)
+    alone = Engine.load(tmp_path / "pair")
+    alone.companion = None
+    seeds = pair.seeds
+    assert seeds.shape[1] == 12 and pair.companion.m == 6
+    np.testing.assert_allclose(pair.predict_first(seeds), 0.5 * (alone.predict(seeds) + other.predict(seeds[:, -6:])),
+                               atol=1e-6, rtol=0)
+    random_release(tmp_path / "wide", m=6, n=10, seed=0)
+    random_release(tmp_path / "wide" / COMPANION, m=12, n=10, seed=5)
+    with pytest.raises(CheckpointError, match="reads no more"):
+        Engine.load(tmp_path / "wide")
+
+
+def test_a_context_shorter_than_the_model_reads_is_led_in_by_its_first_frame(tmp_path):
+    """A rollout from fewer frames than the model reads (a clip shorter than a long-context model's window): the
+    missing frames before it are its first frame's features, so it continues as from that padded context, in
+    both engines; a context of no frame is refused."""
+    random_release(tmp_path / "r", m=12, n=10, seed=3)
+    engine, in_torch = Engine.load(tmp_path / "r"), TorchEngine.load(tmp_path / "r")
+    short = engine.seeds[:, -5:]
+    padded = np.concatenate([np.repeat(short[:, :1], 7, 1), short], 1)
+    np.testing.assert_allclose(engine.extrapolate(short, 25), engine.extrapolate(padded, 25), atol=1e-6, rtol=0)
+    np.testing.assert_allclose(in_torch.extrapolate(short, 25), engine.extrapolate(padded, 25), atol=1e-4, rtol=0)
+    np.testing.assert_array_equal(engine.full_context(engine.seeds), engine.seeds)
+    with pytest.raises(ValueError, match="at least one context frame"):
+        engine.extrapolate(short[:, :0], 5)
 
 
 def test_the_shipped_model_carries_its_companion():

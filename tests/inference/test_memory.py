@@ -92,6 +92,23 @@ def test_extend_clip_follows_the_clip_from_its_first_frame():
     assert error(followed) < 0.7 * error(alone)
 
 
+def test_a_model_that_reads_more_than_the_context_reads_the_rest_from_the_clip(tmp_path):
+    """extend_positions with a model that reads a longer context than the frames Extend hands it (a release
+    trained with ``--encode-len``): the missing frames come from the clip (the memory) before the context, so
+    it continues as from the longer context; without a clip, the short context is led in by its first frame."""
+    from releases import random_release
+
+    from model_core.ops.extend import extend_positions
+
+    random_release(tmp_path / "r", m=30, n=10, seed=2)
+    engine = Engine.load(tmp_path / "r")
+    clip = walking_skeleton(200, radius=4.0)
+    short = extend_positions(engine, clip[-20:], 30.0, 25, memory=clip)
+    np.testing.assert_allclose(short, extend_positions(engine, clip[-30:], 30.0, 25, memory=clip), atol=1e-9)
+    assert np.abs(short - extend_positions(engine, clip[-20:], 30.0, 25)).max() > 1e-4  # the clip was read
+    assert np.isfinite(extend_positions(engine, clip[-20:], 30.0, 25)).all()
+
+
 def test_an_unseen_actors_walk_extended_by_20_s_still_steps(mocap_root):
     """The held-out CMU subject's first walk (60 fps; a take the model never saw), its first 10 s extended by 20 s
     as Extend Clip does: without the memory its last 5 s are a two-footed hop (the feet side by side, both

@@ -179,6 +179,50 @@ def test_a_filter_that_reads_the_context_starts_from_a_filter_that_did_not(walk_
         torch.testing.assert_close(new(x), old(x))
 
 
+def test_a_longer_context_starts_with_the_filter_it_comes_from_on_the_frames_it_knew(walk_folder, tmp_path):
+    """``--init`` into a model that reads more context frames (``--encode-len``): every weight but the residual
+    filter's is taken as it is, and the filter is set into the place of the window's last frames, the earlier
+    frames' weights at zero: on any window it corrects the last frames as the old filter did and leaves the
+    earlier ones alone."""
+    first = train(_cfg(walk_folder, tmp_path / "base"), progress=False)
+    longer = _cfg(walk_folder, tmp_path / "longer", model=tiny(encode_len=30), init=str(first), steps=0)
+    second = train(longer, progress=False)
+    a, b = load_file(str(first / "model.safetensors")), load_file(str(second / "model.safetensors"))
+    assert b["filter.net.0.weight"].shape[1] == a["filter.net.0.weight"].shape[1] + 10 * longer.model.frame_size
+    for k in a:
+        if not k.startswith("filter.net.0.") and not k.startswith("filter.net.6."):
+            np.testing.assert_array_equal(b[k], a[k], err_msg=k)
+    old, new = STRNN(tiny()), STRNN(tiny(encode_len=30))
+    old.load_state_dict({k: torch.from_numpy(v) for k, v in a.items()}, strict=False)
+    new.load_state_dict({k: torch.from_numpy(v) for k, v in b.items()}, strict=False)
+    window = torch.randn(3, 50, longer.model.frame_size)
+    with torch.no_grad():
+        grown, known = new.filter(window), old.filter(window[:, 10:])
+    torch.testing.assert_close(grown[:, 10:], known)
+    torch.testing.assert_close(grown[:, :10], window[:, :10])
+    assert (known - window[:, 10:]).abs().max() > 1e-4  # the old filter does correct those frames
+
+
+def test_a_longer_context_that_decodes_the_last_frames_starts_as_the_model_it_comes_from(walk_folder, tmp_path):
+    """``--encode-len 30 --decode-len 20`` from a 20-frame model: every weight is taken as it is (the window the
+    decoder and filter cover is as long), training moves them, and the release records both lengths and runs
+    in the engine."""
+    from model_core.inference.engine import Engine
+
+    first = train(_cfg(walk_folder, tmp_path / "base"), progress=False)
+    start = train(_cfg(walk_folder, tmp_path / "start", model=tiny(encode_len=30, decode_len=20), init=str(first),
+                       steps=0), progress=False)
+    a, b = load_file(str(first / "model.safetensors")), load_file(str(start / "model.safetensors"))
+    assert a.keys() == b.keys() and all(np.array_equal(a[k], b[k]) for k in a)
+    tuned = train(_cfg(walk_folder, tmp_path / "tuned", model=tiny(encode_len=30, decode_len=20), init=str(first)),
+                  progress=False)
+    assert any(not np.array_equal(a[k], v) for k, v in load_file(str(tuned / "model.safetensors")).items())
+    engine = Engine.load(tuned)
+    assert (engine.m, engine.r) == (30, 20) and engine.ckpt.config["decode_len"] == 20
+    assert engine.seeds.shape[1] == 30 and np.isfinite(engine.extrapolate(engine.seeds, 25)).all()
+    assert "decode_len" not in STRNNConfig().to_dict()  # releases without it read as before
+
+
 def test_a_predictor_that_reads_the_context_starts_as_the_model_it_comes_from_and_learns_to(walk_folder, tmp_path):
     """``--init`` from a model without ``predictor_context``: the new map starts at zero (the same model),
     and training moves it."""
