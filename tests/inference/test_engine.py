@@ -492,5 +492,5 @@ def test_a_context_shorter_than_the_model_reads_is_led_in_by_its_first_frame(tmp
 
 def test_the_shipped_model_carries_its_companion():
     engine = Engine.load()
-    assert engine.companion is not None and engine.companion.m == engine.m and engine.companion.n == engine.n
+    assert engine.companion is not None and engine.companion.m <= engine.m and engine.companion.n == engine.n
     assert engine.companion.ckpt.meta["training"]  # how it was made is in its model.json

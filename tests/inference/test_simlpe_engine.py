@@ -71,7 +71,7 @@ def test_the_shipped_model_carries_the_projects_simlpe():
     """The siMLPe in the release is the project's siMLPe baseline itself, so evaluate.py's siMLPe row is the
     model that shares Extend's first window."""
     engine = Engine.load()
-    assert engine.simlpe is not None and (engine.simlpe.m, engine.simlpe.n) == (engine.m, engine.n)
+    assert engine.simlpe is not None and engine.simlpe.n == engine.n and engine.simlpe.m <= engine.m
     assert engine.simlpe.ckpt.meta["training"]["hold_out"]  # trained without the held-out groups, as the release
     shipped = read_safetensors(REPO / "models" / "strnn_default" / SIMLPE / "model.safetensors")
     baseline = read_safetensors(REPO / "models" / "baseline_simlpe" / "model.safetensors")
