@@ -19,7 +19,7 @@ class STRNNConfig:
     frame_size: int = LAYOUT.size  # channels per frame
     width: int = 512  # L4 width and LSTM hidden size; L1..L3 are width/8, /4, /2
     encode_len: int = 20  # m: context frames
-    predict_len: int = 20  # n: predicted frames (the decoder reconstructs m)
+    predict_len: int = 20  # n: predicted frames (the decoder reconstructs m, or decode_len)
     spatial: bool = True  # hierarchical body-part encoder; False = "Temporal" (one linear layer)
     residual: bool = True  # residual filter over decoded + predicted frames
     residual_width: int = 512  # hidden units of the residual filter
