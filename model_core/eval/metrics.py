@@ -96,14 +96,15 @@ def prediction_errors(engine, clips: list[np.ndarray], horizons_ms=HORIZONS_MS,
     steps = horizon_frames(horizons_ms)
     ctx, fut = prediction_windows(clips, max(steps))
     last, prev = ctx[:, -1:], ctx[:, -2:-1]
+    read = _read(engine, clips, ctx, max(steps))  # what STRNN reads of each window
     preds = {
-        "strnn": extend_batch(engine, _read(engine, clips, ctx, max(steps)), max(steps)),
+        "strnn": extend_batch(engine, read, max(steps)),
         "zero_velocity": np.repeat(last, max(steps), 1),
         "constant_velocity": last + (last - prev) * np.arange(1, max(steps) + 1)[None, :, None, None],
     }
     preds |= {name: extend_batch(e, _read(e, clips, ctx, max(steps)), max(steps))
               for name, e in (extra_engines or {}).items()}
-    shares = momentum_shares(engine, _read(engine, clips, ctx, max(steps)))
+    shares = momentum_shares(engine, read)
     preds["strnn_seam_blend"] = np.stack([blend_seam(c, p, momentum=k) for c, p, k in zip(ctx, preds["strnn"], shares)])
     idx = [s - 1 for s in steps]
     out = {name: [float(v) for v in mpjpe_cm(p[:, idx], fut[:, idx]).mean(0)] for name, p in preds.items()}
