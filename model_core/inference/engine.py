@@ -273,7 +273,8 @@ class Engine:
         return np.concatenate([np.repeat(ctx[:, :1], self.m - ctx.shape[1], 1), ctx], 1)
 
     def extrapolate(self, seed: np.ndarray, frames: int, keep_bone_lengths: bool = True,
-                    paired_windows: int | None = 1, memory: ClipMemory | None = None) -> np.ndarray:
+                    paired_windows: int | None = 1, memory: ClipMemory | None = None,
+                    first_motion: float | np.ndarray = 1.0) -> np.ndarray:
         """Open-loop generation: repeat (take the last m frames, predict n more).
 
         ``seed``: raw features ``[m, C]`` or ``[B, m, C]``; returns ``[frames, C]`` or
@@ -283,7 +284,8 @@ class Engine:
         the companion (None: all of them; a bounded gap, which Fill Gap bends onto its target).
         ``memory`` (a single seed's clip, :class:`memory.ClipMemory`): each window after the first (and the first
         where the memory has a ``first_scale``) leans on what the clip did after its stretch most like the
-        continuation's last frames.
+        continuation's last frames. ``first_motion`` (a share per seed, or one for all): how much of its motion
+        away from the context's last pose the first window keeps (:func:`still_window`; 1: all of it).
         """
         seed = np.asarray(seed, np.float32)
         single = seed.ndim == 2
@@ -296,6 +298,8 @@ class Engine:
             new = self.predict_first(ctx) if paired else self.predict(ctx)
             if memory is not None and (chunks or memory.first_scale is not None):
                 new = np.stack([memory.lean(c, w, first=not chunks) for c, w in zip(ctx, new)])
+            if not chunks:
+                new = still_window(ctx[:, -1], new, first_motion)
             if keep_bone_lengths:
                 new = project_to_skeleton(new, lengths)
             chunks.append(new)
@@ -375,6 +379,20 @@ class Engine:
         steps = np.einsum("fij,fj->fi", rot[:-1], np.diff(root_model, axis=0))
         root = blend_track(shift, steps, root_weight)
         return (np.einsum("fij,fkj->fki", rot, body) + root[:, None]).astype(np.float32)
+
+
+def still_window(last: np.ndarray, window: np.ndarray, motion: float | np.ndarray) -> np.ndarray:
+    """Windows ``[B, n, C]`` kept at ``motion`` (a share per window ``[B]``, or one) of their motion away from the
+    frames ``last`` ``[B, C]`` held still: the root-local joints drawn towards ``last``'s, the root's velocity and
+    turn scaled by it, the contacts as predicted. 1 (or more) leaves a window as it is."""
+    motion = np.broadcast_to(np.asarray(motion, np.float32), window.shape[:1])
+    if (motion >= 1.0).all():
+        return window
+    held = np.repeat(np.asarray(last, np.float32)[:, None], window.shape[1], 1)
+    held[..., LAYOUT.root] = 0.0
+    held[..., LAYOUT.contacts] = window[..., LAYOUT.contacts]
+    k = np.minimum(motion, 1.0)[:, None, None]
+    return (held + k * (window - held)).astype(window.dtype)
 
 
 def fit_yaw_shift(body: np.ndarray, target: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

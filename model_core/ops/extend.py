@@ -15,6 +15,13 @@ from .seam import blend_seam
 # Seconds of the clip before its end that Extend Clip reads as the clip's own motion, which long
 # continuations lean on (inference/memory.py): several strides of a walk, without reading a long take whole.
 MEMORY_S = 20.0
+# Where the model does not know the motion (momentum share 1, :mod:`familiarity`) and the clip has come to rest,
+# the continuation's first window keeps (speed / STILL_SPEED) ** STILL_POWER of its motion away from the last pose
+# (all of it from STILL_SPEED on; speed: the joints' mean speed over the clip's last STILL_FRAMES model frames, in
+# metres a model frame at the model's scale): a fighter paused at the cut is better left near the pause than
+# given a move the model invents. The later windows are the model's own from there. Chosen on the held-out groups
+# (model card, "A clip at rest in motion the model does not know"). 0: off.
+STILL_SPEED, STILL_POWER, STILL_FRAMES = 0.01, 2.0, 10
 
 
 def extend_positions(engine, pos: np.ndarray, fps: float, frames: int, memory: np.ndarray | None = None) -> np.ndarray:
@@ -24,8 +31,9 @@ def extend_positions(engine, pos: np.ndarray, fps: float, frames: int, memory: n
     frames follow it at exactly 1 / fps. ``memory`` ``[M, 21, 3]`` (the same space and rate, ending on the
     same frame as ``pos``; usually more of the clip before it): the clip's own motion, which each predicted
     window leans on where the continuation comes back to something the clip did (the first only as far as the
-    model does not know the context's motion: :func:`inference.memory.first_scale`). Returns ``[frames, 21, 3]``
-    in the same space.
+    model does not know the context's motion: :func:`inference.memory.first_scale`). Where the model does not
+    know the motion and the clip has come to rest, the first window stays near the last pose (:func:`first_motion`).
+    Returns ``[frames, 21, 3]`` in the same space.
     """
     ctx = _at_model_rate(pos, fps)
     if memory is not None and len(ctx) < engine.m:  # a model that reads more than the clip's context: more of it
@@ -36,10 +44,23 @@ def extend_positions(engine, pos: np.ndarray, fps: float, frames: int, memory: n
     momentum = momentum_shares(engine, norm.to_model(ctx)[None])[0]
     kw = {} if memory is None else {"memory": norm.to_model(_at_model_rate(memory, fps)),
                                     "first_scale": first_scale(momentum)}
+    still = first_motion(norm.to_model(ctx), momentum)
+    if still < 1.0:
+        kw["first_motion"] = still
     new = np.asarray(engine.extend(norm.to_model(ctx), n_model, **kw), dtype=np.float64)
     # model frame 0 is the last context frame
     seq = np.concatenate([ctx[-1:], blend_seam(ctx, norm.to_user(new), momentum=momentum)])
     return sample_at(seq, MODEL_FPS, np.arange(1, frames + 1) / fps)
+
+
+def first_motion(ctx: np.ndarray, momentum: float) -> float:
+    """How much of its motion the first window after a context ``[T, 21, 3]`` (model units and rate) keeps
+    (:data:`STILL_SPEED`; 1 for motion the model knows, momentum share 0)."""
+    if STILL_SPEED <= 0.0 or len(ctx) < 2:
+        return 1.0
+    speed = float(np.linalg.norm(np.diff(ctx[-STILL_FRAMES - 1:], axis=0), axis=-1).mean())
+    rest = 1.0 - min(1.0, speed / STILL_SPEED) ** STILL_POWER
+    return 1.0 - rest * float(np.clip(momentum, 0.0, 1.0))
 
 
 def _at_model_rate(pos: np.ndarray, fps: float) -> np.ndarray:

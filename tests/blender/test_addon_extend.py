@@ -208,6 +208,34 @@ def test_extend_says_when_the_motion_is_unfamiliar(real_model, addon):
     assert common.report_note(action_of(obj)).startswith(". This motion is unlike")
 
 
+def test_a_fighter_paused_at_the_cut_is_continued_near_the_pause(real_model, addon, monkeypatch):
+    """Martial arts, an action family the model never learnt (take 08, 120 fps), cut at frame 600 where the
+    fighter stands between moves and extended by half a second from there (From Current Frame): the first frames
+    stay near the pause, nearer the take than the move the model alone invents (``ops.extend.STILL_SPEED`` turned
+    off in the installed extension, for the comparison)."""
+    mocap = find_mocap()
+    if mocap is None:
+        pytest.skip("needs the motion-capture data (data/mocap)")
+    bridge = addon_module(addon, "strnn_addon.engine_bridge")
+    error = {}
+    for still in (True, False):
+        if not still:
+            monkeypatch.setattr(addon_module(addon, "model_core.ops.extend"), "STILL_SPEED", 0.0)
+            bridge._RESULTS.clear()  # the same clip: not the result kept from the first run
+        bpy.ops.wm.read_homefile(use_empty=True)
+        obj = import_bvh(mocap / "cmu/acrnn-dance/martial/08.bvh", global_scale=0.01, update_scene_fps=True)
+        frames = np.arange(600, 661)
+        take = evaluated_joints(addon, obj, frames)
+        bpy.context.scene.frame_set(600)
+        assert bpy.ops.strnn.extend_clip(frames=60, from_current=True) == {"FINISHED"}
+        new = evaluated_joints(addon, obj, frames)
+        assert np.abs(new[0] - take[0]).max() < 1e-4  # the frames up to the cut stay
+        error[still] = np.linalg.norm(new[1:] - take[1:], axis=-1).mean(-1)  # metres, frame by frame
+    held = np.linalg.norm(take[1:] - take[0], axis=-1).mean(-1)  # holding the last pose
+    assert error[True].mean() < 0.7 * error[False].mean(), error
+    assert error[True][-1] < error[False][-1] and error[True][-1] < 2 * held[-1]
+
+
 def test_an_unseen_walk_extended_by_20_s_still_walks_when_it_follows_the_clip(real_model, addon):
     """A 60 fps walk of an actor the model never saw (the held-out CMU subject's 006_01, 4 s), extended by
     1,200 frames: with Follow the Clip (the default) the last 5 s still step (the feet swing past each other

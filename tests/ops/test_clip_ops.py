@@ -56,6 +56,50 @@ def test_extend_at_scene_rates(fps):
     assert miss(v_new) < 0.75 * miss(v_last)
 
 
+def test_a_first_window_held_still_keeps_the_last_pose_and_later_windows_move_on():
+    """Engine.extrapolate's ``first_motion``: 0 keeps the first window at the context's last pose, standing
+    (root-local joints as they were, no root velocity or turn); 1 is the model's own; the windows after it are
+    the model's own from where the first left off."""
+    from model_core.motion.conventions import LAYOUT
+    from model_core.motion.features import positions_to_features
+
+    engine = Engine.load()
+    seed = positions_to_features(walking_skeleton(60))[0][-engine.m:]
+    free = engine.extrapolate(seed, 2 * engine.n)
+    np.testing.assert_allclose(engine.extrapolate(seed, 2 * engine.n, first_motion=1.0), free, atol=1e-6)
+    still = engine.extrapolate(seed, 2 * engine.n, first_motion=0.0)
+    first, held = still[:engine.n], seed[-1]
+    np.testing.assert_allclose(first[:, LAYOUT.positions], np.repeat(held[None, LAYOUT.positions], engine.n, 0),
+                               atol=1e-4)
+    assert np.abs(first[:, LAYOUT.root]).max() < 1e-6
+    assert np.abs(free[:engine.n, LAYOUT.root]).max() > 1e-3  # the model alone walks on
+    assert np.abs(np.diff(still[engine.n:, LAYOUT.positions], axis=0)).max() > 1e-3  # then it moves again
+    half = engine.extrapolate(seed, engine.n, first_motion=0.5)
+    moved = lambda w: np.abs(w[:, LAYOUT.positions] - held[LAYOUT.positions]).mean()  # noqa: E731
+    assert 0.3 * moved(free[:engine.n]) < moved(half) < 0.7 * moved(free[:engine.n])
+
+
+def test_extend_leaves_an_unfamiliar_clip_at_rest_near_its_last_pose(monkeypatch):
+    """Extend Clip's maths (extend.first_motion): a clip that has come to rest in motion the model does not know
+    (momentum share 1) keeps its first window at the last pose, where the model alone would invent a move; motion
+    the model knows, or a clip that still moves, is the model's own."""
+    from model_core.ops import extend
+    from model_core.ops.familiarity import momentum_shares
+
+    engine = Engine.load()
+    walk = walking_skeleton(60)
+    rest = np.repeat(walk[30:31], 40, 0)
+    assert momentum_shares(engine, rest[None, -20:]) == [1.0]  # the synthetic body at rest is unfamiliar
+    assert extend.first_motion(rest, 1.0) == 0.0
+    assert extend.first_motion(rest, 0.0) == 1.0
+    assert extend.first_motion(walk, 1.0) == 1.0  # walking: faster than STILL_SPEED
+    drift = lambda new: np.linalg.norm(new - rest[-1] * 100, axis=-1).mean(-1).max()  # noqa: E731
+    held = extend_positions(engine, rest * 100, 30.0, 19)  # centimetres; the first window's 19 new frames
+    monkeypatch.setattr(extend, "STILL_SPEED", 0.0)
+    alone = extend_positions(engine, rest * 100, 30.0, 19)
+    assert drift(held) < 0.5 and drift(alone) > 2.0  # cm
+
+
 @pytest.mark.parametrize("fps", [24.0, 25.0, 50.0, 120.0])
 def test_denoise_keeps_a_clean_clip_at_any_rate(fps):
     """The bundled denoising model through the product path: a clean clip comes back within a
