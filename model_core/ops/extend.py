@@ -41,13 +41,14 @@ def extend_positions(engine, pos: np.ndarray, fps: float, frames: int, memory: n
         ctx = longer[-engine.m:] if len(longer) > len(ctx) else ctx
     norm = fit_normalisation(ctx)
     n_model = int(math.ceil(frames * MODEL_FPS / fps)) + 1
-    momentum = momentum_shares(engine, norm.to_model(ctx)[None])[0]
+    model_ctx = norm.to_model(ctx)
+    momentum = momentum_shares(engine, model_ctx[None])[0]
     kw = {} if memory is None else {"memory": norm.to_model(_at_model_rate(memory, fps)),
                                     "first_scale": first_scale(momentum)}
-    still = first_motion(norm.to_model(ctx), momentum)
+    still = first_motion(model_ctx, momentum)
     if still < 1.0:
         kw["first_motion"] = still
-    new = np.asarray(engine.extend(norm.to_model(ctx), n_model, **kw), dtype=np.float64)
+    new = np.asarray(engine.extend(model_ctx, n_model, **kw), dtype=np.float64)
     # model frame 0 is the last context frame
     seq = np.concatenate([ctx[-1:], blend_seam(ctx, norm.to_user(new), momentum=momentum)])
     return sample_at(seq, MODEL_FPS, np.arange(1, frames + 1) / fps)
