@@ -297,7 +297,7 @@ class Engine:
             paired = paired_windows is None or len(chunks) < paired_windows
             new = self.predict_first(ctx) if paired else self.predict(ctx)
             if memory is not None and (chunks or memory.first_scale is not None):
-                new = np.stack([memory.lean(c, w, first=not chunks) for c, w in zip(ctx, new)])
+                new = np.stack([memory.lean(c, w, first=not chunks, window=len(chunks)) for c, w in zip(ctx, new)])
             if not chunks:
                 new = still_window(ctx[:, -1], new, first_motion)
             if keep_bone_lengths:

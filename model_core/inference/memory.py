@@ -30,6 +30,14 @@ ALIGN_FRAMES = 10  # over how many frames the followed stretch's jump from the c
 # motion (momentum share 1) and FIRST_FAMILIAR x that where it does (0), so that familiar motion is left to
 # the models unless the clip matches almost exactly. 0: the first window is the models' alone.
 FIRST_SCALE, FIRST_FAMILIAR = 0.3, 0.1
+# From the window LONG_FROM on (past the first second and a third, which the models predict well) a continuation
+# leans harder on the clip: share LONG_SHARE, scale LONG_SCALE, so that it goes on doing what the clip did instead
+# of settling, window by window, into the still idle the models fall back on (a wave extended by 20 s stopped
+# waving within 5 s). There it also plays on: the stretch after the one it just followed is taken where it matches
+# within PLAYHEAD_TIE of the best, and the one just followed (or a neighbour) is never taken again at once, so a
+# clip that ends in a pause does not replay its pause for ever. Chosen on the held-out groups and the validation
+# split (model card, "Long extensions play on"). LONG_FROM None: every window leans as the second does.
+LONG_FROM, LONG_SHARE, LONG_SCALE, PLAYHEAD_TIE = 2, 0.9, 10.0, 0.1
 # The channels compared: joint positions and root motion (contacts follow the motion, they are not matched).
 _CHANNELS = np.r_[np.arange(LAYOUT.size)[LAYOUT.positions], np.arange(LAYOUT.size)[LAYOUT.root]]
 
@@ -43,6 +51,8 @@ class ClipMemory:
         self.n = n
         self.first_scale = first_scale  # the first window's scale (:func:`first_scale`; None: not leant on)
         self.scale = np.asarray(std, np.float32)[_CHANNELS]
+        self.last = None  # the stretch last followed (index into ends)
+        self.playhead = None  # the stretch that follows it, where the clip goes on
         first = max(m, MATCH_FRAMES)  # a stretch ends at frame e - 1 and is followed by frames e .. e + n - 1
         self.ends = np.arange(first, len(self.feats) - n + 1)
         self.keys = np.stack([self.feats[e - MATCH_FRAMES:e, _CHANNELS] for e in self.ends]) / self.scale \
@@ -52,15 +62,26 @@ class ClipMemory:
         """How many stretches the clip offers (0: too short to lean on)."""
         return len(self.ends)
 
-    def follow(self, context: np.ndarray, first: bool = False) -> tuple[float, np.ndarray]:
+    def follow(self, context: np.ndarray, first: bool = False, window: int = 1) -> tuple[float, np.ndarray]:
         """(the clip's share, the ``n`` frames ``[n, C]`` that followed its stretch nearest ``context`` ``[T, C]``,
-        moved to start where ``context`` ends); share 0 (and the context's last frame held) without stretches."""
+        moved to start where ``context`` ends); share 0 (and the context's last frame held) without stretches.
+        ``window``: the rollout's window this is for (0 the first; from :data:`LONG_FROM` on the clip plays on)."""
         last = np.asarray(context[-1], np.float32)
         if not len(self.ends):
             return 0.0, np.repeat(last[None], self.n, 0)
         probe = np.asarray(context[-MATCH_FRAMES:, _CHANNELS], np.float32) / self.scale
         distance = ((self.keys - probe) ** 2).mean((1, 2))
+        long = not first and LONG_FROM is not None and window >= LONG_FROM
+        if long and self.last is not None:  # not the stretch just followed again, nor its neighbours
+            distance = distance.copy()
+            distance[max(0, self.last - self.n + 1):self.last + self.n] = np.inf
+            if not np.isfinite(distance).any():  # a clip too short for anything else
+                distance[self.last] = ((self.keys[self.last] - probe) ** 2).mean()
         best = int(np.argmin(distance))
+        if long and self.playhead is not None and distance[self.playhead] <= distance[best] + PLAYHEAD_TIE:
+            best = self.playhead
+        self.last = best
+        self.playhead = best + self.n if best + self.n < len(self.ends) else None
         end = self.ends[best]
         frames = self.feats[end:end + self.n].copy()
         jump = last - self.feats[end - 1]
@@ -69,12 +90,13 @@ class ClipMemory:
         frames += fade[:, None] * jump
         if first:
             return float(np.exp(-distance[best] / self.first_scale)) if self.first_scale else 0.0, frames
-        return float(SHARE * np.exp(-distance[best] / SCALE)), frames
+        share, scale = (LONG_SHARE, LONG_SCALE) if long else (SHARE, SCALE)
+        return float(share * np.exp(-distance[best] / scale)), frames
 
-    def lean(self, context: np.ndarray, predicted: np.ndarray, first: bool = False) -> np.ndarray:
+    def lean(self, context: np.ndarray, predicted: np.ndarray, first: bool = False, window: int = 1) -> np.ndarray:
         """``predicted`` ``[n, C]`` (the model's window after ``context`` ``[T, C]``; ``first``: the rollout's
         first) blended with what followed the clip's nearest stretch by its share (:meth:`follow`)."""
-        share, frames = self.follow(context, first)
+        share, frames = self.follow(context, first, window)
         return predicted + share * (frames[:len(predicted)] - predicted) if share > 0 else predicted
 
 

@@ -129,3 +129,28 @@ def test_an_unseen_actors_walk_extended_by_20_s_still_steps(mocap_root):
     assert feet_lead(last) > 0.4 * feet_lead(pos[-300:])
     speed = lambda p: np.linalg.norm(np.diff(p - p[:, :1], axis=0), axis=-1).mean()  # noqa: E731
     assert 0.5 < speed(last) / speed(pos) < 1.5
+
+
+def test_later_windows_play_on_through_the_clip_and_never_replay_the_stretch_just_followed():
+    """From ``LONG_FROM`` on a continuation plays on through the clip (the stretch after the one it followed) and
+    does not take the same stretch again at once: a clip that ends in a pause does not replay its pause for ever.
+    Earlier windows keep taking the nearest stretch."""
+    walk = walk_features(200)
+    feats = np.concatenate([walk, np.repeat(walk[-1:], 60, 0)])  # walks, then stands for 2 s at its end
+    still = feats[-40:]
+    clip = ClipMemory(feats, 20, 20, np.ones(LAYOUT.size, np.float32))
+    share, _ = clip.follow(still, window=mem.LONG_FROM)
+    assert share == pytest.approx(mem.LONG_SHARE, rel=1e-4)  # the pause matches exactly: the clip's long share
+    before = clip.last
+    clip.follow(still, window=mem.LONG_FROM + 1)
+    assert abs(clip.last - before) >= 20  # a pause elsewhere, not the same stretch again
+    nearest = ClipMemory(feats, 20, 20, np.ones(LAYOUT.size, np.float32))
+    nearest.follow(still, window=1)
+    first = nearest.last
+    nearest.follow(still, window=1)
+    assert nearest.last == first  # the second window takes the nearest, as it always has
+    going = ClipMemory(feats, 20, 20, np.ones(LAYOUT.size, np.float32))
+    going.follow(walk[40:80], window=mem.LONG_FROM)
+    followed = going.last
+    going.follow(walk[40:100], window=mem.LONG_FROM + 1)  # the continuation did what the clip did next
+    assert going.last == followed + 20

@@ -118,3 +118,20 @@ def test_seam_blend_removes_a_jump():
     out = blend_seam(ctx, new)
     assert np.allclose(out[0, :, 0], 0.5) and np.allclose(out[10:], new[10:])
     assert np.abs(np.diff(out[:, 0, 0])).max() < 0.4
+
+
+def test_a_long_extension_of_a_wave_keeps_waving(mocap_root, monkeypatch):
+    """A real take (a test-split wave the model never learnt from) extended by 20 s as Extend Clip makes it,
+    following the clip: its last 5 s move at 0.4 x the take's limb speed or more; leaning on the clip as the
+    second window does in every window (``memory.LONG_FROM`` None), the wave used to stop within 5 s."""
+    from model_core.eval.extend_evaluation import limb_speed
+    from model_core.inference import memory
+    from model_core.rig.rigs import load_clip
+
+    engine = Engine.load()
+    take = load_clip(mocap_root / "bandai-namco/dataset-2/dataset-2_wave-both-hands_active_031.bvh").astype(np.float64)
+    ratio = lambda: limb_speed(extend_positions(engine, take[-20:], 30.0, 600, memory=take)[-150:]) / limb_speed(take)  # noqa: E731
+    plays_on = ratio()
+    monkeypatch.setattr(memory, "LONG_FROM", None)
+    settles = ratio()
+    assert plays_on > 0.4 > settles
