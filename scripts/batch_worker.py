@@ -11,6 +11,7 @@ also used by the README pictures, which install the extension the same way.
 from __future__ import annotations
 
 import contextlib
+import importlib
 import os
 import sys
 import time
@@ -152,7 +153,9 @@ def open_target(bpy, job: dict):
     return pick_armature(bpy)
 
 
-def run_file(bpy, job: dict) -> None:
+def run_file(bpy, job: dict) -> list[str]:
+    """Import the job's input, run its operator, write the result; returns the notes of the new action's
+    record (what the operator's report would warn of: the motion is unfamiliar, the keys' rate, ...)."""
     src, dst = Path(job["input"]), Path(job["output"])
     target = None
     if job["operator"] == "transfer_motion":
@@ -202,6 +205,7 @@ def run_file(bpy, job: dict) -> None:
     action = obj.animation_data.action if obj.animation_data else None
     if action is None:
         raise BatchError(f"strnn.{job['operator']} left the armature without an action")
+    notes = importlib.import_module(f"{ADDON}.strnn_addon.stages.common").record_notes(action)
     start, end = (int(round(f)) for f in action.frame_range)
     scene = bpy.context.scene
     scene.frame_start, scene.frame_end = start, end
@@ -220,6 +224,7 @@ def run_file(bpy, job: dict) -> None:
         tmp.unlink(missing_ok=True)
         raise BatchError(f"Blender could not write {dst.name}: {blender_error(e)}") from None
     os.replace(tmp, dst)
+    return notes
 
 
 def to_file_axes(bpy, obj) -> None:
@@ -288,7 +293,7 @@ def output_to(log: Path | None):
 def process_file(job: dict) -> dict:
     """Worker entry point: process one file in this process (Blender started on its first file); never raises."""
     start = time.perf_counter()
-    result = {"file": job["display"], "status": "failed", "output": "", "reason": ""}
+    result = {"file": job["display"], "status": "failed", "output": "", "reason": "", "notes": []}
     log = None if job["verbose"] else Path(job["user_dir"]) / "blender.log"
     with output_to(log):
         try:
@@ -296,8 +301,8 @@ def process_file(job: dict) -> dict:
             bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)  # nothing of the last file stays
             prefs = bpy.context.preferences.addons[ADDON].preferences
             prefs.model_folder, prefs.denoise_model_folder = job["model"], job["denoise_model"]
-            run_file(bpy, job)
-            result.update(status="ok", output=job["shown_output"])
+            notes = run_file(bpy, job)
+            result.update(status="ok", output=job["shown_output"], notes=notes)
         except BatchError as e:
             result["reason"] = str(e)
         except Exception as e:  # an unexpected failure: still one line, with where it happened

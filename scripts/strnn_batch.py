@@ -18,8 +18,10 @@ sub-folders are kept under OUT. An input is never overwritten unless ``--in-plac
 opens the character .blend (--target) instead, imports each take beside its rig, runs
 strnn.transfer_motion from the take onto the rig, removes the take and saves a copy of the .blend.
 
-One progress line per finished file, then a summary table (file, status, seconds, reason). A
-file whose worker runs past ``--timeout`` seconds (default 900) is killed and reported as failed.
+One progress line per finished file, then a summary table (file, status, seconds, and the reason a
+file failed or the notes the operator's report warns of for one that did: motion unlike what the model
+learnt, keys at another rate than the take's, a first window held near a clip at rest). A file
+whose worker runs past ``--timeout`` seconds (default 900) is killed and reported as failed.
 Exit status: 0 when every file was processed, 1 when any failed (each failure and its reason
 are listed at the end), 2 for bad arguments.
 """
@@ -86,7 +88,8 @@ def build_parser() -> argparse.ArgumentParser:
                           "(default: the model bundled in the zip)")
     run.add_argument("--report", type=Path, default=None, metavar="FILE",
                      help="also write the results as JSON for pipelines: the command, and per file its "
-                          "status (ok / failed), seconds, output and reason")
+                          "status (ok / failed), seconds, output, reason and notes (what the operator's report "
+                          "warns of)")
     run.add_argument("--verbose", "-v", action="store_true",
                      help="let Blender's own output through (default: hidden; kept in the failure reason)")
 
@@ -284,12 +287,15 @@ def progress_line(done: int, total: int, result: dict) -> str:
     filled = round(width * done / total)
     bar = "#" * filled + "-" * (width - filled)
     tail = f"-> {result['output']}" if result["status"] == "ok" else result["reason"]
+    if result.get("notes"):
+        tail += f"  (note: {'; '.join(result['notes'])})"
     return f"[{bar}] {done}/{total} {result['status']:6s} {result['seconds']:6.1f}s  {result['file']}  {tail}"
 
 
 def summary(results: list[dict]) -> str:
-    rows = [("file", "status", "seconds", "reason")]
-    rows += [(r["file"], r["status"], f"{r['seconds']:.1f}", r["reason"] or "-") for r in results]
+    rows = [("file", "status", "seconds", "reason / note")]
+    rows += [(r["file"], r["status"], f"{r['seconds']:.1f}", r["reason"] or "; ".join(r.get("notes") or []) or "-")
+             for r in results]
     widths = [max(len(row[i]) for row in rows) for i in range(3)]
     lines = []
     for n, row in enumerate(rows):
@@ -364,7 +370,7 @@ class _Worker:
 
 def _failed(file: str, reason: str, seconds: float = 0.0) -> dict:
     """The result row of a file that was not processed."""
-    return {"file": file, "status": "failed", "output": "", "seconds": seconds, "reason": reason}
+    return {"file": file, "status": "failed", "output": "", "seconds": seconds, "reason": reason, "notes": []}
 
 
 def _discard_partial(job: dict) -> None:

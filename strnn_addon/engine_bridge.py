@@ -19,7 +19,7 @@ import numpy as np
 from ..model_core.inference.steps import drive
 from ..model_core.io.checkpoint import DEFAULT_MODEL, default_denoiser
 from ..model_core.ops.denoise import denoise_positions_steps
-from ..model_core.ops.extend import extend_positions
+from ..model_core.ops.extend import extend_positions, first_window
 from ..model_core.ops.familiarity import clip_familiarity
 from ..model_core.ops.follow import PathFollower, follow_curve_positions_steps
 from ..model_core.ops.inbetween import inbetween_positions
@@ -209,6 +209,14 @@ def run_extend(prefs, positions: np.ndarray, fps: float, frames: int, memory: np
     with threads(prefs):
         return _kept(_key("extend", engine, positions, fps, frames, memory),
                      lambda: extend_positions(engine, positions, fps, frames, memory))
+
+
+def run_first_window(prefs, positions: np.ndarray, fps: float, memory: np.ndarray | None = None):
+    """How much of its motion Extend's first window after ``positions`` keeps (:func:`extend.first_window`)."""
+    engine = generator_from_prefs(prefs)
+    with threads(prefs):
+        return _kept(_key("first_window", engine, positions, fps, memory),
+                     lambda: first_window(engine, positions, fps, memory))
 
 
 def run_inbetween(prefs, before: np.ndarray, after: np.ndarray, fps: float, frames: int,

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -22,6 +23,24 @@ MEMORY_S = 20.0
 # given a move the model invents. The later windows are the model's own from there. Chosen on the held-out groups
 # (model card, "A clip at rest in motion the model does not know"). 0: off.
 STILL_SPEED, STILL_POWER, STILL_FRAMES = 0.01, 2.0, 10
+# The report says the first window was held near the last pose when it kept at most this share of its motion.
+HELD_NOTE = 0.75
+
+
+@dataclass(frozen=True)
+class FirstWindow:
+    """How much of its motion Extend's first window keeps (:func:`first_motion`) and how long it lasts."""
+    motion: float  # 1: the model's own; 0: the last pose held
+    seconds: float
+
+    def note(self) -> str:
+        """A sentence for the operator's report; empty unless the first window was mostly held."""
+        if self.motion > HELD_NOTE:
+            return ""
+        return (f"The clip has come to rest in motion the model does not know, so its first {self.seconds:.2f} s "
+                f"stay near the last pose ({1.0 - self.motion:.0%} of the model's move held back) rather than "
+                "invent a move: if the performer was about to move, key it or extend from a frame where the "
+                "clip still moves")
 
 
 def extend_positions(engine, pos: np.ndarray, fps: float, frames: int, memory: np.ndarray | None = None) -> np.ndarray:
@@ -35,14 +54,8 @@ def extend_positions(engine, pos: np.ndarray, fps: float, frames: int, memory: n
     know the motion and the clip has come to rest, the first window stays near the last pose (:func:`first_motion`).
     Returns ``[frames, 21, 3]`` in the same space.
     """
-    ctx = _at_model_rate(pos, fps)
-    if memory is not None and len(ctx) < engine.m:  # a model that reads more than the clip's context: more of it
-        longer = _at_model_rate(memory, fps)
-        ctx = longer[-engine.m:] if len(longer) > len(ctx) else ctx
-    norm = fit_normalisation(ctx)
+    ctx, norm, model_ctx, momentum = _reading(engine, pos, fps, memory)
     n_model = int(math.ceil(frames * MODEL_FPS / fps)) + 1
-    model_ctx = norm.to_model(ctx)
-    momentum = momentum_shares(engine, model_ctx[None])[0]
     kw = {} if memory is None else {"memory": norm.to_model(_at_model_rate(memory, fps)),
                                     "first_scale": first_scale(momentum)}
     still = first_motion(model_ctx, momentum)
@@ -52,6 +65,26 @@ def extend_positions(engine, pos: np.ndarray, fps: float, frames: int, memory: n
     # model frame 0 is the last context frame
     seq = np.concatenate([ctx[-1:], blend_seam(ctx, norm.to_user(new), momentum=momentum)])
     return sample_at(seq, MODEL_FPS, np.arange(1, frames + 1) / fps)
+
+
+def first_window(engine, pos: np.ndarray, fps: float, memory: np.ndarray | None = None) -> FirstWindow:
+    """What :func:`extend_positions` does with the first window after the clip ``pos`` (same arguments): how
+    much of its motion it keeps, for the operator's report."""
+    _, _, model_ctx, momentum = _reading(engine, pos, fps, memory)
+    return FirstWindow(first_motion(model_ctx, momentum), engine.n / MODEL_FPS)
+
+
+def _reading(engine, pos: np.ndarray, fps: float, memory: np.ndarray | None):
+    """The context Extend reads of the clip ``pos`` (and ``memory``, for a model that reads more than the clip's
+    context): (context at the model's rate ``[T, 21, 3]``, its normalisation, the context in model units, the
+    context's momentum share)."""
+    ctx = _at_model_rate(pos, fps)
+    if memory is not None and len(ctx) < engine.m:  # a model that reads more than the clip's context: more of it
+        longer = _at_model_rate(memory, fps)
+        ctx = longer[-engine.m:] if len(longer) > len(ctx) else ctx
+    norm = fit_normalisation(ctx)
+    model_ctx = norm.to_model(ctx)
+    return ctx, norm, model_ctx, momentum_shares(engine, model_ctx[None])[0]
 
 
 def first_motion(ctx: np.ndarray, momentum: float) -> float:

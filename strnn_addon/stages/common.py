@@ -128,6 +128,18 @@ def familiarity_record(found) -> dict:
     return {"familiarity": entry}
 
 
+def first_window_record(found) -> dict:
+    """The record's ``first_window`` entry where Extend held its first window near the clip's last pose
+    (:class:`extend.FirstWindow`): the share of the model's motion kept, how long, and the note the operator
+    reports; empty where the first window is the model's own."""
+    if found.motion >= 1.0:
+        return {}
+    entry = {"motion_kept": round(found.motion, 3), "seconds": round(found.seconds, 3)}
+    if found.note():
+        entry["note"] = found.note()
+    return {"first_window": entry}
+
+
 PACE_SECONDS = 8.0  # how much of the action, up to its end, the pace is read from
 PACE_SAMPLES = 96  # at most this many frames of it are read (evaluated rigs pay per frame)
 
@@ -156,11 +168,16 @@ def pace_record(context, clip, end: int | None = None) -> dict:
     return {"pace": entry}
 
 
-def report_note(action) -> str:
-    """The pace and familiarity notes of a new action's record, as sentences to append to a report ('' if none)."""
+def record_notes(action) -> list[str]:
+    """The notes of a new action's record (its pace, familiarity and held first window), in that order."""
     record = action.get(RECORD, {})
-    notes = [record.get(key, {}).get("note", "") for key in ("pace", "familiarity")]
-    return "".join(f". {note}" for note in notes if note)
+    notes = [record.get(key, {}).get("note", "") for key in ("pace", "familiarity", "first_window")]
+    return [str(note) for note in notes if note]
+
+
+def report_note(action) -> str:
+    """:func:`record_notes` as sentences to append to an operator's report ('' if none)."""
+    return "".join(f". {note}" for note in record_notes(action))
 
 
 def with_bake(record: dict, clip, error: float, frames) -> dict:

@@ -10,7 +10,18 @@ from ...model_core.rig.solve import solve
 from .. import engine_bridge
 from ..scene import pipeline
 from ..scene.pipeline import UserError
-from .common import familiarity_record, lock, made_by, model_call, noop, pace_record, prefs, run, write_new
+from .common import (
+    familiarity_record,
+    first_window_record,
+    lock,
+    made_by,
+    model_call,
+    noop,
+    pace_record,
+    prefs,
+    run,
+    write_new,
+)
 
 
 def extend_clip(context, obj, *, progress=noop, **options):
@@ -63,8 +74,8 @@ def extend_steps(context, obj, *, frames: int = 120, context_frames: int = 0, fo
     held_loc, held_rot = pipeline.reference_pose(context, clip, ctx_frames[-1:])
     previous = pipeline.raw_rotations(clip, end)
     yield "model"
-    new_pos = model_call(engine_bridge.run_extend, prefs(context), pos, clip.fps, frames,
-                         memory if len(mem_frames) > len(ctx_frames) else None)
+    followed = memory if len(mem_frames) > len(ctx_frames) else None
+    new_pos = model_call(engine_bridge.run_extend, prefs(context), pos, clip.fps, frames, followed)
     if foot_lock:
         new_pos = lock(np.concatenate([pos, new_pos]), clip.fps, fixed=np.arange(len(pos) + frames) < len(pos),
                        passes=SETTLE_PASSES)
@@ -78,6 +89,8 @@ def extend_steps(context, obj, *, frames: int = 120, context_frames: int = 0, fo
                      context_frames=len(ctx_frames), follow_clip_frames=len(mem_frames) if follow_clip else 0,
                      foot_lock=foot_lock, from_frame=from_frame)
     record.update(familiarity_record(model_call(engine_bridge.run_familiarity, prefs(context), pos, clip.fps)))
+    held = model_call(engine_bridge.run_first_window, prefs(context), pos, clip.fps, followed)
+    record.update(first_window_record(held))
     record.update(pace_record(context, clip, end))
     replace = None if end == clip.last else (end + 0.5, float("inf"))  # the old tail goes
     return write_new(context, clip, "extended", new_frames, loc, rot, previous, replace, record,

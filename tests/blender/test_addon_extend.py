@@ -212,7 +212,7 @@ def test_a_fighter_paused_at_the_cut_is_continued_near_the_pause(real_model, add
     """Martial arts, an action family the model never learnt (take 08, 120 fps), cut at frame 600 where the
     fighter stands between moves and extended by half a second from there (From Current Frame): the first frames
     stay near the pause, nearer the take than the move the model alone invents (``ops.extend.STILL_SPEED`` turned
-    off in the installed extension, for the comparison)."""
+    off in the installed extension, for the comparison), and the new action's record says so."""
     mocap = find_mocap()
     if mocap is None:
         pytest.skip("needs the motion-capture data (data/mocap)")
@@ -228,6 +228,11 @@ def test_a_fighter_paused_at_the_cut_is_continued_near_the_pause(real_model, add
         take = evaluated_joints(addon, obj, frames)
         bpy.context.scene.frame_set(600)
         assert bpy.ops.strnn.extend_clip(frames=60, from_current=True) == {"FINISHED"}
+        record = action_of(obj)["strnn"].to_dict()
+        if still:  # the record, and so the report, says the first window was held near the pause
+            assert record["first_window"]["motion_kept"] < 0.75 and "come to rest" in record["first_window"]["note"]
+        else:
+            assert "first_window" not in record
         new = evaluated_joints(addon, obj, frames)
         assert np.abs(new[0] - take[0]).max() < 1e-4  # the frames up to the cut stay
         error[still] = np.linalg.norm(new[1:] - take[1:], axis=-1).mean(-1)  # metres, frame by frame

@@ -77,6 +77,11 @@ def test_follow_flags_reach_their_operators():
 
 
 def test_good_file_processed_corrupt_one_reported(clips, tmp_path, extension, capsys):
+    """A good take is extended, a broken one reported with its reason; a take that has come to rest in motion the
+    model does not know is extended too, and the progress line, the summary and the report carry the operator's
+    note on it (its first window was held near the last pose), as its report in Blender would warn."""
+    walk = walking_skeleton(60)
+    write_bvh(clips / "rest.bvh", np.repeat(walk[30:31], 40, 0))
     before = snapshot(clips)
     out = tmp_path / "out"
     code = strnn_batch.main(["extend", "--frames", "20", str(clips), "--out", str(out), "--jobs", "2",
@@ -88,16 +93,20 @@ def test_good_file_processed_corrupt_one_reported(clips, tmp_path, extension, ca
     # the result is in the take's own axes (Y up), its first frames the take's
     taken, written = (canonical_positions(read_bvh(p)) for p in (clips / "walk.bvh", result))
     assert np.abs(written[:60] - taken).max() < 0.01 * np.abs(taken).max(), np.abs(written[:60] - taken).max()
-    assert sorted(p.name for p in out.iterdir()) == ["walk.extend.bvh"]  # nothing for the broken one
+    assert sorted(p.name for p in out.iterdir()) == ["rest.extend.bvh", "walk.extend.bvh"]  # none for the broken
     assert snapshot(clips) == before  # inputs untouched
     failures = captured.err.split("failures:")[1]
     assert "broken.bvh" in failures and "broken BVH" in failures and "walk.bvh" not in failures
     assert "Traceback" not in captured.out + captured.err
     table = captured.out.split("file ")[-1]
-    assert "ok" in table and "failed" in table and "1 of 2 files processed" in captured.out
+    assert "ok" in table and "failed" in table and "2 of 3 files processed" in captured.out
     report = json.loads((tmp_path / "report.json").read_text())
-    assert report["command"] == "extend" and (report["processed"], report["failed"]) == (1, 1)
+    assert report["command"] == "extend" and (report["processed"], report["failed"]) == (2, 1)
     rows = {Path(r["file"]).name: r for r in report["files"]}
+    assert any("come to rest" in note for note in rows["rest.bvh"]["notes"]), rows["rest.bvh"]
+    assert not any("come to rest" in note for note in rows["walk.bvh"]["notes"])
+    rest_lines = [line for line in captured.out.splitlines() if "rest.bvh" in line]
+    assert len(rest_lines) == 2 and all("come to rest" in line for line in rest_lines)  # progress line, summary
     assert rows["walk.bvh"]["status"] == "ok" and Path(rows["walk.bvh"]["output"]) == result.resolve()
     assert rows["broken.bvh"]["status"] == "failed" and "broken BVH" in rows["broken.bvh"]["reason"]
 

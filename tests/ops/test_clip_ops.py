@@ -100,6 +100,24 @@ def test_extend_leaves_an_unfamiliar_clip_at_rest_near_its_last_pose(monkeypatch
     assert drift(held) < 0.5 and drift(alone) > 2.0  # cm
 
 
+def test_extend_says_when_its_first_window_was_held_near_the_last_pose():
+    """extend.first_window tells the operator what Extend did with the first window: a clip at rest in motion the
+    model does not know is held (a note for the report, with how long and how much), a walk is the model's own."""
+    from model_core.ops import extend
+
+    engine = Engine.load()
+    walk = walking_skeleton(60)
+    rest = np.repeat(walk[30:31], 40, 0)
+    held = extend.first_window(engine, rest * 100, 30.0)
+    assert held.motion == 0.0 and held.seconds == pytest.approx(engine.n / 30.0)
+    assert "come to rest" in held.note() and "100% of the model's move held back" in held.note()
+    assert f"first {engine.n / 30.0:.2f} s" in held.note()
+    moving = extend.first_window(engine, walk * 100, 30.0)
+    assert moving.motion == 1.0 and moving.note() == ""
+    assert extend.FirstWindow(extend.HELD_NOTE + 0.05, 0.6).note() == ""  # mostly the model's own: no note
+    assert "50% of the model's move" in extend.FirstWindow(0.5, 0.6).note()
+
+
 @pytest.mark.parametrize("fps", [24.0, 25.0, 50.0, 120.0])
 def test_denoise_keeps_a_clean_clip_at_any_rate(fps):
     """The bundled denoising model through the product path: a clean clip comes back within a
