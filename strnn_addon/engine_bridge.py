@@ -18,7 +18,7 @@ import numpy as np
 
 from ..model_core.inference.steps import drive
 from ..model_core.io.checkpoint import DEFAULT_MODEL, default_denoiser
-from ..model_core.ops.denoise import denoise_positions_steps
+from ..model_core.ops.denoise import denoise_positions_steps, result_familiarity
 from ..model_core.ops.extend import extend_positions, first_window
 from ..model_core.ops.familiarity import clip_familiarity
 from ..model_core.ops.follow import PathFollower, follow_curve_positions_steps
@@ -235,6 +235,16 @@ def run_familiarity(prefs, positions: np.ndarray, fps: float):
     engine = generator_from_prefs(prefs)
     with threads(prefs):
         return _kept(_key("familiarity", engine, positions, fps), lambda: clip_familiarity(engine, positions, fps))
+
+
+def run_denoised_familiarity(prefs, positions: np.ndarray, denoised: np.ndarray, fps: float, strength: float):
+    """How familiar the motion of ``positions`` is to the main model, judged on what Denoise made of it
+    (``denoised``, blended by ``strength``: :func:`denoise.result_familiarity`); None for strength 0. The main
+    model judges (it carries the calibration); one that can only denoise judges too, without a note."""
+    engine = engine_from_prefs(prefs)
+    with threads(prefs):
+        return _kept(_key("denoised_familiarity", engine, positions, denoised, fps, strength),
+                     lambda: result_familiarity(engine, positions, denoised, fps, strength))
 
 
 def run_denoise(prefs, positions: np.ndarray, fps: float, strength: float):

@@ -55,6 +55,14 @@ class Familiarity:
         return (f"This motion is unlike what the model learnt (it rebuilds it {self.ratio:.1f} x worse than 90 % of "
                 f"the motion it knows): the result may drift from the clip's style, so check it")
 
+    def denoised_note(self) -> str:
+        """:meth:`note` for Denoise, which judges its result (:func:`denoise.result_familiarity`)."""
+        if not self.unfamiliar:
+            return ""
+        return (f"The denoised motion is unlike what the model learnt (it rebuilds it {self.ratio:.1f} x worse than "
+                "90 % of the motion it knows): the take is motion it does not know, or noise is left, so compare "
+                "the result with the original action (kept) and lower Strength where the style changed")
+
 
 def model_body(engine) -> np.ndarray | None:
     """The body the model learnt, ``[21, 3]`` (model units): the first frame of the release's seed window whose

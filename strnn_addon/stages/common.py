@@ -117,14 +117,18 @@ def made_by(operation: str, clip, model: str = "", **settings) -> dict:
     return record
 
 
-def familiarity_record(found) -> dict:
+def familiarity_record(found, denoised: bool = False) -> dict:
     """The record's ``familiarity`` entry: the clip's reconstruction error against the model's usual,
-    and the note the operator reports when the clip is unlike what the model learnt."""
+    and the note the operator reports when the clip is unlike what the model learnt (Denoise's, which judges its
+    result, with ``denoised``); empty for ``found`` None."""
+    if found is None:
+        return {}
     entry = {"reconstruction_cm": round(found.error_cm, 2)}
     if found.usual_cm:
         entry["usual_cm_p90"] = found.usual_cm
-    if found.note():
-        entry["note"] = found.note()
+    note = found.denoised_note() if denoised else found.note()
+    if note:
+        entry["note"] = note
     return {"familiarity": entry}
 
 

@@ -7,7 +7,19 @@ import numpy as np
 from ...model_core.ops.seam import fade_edges
 from .. import engine_bridge
 from ..scene import pipeline
-from .common import frame_range, lock, made_by, model_steps, noop, pace_record, prefs, run, write_new
+from .common import (
+    familiarity_record,
+    frame_range,
+    lock,
+    made_by,
+    model_call,
+    model_steps,
+    noop,
+    pace_record,
+    prefs,
+    run,
+    write_new,
+)
 
 
 def denoise_action(context, obj, *, progress=noop, **options):
@@ -31,6 +43,7 @@ def denoise_steps(context, obj, *, frame_start: int | None = None, frame_end: in
     previous = pipeline.raw_rotations(clip, a)
     yield "model"
     clean = yield from model_steps(engine_bridge.run_denoise(prefs(context), pos, clip.fps, float(strength)))
+    found = model_call(engine_bridge.run_denoised_familiarity, prefs(context), pos, clean, clip.fps, float(strength))
     clean = fade_edges(pos, clean, clip.fps, a > clip.first, b < clip.last)
     if foot_lock:
         clean = lock(clean, clip.fps)
@@ -39,5 +52,6 @@ def denoise_steps(context, obj, *, frame_start: int | None = None, frame_end: in
     yield "write"
     record = made_by("Denoise Action", clip, engine_bridge.model_used(prefs(context), "denoise"), frame_start=a,
                      frame_end=b, strength=float(strength), foot_lock=foot_lock, only_selected=only_selected)
+    record.update(familiarity_record(found, denoised=True))
     record.update(pace_record(context, clip))
     return write_new(context, clip, "denoised", frames, loc, rot, previous, (a, b), record, bones=bones)

@@ -78,6 +78,7 @@ def test_strength_zero_changes_no_motion(fake_model, addon, monkeypatch):
     monkeypatch.setattr(fake_model, "run_denoise", stand_in(lambda pos, strength: pos + strength * 0.1))
     denoise(strength=0.0)
     assert np.abs(evaluated_joints(addon, obj, frames) - before).max() < 1e-4
+    assert "familiarity" not in action_of(obj)["strnn"]  # nothing denoised, nothing judged
 
 
 def test_steps_report_model_progress_and_stop_without_changes(real_model, addon, tmp_path):
@@ -129,6 +130,35 @@ def test_denoise_noisy_clip_with_model(real_model, addon, tmp_path):
     print(f"noisy {err_noisy:.4f}, denoised {err_out:.4f} (scene units)")
     shipped = (Path(addon.__file__).parent / "models" / "strnn_denoise" / "model.json").exists()
     assert 0 < err_noisy and err_out < (0.5 if shipped else 1.0) * err_noisy  # the denoising model: under half
+
+
+def test_denoise_judges_how_familiar_the_motion_is_not_the_jitter(real_model, addon):
+    """A familiar walk (a real take) with light rotation jitter: the noisy keys as they are would read as motion
+    unlike what the model learnt, but the new action's record (and so the report) judges the denoised motion, which
+    reads familiar: no note. Under heavy jitter some noise is left and the note says so."""
+    root = find_mocap()
+    clip = root / "bandai-namco/dataset-2/dataset-2_walk_normal_001.bvh" if root else None
+    if clip is None or not clip.exists():
+        pytest.skip("needs the motion-capture data (data/mocap): the claim is about a real take")
+    bridge = addon_module(addon, "strnn_addon.engine_bridge")
+    pipeline = addon_module(addon, "strnn_addon.scene.pipeline")
+    prefs = bpy.context.preferences.addons[addon.__name__].preferences
+    for degrees in (0.3, 2.0):
+        bpy.ops.wm.read_homefile(use_empty=True)
+        obj = import_bvh(clip, update_scene_fps=True)
+        frames = np.arange(int(action_of(obj).frame_range[0]), int(action_of(obj).frame_range[1]) + 1)
+        shake(obj, degrees)
+        noisy = pipeline.joint_positions(bpy.context, pipeline.prepare(bpy.context, obj), frames)  # as Denoise reads
+        render = bpy.context.scene.render
+        as_read = bridge.run_familiarity(prefs, noisy, render.fps / render.fps_base)  # the noisy input as it is
+        denoise()
+        found = action_of(obj)["strnn"]["familiarity"].to_dict()
+        ratio = found["reconstruction_cm"] / found["usual_cm_p90"]
+        assert as_read.unfamiliar and ratio < as_read.ratio, (degrees, as_read.ratio, found)
+        if degrees < 1.0:
+            assert "note" not in found and ratio < 1.25, found
+        else:
+            assert "noise is left" in found["note"] and "Strength" in found["note"]
 
 
 def test_denoise_model_folder_preference_picks_the_denoiser(real_model, addon, tmp_path):

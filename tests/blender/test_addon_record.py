@@ -32,6 +32,7 @@ def test_extend_then_denoise_then_lock(addon, tmp_path, real_model):
     assert bpy.ops.strnn.denoise_action(strength=0.5, use_range=True, frame_start=5, frame_end=70) == {"FINISHED"}
     denoised = record(obj)
     assert denoised["operation"] == "Denoise Action" and denoised["source_action"] == extended
+    assert set(denoised["familiarity"]) >= {"reconstruction_cm", "usual_cm_p90"}  # judged on the denoised motion
     assert denoised["model"].endswith("strnn_denoise")  # the bundled denoising model
     assert denoised["settings"] == {"frame_start": 5, "frame_end": 70, "strength": 0.5, "foot_lock": False,
                                     "only_selected": False}

@@ -153,3 +153,25 @@ def test_a_long_extension_of_a_wave_keeps_waving(mocap_root, monkeypatch):
     monkeypatch.setattr(memory, "LONG_FROM", None)
     settles = ratio()
     assert plays_on > 0.4 > settles
+
+
+def test_denoise_judges_how_familiar_the_motion_is_on_its_result_not_on_the_noise(mocap_root):
+    """A familiar walk with 3 cm of jitter and pops reads as unfamiliar motion as it is (the noise does not
+    rebuild), but its denoised self reads familiar at full and half strength; an action family the model never
+    learnt (martial arts) still reads unfamiliar once denoised. Strength 0 changes nothing and judges nothing."""
+    from model_core.eval.metrics import add_noise, add_pops
+    from model_core.ops.denoise import result_familiarity
+    from model_core.ops.familiarity import clip_familiarity
+    from model_core.rig.rigs import load_clip
+
+    main, denoiser = Engine.load(), Engine.load(default_denoiser(DEFAULT_MODEL))
+    rng = np.random.default_rng(0)
+    for path, familiar in [("bandai-namco/dataset-2/dataset-2_walk_normal_001.bvh", True),
+                           ("cmu/acrnn-dance/martial/08.bvh", False)]:
+        take = load_clip(mocap_root / path)[:300].astype(np.float64)
+        noisy = add_pops(add_noise(take, 3.0, rng), 0.01, rng)
+        assert clip_familiarity(main, noisy, 30.0).unfamiliar
+        for strength in (1.0, 0.5):
+            found = result_familiarity(main, noisy, denoise_positions(denoiser, noisy, 30.0, strength), 30.0, strength)
+            assert found.unfamiliar is not familiar, (path, strength, found.ratio)
+    assert result_familiarity(main, noisy, noisy, 30.0, 0.0) is None
