@@ -240,8 +240,12 @@ def run_familiarity(prefs, positions: np.ndarray, fps: float):
 def run_denoised_familiarity(prefs, positions: np.ndarray, denoised: np.ndarray, fps: float, strength: float):
     """How familiar the motion of ``positions`` is to the main model, judged on what Denoise made of it
     (``denoised``, blended by ``strength``: :func:`denoise.result_familiarity`); None for strength 0. The main
-    model judges (it carries the calibration); one that can only denoise judges too, without a note."""
-    engine = engine_from_prefs(prefs)
+    model judges (it carries the calibration); one that can only denoise judges too, without a note. None where
+    the Model Folder holds no model Denoise could load: the judgement is not worth failing a Denoise over."""
+    try:
+        engine = engine_from_prefs(prefs)
+    except EngineError:
+        return None
     with threads(prefs):
         return _kept(_key("denoised_familiarity", engine, positions, denoised, fps, strength),
                      lambda: result_familiarity(engine, positions, denoised, fps, strength))

@@ -184,6 +184,22 @@ def test_denoise_model_folder_preference_picks_the_denoiser(real_model, addon, t
         assert np.abs(outputs[0] - outputs[1]).max() > 1e-3  # a different model gave a different result
 
 
+def test_denoise_with_its_own_folder_works_when_the_model_folder_holds_no_model(real_model, addon, tmp_path):
+    """Denoise judges familiarity with the main model; a Model Folder that holds no model does not stop a Denoise
+    whose Denoise Model Folder is set: the motion is denoised, and the record simply has no judgement."""
+    prefs = bpy.context.preferences.addons[addon.__name__].preferences
+    shipped = Path(addon.__file__).parent / "models" / "strnn_denoise"
+    obj = import_bvh(walk_bvh(tmp_path, frames=60))
+    shake(obj)
+    prefs.model_folder, prefs.denoise_model_folder = str(tmp_path / "empty"), str(
+        shipped if (shipped / "model.json").exists() else real_model)
+    try:
+        denoise()
+    finally:
+        prefs.model_folder, prefs.denoise_model_folder = str(real_model), ""
+    assert "familiarity" not in action_of(obj)["strnn"]
+
+
 def select(obj, names: set) -> None:
     """Select exactly the pose bones ``names`` (Blender 5 keeps pose selection on the pose bone, 4.x on the bone)."""
     for pb in obj.pose.bones:
