@@ -2,12 +2,15 @@
 
 from __future__ import annotations
 
+import textwrap
+
 import bpy
 
 from ..model_core.motion.conventions import JOINTS
 from .operators import check_message
 from .props import TAIL_JOINTS, joint_label
 from .scene import controls
+from .stages.common import RECORD, record_notes
 
 
 class _Sidebar:
@@ -38,6 +41,25 @@ class STRNN_PT_main(_Sidebar, bpy.types.Panel):
         first, last = (int(round(f)) for f in action.frame_range)
         col.label(text=f"{obj.name}: {action.name} (frames {first}-{last})", icon="ACTION")
         col.prop(obj, "strnn_keys_per_second")
+        made_by_note(col, action, context)
+
+
+def made_by_note(col, action, context) -> None:
+    """Under the action: which operation made it and, where its report warned (the motion unlike what the model
+    learnt, a first window held, the keys' rate), the same notes, wrapped to the sidebar's width, so they stay in
+    view after the report has gone from the status bar."""
+    record = action.get(RECORD)
+    if record is None or "operation" not in record:
+        return
+    notes = record_notes(action)
+    col.label(text=f"Made by {record['operation']}{': check it' if notes else ''}",
+              icon="ERROR" if notes else "INFO")
+    region = getattr(context, "region", None)
+    scale = context.preferences.view.ui_scale if context.preferences else 1.0
+    width = max(24, int(region.width / (7.0 * scale)) - 4) if region is not None and region.width > 1 else 48
+    for note in notes:
+        for line in textwrap.wrap(note, width):
+            col.label(text=line)
 
 
 def remembered(context, idname: str):

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import bpy
 import pytest
-from scenes import action_of, build_armature, import_bvh, key_snapshot, same_keys, walk_bvh
+from scenes import action_of, addon_module, build_armature, import_bvh, key_snapshot, same_keys, walk_bvh
 
 PANELS = ("STRNN_PT_main", "STRNN_PT_extend", "STRNN_PT_fill_gap", "STRNN_PT_denoise", "STRNN_PT_foot_lock",
           "STRNN_PT_follow_curve", "STRNN_PT_transfer", "STRNN_PT_bone_map", "STRNN_PT_controls")
@@ -133,6 +133,20 @@ def test_main_panel_says_what_each_object_allows(addon, tmp_path):
                                               ("Follow Curve can start one; the others need an action", "NONE")]
     import_bvh(walk_bvh(tmp_path, frames=30))
     assert panel_labels("STRNN_PT_main", bpy.context) == [("walk: walk (frames 1-30)", "ACTION")]
+
+
+def test_main_panel_keeps_the_reports_notes_in_view(addon, tmp_path, real_model):
+    """After an operation the main panel says which one made the active action and, where its report warned,
+    the same notes (a procedural walk is unlike any capture), wrapped into lines; a take it did not make shows
+    none of that."""
+    import_bvh(walk_bvh(tmp_path, frames=40))
+    assert [text for text, _ in panel_labels("STRNN_PT_main", bpy.context)] == ["walk: walk (frames 1-40)"]
+    assert bpy.ops.strnn.extend_clip(frames=10) == {"FINISHED"}
+    labels = panel_labels("STRNN_PT_main", bpy.context)
+    assert labels[1] == ("Made by Extend Clip: check it", "ERROR")
+    notes = addon_module(addon, "strnn_addon.stages.common").record_notes(action_of(bpy.context.active_object))
+    assert notes and " ".join(text for text, _ in labels[2:]) == " ".join(notes)
+    assert all(len(text) <= 60 for text, _ in labels[2:])
 
 
 def as_from_the_ui(op: str, **handed):
