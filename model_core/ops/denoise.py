@@ -31,7 +31,7 @@ def result_familiarity(engine, pos: np.ndarray, denoised: np.ndarray, fps: float
     if strength <= 0.0:
         return None
     pos = np.asarray(pos, np.float64)
-    return clip_familiarity(engine, pos + (np.asarray(denoised, np.float64) - pos) / min(strength, 1.0), fps)
+    return clip_familiarity(engine, pos + (np.asarray(denoised, np.float64) - pos) / strength, fps)  # the blend undone
 
 
 def denoise_positions_steps(engine, pos: np.ndarray, fps: float, strength: float = 1.0):
