@@ -50,18 +50,18 @@ class Familiarity:
 
     def note(self) -> str:
         """A sentence for an operator's report; empty when the clip is familiar."""
-        if not self.unfamiliar:
-            return ""
-        return (f"This motion is unlike what the model learnt (it rebuilds it {self.ratio:.1f} x worse than 90 % of "
-                f"the motion it knows): the result may drift from the clip's style, so check it")
+        return self._said("This motion", "the result may drift from the clip's style, so check it")
 
     def denoised_note(self) -> str:
         """:meth:`note` for Denoise, which judges its result (:func:`denoise.result_familiarity`)."""
+        return self._said("The denoised motion", "the take is motion it does not know, or noise is left, so compare "
+                          "the result with the original action (kept) and lower Strength where the style changed")
+
+    def _said(self, what: str, meaning: str) -> str:
         if not self.unfamiliar:
             return ""
-        return (f"The denoised motion is unlike what the model learnt (it rebuilds it {self.ratio:.1f} x worse than "
-                "90 % of the motion it knows): the take is motion it does not know, or noise is left, so compare "
-                "the result with the original action (kept) and lower Strength where the style changed")
+        return (f"{what} is unlike what the model learnt (it rebuilds it {self.ratio:.1f} x worse than 90 % of the "
+                f"motion it knows): {meaning}")
 
 
 def model_body(engine) -> np.ndarray | None:
