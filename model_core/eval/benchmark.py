@@ -26,34 +26,37 @@ def _matrices(weights: dict, prefix: str, contains: str = "") -> int:
     return sum(v.size for k, v in weights.items() if k.startswith(prefix) and v.ndim == 2 and contains in k)
 
 
-def model_costs(weights: dict, config: dict, readings: int = 1) -> dict:
+def model_costs(weights: dict, config: dict, readings: int = 1, decoded: bool = False) -> dict:
     """Matmul FLOPs and weight bytes per generated frame of one extrapolation window, the model
     reading each context ``readings`` times (2: as it is and as its mirror image, as
     :meth:`Engine.predict <model_core.inference.engine.Engine.predict>` does).
 
     Per window (``m`` context frames, ``n`` predicted): the encoder runs m LSTM steps over m
-    spatially encoded frames; the decoder and predictor each run max(m, n) steps, each step a
-    spatial decode and encode; the residual filter runs once. Bytes are for batch 1 with no
-    weight kept in cache between uses: per step each LSTM matrix is read once, the spatial
-    nets once for decoder and predictor together (one batch of two), the encoder's input
-    weights and the filter once per window. The readings are rows of the same batch: they
-    multiply the FLOPs, not the weight reads.
+    spatially encoded frames; the predictor runs n steps, each step a spatial decode and encode, and with
+    ``decoded`` (every window through the backward decoder: :attr:`Engine.decode_later_windows`) the decoder
+    runs beside it, max(r, n) steps of both; the residual filter runs once. The cost is a later window's (the
+    first, decoded and with the release's partners, is one of many). Bytes are for batch 1 with no weight kept
+    in cache between uses: per step each LSTM matrix is read once, the spatial nets once for decoder and
+    predictor together (one batch of two), the encoder's input weights and the filter once per window. The
+    readings are rows of the same batch: they multiply the FLOPs, not the weight reads.
     """
     m, n = config["encode_len"], config["predict_len"]
-    steps = max(config.get("decode_len") or m, n)  # the decoder reconstructs the context's last decode_len frames
+    steps = max(config.get("decode_len") or m, n) if decoded else n  # the decoder rebuilds decode_len frames
+    rows = 2 if decoded else 1  # rows per step through the spatial nets: decoder and predictor, or predictor
     macs = {k: _matrices(weights, p) for k, p in _PARTS.items()}
     enc_ih = _matrices(weights, "encoder.", "weight_ih")
+    decoder = macs["lstm_decoder"] if decoded else 0
     flops_window = 2 * (m * (macs["spatial_encoder"] + macs["lstm_encoder"])
-                        + steps * (macs["lstm_decoder"] + macs["lstm_predictor"]
-                                   + 2 * (macs["spatial_decoder"] + macs["spatial_encoder"]))
+                        + steps * (decoder + macs["lstm_predictor"]
+                                   + rows * (macs["spatial_decoder"] + macs["spatial_encoder"]))
                         + macs["filter"])
     entries_window = (macs["spatial_encoder"] + enc_ih + m * (macs["lstm_encoder"] - enc_ih)
-                      + steps * (macs["lstm_decoder"] + macs["lstm_predictor"]
+                      + steps * (decoder + macs["lstm_predictor"]
                                  + macs["spatial_decoder"] + macs["spatial_encoder"])
                       + macs["filter"])
     return {"flops_per_frame": readings * flops_window / n, "weight_bytes_per_frame": 4 * entries_window / n,
             "weight_bytes_total": 4 * sum(macs.values()), "macs_per_part": macs, "readings": readings,
-            "window": {"m": m, "n": n, "steps": steps}}
+            "window": {"m": m, "n": n, "steps": steps, "decoded": decoded}}
 
 
 def _best_seconds(fn, repeats: int) -> float:

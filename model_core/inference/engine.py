@@ -3,13 +3,14 @@
 Loads the same release checkpoint as the torch model. Batch norms are folded into
 the layers that read them, the four spatial levels become one dense matrix each
 (zeros where the body graph has no edge), and the backward decoder and forward
-predictor step together, so a 20-frame window costs a few hundred small NumPy calls.
+predictor step together, so a 20-frame window costs a few hundred small NumPy calls (a rollout's later
+windows run the predictor alone: :meth:`Engine.predict_next`).
 Features in and out are RAW (un-normalised) ``[..., T, C]`` in :data:`LAYOUT` order.
 """
 
 from __future__ import annotations
 
-from functools import lru_cache
+from functools import lru_cache, partial
 from pathlib import Path
 
 import numpy as np
@@ -99,6 +100,7 @@ class Engine:
 
     seam_frames = PREDICT_SEAM_FRAMES  # fade-out (frames) of the seam correction in predict() (ops/seam.py)
     mirrored_reading = True  # predict() averages the context's reading and its mirror image's
+    decode_later_windows = False  # True: a rollout's later windows run the backward decoder too (predict_next)
 
     def __init__(self, ckpt: Checkpoint):
         ckpt.require_strnn()
@@ -160,16 +162,17 @@ class Engine:
         return self.ckpt.seeds
 
     # ----------------------------------------------------------------- core
-    def _window(self, x: np.ndarray) -> np.ndarray:
+    def _window(self, x: np.ndarray, decode: bool = True) -> np.ndarray:
         """Normalised context ``(B, m, C)`` -> normalised window ``(B, r + n, C)``: the context's last r frames
-        decoded, then the prediction."""
+        decoded, then the prediction. ``decode`` False: the context's last r frames stand in for their
+        reconstruction and the backward decoder is not run (:meth:`predict_next`)."""
         b, m, c = x.shape
         r = self.r
         xin = self.enc_frame(x.reshape(b * m, c)) @ self.enc_wih
         xin = (xin + self.enc_b).reshape(b, m, -1)
         h = np.zeros((b, self.width), np.float32)
         cs = np.zeros_like(h)
-        states = np.empty((m, b, self.width), np.float32) if self.dec_skip_gates is not None else None
+        states = np.empty((m, b, self.width), np.float32) if decode and self.dec_skip_gates is not None else None
         for t in range(m):
             h, cs = _cell(xin[:, t] + rows_matmul(h, self.enc_whh), cs)
             if states is not None:
@@ -177,35 +180,40 @@ class Engine:
         # The decoder's gates from the encoder's state at each frame, in the decoder's (backward) order.
         dec_skip = (states[::-1].reshape(m * b, -1) @ self.dec_skip_gates).reshape(m, b, -1) \
             if states is not None else None
-        hs, cs = np.stack([h, h]), np.stack([cs, cs])  # (2, B, H): decoder, predictor
-        first = self.enc_frame(x[:, -1])  # (B, W)
-        gin = np.stack([np.broadcast_to(self.start_gates, (b, self.start_gates.shape[0])),
-                        first @ self.step_wih[1]]) + self.step_b
+        # The recurrent steps run as a stack: (decoder, predictor), or the predictor alone; p is its place.
+        k = 2 if decode else 1
+        p = k - 1
+        wih, whh, bias = self.step_wih[2 - k:], self.step_whh[2 - k:], self.step_b[2 - k:]
+        hs, cs = np.stack([h] * k), np.stack([cs] * k)  # (k, B, H)
+        first = self.enc_frame(x[:, -1]) @ self.step_wih[1]  # (B, 4H)
+        gin = (np.stack([np.broadcast_to(self.start_gates, first.shape), first]) if decode else first[None]) + bias
         extra = (x - x[:, -1:]).reshape(b, -1) @ self.context_gates if self.context_gates is not None else None
         if extra is not None:
-            gin[1] += extra
+            gin[p] += extra
         if dec_skip is not None:
             gin[0] += dec_skip[0]
-        steps = max(r, self.n)
-        out = np.empty((2, steps, b, c), np.float32)
-        base = np.concatenate([x[:, -1], x[:, -1]]) if self.offsets else None  # (2B, C)
+        steps = max(r, self.n) if decode else self.n
+        out = np.empty((k, steps, b, c), np.float32)
+        base = x[:, -1] if self.offsets else None  # (B, C)
         skip = np.einsum("it,btc->ibc", self.skip, x - x[:, -1:]) if self.skip is not None else None
         for t in range(steps):
-            hs, cs = _cell(gin + stack_matmul(hs, self.step_whh), cs)
-            frames = self.dec_frame(hs.reshape(2 * b, -1))  # (2B, C)
+            hs, cs = _cell(gin + stack_matmul(hs, whh), cs)
+            frames = self.dec_frame(hs.reshape(k * b, -1))  # (kB, C)
             if base is not None:
-                frames[:b] += base[:b]
-                frames[b:] += base[b:] * self.base_weights[min(t, self.n - 1)]
+                if decode:
+                    frames[:b] += base
+                frames[p * b:] += base * self.base_weights[min(t, self.n - 1)]
             if skip is not None:
-                frames[b:] += skip[min(t, self.n - 1)]
-            out[:, t] = frames.reshape(2, b, c)
+                frames[p * b:] += skip[min(t, self.n - 1)]
+            out[:, t] = frames.reshape(k, b, c)
             if t + 1 < steps:
-                gin = stack_matmul(self.enc_frame(frames).reshape(2, b, -1), self.step_wih) + self.step_b
+                gin = stack_matmul(self.enc_frame(frames).reshape(k, b, -1), wih) + bias
                 if extra is not None:
-                    gin[1] += extra
+                    gin[p] += extra
                 if dec_skip is not None and t + 1 < r:
                     gin[0] += dec_skip[t + 1]
-        window = np.concatenate([out[0, :r][::-1], out[1, : self.n]]).transpose(1, 0, 2)  # (B, T, C)
+        decoded = out[0, :r][::-1] if decode else x[:, -r:].transpose(1, 0, 2)
+        window = np.concatenate([decoded, out[p, : self.n]]).transpose(1, 0, 2)  # (B, T, C)
         if self.filter is not None:
             y = window.reshape(b, -1)
             z = np.concatenate([y, x.reshape(b, -1)], 1) if self.filter_context else y
@@ -216,10 +224,11 @@ class Engine:
             window = (y + z).reshape(window.shape)
         return window
 
-    def forward(self, context: np.ndarray) -> np.ndarray:
-        """Raw context ``[B, m, C]`` -> raw decoded context (its last r frames) + prediction ``[B, r + n, C]``."""
+    def forward(self, context: np.ndarray, decode: bool = True) -> np.ndarray:
+        """Raw context ``[B, m, C]`` -> raw decoded context (its last r frames) + prediction ``[B, r + n, C]``
+        (``decode`` False: the context's last r frames, filtered, in place of their reconstruction)."""
         x = ((np.asarray(context, np.float32) - self.mean) / self.std).astype(np.float32)
-        return self._window(x) * self.std + self.mean
+        return self._window(x, decode) * self.std + self.mean
 
     def predict(self, context: np.ndarray) -> np.ndarray:
         """Raw context ``[B, m, C]`` -> the next ``n`` raw frames ``[B, n, C]``.
@@ -248,13 +257,27 @@ class Engine:
             own = (1.0 - SIMLPE_SHARE) * own + SIMLPE_SHARE * self.simlpe.predict(context[:, -self.simlpe.m:])
         return own
 
-    def predict_once(self, context: np.ndarray) -> np.ndarray:
+    def predict_next(self, context: np.ndarray) -> np.ndarray:
+        """:meth:`predict` for a rollout's windows after the first, whose context is the model's own motion
+        (with :attr:`decode_later_windows` False): the context's last r frames stand in for the backward
+        decoder's reconstruction of them, so only the encoder and the forward predictor run: 1.5 x the frames a
+        second. On its own motion the decoder rebuilds the context closely, and the continuations
+        are as near the takes with or without it (model card, "Speed")."""
+        if self.decode_later_windows:
+            return self.predict(context)
+        self.ckpt.require_generator("predict motion")
+        once = partial(self.predict_once, decode=False)
+        context = np.asarray(context, np.float32)
+        return read_mirrored(once, context) if self.mirrored_reading else once(context)
+
+    def predict_once(self, context: np.ndarray, decode: bool = True) -> np.ndarray:
         """:meth:`predict` from one reading of the context ``[B, m, C]`` (float32).
 
         Seam correction: the decoder's error on the last context frame (its offset from the
         true frame) is carried into the prediction and fades out over ``seam_frames`` frames,
-        so the continuation starts where the context ends (0 turns it off)."""
-        window = self.forward(context)
+        so the continuation starts where the context ends (0 turns it off). ``decode`` False: the
+        backward decoder is not run (:meth:`predict_next`)."""
+        window = self.forward(context, decode)
         pred = window[:, self.r:]
         if self.seam_frames > 0:
             offset = context[:, -1, LAYOUT.positions] - window[:, self.r - 1, LAYOUT.positions]
@@ -295,7 +318,7 @@ class Engine:
         chunks, total = [], 0
         while total < frames:
             paired = paired_windows is None or len(chunks) < paired_windows
-            new = self.predict_first(ctx) if paired else self.predict(ctx)
+            new = self.predict_first(ctx) if paired else self.predict_next(ctx)
             if memory is not None and (chunks or memory.first_scale is not None):
                 new = np.stack([memory.lean(c, w, first=not chunks, window=len(chunks)) for c, w in zip(ctx, new)])
             if not chunks:

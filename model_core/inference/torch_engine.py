@@ -66,10 +66,11 @@ class TorchEngine:
         return self.ckpt.seeds
 
     @torch.inference_mode()
-    def forward(self, context: np.ndarray) -> np.ndarray:
-        """Raw context ``[B, m, C]`` -> raw decoded context (its last r frames) + prediction ``[B, r + n, C]``."""
+    def forward(self, context: np.ndarray, decode: bool = True) -> np.ndarray:
+        """Raw context ``[B, m, C]`` -> raw decoded context (its last r frames) + prediction ``[B, r + n, C]``
+        (``decode`` False: :meth:`Engine.forward`'s)."""
         x = torch.as_tensor(np.asarray(context, np.float32), device=self.device)
-        out = self.model((x - self._mean) / self._std)
+        out = self.model((x - self._mean) / self._std, decode=decode)
         return (out * self._std + self._mean).cpu().numpy()
 
     # The rollout, the windowed denoiser and the position-level wrappers only call
@@ -77,7 +78,9 @@ class TorchEngine:
     # the two engines cannot drift apart.
     seam_frames = Engine.seam_frames
     mirrored_reading = Engine.mirrored_reading
+    decode_later_windows = Engine.decode_later_windows
     predict = Engine.predict
+    predict_next = Engine.predict_next
     predict_once = Engine.predict_once
     predict_first = Engine.predict_first
     full_context = Engine.full_context

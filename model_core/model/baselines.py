@@ -180,7 +180,7 @@ class BaselineEngine:
     # projection, contacts rounded) and position-level wrapper only call predict_once and read m,
     # so the baselines are generated exactly as STRNN is.
     mirrored_reading = Engine.mirrored_reading
-    predict = Engine.predict
+    predict = predict_next = Engine.predict  # one model, no decoder: every window the same
     predict_first = Engine.predict_first
     companion = simlpe = None  # a baseline release is one model
     full_context = Engine.full_context

@@ -205,9 +205,10 @@ class STRNN(nn.Module):
         b, t, c = x.shape
         return self.encode_frame(x.reshape(b * t, c)).view(b, t, -1)  # (B, T, W)
 
-    def spatio_temporal(self, x):
+    def spatio_temporal(self, x, decode: bool = True):
         """Context ``(B, m, C)`` -> decoded ``(B, r, C)`` (the last r frames, chronological) and predicted
-        ``(B, n, C)``."""
+        ``(B, n, C)``. ``decode`` False: the context's last r frames in place of the decoded ones (the backward
+        decoder is not run; inference only, :meth:`Engine.predict_next`)."""
         cfg = self.cfg
         r = cfg.recon_len
         states, (h, c) = self.encoder(self.encode_frames(x))
@@ -221,8 +222,8 @@ class STRNN(nn.Module):
         base = x[:, -1] if cfg.offsets else 0.0
         keep = offset_weights(cfg.predict_len, cfg.offset_keep)
         decoded, predicted = [], []
-        for i in range(max(r, cfg.predict_len)):
-            if i < r:
+        for i in range(max(r, cfg.predict_len) if decode else cfg.predict_len):
+            if decode and i < r:
                 step_in = dec_in if dec_skip is None else dec_in + dec_skip[:, cfg.encode_len - 1 - i]
                 hd, cd = self.decoder(step_in, (hd, cd))
                 frame = base + self.decode_frame(hd)
@@ -235,12 +236,12 @@ class STRNN(nn.Module):
                     frame = frame + skip[:, i]
                 predicted.append(frame)
                 pred_in = self.encode_frame(frame) + extra
-        return torch.stack(decoded[::-1], 1), torch.stack(predicted, 1)
+        return torch.stack(decoded[::-1], 1) if decode else x[:, -r:], torch.stack(predicted, 1)
 
-    def forward(self, x, use_filter: bool = True):
+    def forward(self, x, use_filter: bool = True, decode: bool = True):
         """Context ``(B, m, C)`` -> window ``(B, r + n, C)``: decoded context (its last r frames) then
-        prediction."""
-        decoded, predicted = self.spatio_temporal(x)
+        prediction (``decode``: :meth:`spatio_temporal`'s)."""
+        decoded, predicted = self.spatio_temporal(x, decode)
         out = torch.cat([decoded, predicted], 1)
         if self.filter is not None and use_filter:
             out = self.filter(out, x)

@@ -17,7 +17,7 @@ torch = pytest.importorskip("torch")
 
 from releases import random_release  # noqa: E402
 
-from model_core.inference.engine import Engine, bone_lengths, offset_weights  # noqa: E402
+from model_core.inference.engine import Engine, bone_lengths, offset_weights, project_to_skeleton  # noqa: E402
 from model_core.inference.spatial_fold import rows_matmul, stack_matmul  # noqa: E402
 from model_core.inference.steps import drive  # noqa: E402
 from model_core.inference.torch_engine import TorchEngine  # noqa: E402
@@ -164,6 +164,56 @@ def test_a_temporal_skip_runs_the_same_in_numpy_and_torch_and_extrapolates_linea
         step = x[:, -1] - x[:, -2]
         expected = step[:, None] * torch.arange(1, n + 1, dtype=torch.float32)[None, :, None]
         torch.testing.assert_close(model.skip_frames(x), expected)
+
+
+@pytest.mark.parametrize("spatial,residual", VARIANTS)
+@pytest.mark.parametrize("kw", [{}, {"decode_len": 5, "decoder_skip": True, "offset_keep": 4},
+                                {"predictor_context": True, "temporal_skip": True, "filter_context": True}])
+def test_a_window_without_the_decoder_runs_the_same_in_numpy_and_torch(tmp_path, spatial, residual, kw):
+    """``decode`` False (a rollout's later windows, :meth:`Engine.predict_next`): the context's last r frames stand
+    in for their reconstruction, the prediction is the predictor's as in the full window but for what the
+    residual filter makes of it, the same in NumPy and torch; without a filter, exactly the full window's."""
+    if kw.get("filter_context") and not residual:
+        kw = {k: v for k, v in kw.items() if k != "filter_context"}
+    model, mean, std = random_release(tmp_path, spatial, residual, m=12, n=10, offsets=True, **kw)
+    engine = Engine.load(tmp_path)
+    raw = engine.seeds
+    with torch.no_grad():
+        x = torch.from_numpy(((raw - mean) / std).astype(np.float32))
+        want = model(x, decode=False).numpy() * std + mean
+    r = engine.r
+    got = engine.forward(raw, decode=False)
+    assert got.shape == (3, r + engine.n, C)
+    np.testing.assert_allclose(got, want, atol=1e-4, rtol=0)
+    np.testing.assert_allclose(TorchEngine.load(tmp_path).forward(raw, decode=False), want, atol=1e-5, rtol=0)
+    for b in (1, 2):  # few rows: each product a matrix-vector one
+        np.testing.assert_allclose(engine.forward(raw[:b], decode=False), want[:b], atol=1e-4, rtol=0)
+    full = engine.forward(raw)
+    if not residual:
+        np.testing.assert_allclose(got[:, :r], raw[:, -r:], atol=1e-5, rtol=0)  # the context as it is
+        np.testing.assert_allclose(got[:, r:], full[:, r:], atol=1e-4, rtol=0)  # the predictor's own
+    else:
+        assert np.abs(got[:, :r] - full[:, :r]).max() > 1e-3  # the filter reads the context, not its rebuild
+
+
+def test_a_rollouts_later_windows_leave_out_the_decoder_unless_asked(release):
+    """:meth:`Engine.extrapolate`: the first window is :meth:`predict_first` (decoded), each later one
+    :meth:`predict_next`; with ``decode_later_windows`` every window is decoded, as :meth:`predict` does."""
+    engine = Engine.load(release)
+    seeds, n = engine.seeds, engine.n
+    lengths = bone_lengths(seeds)
+    out = engine.extrapolate(seeds, 2 * n)
+    first = project_to_skeleton(engine.predict_first(seeds), lengths)
+    np.testing.assert_allclose(out[:, :n], first, atol=1e-5, rtol=0)
+    rolled = np.concatenate([seeds, first], 1)[:, -engine.m:]
+    np.testing.assert_allclose(out[:, n:], project_to_skeleton(engine.predict_next(rolled), lengths), atol=1e-5,
+                               rtol=0)
+    engine.decode_later_windows = True
+    np.testing.assert_allclose(engine.predict_next(rolled), engine.predict(rolled), atol=0, rtol=0)
+    decoded = engine.extrapolate(seeds, 2 * n)
+    np.testing.assert_allclose(decoded[:, n:], project_to_skeleton(engine.predict(rolled), lengths), atol=1e-5,
+                               rtol=0)
+    assert np.abs(decoded[:, n:] - out[:, n:]).max() > 1e-4  # a random model's decoder rebuilds loosely
 
 
 def test_spatial_norm_is_checked():
@@ -416,7 +466,6 @@ def test_fit_yaw_shift_recovers_a_known_placement():
 def test_a_companion_model_shares_the_first_window_only(tmp_path):
     """A release with a second STRNN (checkpoint.COMPANION): the first window of a rollout is the average of
     the two models' predictions, every later window the release's own, in both engines."""
-    from model_core.inference.engine import project_to_skeleton
     from model_core.io.checkpoint import COMPANION
 
     random_release(tmp_path / "alone", seed=0)
@@ -431,7 +480,8 @@ def test_a_companion_model_shares_the_first_window_only(tmp_path):
     out = pair.extrapolate(seeds, 2 * pair.n)
     np.testing.assert_allclose(out[:, :pair.n], first, atol=1e-5, rtol=0)
     rolled = np.concatenate([seeds, first], 1)[:, -pair.m:]
-    np.testing.assert_allclose(out[:, pair.n:], project_to_skeleton(own.predict(rolled), lengths), atol=1e-5, rtol=0)
+    np.testing.assert_allclose(out[:, pair.n:], project_to_skeleton(own.predict_next(rolled), lengths), atol=1e-5,
+                               rtol=0)
     assert np.abs(out[:, :pair.n] - own.extrapolate(seeds, pair.n)).max() > 1e-3  # the companion counts
     in_torch = TorchEngine.load(tmp_path / "pair").extrapolate(seeds, 2 * pair.n)
     np.testing.assert_allclose(in_torch, out, atol=1e-4, rtol=0)
@@ -441,6 +491,7 @@ def test_a_companion_model_shares_the_first_window_only(tmp_path):
     second = 0.5 * (own.predict(rolled) + other.predict(rolled))
     np.testing.assert_allclose(both[:, pair.n:], project_to_skeleton(second, lengths), atol=1e-5, rtol=0)
     alone = own.extrapolate(seeds, 2 * own.n, paired_windows=None)  # without a companion: nothing to pair
+    own.decode_later_windows = True  # (every window of a bounded gap is decoded)
     np.testing.assert_allclose(alone, own.extrapolate(seeds, 2 * own.n))
 
 

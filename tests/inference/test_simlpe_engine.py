@@ -32,8 +32,8 @@ def test_the_numpy_simlpe_predicts_as_the_torch_model(baseline_release):
 
 def test_a_simlpe_shares_the_first_window_only(tmp_path, baseline_release):
     """A release with a siMLPe (checkpoint.SIMLPE): the first window of a rollout is the STRNN's prediction
-    weighted with the siMLPe's by SIMLPE_SHARE, every later window the STRNN's own, in both engines; Fill Gap's
-    bounded gaps (paired_windows=None) share every window."""
+    weighted with the siMLPe's by SIMLPE_SHARE, every later window the STRNN's own (predict_next), in both
+    engines; Fill Gap's bounded gaps (paired_windows=None) share every window."""
     random_release(tmp_path / "alone", seed=0)
     random_release(tmp_path / "pair", seed=0)
     shutil.copytree(baseline_release("simlpe", blocks=2, encode_len=10, predict_len=10), tmp_path / "pair" / SIMLPE)
@@ -47,7 +47,8 @@ def test_a_simlpe_shares_the_first_window_only(tmp_path, baseline_release):
     out = pair.extrapolate(seeds, 2 * pair.n)
     np.testing.assert_allclose(out[:, :pair.n], first, atol=1e-5, rtol=0)
     rolled = np.concatenate([seeds, first], 1)[:, -pair.m:]
-    np.testing.assert_allclose(out[:, pair.n:], project_to_skeleton(own.predict(rolled), lengths), atol=1e-5, rtol=0)
+    np.testing.assert_allclose(out[:, pair.n:], project_to_skeleton(own.predict_next(rolled), lengths), atol=1e-5,
+                               rtol=0)
     assert np.abs(out[:, :pair.n] - own.extrapolate(seeds, pair.n)).max() > 1e-3  # the siMLPe counts
     np.testing.assert_allclose(TorchEngine.load(tmp_path / "pair").extrapolate(seeds, 2 * pair.n), out, atol=1e-4,
                                rtol=0)

@@ -28,7 +28,7 @@ def temporal_weights(c: int, w: int, window: int, r: int) -> dict:
 
 def test_model_costs_by_hand():
     c, w, m, n, r = 70, 16, 4, 6, 8
-    costs = model_costs(temporal_weights(c, w, m + n, r), {"encode_len": m, "predict_len": n})
+    costs = model_costs(temporal_weights(c, w, m + n, r), {"encode_len": m, "predict_len": n}, decoded=True)
     lstm, frame, filt = 8 * w * w, c * w, 2 * (m + n) * c * r + 2 * r * r
     macs = m * (frame + lstm) + n * (2 * lstm + 2 * 2 * frame) + filt  # max(m, n) = n steps
     assert costs["flops_per_frame"] == pytest.approx(2 * macs / n)
@@ -37,9 +37,16 @@ def test_model_costs_by_hand():
     bounds = roofline(100.0, 4, costs, gflops=10.0, bandwidth_gbs=2.0)
     assert bounds["compute_bound_fps"] == pytest.approx(10e9 / costs["flops_per_frame"])
     assert bounds["bandwidth_bound_fps"] == pytest.approx(4 * 2e9 / costs["weight_bytes_per_frame"])
-    twice = model_costs(temporal_weights(c, w, m + n, r), {"encode_len": m, "predict_len": n}, readings=2)
+    twice = model_costs(temporal_weights(c, w, m + n, r), {"encode_len": m, "predict_len": n}, readings=2,
+                        decoded=True)
     assert twice["flops_per_frame"] == pytest.approx(2 * costs["flops_per_frame"])  # mirrored reading: twice
     assert twice["weight_bytes_per_frame"] == costs["weight_bytes_per_frame"]  # the work, the same weights
+    # A later window as the engine runs it: the predictor alone beside the encoder, n steps of one row.
+    later = model_costs(temporal_weights(c, w, m + n, r), {"encode_len": m, "predict_len": n})
+    macs = m * (frame + lstm) + n * (lstm + 2 * frame) + filt
+    assert later["flops_per_frame"] == pytest.approx(2 * macs / n)
+    entries = frame + 4 * w * w + m * 4 * w * w + n * (lstm + 2 * frame) + filt
+    assert later["weight_bytes_per_frame"] == pytest.approx(4 * entries / n)
 
 
 def test_benchmark_script_smoke(tmp_path, monkeypatch):
@@ -54,11 +61,13 @@ def test_benchmark_script_smoke(tmp_path, monkeypatch):
     finally:
         sys.path.remove(str(REPO / "scripts"))
     out = tmp_path / "bench.json"
-    args = ["--model", str(tmp_path / "model"), "--engines", "numpy", "--batches", "1", "2", "--frames", "15",
-            "--repeats", "1", "--json", str(out)]
+    args = ["--model", str(tmp_path / "model"), "--engines", "numpy", "numpy-decoded", "--batches", "1", "2",
+            "--frames", "15", "--repeats", "1", "--json", str(out)]
     assert benchmark_core.main(args) == 0
     res = json.loads(out.read_text())
-    assert [r["batch"] for r in res["results"]] == [1, 2]
+    assert [(r["engine"], r["batch"]) for r in res["results"]] == \
+        [("numpy", 1), ("numpy", 2), ("numpy-decoded", 1), ("numpy-decoded", 2)]
+    assert [r["batch"] for r in res["ratios"]] == [1, 2] and all(r["ratio"] > 0 for r in res["ratios"])
     assert all(r["fps_best"] > 0 and r["pct_of_roofline"] > 0 for r in res["results"])
     assert res["machine"]["sgemm_gflops"] > 0 and res["costs"]["flops_per_frame"] > 0
     assert res["config"]["frame_size"] == LAYOUT.size
