@@ -126,10 +126,11 @@ class TorchPathFollower(PathFollower):
         return cost
 
     def window(self, ctx: np.ndarray, control: np.ndarray, lengths: np.ndarray,
-               aim: np.ndarray | None = None) -> np.ndarray:
+               aim: np.ndarray | None = None, first: bool = True) -> np.ndarray:
         """The next ``n`` raw frames ``[n, C]`` after raw context ``[m, C]``, steered towards the raw
         root channels ``control`` ``[n, 3]`` (and the root positions ``aim`` ``[n, 2]``, metres in the
-        frame of the context's last root) by a fine-tuned copy of the weights (restored after)."""
+        frame of the context's last root) by a fine-tuned copy of the weights (restored after). Every
+        window is tuned and run whole, the seed's (``first``) and the later ones alike."""
         cfg = self.tuning
         x = ((torch.from_numpy(np.asarray(ctx, np.float32)) - self.mean) / self.std)[None]  # (1, m, C)
         target = (torch.from_numpy(np.asarray(control, np.float32)) - self.mean[LAYOUT.root]) / self.std[LAYOUT.root]

@@ -53,6 +53,20 @@ def test_steps_report_each_window_and_give_the_same_walk(bundled):
     np.testing.assert_array_equal(stepped[0], follow_path(bundled, seed, straight(), frames=45)[0])
 
 
+def test_the_seeds_window_is_decoded_and_later_ones_leave_the_decoder_out():
+    """The first window reads the seed through the whole model; later windows, whose context is the walk's own,
+    run without the backward decoder (:meth:`Engine.predict_next`) and stay within a centimetre of the walk
+    decoded throughout, on the same path."""
+    follower, seed = PathFollower.load(DEFAULT_MODEL), walking_skeleton(40)
+    shipped, _ = follow_path(follower, seed, straight(), frames=90)
+    follower.engine.decode_later_windows = True
+    decoded, _ = follow_path(follower, seed, straight(), frames=90)
+    n = follower.n
+    np.testing.assert_array_equal(shipped[:n], decoded[:n])
+    apart = np.linalg.norm(shipped[n:] - decoded[n:], axis=-1).mean(-1)
+    assert 1e-5 < apart.max() and apart.mean() < 0.01
+
+
 @pytest.mark.parametrize("speed", [None, 0.6, 2.0])
 def test_with_no_frame_count_the_walk_reaches_the_end_of_the_path(speed):
     """Until the path ends, whatever the pace: the root ends within 25 cm of the end, having walked it."""
