@@ -2,7 +2,8 @@
 """Curve-synthesis speed: generated frames per second for a 1,000-frame path (a circle of
 radius 2 m) with Follow Curve's NumPy follower and with the paper's run-time control (predict,
 fine-tune a copy with torch, restore), beside plain open-loop generation with the NumPy and torch
-engines, all in the same run.
+engines, all in the same run; the NumPy rows also with every window through the backward decoder, as
+before a rollout's later windows left it out (Engine.decode_later_windows).
 
   python scripts/benchmark_curve.py [--model FOLDER] [--frames 1000] [--threads 1]
 """
@@ -54,17 +55,21 @@ def main(argv=None) -> int:
     seed = features_to_positions(seed_feats)
     points, cyclic = evaluation_paths()["circle"]
     path = CurvePath(points, cyclic)
+    decoded, decoded_engine = PathFollower.load(args.model), Engine.load(args.model)
+    decoded.engine.decode_later_windows = decoded_engine.decode_later_windows = True  # every window, as before
     rows = [
         ("Follow Curve (NumPy)", timed(lambda: follow_path(follower, seed, path, frames=args.frames))),
+        ("Follow Curve, every window decoded", timed(lambda: follow_path(decoded, seed, path, frames=args.frames))),
         ("run-time control (torch, fine-tuned)", timed(lambda: follow_path(tuned, seed, path, frames=args.frames))),
         ("open loop (torch engine)", timed(lambda: torch_engine.extrapolate(seed_feats, args.frames))),
         ("open loop (NumPy engine)", timed(lambda: engine.extrapolate(seed_feats, args.frames))),
+        ("open loop (NumPy), every window decoded", timed(lambda: decoded_engine.extrapolate(seed_feats, args.frames))),
     ]
     base = rows[0][1]
     print(f"seed: {engine.ckpt.seed_names[walk]}; {args.frames} frames; {args.threads} thread(s)")
-    print(f"{'':<38}{'frames/s':>10}{'x Follow Curve':>16}")
+    print(f"{'':<42}{'frames/s':>10}{'x Follow Curve':>16}")
     for name, seconds in rows:
-        print(f"{name:<38}{args.frames / seconds:10,.0f}{base / seconds:16.2f}")
+        print(f"{name:<42}{args.frames / seconds:10,.0f}{base / seconds:16.2f}")
     print("paper: 1,200 frames/s of curve synthesis on a GTX 1080")
     return 0
 
