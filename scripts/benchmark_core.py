@@ -112,7 +112,7 @@ def run(args: argparse.Namespace) -> dict:
             cost = costs[kind == "numpy-decoded"]
             r.update(engine=kind, **roofline(r["fps_best"], batch, cost, mach["sgemm_gflops"], mach["bandwidth_gbs"]))
             results.append(r)
-            print(f"  {kind:5s} batch {batch:3d}: {r['fps_best']:9,.0f} frames/s", flush=True)
+            print(f"  {kind:13s} batch {batch:3d}: {r['fps_best']:9,.0f} frames/s", flush=True)
     fps = {(r["engine"], r["batch"]): r["fps_best"] for r in results}
     ratios = [{"batch": b, "ratio": fps["numpy", b] / fps["numpy-decoded", b]} for b in args.batches
               if ("numpy", b) in fps and ("numpy-decoded", b) in fps]

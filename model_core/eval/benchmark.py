@@ -36,9 +36,9 @@ def model_costs(weights: dict, config: dict, readings: int = 1, decoded: bool = 
     ``decoded`` (every window through the backward decoder: :attr:`Engine.decode_later_windows`) the decoder
     runs beside it, max(r, n) steps of both; the residual filter runs once. The cost is a later window's (the
     first, decoded and with the release's partners, is one of many). Bytes are for batch 1 with no weight kept
-    in cache between uses: per step each LSTM matrix is read once, the spatial nets once for decoder and
-    predictor together (one batch of two), the encoder's input weights and the filter once per window. The
-    readings are rows of the same batch: they multiply the FLOPs, not the weight reads.
+    in cache between uses: per step each LSTM matrix is read once, the spatial nets once (for decoder and
+    predictor together, one batch of two, where both run), the encoder's input weights and the filter once per
+    window. The readings are rows of the same batch: they multiply the FLOPs, not the weight reads.
     """
     m, n = config["encode_len"], config["predict_len"]
     steps = max(config.get("decode_len") or m, n) if decoded else n  # the decoder rebuilds decode_len frames
