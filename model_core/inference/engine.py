@@ -230,17 +230,19 @@ class Engine:
         x = ((np.asarray(context, np.float32) - self.mean) / self.std).astype(np.float32)
         return self._window(x, decode) * self.std + self.mean
 
-    def predict(self, context: np.ndarray) -> np.ndarray:
+    def predict(self, context: np.ndarray, decode: bool = True) -> np.ndarray:
         """Raw context ``[B, m, C]`` -> the next ``n`` raw frames ``[B, n, C]``.
 
         With :attr:`mirrored_reading` (the default) the model reads each context twice, as it is and
         as its mirror image (left and right swapped: :func:`mirror_features`, exact on the features),
         in one batch, and the two predictions are averaged, the mirrored one mirrored back. Each
         reading errs in its own way and their average less than either, and what is predicted no
-        longer depends on which side of the body was captured as the left."""
+        longer depends on which side of the body was captured as the left. ``decode`` False: the
+        backward decoder is not run (:meth:`predict_next`)."""
         self.ckpt.require_generator("predict motion")
         context = np.asarray(context, np.float32)
-        return read_mirrored(self.predict_once, context) if self.mirrored_reading else self.predict_once(context)
+        once = self.predict_once if decode else partial(self.predict_once, decode=False)
+        return read_mirrored(once, context) if self.mirrored_reading else once(context)
 
     def predict_first(self, context: np.ndarray) -> np.ndarray:
         """:meth:`predict` for the first window of a rollout: with a release that holds a second STRNN
@@ -263,12 +265,7 @@ class Engine:
         decoder's reconstruction of them, so only the encoder and the forward predictor run: 1.5 x the frames a
         second. On its own motion the decoder rebuilds the context closely, and the continuations
         are as near the takes with or without it (model card, "Speed")."""
-        if self.decode_later_windows:
-            return self.predict(context)
-        self.ckpt.require_generator("predict motion")
-        once = partial(self.predict_once, decode=False)
-        context = np.asarray(context, np.float32)
-        return read_mirrored(once, context) if self.mirrored_reading else once(context)
+        return self.predict(context, decode=self.decode_later_windows)
 
     def predict_once(self, context: np.ndarray, decode: bool = True) -> np.ndarray:
         """:meth:`predict` from one reading of the context ``[B, m, C]`` (float32).

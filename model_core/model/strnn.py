@@ -213,7 +213,7 @@ class STRNN(nn.Module):
         r = cfg.recon_len
         states, (h, c) = self.encoder(self.encode_frames(x))
         h, c = h[0], c[0]  # (B, W)
-        dec_skip = self.dec_skip(states) if cfg.decoder_skip else None  # (B, m, W)
+        dec_skip = self.dec_skip(states) if cfg.decoder_skip and decode else None  # (B, m, W)
         dec_in = self.start.expand_as(h)
         extra = self.context_code(x)
         skip = self.skip_frames(x)
