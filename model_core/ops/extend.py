@@ -20,9 +20,10 @@ MEMORY_S = 20.0
 # the continuation's first window keeps (speed / STILL_SPEED) ** STILL_POWER of its motion away from the last pose
 # (all of it from STILL_SPEED on; speed: the joints' mean speed over the clip's last STILL_FRAMES model frames, in
 # metres a model frame at the model's scale): a fighter paused at the cut is better left near the pause than
-# given a move the model invents. The later windows are the model's own from there. Chosen on the held-out groups
-# (model card, "A clip at rest in motion the model does not know"). 0: off.
-STILL_SPEED, STILL_POWER, STILL_FRAMES = 0.01, 2.0, 10
+# given a move the model invents. The speed is the clip's most recent (0.13 s), so that a move that has just
+# ended reads as the pause it is, not as the move before it. The later windows are the model's own from there.
+# Chosen on the held-out groups (model card, "A clip at rest in motion the model does not know"). 0: off.
+STILL_SPEED, STILL_POWER, STILL_FRAMES = 0.01, 2.0, 4
 # The report says the first window was held near the last pose when it kept at most this share of its motion.
 HELD_NOTE = 0.75
 
