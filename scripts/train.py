@@ -89,6 +89,9 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--velocity-weight", type=float, default=TrainConfig.velocity_weight,
                    help="weight of the error of the joints' frame-to-frame motion from the context's last frame "
                         "through the prediction (0: off)")
+    p.add_argument("--world-weight", type=float, default=TrainConfig.world_weight,
+                   help="weight of the error (m^2) of the joints' world positions over the predicted frames, the "
+                        "root's track and heading integrated as the motion is played (0: off)")
     p.add_argument("--rollout-windows", type=int, default=TrainConfig.rollout_windows,
                    help="train on contexts the model generated itself, open loop for up to this many windows "
                         "(0: off)")
@@ -210,7 +213,8 @@ def strnn_run(args, argv):
                       phase_split=tuple(args.phase_split), recalibrate_batches=args.recalibrate_batches,
                       optimizer=args.optimizer, lr=learning_rate(args), weight_decay=args.weight_decay,
                       smooth_weight=args.smooth_weight,
-                      recon_weight=args.recon_weight, velocity_weight=args.velocity_weight, init=args.init,
+                      recon_weight=args.recon_weight, velocity_weight=args.velocity_weight,
+                      world_weight=args.world_weight, init=args.init,
                       rollout_windows=args.rollout_windows, rollout_fraction=args.rollout_fraction,
                       denoise_fraction=args.denoise_fraction, denoise_rotation_deg=args.denoise_rotation_deg,
                       noise_start=args.noise_start, seed=args.seed, cache=args.cache, max_minutes=args.max_minutes,

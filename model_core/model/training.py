@@ -58,6 +58,10 @@ class TrainConfig:
     # Weight of the error of the joints' frame-to-frame motion (normalised positions), from the last context frame
     # on through the prediction: the first predicted frames must move on from where the context ends, at its pace.
     velocity_weight: float = 0.0
+    # Weight of the error (m^2) of the joints' world positions over the predicted frames, the root's track and
+    # heading integrated from the context's last frame as features_to_positions does: what MPJPE measures, where
+    # a small error of the root's velocity every frame adds up to a body that falls behind its take (0: off).
+    world_weight: float = 0.0
     noise_start: float = 0.1  # input-noise std at step 0 (normalised units)
     noise_zero_at: float = 0.5  # fraction of the first phase at which the noise reaches 0
     residual_noise: float = 0.05  # input noise while pre-training the filter on ground truth
@@ -207,12 +211,13 @@ class Mirror:
 
 
 def window_loss(model: STRNN, window: torch.Tensor, cfg: TrainConfig, phase: str, noise: float, net=None,
-                noisy: torch.Tensor | None = None):
+                noisy: torch.Tensor | None = None, norm: tuple[torch.Tensor, torch.Tensor] | None = None):
     """The loss of one phase on a batch of clean windows ``(B, m + n, C)``; the model's output is the window's
     last r + n frames (r: :attr:`STRNNConfig.recon_len`).
 
     ``noisy`` replaces the first contexts with ones derived from noisy positions; ``net`` is
-    the (possibly data-parallel) wrapper that runs the first phase's forward.
+    the (possibly data-parallel) wrapper that runs the first phase's forward; ``norm`` (the features' mean and
+    std) is needed by ``cfg.world_weight``.
     """
     m, r = cfg.model.encode_len, cfg.model.recon_len
     if phase == PHASES[1]:
@@ -227,7 +232,11 @@ def window_loss(model: STRNN, window: torch.Tensor, cfg: TrainConfig, phase: str
     if phase == PHASES[2]:
         with torch.no_grad():
             decoded, predicted = model.spatio_temporal(context)
-        return (model.filter(torch.cat([decoded, predicted], 1), context) - window).pow(2).mean()
+        out = model.filter(torch.cat([decoded, predicted], 1), context)
+        loss = (out - window).pow(2).mean()
+        if cfg.world_weight:
+            loss = loss + cfg.world_weight * world_error(out[:, r:], window[:, r - 1:], *norm)
+        return loss
     out = (net or model)(context, use_filter=False)
     w = torch.ones(out.shape[1], dtype=out.dtype, device=out.device)
     w[:r] = cfg.recon_weight  # decoded frames against predicted ones
@@ -235,7 +244,34 @@ def window_loss(model: STRNN, window: torch.Tensor, cfg: TrainConfig, phase: str
     loss = mse + cfg.smooth_weight * smoothness_cost(out)
     if cfg.velocity_weight:
         loss = loss + cfg.velocity_weight * velocity_error(out[:, r:], window[:, r - 1:])
+    if cfg.world_weight:
+        loss = loss + cfg.world_weight * world_error(out[:, r:], window[:, r - 1:], *norm)
     return loss
+
+
+def world_positions(frames: torch.Tensor, mean: torch.Tensor, std: torch.Tensor) -> torch.Tensor:
+    """Joint positions ``(B, T, J, 3)`` (metres) of normalised feature frames ``(B, T, C)``, the root's track and
+    heading integrated from the first frame (at the origin, heading 0): :func:`features_to_positions` in torch,
+    differentiable."""
+    raw = frames * std + mean
+    rate = raw[..., LAYOUT.yaw_rate]
+    yaw = torch.cat([torch.zeros_like(rate[:, :1]), torch.cumsum(rate[:, :-1], 1)], 1)
+    c, s = torch.cos(yaw), torch.sin(yaw)
+    vel = raw[..., LAYOUT.velocity]
+    steps = torch.stack([c * vel[..., 0] + s * vel[..., 1], -s * vel[..., 0] + c * vel[..., 1]], -1)
+    track = torch.cat([torch.zeros_like(steps[:, :1]), torch.cumsum(steps[:, :-1], 1)], 1)
+    local = raw[..., LAYOUT.positions].reshape(*raw.shape[:-1], -1, 3)
+    c, s = c[..., None], s[..., None]
+    x = c * local[..., 0] + s * local[..., 2] + track[..., None, 0]
+    z = -s * local[..., 0] + c * local[..., 2] + track[..., None, 1]
+    return torch.stack([x, local[..., 1], z], -1)
+
+
+def world_error(predicted: torch.Tensor, truth: torch.Tensor, mean: torch.Tensor, std: torch.Tensor) -> torch.Tensor:
+    """Mean squared distance (m^2) of the joints of ``predicted`` ``(B, n, C)``, continuing the true frame
+    ``truth[:, 0]``, from those of ``truth`` ``(B, n + 1, C)``, both placed in the world from that frame on."""
+    ours = world_positions(torch.cat([truth[:, :1], predicted], 1), mean, std)[:, 1:]
+    return (ours - world_positions(truth, mean, std)[:, 1:]).pow(2).sum(-1).mean()
 
 
 def velocity_error(predicted: torch.Tensor, truth: torch.Tensor) -> torch.Tensor:
@@ -472,6 +508,7 @@ def train(cfg: TrainConfig, resume: bool = False, progress: bool = True) -> Path
                  {s: len(data.split(s)) for s in ("train", "validation", "test")}, len(train_w), len(data.failures))
     per_rank = max(1, cfg.batch // world)
     mirror = Mirror(norm)
+    stats = (torch.from_numpy(norm.mean).to(device), torch.from_numpy(norm.std).to(device))
     started, last_ckpt = time.time(), time.time()
     bar = Progress(cfg.steps, step, enabled=rank == 0 and progress)
     net = model
@@ -506,7 +543,7 @@ def train(cfg: TrainConfig, resume: bool = False, progress: bool = True) -> Path
                                            None if bodies is None else bodies[:n_heavy]) if n_heavy else None
             noisy = mirror(noisy, flip)
             window, noisy = window.to(device), None if noisy is None else noisy.to(device)
-        loss = window_loss(model, window, cfg, phase, noise_std(cfg, step), net=net, noisy=noisy)
+        loss = window_loss(model, window, cfg, phase, noise_std(cfg, step), net=net, noisy=noisy, norm=stats)
         scale = float(cfg.lr_final + (1 - cfg.lr_final) * 0.5 * (1 + np.cos(np.pi * phase_progress(cfg, step))))
         for group in opt.param_groups:
             group["lr"] = group.setdefault("base_lr", group["lr"]) * scale

@@ -16,8 +16,19 @@ from safetensors.numpy import load_file
 
 from model_core.model.dataset import Normaliser
 from model_core.model.strnn import STRNN, STRNNConfig, smoothness_cost
-from model_core.model.training import Mirror, TrainConfig, rolled_context, rollout_batch, train, window_loss
-from model_core.motion.features import mirror_features
+from model_core.model.training import (
+    Mirror,
+    TrainConfig,
+    rolled_context,
+    rollout_batch,
+    train,
+    window_loss,
+    world_error,
+    world_positions,
+)
+from model_core.motion.conventions import LAYOUT
+from model_core.motion.features import features_to_positions, mirror_features, positions_to_features
+from model_core.motion.synthetic import walking_skeleton
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -99,6 +110,53 @@ def test_offsets_model_learns_and_hold_out_trains(walk_folder, tmp_path):
                       batch=8, cache=str(tmp_path / "cache"), val_every=1000, mirror=0.5, hold_out=True)
     release = train(cfg, progress=False)
     assert json.loads((release / "model.json").read_text())["config"]["offsets"] is True
+
+
+def test_world_positions_play_normalised_features_as_the_motion_is_played():
+    # a walk along a circle, so the heading turns and the track bends
+    feats, _ = positions_to_features(walking_skeleton(frames=60, radius=2.0))
+    norm = Normaliser.fit(feats)
+    x = torch.from_numpy((feats - norm.mean) / norm.std)[None].double()
+    ours = world_positions(x, torch.from_numpy(norm.mean).double(), torch.from_numpy(norm.std).double())
+    np.testing.assert_allclose(ours[0].numpy(), features_to_positions(feats), atol=1e-5)
+
+
+def test_the_world_loss_charges_a_body_that_falls_behind_its_take():
+    n, step = 20, 0.04  # metres a frame straight ahead, at the right pace and 10 % slower
+    truth = torch.zeros(1, n + 1, LAYOUT.size, dtype=torch.float64)
+    truth[..., LAYOUT.velocity.start + 1] = step
+    slow = truth[:, 1:].clone()
+    slow[..., LAYOUT.velocity.start + 1] = 0.9 * step
+    mean, std = torch.zeros(LAYOUT.size, dtype=torch.float64), torch.ones(LAYOUT.size, dtype=torch.float64)
+    assert world_error(truth[:, 1:], truth, mean, std).item() == 0.0
+    # the first new frame is where the context's last velocity leads; every step after it falls 4 mm behind
+    behind = 0.1 * step * torch.arange(n, dtype=torch.float64)
+    torch.testing.assert_close(world_error(slow, truth, mean, std), behind.pow(2).mean())
+    # a poses-only loss sees only the velocity channel's 4 mm, not the 7.6 cm the body is behind at the end
+    assert (slow - truth[:, 1:]).abs().max().item() < 0.0041
+
+
+def test_the_world_weight_adds_the_world_error_of_the_predicted_frames(walk_folder, tmp_path):
+    torch.manual_seed(0)
+    model = STRNN(tiny(residual=False))
+    model.eval()
+    feats, _ = positions_to_features(walking_skeleton(frames=40, radius=2.0))
+    norm = Normaliser.fit(feats)
+    mean, std = torch.from_numpy(norm.mean), torch.from_numpy(norm.std)
+    x = torch.from_numpy((feats - norm.mean) / norm.std)[None].repeat(3, 1, 1)
+    plain = _cfg(Path("."), Path("."))
+    weighted = _cfg(Path("."), Path("."), world_weight=7.0)
+    with torch.no_grad():
+        out = model(x[:, :20])
+        expected = window_loss(model, x, plain, "spatio_temporal", 0.0) + 7.0 * world_error(out[:, 20:], x[:, 19:],
+                                                                                             mean, std)
+        torch.testing.assert_close(window_loss(model, x, weighted, "spatio_temporal", 0.0, norm=(mean, std)),
+                                   expected)
+    cfg = TrainConfig(data=str(walk_folder), out=str(tmp_path / "run"), model=tiny(offsets=True), steps=12,
+                      batch=8, cache=str(tmp_path / "cache"), val_every=1000, world_weight=20.0)
+    release = train(cfg, progress=False)  # every phase, the filter's fine-tuning with the world loss too
+    weights = load_file(release / "model.safetensors")
+    assert weights and all(np.isfinite(w).all() for w in weights.values())
 
 
 def test_rolled_context_is_the_models_own_open_loop_output():
