@@ -77,7 +77,9 @@ def planted_steps(window: np.ndarray, control: np.ndarray, trust: float = PLANT_
     and otherwise follow the ``control`` steps ``[n, 2]``: per frame, the least-squares step between the
     step each heel and toe would need to stay planted (``L_t - R(yaw rate_t) L_{t+1}``, ``L`` its ground
     position in the root's frame), weighted by the window's contact channels, and the control's step,
-    weighted by ``trust``. The last frame's next is not known yet: it takes the control's step."""
+    weighted by ``trust``. The last frame's next is not known yet: it repeats the step before it (the
+    control's step there would be a jump in the stride's pace that :func:`match_mean` then scales with the
+    rest, a pop of the hips at every window's seam)."""
     n = len(window)
     steps = np.array(control, np.float64)
     if n < 2:
@@ -86,6 +88,7 @@ def planted_steps(window: np.ndarray, control: np.ndarray, trust: float = PLANT_
     planted = local[:-1] - rotate_ground(window[:-1, LAYOUT.yaw_rate][:, None], local[1:])  # (n - 1, 4, 2)
     weight = np.clip(window[:-1, LAYOUT.contacts], 0.0, 1.0)[..., None]  # (n - 1, 4, 1)
     steps[:-1] = ((weight * planted).sum(1) + trust * steps[:-1]) / (weight.sum(1) + trust)
+    steps[-1] = steps[-2]
     return steps
 
 

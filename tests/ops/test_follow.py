@@ -10,11 +10,12 @@ import pytest
 from model_core.eval.metrics import bone_lengths_of as bone_lengths
 from model_core.inference.steps import drive
 from model_core.io.checkpoint import DEFAULT_MODEL
-from model_core.motion.conventions import LAYOUT
+from model_core.motion.conventions import CONTACT_JOINTS, LAYOUT
 from model_core.motion.features import heading
 from model_core.motion.synthetic import walking_skeleton
 from model_core.ops import footlock as fl
 from model_core.ops.follow import (
+    PLANT_TRUST,
     ControlSettings,
     PathFollower,
     align_to_path,
@@ -22,6 +23,8 @@ from model_core.ops.follow import (
     follow_path,
     follow_path_steps,
     lead_in_radius,
+    match_mean,
+    planted_steps,
     with_lead_in,
 )
 from model_core.ops.paths import Path, evaluation_paths, path_errors_cm
@@ -51,6 +54,27 @@ def test_steps_report_each_window_and_give_the_same_walk(bundled):
     windows = -(-45 // bundled.n)
     assert fractions == [min(k * bundled.n / 45, 1.0) for k in range(1, windows + 1)]  # after each n-frame window
     np.testing.assert_array_equal(stepped[0], follow_path(bundled, seed, straight(), frames=45)[0])
+
+
+def test_a_windows_last_step_keeps_its_strides_pace_not_the_paths():
+    """The root steps of a window follow its planted feet, scaled to the path's pace (:func:`match_mean`). Its last
+    frame's step leads into the next window, whose feet are not known yet; it used to be the path's own step, scaled
+    with the rest: a stride that the model walks at 10 cm a frame on a path that asks 14 put 1.4 x 14 cm into the
+    last step, a pop of the hips at every seam (a runner's hand flung 1.3 x as hard as in the take, in Blender). It
+    now repeats the step before it."""
+    n = 20
+    window = np.zeros((n, LAYOUT.size), np.float32)
+    feet = window[:, LAYOUT.positions].reshape(n, -1, 3)
+    for j in CONTACT_JOINTS:  # every heel and toe planted, sliding back 10 cm a frame under the root
+        feet[:, j, 2] = -0.10 * np.arange(n)
+    window[:, LAYOUT.positions] = feet.reshape(n, -1)
+    window[:, LAYOUT.contacts] = 1.0
+    control = np.tile([0.0, 0.14], (n, 1))
+    steps = planted_steps(window, control)
+    np.testing.assert_allclose(steps[:-1, 1], (4 * 0.10 + PLANT_TRUST * 0.14) / (4 + PLANT_TRUST), rtol=1e-6)
+    assert steps[-1, 1] == pytest.approx(steps[-2, 1])
+    paced = match_mean(steps, control)
+    np.testing.assert_allclose(paced[:, 1], 0.14, rtol=1e-6)  # the path's pace, no jump into the next window
 
 
 def test_the_seeds_window_is_decoded_and_later_ones_leave_the_decoder_out():
