@@ -30,6 +30,7 @@ from ..motion.features import (
     with_bone_lengths,
     yaw_matrix,
 )
+from ..motion.stance import settle_stances
 from ..ops.seam import PREDICT_SEAM_FRAMES, seam_fade
 from .memory import ClipMemory
 from .simlpe_engine import SiMLPeEngine
@@ -294,7 +295,7 @@ class Engine:
 
     def extrapolate(self, seed: np.ndarray, frames: int, keep_bone_lengths: bool = True,
                     paired_windows: int | None = 1, memory: ClipMemory | None = None,
-                    first_motion: float | np.ndarray = 1.0) -> np.ndarray:
+                    first_motion: float | np.ndarray = 1.0, settle: bool = False) -> np.ndarray:
         """Open-loop generation: repeat (take the last m frames, predict n more).
 
         ``seed``: raw features ``[m, C]`` or ``[B, m, C]``; returns ``[frames, C]`` or
@@ -306,6 +307,8 @@ class Engine:
         where the memory has a ``first_scale``) leans on what the clip did after its stretch most like the
         continuation's last frames. ``first_motion`` (a share per seed, or one for all): how much of its motion
         away from the context's last pose the first window keeps (:func:`still_window`; 1: all of it).
+        ``settle``: the later windows that are stances stand where they are instead of gliding
+        (:func:`stance.settle_stances`; what comes out only, the windows fed back are the model's own).
         """
         seed = np.asarray(seed, np.float32)
         single = seed.ndim == 2
@@ -326,6 +329,8 @@ class Engine:
             total += new.shape[1]
             ctx = np.concatenate([ctx, new], 1)[:, -self.m:]
         out = np.concatenate(chunks, 1)[:, :frames]
+        if settle:
+            out = settle_stances(out, self.n)
         return out[0] if single else out
 
     def reconstruct(self, feats: np.ndarray, stride: int | None = None) -> np.ndarray:

@@ -53,6 +53,7 @@ def extend_positions(engine, pos: np.ndarray, fps: float, frames: int, memory: n
     window leans on where the continuation comes back to something the clip did (the first only as far as the
     model does not know the context's motion: :func:`inference.memory.first_scale`). Where the model does not
     know the motion and the clip has come to rest, the first window stays near the last pose (:func:`first_motion`).
+    A long continuation that settles into a stance stands where it is (:func:`stance.settle_stances`).
     Returns ``[frames, 21, 3]`` in the same space.
     """
     ctx, norm, model_ctx, momentum = _reading(engine, pos, fps, memory)
@@ -62,7 +63,7 @@ def extend_positions(engine, pos: np.ndarray, fps: float, frames: int, memory: n
     still = first_motion(model_ctx, momentum)
     if still < 1.0:
         kw["first_motion"] = still
-    new = np.asarray(engine.extend(model_ctx, n_model, **kw), dtype=np.float64)
+    new = np.asarray(engine.extend(model_ctx, n_model, settle=True, **kw), dtype=np.float64)
     # model frame 0 is the last context frame
     seq = np.concatenate([ctx[-1:], blend_seam(ctx, norm.to_user(new), momentum=momentum)])
     return sample_at(seq, MODEL_FPS, np.arange(1, frames + 1) / fps)

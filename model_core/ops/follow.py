@@ -32,7 +32,7 @@ import numpy as np
 from ..inference.engine import Engine, bone_lengths, on_learnt_body, project_to_skeleton
 from ..inference.steps import drive
 from ..io.checkpoint import Checkpoint, walk_seed_index
-from ..motion.conventions import CONTACT_JOINTS, LAYOUT, MODEL_FPS, UP_AXIS
+from ..motion.conventions import LAYOUT, MODEL_FPS, UP_AXIS
 from ..motion.features import (
     RootStart,
     continue_positions,
@@ -44,6 +44,7 @@ from ..motion.features import (
     yaw_matrix,
 )
 from ..motion.geometry import rotate_ground
+from ..motion.stance import planted_steps
 from .normalise import fit_normalisation, model_frames_available, sample_at
 from .paths import Path, Steering, control_signal, turning_path
 from .seam import SEAM_FRAMES, blend_seam
@@ -56,7 +57,6 @@ LEAD_IN_RADIUS = (0.3, 1.5)  # within these radii (metres)
 STILL_SPEED = 0.3  # m/s: slower than this, a character's lead-in starts the way it faces
 MAX_STRETCH = 3.0  # with no frame count, give up after this many times the frames the path should take
 ARRIVED = 0.1  # metres: with no frame count, the walk ends this close to the path's end
-PLANT_TRUST = 0.25  # weight of the control's step against a planted foot's (weight 1) in planted_steps
 
 
 @dataclass
@@ -69,27 +69,6 @@ class ControlSettings:
 def natural_speed(feats: np.ndarray, fps: float = MODEL_FPS) -> float:
     """Mean ground speed (m/s) of the root in raw features ``[T, C]``."""
     return float(np.linalg.norm(np.asarray(feats)[:, LAYOUT.velocity], axis=-1).mean() * fps)
-
-
-def planted_steps(window: np.ndarray, control: np.ndarray, trust: float = PLANT_TRUST) -> np.ndarray:
-    """Root steps ``[n, 2]`` (ground velocity in each frame's root frame, metres per frame) for raw features
-    ``[n, C]`` (yaw rates already set) that keep its contact feet where they are from each frame to the next
-    and otherwise follow the ``control`` steps ``[n, 2]``: per frame, the least-squares step between the
-    step each heel and toe would need to stay planted (``L_t - R(yaw rate_t) L_{t+1}``, ``L`` its ground
-    position in the root's frame), weighted by the window's contact channels, and the control's step,
-    weighted by ``trust``. The last frame's next is not known yet: it repeats the step before it (the
-    control's step there would be a jump in the stride's pace that :func:`match_mean` then scales with the
-    rest, a pop of the hips at every window's seam)."""
-    n = len(window)
-    steps = np.array(control, np.float64)
-    if n < 2:
-        return steps
-    local = window[:, LAYOUT.positions].reshape(n, -1, 3)[:, CONTACT_JOINTS][..., [0, 2]]  # (n, 4, 2)
-    planted = local[:-1] - rotate_ground(window[:-1, LAYOUT.yaw_rate][:, None], local[1:])  # (n - 1, 4, 2)
-    weight = np.clip(window[:-1, LAYOUT.contacts], 0.0, 1.0)[..., None]  # (n - 1, 4, 1)
-    steps[:-1] = ((weight * planted).sum(1) + trust * steps[:-1]) / (weight.sum(1) + trust)
-    steps[-1] = steps[-2]
-    return steps
 
 
 def match_mean(steps: np.ndarray, control: np.ndarray) -> np.ndarray:

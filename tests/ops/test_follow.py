@@ -12,10 +12,10 @@ from model_core.inference.steps import drive
 from model_core.io.checkpoint import DEFAULT_MODEL
 from model_core.motion.conventions import CONTACT_JOINTS, LAYOUT
 from model_core.motion.features import heading
+from model_core.motion.stance import PLANT_TRUST, planted_steps
 from model_core.motion.synthetic import walking_skeleton
 from model_core.ops import footlock as fl
 from model_core.ops.follow import (
-    PLANT_TRUST,
     ControlSettings,
     PathFollower,
     align_to_path,
@@ -24,7 +24,6 @@ from model_core.ops.follow import (
     follow_path_steps,
     lead_in_radius,
     match_mean,
-    planted_steps,
     with_lead_in,
 )
 from model_core.ops.paths import Path, evaluation_paths, path_errors_cm
