@@ -56,7 +56,7 @@ def seed_continuation(model: str | Path | None, seed_index: int | None, frames: 
     seed = features_to_positions(seeds[seed_index])
     names = eng.ckpt.seed_names
     name = names[seed_index] if seed_index < len(names) else f"seed {seed_index}"
-    extended = np.concatenate([seed, eng.extend(seed, frames)]) if frames > 0 else seed
+    extended = np.concatenate([seed, eng.extend(seed, frames, settle=True)]) if frames > 0 else seed  # as Extend
     return extended.astype(np.float32), name, len(seed), eng
 
 
