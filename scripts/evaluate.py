@@ -206,11 +206,13 @@ def print_seeds(lh: dict) -> None:
     feet = lh["feet"]
     print("per seed, over the last 1000 frames: speed / its take, speed / data mean, share of locomotion seconds "
           "with a foot on the floor, median lowest-foot height over the floor (cm), 99th-percentile sink (cm), "
-          "share of frames with both feet in the air / the same in its take, D_1nn last block / first")
+          "share of frames with both feet in the air / the same in its take, slide of the feet it says are down "
+          "(cm/frame), D_1nn last block / first")
     for i, name in enumerate(lh["seed_clips"]):
         print(f"  {lh['seed_take_speed_ratio'][i]:6.2f} {lh['speed_ratio_last_1000'][i]:6.2f} "
               f"{feet['touch_fraction'][i]:6.2f} {feet['floor_offset_cm'][i]:7.1f} {feet['sink_cm'][i]:6.1f} "
               f"{feet['airborne_fraction'][i]:6.2f} / {feet['take_airborne_fraction'][i]:4.2f} "
+              f"{feet.get('skate_cm', [float('nan')] * (i + 1))[i]:6.2f} "
               f"{lh['d1nn_drift'][i]:6.2f}  {name}")
 
 

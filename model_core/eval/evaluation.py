@@ -149,7 +149,7 @@ def evaluate_long_horizon(engine, clips, frames: int, seeds: int, reference=None
         "seed_take_speed_ratio": [r.speed_ratio_last_1000 * speed / t for r, t in zip(reports, take_speed)],
         "d1nn_drift": [_drift(r.d1nn_per_block) for r in reports],
         "feet": {key: [getattr(r.feet, key) if r.feet else float("nan") for r in reports]
-                 for key in ("touch_fraction", "floor_offset_cm", "sink_cm", "airborne_fraction")}
+                 for key in ("touch_fraction", "floor_offset_cm", "sink_cm", "airborne_fraction", "skate_cm")}
         # the seed's own take in the air as often: a run's flight is not a walk turned into hops
         | {"take_airborne_fraction": [airborne_fraction(by_name[name], floors[name]) for name, _ in chosen]},
     }

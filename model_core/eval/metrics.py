@@ -18,6 +18,7 @@ from ..motion.features import (
 )
 from ..motion.geometry import cubic_frames
 from ..ops.familiarity import momentum_shares
+from ..ops.footlock import foot_skate_cm
 from ..ops.fusion import running_median
 from ..ops.seam import blend_seam
 
@@ -156,6 +157,9 @@ class FeetReport:
     floor_offset_cm: float  # median height of the lowest foot joint over the floor: hovering > 0, sinking < 0
     sink_cm: float  # how far the lowest foot goes below the floor (99th percentile over frames, >= 0)
     airborne_fraction: float = float("nan")  # share of frames with both feet in the air
+    # how far the heels and toes that the motion says are down (its contact channels) slide over the floor, cm a
+    # frame (:func:`footlock.foot_skate_cm`): a stance that glides shows here (nan: no contact channels given)
+    skate_cm: float = float("nan")
 
 
 def airborne_fraction(pos: np.ndarray, floor: float) -> float:
@@ -164,8 +168,10 @@ def airborne_fraction(pos: np.ndarray, floor: float) -> float:
     return float(np.mean(lowest_foot(pos) - floor > AIRBORNE_M))
 
 
-def feet_report(pos: np.ndarray, floor: float, fps: float = MODEL_FPS) -> FeetReport:
-    """Grounding of positions ``[F, J, 3]`` against a ``floor`` height (metres)."""
+def feet_report(pos: np.ndarray, floor: float, fps: float = MODEL_FPS,
+                contacts: np.ndarray | None = None) -> FeetReport:
+    """Grounding of positions ``[F, J, 3]`` against a ``floor`` height (metres); with the motion's own ``contacts``
+    ``[F, 4]``, how far the feet it says are down slide."""
     height = lowest_foot(pos) - floor
     root = pos[:, ROOT][:, [0, 2]]
     speed = np.r_[np.linalg.norm(np.diff(root, axis=0), axis=-1) * fps, 0.0]
@@ -173,8 +179,9 @@ def feet_report(pos: np.ndarray, floor: float, fps: float = MODEL_FPS) -> FeetRe
     spans = [slice(a, a + second) for a in range(0, len(pos) - second + 1, second)]
     moving = [s for s in spans if speed[s].mean() > LOCOMOTION_SPEED]
     touch = float(np.mean([height[s].min() < FOOT_TOUCH_M for s in moving])) if moving else float("nan")
+    skate = float("nan") if contacts is None else foot_skate_cm(pos, contacts)
     return FeetReport(touch, float(100 * np.median(height)), float(100 * max(0.0, np.percentile(-height, 99))),
-                      airborne_fraction(pos, floor))
+                      airborne_fraction(pos, floor), skate)
 
 
 def segments(local: np.ndarray, length: int = 40, stride: int = 10) -> np.ndarray:
@@ -219,7 +226,8 @@ def rollout_report(feats: np.ndarray, seed_pos: np.ndarray, data_speed: float, r
     for b in range(0, len(feats) - block + 1, block):
         seg = segments(pose_vectors(feats[b:b + block]))
         blocks.append(float(d1nn(seg, ref_segments).mean()) if finite and len(seg) else float("nan"))
-    feet = feet_report(pos[-block:], floor) if finite and floor is not None else None
+    feet = feet_report(pos[-block:], floor, contacts=feats[-block:, LAYOUT.contacts]) \
+        if finite and floor is not None else None
     return RolloutReport(exploded, frozen, ratio, blocks, feet)
 
 

@@ -53,8 +53,9 @@ def test_one_run_writes_exactly_the_metric_keys(walks, tmp_path, capsys):
     assert lh["frames"] == 1000 and lh["seeds"] == 2 and len(lh["speed_ratio_last_1000"]) == 2
     assert len(lh["seed_clips"]) == len(lh["seed_take_speed_ratio"]) == 2
     assert set(lh["feet"]) == {"touch_fraction", "floor_offset_cm", "sink_cm", "airborne_fraction",
-                               "take_airborne_fraction"}
+                               "take_airborne_fraction", "skate_cm"}
     assert all(0 <= v <= 1 for v in lh["feet"]["airborne_fraction"] + lh["feet"]["take_airborne_fraction"])
+    assert all(0 <= v < 5 for v in lh["feet"]["skate_cm"])  # cm a frame that the feet it says are down slide
     assert [len(b) for b in lh["d1nn_per_block"]] == [1, 1]
     dn = doc["denoise"]
     assert set(dn) == {"std_cm", "mpjpe_cm", "fps", "clips", "clips_captured_at_fps"}

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from model_core.eval.metrics import (
     airborne_fraction,
@@ -103,6 +104,23 @@ def test_feet_report_sees_hovering_sinking_and_gliding():
     assert feet_report(glide, floor).touch_fraction == 0.0
     still = feet_report(np.repeat(pos[:1], 60, 0), floor)
     assert np.isnan(still.touch_fraction)  # no locomotion: nothing to judge
+
+
+def test_feet_report_sees_a_stance_that_glides_with_its_feet_down():
+    """The failure the long-horizon check missed: a stance whose feet are down (its contact channels say so, and
+    they stand on the floor) while the whole body glides at 0.23 m/s. It touches the floor and is too slow to
+    count as locomotion; the slide of the feet that are down shows it. Standing in place, they do not slide."""
+    pos = np.repeat(walking_skeleton(60)[:1], 300, 0)
+    floor = floor_height(pos)
+    down = np.ones((300, 4), np.float32)
+    glide = pos.copy()
+    glide[..., 2] += 0.23 * np.arange(300)[:, None] / 30.0
+    gliding = feet_report(glide, floor, contacts=down)
+    assert np.isnan(gliding.touch_fraction) and abs(gliding.floor_offset_cm) < 3  # on the floor, not locomotion
+    assert gliding.skate_cm == pytest.approx(23.0 / 30.0, rel=1e-3)
+    assert feet_report(pos, floor, contacts=down).skate_cm == 0.0
+    assert feet_report(glide, floor, contacts=np.zeros((300, 4))).skate_cm == 0.0  # feet it says are up
+    assert np.isnan(feet_report(glide, floor).skate_cm)  # no contact channels: not judged
 
 
 def test_a_walk_turned_into_hops_is_in_the_air_where_the_walk_never_is():
