@@ -18,8 +18,8 @@ from model_core.rig.rigs import leg_length
 class GlideEngine:
     """A stand-in engine: extends by gliding the last pose on. Records its input."""
 
-    def extend(self, pos, frames):
-        self.seen = pos
+    def extend(self, pos, frames, settle=False):
+        self.seen, self.settle = pos, settle
         step = pos[-1, 0] - pos[-2, 0]
         return pos[-1] + step * np.arange(1, frames + 1)[:, None, None]
 
@@ -47,6 +47,7 @@ def test_extend_at_scene_rates(fps):
     out = extend_positions(engine, pos, fps, frames=int(fps))
     assert out.shape == (int(fps), 21, 3)
     assert len(engine.seen) >= 20 and abs(leg_length(engine.seen) - 0.87) < 1e-3  # model space
+    assert engine.settle  # a long continuation that settles into a stance stands (stance.settle_stances)
     # The first new frame comes 1 / fps after the clip's last (a step at the model's rate would be off by
     # 30 / fps) and goes on as the clip moves, its acceleration included: joint velocities closer to the
     # walk's own next frame than the clip's last velocity is (and the hips' speed within 5 %).
