@@ -212,7 +212,7 @@ def print_seeds(lh: dict) -> None:
         print(f"  {lh['seed_take_speed_ratio'][i]:6.2f} {lh['speed_ratio_last_1000'][i]:6.2f} "
               f"{feet['touch_fraction'][i]:6.2f} {feet['floor_offset_cm'][i]:7.1f} {feet['sink_cm'][i]:6.1f} "
               f"{feet['airborne_fraction'][i]:6.2f} / {feet['take_airborne_fraction'][i]:4.2f} "
-              f"{feet.get('skate_cm', [float('nan')] * (i + 1))[i]:6.2f} "
+              f"{feet['skate_cm'][i]:6.2f} "
               f"{lh['d1nn_drift'][i]:6.2f}  {name}")
 
 
