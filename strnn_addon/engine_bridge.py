@@ -202,13 +202,15 @@ def bpy_path(path: str) -> str:
     return path
 
 
-def run_extend(prefs, positions: np.ndarray, fps: float, frames: int, memory: np.ndarray | None = None) -> np.ndarray:
+def run_extend(prefs, positions: np.ndarray, fps: float, frames: int, memory: np.ndarray | None = None,
+               floor: float | None = None) -> np.ndarray:
     """Continue ``positions`` ``[F, 21, 3]`` (Y-up scene units at ``fps``) by ``frames`` -> ``[frames, 21, 3]``;
-    ``memory``: more of the clip, ending where ``positions`` ends, that long continuations lean on."""
+    ``memory``: more of the clip, ending where ``positions`` ends, that long continuations lean on; ``floor``: the
+    height the new frames' feet stay out of (:func:`extend.extend_positions`)."""
     engine = generator_from_prefs(prefs)
     with threads(prefs):
-        return _kept(_key("extend", engine, positions, fps, frames, memory),
-                     lambda: extend_positions(engine, positions, fps, frames, memory))
+        return _kept(_key("extend", engine, positions, fps, frames, memory, floor),
+                     lambda: extend_positions(engine, positions, fps, frames, memory, floor))
 
 
 def run_first_window(prefs, positions: np.ndarray, fps: float, memory: np.ndarray | None = None):

@@ -17,7 +17,7 @@ import numpy as np
 from ..inference.engine import Engine
 from ..io.checkpoint import DEFAULT_MODEL, CheckpointError, default_denoiser, walk_seed_index
 from ..motion.conventions import MODEL_FPS
-from ..motion.features import features_to_positions, heading, yaw_matrix
+from ..motion.features import features_to_positions, floor_height, heading, yaw_matrix
 from ..ops.denoise import denoise_positions
 from ..ops.footlock import detect_foot_contacts, foot_lock, foot_skate_cm
 from ..ops.paths import Path as CurvePath, evaluation_paths
@@ -56,7 +56,8 @@ def seed_continuation(model: str | Path | None, seed_index: int | None, frames: 
     seed = features_to_positions(seeds[seed_index])
     names = eng.ckpt.seed_names
     name = names[seed_index] if seed_index < len(names) else f"seed {seed_index}"
-    extended = np.concatenate([seed, eng.extend(seed, frames, settle=True)]) if frames > 0 else seed  # as Extend
+    new = eng.extend(seed, frames, settle=True, floor=floor_height(seed)) if frames > 0 else seed[:0]  # as Extend
+    extended = np.concatenate([seed, new])
     return extended.astype(np.float32), name, len(seed), eng
 
 

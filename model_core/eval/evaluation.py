@@ -132,7 +132,8 @@ def evaluate_long_horizon(engine, clips, frames: int, seeds: int, reference=None
     by_name = {c.name: c.positions for c in clips}
     seed_feats = np.stack([positions_to_features(p)[0] for _, p in chosen])
     log(f"long horizon: {seeds} seeds x {frames} frames open loop")
-    rollouts = engine.extrapolate(seed_feats, frames, settle=True)  # as Extend continues a clip
+    # as Extend continues a clip: stances settled, the feet kept out of the floor the seed stands on
+    rollouts = engine.extrapolate(seed_feats, frames, settle=True, floor=np.array([floor_height(p) for _, p in chosen]))
     block = min(1000, frames)
     floors = {name: floor_height(by_name[name]) for name, _ in chosen}
     reports = [rollout_report(r, p, speed, ref, block=block, median_speed=median, floor=floors[name])

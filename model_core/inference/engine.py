@@ -30,7 +30,7 @@ from ..motion.features import (
     with_bone_lengths,
     yaw_matrix,
 )
-from ..motion.stance import settle_stances
+from ..motion.stance import SETTLE_FROM, ground, settle_stances
 from ..ops.seam import PREDICT_SEAM_FRAMES, seam_fade
 from .memory import ClipMemory
 from .simlpe_engine import SiMLPeEngine
@@ -295,7 +295,8 @@ class Engine:
 
     def extrapolate(self, seed: np.ndarray, frames: int, keep_bone_lengths: bool = True,
                     paired_windows: int | None = 1, memory: ClipMemory | None = None,
-                    first_motion: float | np.ndarray = 1.0, settle: bool = False) -> np.ndarray:
+                    first_motion: float | np.ndarray = 1.0, settle: bool = False,
+                    floor: float | np.ndarray | None = None) -> np.ndarray:
         """Open-loop generation: repeat (take the last m frames, predict n more).
 
         ``seed``: raw features ``[m, C]`` or ``[B, m, C]``; returns ``[frames, C]`` or
@@ -309,6 +310,9 @@ class Engine:
         away from the context's last pose the first window keeps (:func:`still_window`; 1: all of it).
         ``settle``: the later windows that are stances stand where they are instead of gliding
         (:func:`stance.settle_stances`; what comes out only, the windows fed back are the model's own).
+        ``floor`` (a height in the features' units, or one per seed ``[B]``): frames whose lowest heel or toe would go
+        under it come out lifted onto it, eased in over the third window (:func:`stance.ground`; again only what comes
+        out).
         """
         seed = np.asarray(seed, np.float32)
         single = seed.ndim == 2
@@ -331,6 +335,10 @@ class Engine:
         out = np.concatenate(chunks, 1)[:, :frames]
         if settle:
             out = settle_stances(out, self.n)
+        if floor is not None:
+            pos = ground(out[..., LAYOUT.positions].reshape(*out.shape[:-1], -1, 3), floor, start=SETTLE_FROM * self.n,
+                         ramp=self.n)
+            out[..., LAYOUT.positions] = pos.reshape(*out.shape[:-1], -1)
         return out[0] if single else out
 
     def reconstruct(self, feats: np.ndarray, stride: int | None = None) -> np.ndarray:
@@ -365,18 +373,23 @@ class Engine:
 
     # ------------------------------------------------------ position level
     def extend(self, positions: np.ndarray, frames: int, memory: np.ndarray | None = None,
-               first_scale: float | None = None, **kw) -> np.ndarray:
+               first_scale: float | None = None, floor: float | None = None, **kw) -> np.ndarray:
         """Continue global positions ``[F, 21, 3]`` (metres, Y-up, 30 fps, F >= m) by
         ``frames`` new frames ``[frames, 21, 3]``, root motion continuing. The model reads the clip on
         the body it learnt (:func:`on_learnt_body`) and its frames come back on the clip's own. ``memory``
         ``[M, 21, 3]`` (the same space and rate, ending on ``positions``' last frame; usually more of the clip):
         the clip's own motion, which each window after the first leans on (:class:`memory.ClipMemory`), and the
-        first too with ``first_scale`` (:func:`memory.first_scale`)."""
+        first too with ``first_scale`` (:func:`memory.first_scale`). ``floor`` (a height): no new frame's heel or
+        toe goes under it once the lift has eased in over the third window (:func:`stance.ground`), on the clip's
+        own body, after the frames come back to it."""
         seen, back = on_learnt_body(self, positions)
         feats, start = positions_to_features(seen)
         clip = None if memory is None else \
             ClipMemory(positions_to_features(on_learnt_body(self, memory)[0])[0], self.m, self.n, self.std, first_scale)
-        return back(continue_positions(feats, start, self.extrapolate(feats[-self.m:], frames, memory=clip, **kw)))
+        new = back(continue_positions(feats, start, self.extrapolate(feats[-self.m:], frames, memory=clip, **kw)))
+        if floor is not None:  # as extrapolate grounds (the windows count from the new frames' first)
+            new = ground(new, floor, start=SETTLE_FROM * self.n, ramp=self.n)
+        return new
 
     def reconstruct_positions(self, positions: np.ndarray, root_weight: float = 3.0,
                           yaw_weight: float = 10.0) -> np.ndarray:

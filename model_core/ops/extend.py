@@ -9,6 +9,7 @@ import numpy as np
 
 from ..inference.memory import first_scale
 from ..motion.conventions import MODEL_FPS
+from ..motion.features import floor_height
 from .familiarity import momentum_shares
 from .normalise import fit_normalisation, model_frames_available, sample_at
 from .seam import blend_seam
@@ -26,6 +27,10 @@ MEMORY_S = 20.0
 STILL_SPEED, STILL_POWER, STILL_FRAMES = 0.01, 2.0, 4
 # The report says the first window was held near the last pose when it kept at most this share of its motion.
 HELD_NOTE = 0.75
+# Seconds of the clip before its end whose floor (features.floor_height) the new frames' feet are kept out of
+# (stance.ground): long enough to hold a step down even where the clip ends in a jump, short enough to be the floor
+# where the clip ends when a capture's floor drifts over a take.
+FLOOR_S = 3.0
 
 
 @dataclass(frozen=True)
@@ -44,7 +49,8 @@ class FirstWindow:
                 "clip still moves")
 
 
-def extend_positions(engine, pos: np.ndarray, fps: float, frames: int, memory: np.ndarray | None = None) -> np.ndarray:
+def extend_positions(engine, pos: np.ndarray, fps: float, frames: int, memory: np.ndarray | None = None,
+                     floor: float | None = None) -> np.ndarray:
     """Continue a clip ``[F, 21, 3]`` (Y-up, scene units, ``fps``) by ``frames`` scene frames.
 
     The context is resampled to the model's rate aligned on its LAST frame, so the new
@@ -53,7 +59,9 @@ def extend_positions(engine, pos: np.ndarray, fps: float, frames: int, memory: n
     window leans on where the continuation comes back to something the clip did (the first only as far as the
     model does not know the context's motion: :func:`inference.memory.first_scale`). Where the model does not
     know the motion and the clip has come to rest, the first window stays near the last pose (:func:`first_motion`).
-    A long continuation that settles into a stance stands where it is (:func:`stance.settle_stances`).
+    A long continuation that settles into a stance stands where it is (:func:`stance.settle_stances`), and no
+    new frame's feet go under the floor the clip stands on (:func:`stance.ground`): ``floor`` (a height in the same
+    space), by default that of the last :data:`FLOOR_S` seconds of ``memory`` (else of ``pos``).
     Returns ``[frames, 21, 3]`` in the same space.
     """
     ctx, norm, model_ctx, momentum = _reading(engine, pos, fps, memory)
@@ -63,6 +71,9 @@ def extend_positions(engine, pos: np.ndarray, fps: float, frames: int, memory: n
     still = first_motion(model_ctx, momentum)
     if still < 1.0:
         kw["first_motion"] = still
+    if floor is None:
+        floor = floor_height((pos if memory is None else memory)[-max(2, int(round(FLOOR_S * fps))):])
+    kw["floor"] = (floor - norm.ground) * norm.scale  # in the model's units, as Normalisation.to_model puts it
     new = np.asarray(engine.extend(model_ctx, n_model, settle=True, **kw), dtype=np.float64)
     # model frame 0 is the last context frame
     seq = np.concatenate([ctx[-1:], blend_seam(ctx, norm.to_user(new), momentum=momentum)])

@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ...model_core.ops.extend import MEMORY_S
+from ...model_core.motion.features import floor_height
+from ...model_core.ops.extend import FLOOR_S, MEMORY_S
 from ...model_core.ops.footlock import SETTLE_PASSES
 from ...model_core.rig.solve import solve
 from .. import engine_bridge
@@ -47,11 +48,11 @@ def context_range(clip, context_frames: int, frames: int, end: int) -> np.ndarra
     return np.arange(end - n_ctx + 1, end + 1, dtype=np.float64)
 
 
-def memory_range(clip, ctx_frames: np.ndarray) -> np.ndarray:
+def memory_range(clip, ctx_frames: np.ndarray, seconds: float = MEMORY_S) -> np.ndarray:
     """Scene frames ``[M]`` of the clip's own motion the continuation leans on (:data:`extend.MEMORY_S` seconds
-    up to the context's last frame, within the action; at least the context's frames)."""
+    up to the context's last frame, or ``seconds``, within the action; at least the context's frames)."""
     end = int(ctx_frames[-1])
-    first = max(clip.first, end - int(round(MEMORY_S * clip.fps)) + 1)
+    first = max(clip.first, end - int(round(seconds * clip.fps)) + 1)
     return np.arange(min(first, int(ctx_frames[0])), end + 1, dtype=np.float64)
 
 
@@ -68,14 +69,16 @@ def extend_steps(context, obj, *, frames: int = 120, context_frames: int = 0, fo
     end = clip.last if from_frame is None else int(from_frame)
     ctx_frames = context_range(clip, context_frames, frames, end)
     yield "read"
-    mem_frames = memory_range(clip, ctx_frames) if follow_clip else ctx_frames
+    # following the clip, up to 20 s of it; otherwise what the floor is judged on (extend.FLOOR_S)
+    mem_frames = memory_range(clip, ctx_frames, MEMORY_S if follow_clip else FLOOR_S)
     memory = pipeline.joint_positions(context, clip, mem_frames)
     pos = memory[len(mem_frames) - len(ctx_frames):]
     held_loc, held_rot = pipeline.reference_pose(context, clip, ctx_frames[-1:])
     previous = pipeline.raw_rotations(clip, end)
     yield "model"
-    followed = memory if len(mem_frames) > len(ctx_frames) else None
-    new_pos = model_call(engine_bridge.run_extend, prefs(context), pos, clip.fps, frames, followed)
+    followed = memory if follow_clip and len(mem_frames) > len(ctx_frames) else None
+    floor = floor_height(memory[-max(2, int(round(FLOOR_S * clip.fps))):])  # the ground the new feet stay out of
+    new_pos = model_call(engine_bridge.run_extend, prefs(context), pos, clip.fps, frames, followed, floor)
     if foot_lock:
         new_pos = lock(np.concatenate([pos, new_pos]), clip.fps, fixed=np.arange(len(pos) + frames) < len(pos),
                        passes=SETTLE_PASSES)

@@ -63,7 +63,7 @@ def fake_model(addon, monkeypatch):
     last velocity (a rigid motion, so the solve can follow it exactly); denoise = identity."""
     bridge = importlib.import_module(addon.__name__ + ".strnn_addon.engine_bridge")
 
-    def run_extend(prefs, pos, fps, frames, memory=None):
+    def run_extend(prefs, pos, fps, frames, memory=None, floor=None):
         step = pos[-1, 0] - pos[-2, 0]  # hips
         return pos[-1] + step * np.arange(1, frames + 1)[:, None, None]
 

@@ -93,7 +93,7 @@ def test_operator_is_undoable_and_searchable(addon):
 
 def swaying_model(fake_model, monkeypatch):
     """A stand-in extend: the last pose swaying 6 cm on the ground (planted feet slide)."""
-    def extend(prefs, pos, fps, frames, memory=None):
+    def extend(prefs, pos, fps, frames, memory=None, floor=None):
         t = np.arange(1, frames + 1) / fps
         sway = np.stack([np.sin(2 * np.pi * t), 0 * t, 0 * t], -1) * 0.06
         return pos[-1] + sway[:, None]

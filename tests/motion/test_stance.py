@@ -1,5 +1,5 @@
-"""Planted feet and stances that stand: :mod:`model_core.motion.stance`, on made-up windows and on the shipped
-model's own open-loop rollout of a standing seed."""
+"""Planted feet, stances that stand and feet kept out of the floor: :mod:`model_core.motion.stance`, on made-up
+windows and on the shipped model's own open-loop rollouts."""
 
 from __future__ import annotations
 
@@ -8,8 +8,17 @@ import pytest
 
 from model_core.inference.engine import Engine
 from model_core.io.checkpoint import DEFAULT_MODEL
-from model_core.motion.conventions import CONTACT_JOINTS, LAYOUT, MODEL_FPS
-from model_core.motion.stance import SETTLE_FROM, planted_steps, settle_stances
+from model_core.motion.conventions import CONTACT_JOINTS, JOINT_INDEX, LAYOUT, MODEL_FPS
+from model_core.motion.features import (
+    body_lengths,
+    features_to_positions,
+    floor_height,
+    lowest_foot,
+    positions_to_features,
+    with_bone_lengths,
+)
+from model_core.motion.stance import SETTLE_FROM, ground, planted_steps, settle_stances
+from model_core.motion.synthetic import walking_skeleton
 
 
 def gliding(frames: int, down: bool = True, step: float = 0.008) -> np.ndarray:
@@ -79,3 +88,50 @@ def test_the_shipped_models_standing_rollout_stands_where_its_root_used_to_glide
     others = np.ones(LAYOUT.size, bool)
     others[LAYOUT.velocity] = False
     np.testing.assert_array_equal(settled[:, others], raw[:, others])
+
+
+def test_ground_lifts_only_the_frames_that_go_under_the_floor_and_eases_the_lift():
+    walk = walking_skeleton(60)
+    floor = lowest_foot(walk).min()
+    sunk = walk.copy()
+    sunk[20:30, :, 1] -= 0.05  # ten frames 5 cm into the floor
+    sunk[45:50, :, 1] += 0.2  # a hop: five frames in the air
+    out = ground(sunk, floor)
+    assert lowest_foot(out).min() >= floor - 1e-9  # no frame under the floor
+    np.testing.assert_array_equal(out[:10], sunk[:10])  # far from the dip: as it was
+    np.testing.assert_array_equal(out[45:50], sunk[45:50])  # nothing pushed down: the hop stays a hop
+    lift = out[:, 0, 1] - sunk[:, 0, 1]
+    np.testing.assert_allclose(out - sunk, np.broadcast_to(lift[:, None, None] * [0, 1, 0], out.shape), atol=1e-6)
+    assert np.abs(np.diff(lift)).max() < 0.05  # it eases in and out rather than jumping by the dip
+    both = ground(np.stack([sunk, sunk]), np.array([floor, np.nan]))
+    np.testing.assert_array_equal(both[0], out)
+    np.testing.assert_array_equal(both[1], sunk)  # no floor known: left as it is
+
+
+def test_the_open_loop_on_a_longer_legged_body_keeps_its_feet_out_of_the_floor(engine):
+    """The shipped model, open loop from its walking seed put on legs 8 % longer: the model places the hips for the
+    bodies it learnt, so that, put back on the seed's bones window after window, the feet sink about 9 cm into the
+    floor (model card, "Feet out of the floor"). With the seed's floor given, no frame after the lift has eased in
+    (over the third window) goes under it and the feet still touch it; the first two windows, and everything but the
+    height, are as before."""
+    names = list(engine.ckpt.seed_names)
+    seed = features_to_positions(engine.seeds[next(i for i, name in enumerate(names) if "walk_active" in name)])
+    lengths = body_lengths(seed)
+    legs = [JOINT_INDEX[name] for name in ("l_knee", "l_foot", "r_knee", "r_foot")]
+    lengths[legs] *= 1.08
+    long_legs = with_bone_lengths(seed, lengths)
+    long_legs[..., 1] -= floor_height(long_legs) - floor_height(seed)
+    feats, floor = positions_to_features(long_legs)[0], floor_height(long_legs)
+    raw = engine.extrapolate(feats, 600, settle=True)
+    grounded = engine.extrapolate(feats, 600, settle=True, floor=floor)
+
+    def lowest(out):
+        return lowest_foot(out[:, LAYOUT.positions].reshape(len(out), -1, 3)) - floor
+
+    assert np.percentile(lowest(raw)[-300:], 1) < -0.05  # it sinks
+    held = (SETTLE_FROM + 1) * engine.n
+    assert lowest(grounded)[held:].min() > -1e-6 and np.median(lowest(grounded)[-300:]) < 0.02  # out of it, on it
+    np.testing.assert_array_equal(grounded[:SETTLE_FROM * engine.n], raw[:SETTLE_FROM * engine.n])
+    others = np.ones(LAYOUT.size, bool)
+    others[LAYOUT.positions.start + 1:LAYOUT.positions.stop:3] = False  # the joints' heights
+    np.testing.assert_array_equal(grounded[:, others], raw[:, others])

@@ -7,6 +7,7 @@ import pytest
 
 from model_core.inference.engine import Engine
 from model_core.io.checkpoint import DEFAULT_MODEL, default_denoiser
+from model_core.motion.features import floor_height
 from model_core.motion.synthetic import walking_skeleton
 from model_core.ops.denoise import denoise_positions
 from model_core.ops.extend import extend_positions
@@ -18,8 +19,10 @@ from model_core.rig.rigs import leg_length
 class GlideEngine:
     """A stand-in engine: extends by gliding the last pose on. Records its input."""
 
-    def extend(self, pos, frames, settle=False):
-        self.seen, self.settle = pos, settle
+    m = 20
+
+    def extend(self, pos, frames, settle=False, floor=None, **kw):
+        self.seen, self.settle, self.floor = pos, settle, floor
         step = pos[-1, 0] - pos[-2, 0]
         return pos[-1] + step * np.arange(1, frames + 1)[:, None, None]
 
@@ -48,6 +51,7 @@ def test_extend_at_scene_rates(fps):
     assert out.shape == (int(fps), 21, 3)
     assert len(engine.seen) >= 20 and abs(leg_length(engine.seen) - 0.87) < 1e-3  # model space
     assert engine.settle  # a long continuation that settles into a stance stands (stance.settle_stances)
+    assert abs(engine.floor) < 0.01  # its feet kept out of the floor the clip stands on, about y = 0 in model space
     # The first new frame comes 1 / fps after the clip's last (a step at the model's rate would be off by
     # 30 / fps) and goes on as the clip moves, its acceleration included: joint velocities closer to the
     # walk's own next frame than the clip's last velocity is (and the hips' speed within 5 %).
@@ -55,6 +59,21 @@ def test_extend_at_scene_rates(fps):
     assert np.linalg.norm(v_new[0]) == pytest.approx(np.linalg.norm(v_true[0]), rel=0.05)
     miss = lambda v: np.linalg.norm(v - v_true, axis=-1).mean()  # noqa: E731
     assert miss(v_new) < 0.75 * miss(v_last)
+
+
+def test_the_floor_extend_keeps_the_feet_out_of_is_the_clips_before_a_jump_not_the_jumps():
+    """A clip whose last 0.67 s are in the air (a jump at the cut): the floor the new frames' feet are kept out of
+    (stance.ground) is judged on its last 3 s (extend.FLOOR_S), the ground it took off from, not on the context,
+    which would float the continuation at the jump's height; a floor given is taken as it is."""
+    walk = walking_skeleton(90)  # metres, legs of the standard length: model units up to the ground
+    walk[-20:, :, 1] += 0.3
+    engine = GlideEngine()
+    extend_positions(engine, walk[-20:], 30.0, 10, memory=walk)
+    assert engine.floor == pytest.approx(-0.3, abs=0.01)
+    extend_positions(engine, walk[-20:], 30.0, 10)  # the context alone: it is all there is
+    assert engine.floor == pytest.approx(0.0, abs=0.01)
+    extend_positions(engine, walk[-20:], 30.0, 10, floor=floor_height(walk[:70]) + 0.05)
+    assert engine.floor == pytest.approx(-0.25, abs=0.01)
 
 
 def test_a_first_window_held_still_keeps_the_last_pose_and_later_windows_move_on():
