@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from ..io.checkpoint import Checkpoint, load_release
-from ..motion.conventions import LAYOUT, PARENTS
+from ..motion.conventions import JOINT_INDEX, LAYOUT, PARENTS
 from ..motion.features import (
     RootStart,
     body_lengths,
@@ -27,6 +27,7 @@ from ..motion.features import (
     learnt_body,
     positions_to_features,
     read_mirrored,
+    root_and_local,
     with_bone_lengths,
     yaw_matrix,
 )
@@ -484,8 +485,39 @@ def on_learnt_body(engine, positions: np.ndarray):
     if body is None or (np.abs(bodies - own).sum(1) <= LEARNT_BODY_TOLERANCE * bodies.sum(1)).any():
         return positions, lambda frames: frames
     dtype = positions.dtype
+    _, _, local = root_and_local(positions)
+    pelvis = (local[:, _UPLEGS] - local[:, :1]).mean(0)  # the clip's hips -> thighs, in the body's frame
     return (with_bone_lengths(positions, body).astype(dtype),
-            lambda frames: with_bone_lengths(frames, own).astype(np.asarray(frames).dtype))
+            lambda frames: keep_pelvis(with_bone_lengths(frames, own), pelvis).astype(np.asarray(frames).dtype))
+
+
+_UPLEGS = [JOINT_INDEX["l_upleg"], JOINT_INDEX["r_upleg"]]
+
+
+def _legs() -> np.ndarray:
+    """Whether each joint is a thigh's head or below it (the legs hang from the pelvis)."""
+    legs = np.zeros(len(PARENTS), bool)
+    for j in range(1, len(PARENTS)):  # parents first
+        legs[j] = j in _UPLEGS or legs[PARENTS[j]]
+    return legs
+
+
+_LEGS = _legs()
+
+
+def keep_pelvis(frames: np.ndarray, pelvis: np.ndarray) -> np.ndarray:
+    """Joints ``[F, 21, 3]`` whose trunk (the hips and everything above them) is moved so that the thighs' heads
+    sit at ``pelvis`` ``[2, 3]`` (hips -> left and right thigh, in the body's frame) from the hips, the legs left where
+    they are. A rig's pelvis is rigid: a generated Rigify rig's thighs sit 7 cm above its hips joint, where a
+    continuation read on the body the model learnt puts them 4 cm below; the solve keeps the rig's pelvis, so the
+    whole leg came out 11 cm high and the feet floated 6 cm over the floor (Follow the Clip off)."""
+    frames = np.asarray(frames, np.float64)
+    _, yaw, _ = root_and_local(frames)
+    offsets = np.einsum("fij,kj->fki", yaw_matrix(yaw), pelvis)  # (F, 2, 3) in the world
+    move = (frames[:, _UPLEGS] - offsets).mean(1) - frames[:, 0]  # where the hips go, less where they are
+    out = frames.copy()
+    out[:, ~_LEGS] += move[:, None]
+    return out
 
 
 def bone_lengths(feats: np.ndarray) -> np.ndarray:
