@@ -337,8 +337,7 @@ class Engine:
         if settle:
             out = settle_stances(out, self.n)
         if floor is not None:
-            pos = ground(out[..., LAYOUT.positions].reshape(*out.shape[:-1], -1, 3), floor, start=SETTLE_FROM * self.n,
-                         ramp=self.n)
+            pos = self.ground(out[..., LAYOUT.positions].reshape(*out.shape[:-1], -1, 3), floor)
             out[..., LAYOUT.positions] = pos.reshape(*out.shape[:-1], -1)
         return out[0] if single else out
 
@@ -388,9 +387,12 @@ class Engine:
         clip = None if memory is None else \
             ClipMemory(positions_to_features(on_learnt_body(self, memory)[0])[0], self.m, self.n, self.std, first_scale)
         new = back(continue_positions(feats, start, self.extrapolate(feats[-self.m:], frames, memory=clip, **kw)))
-        if floor is not None:  # as extrapolate grounds (the windows count from the new frames' first)
-            new = ground(new, floor, start=SETTLE_FROM * self.n, ramp=self.n)
-        return new
+        return new if floor is None else self.ground(new, floor)
+
+    def ground(self, pos: np.ndarray, floor: float | np.ndarray) -> np.ndarray:
+        """A rollout's joints ``[..., F, 21, 3]`` (its first frame the first new one) kept out of ``floor`` from its
+        third window on, eased in over that window (:func:`stance.ground`), as its stances settle."""
+        return ground(pos, floor, start=SETTLE_FROM * self.n, ramp=self.n)
 
     def reconstruct_positions(self, positions: np.ndarray, root_weight: float = 3.0,
                           yaw_weight: float = 10.0) -> np.ndarray:
@@ -485,10 +487,13 @@ def on_learnt_body(engine, positions: np.ndarray):
     if body is None or (np.abs(bodies - own).sum(1) <= LEARNT_BODY_TOLERANCE * bodies.sum(1)).any():
         return positions, lambda frames: frames
     dtype = positions.dtype
-    _, _, local = root_and_local(positions)
-    pelvis = (local[:, _UPLEGS] - local[:, :1]).mean(0)  # the clip's hips -> thighs, in the body's frame
-    return (with_bone_lengths(positions, body).astype(dtype),
-            lambda frames: keep_pelvis(with_bone_lengths(frames, own), pelvis).astype(np.asarray(frames).dtype))
+
+    def back(frames: np.ndarray) -> np.ndarray:
+        _, _, local = root_and_local(positions)
+        pelvis = (local[:, _UPLEGS] - local[:, :1]).mean(0)  # the clip's hips -> thighs, in the body's frame
+        return keep_pelvis(with_bone_lengths(frames, own), pelvis).astype(np.asarray(frames).dtype)
+
+    return with_bone_lengths(positions, body).astype(dtype), back
 
 
 _UPLEGS = [JOINT_INDEX["l_upleg"], JOINT_INDEX["r_upleg"]]

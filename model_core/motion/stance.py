@@ -15,7 +15,7 @@ walks and runs too): only what comes out.
 
 :func:`ground` keeps a rollout's feet out of the floor the clip stood on. The model places the hips for the bodies
 it learnt, and a rollout put back on another body's bones sinks window after window: the unseen subject's lowest
-heel or toe went 5.4 to 6.7 cm under its floor (model card, "Feet out of the floor"). Each frame that would go
+heel or toe went 5.4 to 6.4 cm under its floor (model card, "Feet out of the floor"). Each frame that would go
 under is lifted, the lift eased over a few frames; nothing is pushed down (a hop stays a hop), and again only
 what comes out changes (lifting the windows fed back slowed the rollouts). Like the stances, the first two windows
 are left alone (they continue the clip, and lifting them cost martial arts 0.4 cm at 400 ms: its fighters' predicted

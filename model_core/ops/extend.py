@@ -61,7 +61,7 @@ def extend_positions(engine, pos: np.ndarray, fps: float, frames: int, memory: n
     know the motion and the clip has come to rest, the first window stays near the last pose (:func:`first_motion`).
     A long continuation that settles into a stance stands where it is (:func:`stance.settle_stances`), and no
     new frame's feet go under the floor the clip stands on (:func:`stance.ground`): ``floor`` (a height in the same
-    space), by default that of the last :data:`FLOOR_S` seconds of ``memory`` (else of ``pos``).
+    space), by default :func:`clip_floor` of ``memory`` (else of ``pos``).
     Returns ``[frames, 21, 3]`` in the same space.
     """
     ctx, norm, model_ctx, momentum = _reading(engine, pos, fps, memory)
@@ -72,12 +72,18 @@ def extend_positions(engine, pos: np.ndarray, fps: float, frames: int, memory: n
     if still < 1.0:
         kw["first_motion"] = still
     if floor is None:
-        floor = floor_height((pos if memory is None else memory)[-max(2, int(round(FLOOR_S * fps))):])
+        floor = clip_floor(pos if memory is None else memory, fps)
     kw["floor"] = (floor - norm.ground) * norm.scale  # in the model's units, as Normalisation.to_model puts it
     new = np.asarray(engine.extend(model_ctx, n_model, settle=True, **kw), dtype=np.float64)
     # model frame 0 is the last context frame
     seq = np.concatenate([ctx[-1:], blend_seam(ctx, norm.to_user(new), momentum=momentum)])
     return sample_at(seq, MODEL_FPS, np.arange(1, frames + 1) / fps)
+
+
+def clip_floor(clip: np.ndarray, fps: float) -> float:
+    """The floor (:func:`features.floor_height`) of the last :data:`FLOOR_S` seconds of a clip ``[F, 21, 3]`` at
+    ``fps``: the ground the new frames' feet are kept out of."""
+    return floor_height(clip[-max(2, int(round(FLOOR_S * fps))):])
 
 
 def first_window(engine, pos: np.ndarray, fps: float, memory: np.ndarray | None = None) -> FirstWindow:

@@ -4,8 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ...model_core.motion.features import floor_height
-from ...model_core.ops.extend import FLOOR_S, MEMORY_S
+from ...model_core.ops.extend import FLOOR_S, MEMORY_S, clip_floor
 from ...model_core.ops.footlock import SETTLE_PASSES
 from ...model_core.rig.solve import solve
 from .. import engine_bridge
@@ -77,7 +76,7 @@ def extend_steps(context, obj, *, frames: int = 120, context_frames: int = 0, fo
     previous = pipeline.raw_rotations(clip, end)
     yield "model"
     followed = memory if follow_clip and len(mem_frames) > len(ctx_frames) else None
-    floor = floor_height(memory[-max(2, int(round(FLOOR_S * clip.fps))):])  # the ground the new feet stay out of
+    floor = clip_floor(memory, clip.fps)  # the ground the new feet stay out of
     new_pos = model_call(engine_bridge.run_extend, prefs(context), pos, clip.fps, frames, followed, floor)
     if foot_lock:
         new_pos = lock(np.concatenate([pos, new_pos]), clip.fps, fixed=np.arange(len(pos) + frames) < len(pos),
