@@ -88,5 +88,6 @@ class TorchEngine:
     reconstruct = Engine.reconstruct
     reconstruct_steps = Engine.reconstruct_steps
     extend = Engine.extend
+    ground = Engine.ground
     reconstruct_positions = Engine.reconstruct_positions
     reconstruct_positions_steps = Engine.reconstruct_positions_steps

@@ -24,7 +24,7 @@ from model_core.inference.torch_engine import TorchEngine  # noqa: E402
 from model_core.io.checkpoint import DEFAULT_MODEL, REPO, CheckpointError, load_release  # noqa: E402
 from model_core.model.strnn import STRNNConfig  # noqa: E402
 from model_core.motion.conventions import LAYOUT  # noqa: E402
-from model_core.motion.features import mirror_features  # noqa: E402
+from model_core.motion.features import features_to_positions, lowest_foot, mirror_features  # noqa: E402
 from model_core.ops.seam import seam_fade  # noqa: E402
 
 C = LAYOUT.size
@@ -361,6 +361,24 @@ def test_config_mismatch_is_a_clear_error(release):
     for engine in (TorchEngine, Engine):
         with pytest.raises(CheckpointError, match="describes a width of 32 but model.safetensors holds one of 64"):
             engine.load(release)
+
+
+def test_the_torch_twin_has_every_method_of_the_numpy_engine():
+    """The add-on may be handed either engine: a method written on one only fails where the other is used."""
+    public = {name for name, value in vars(Engine).items() if callable(value) and not name.startswith("_")}
+    missing = sorted(name for name in public if not hasattr(TorchEngine, name))
+    assert not missing, f"TorchEngine lacks {missing}"
+
+
+@pytest.mark.skipif(not (DEFAULT_MODEL / "model.safetensors").exists(), reason="no bundled model yet")
+def test_both_engines_extend_a_clip_onto_the_same_floor():
+    engine, twin = Engine.load(), TorchEngine.load()
+    take = engine.seeds[:1]
+    pos = features_to_positions(take)[0]
+    floor = float(pos[..., 1].min()) + 0.05  # above the clip's feet: the lift must act
+    got = [e.extend(pos, 3 * e.n + 5, floor=floor) for e in (engine, twin)]
+    np.testing.assert_allclose(got[0], got[1], atol=2e-3, rtol=0)
+    assert lowest_foot(got[0][3 * engine.n:]).min() >= floor - 1e-6
 
 
 def test_numpy_engine_does_not_import_torch():
