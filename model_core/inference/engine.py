@@ -253,12 +253,13 @@ class Engine:
         apart err differently, and their average is nearer the truth over the next 20 frames (the siMLPe is
         the nearer on motion unlike the training data); but window after window an average drifts towards
         a slower, lower idle, so each later window is this model's own (model card). A partner that reads
-        fewer frames than this model reads the last of them."""
+        fewer frames than this model reads the last of them; one that predicts fewer frames continues its own
+        prediction as far (:func:`partner_ahead`)."""
         own = self.predict(context)
         if self.companion is not None:
-            own = 0.5 * (own + self.companion.predict(context[:, -self.companion.m:]))
+            own = 0.5 * (own + partner_ahead(self.companion, context, self.n))
         if self.simlpe is not None:
-            own = (1.0 - SIMLPE_SHARE) * own + SIMLPE_SHARE * self.simlpe.predict(context[:, -self.simlpe.m:])
+            own = (1.0 - SIMLPE_SHARE) * own + SIMLPE_SHARE * partner_ahead(self.simlpe, context, self.n)
         return own
 
     def predict_next(self, context: np.ndarray) -> np.ndarray:
@@ -420,6 +421,19 @@ class Engine:
         steps = np.einsum("fij,fj->fi", rot[:-1], np.diff(root_model, axis=0))
         root = blend_track(shift, steps, root_weight)
         return (np.einsum("fij,fkj->fki", rot, body) + root[:, None]).astype(np.float32)
+
+
+def partner_ahead(partner, context: np.ndarray, frames: int) -> np.ndarray:
+    """A first window's partner's prediction ``[B, frames, C]`` from the last of the contexts ``[B, F, C]`` it reads:
+    one window where it predicts as many frames, else its own open loop (its next windows read its own frames) to as
+    far, so that a partner of a shorter window shares all of a longer one."""
+    ctx, out, total = context[:, -partner.m:], [], 0
+    while total < frames:
+        new = partner.predict(ctx) if not out else getattr(partner, "predict_next", partner.predict)(ctx)
+        out.append(new)
+        total += new.shape[1]
+        ctx = np.concatenate([ctx, new], 1)[:, -partner.m:]
+    return np.concatenate(out, 1)[:, :frames]
 
 
 def still_window(last: np.ndarray, window: np.ndarray, motion: float | np.ndarray) -> np.ndarray:

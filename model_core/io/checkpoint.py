@@ -235,16 +235,17 @@ def load_release(folder: str | Path | None = None) -> Checkpoint:
 
 def _partner(folder: Path, ckpt: Checkpoint, sub: str, architecture: str) -> Checkpoint:
     """A model the release shares its first window with (:data:`COMPANION`, an STRNN; :data:`SIMLPE`, a siMLPe):
-    a generating ``architecture`` model without partners of its own that predicts as many frames and reads no
-    more of the context (it reads the last of the release's context frames)."""
+    a generating ``architecture`` model without partners of its own that predicts and reads no more frames than the
+    release (it reads the last of the release's context frames, and continues its own prediction as far as the
+    release's window reaches)."""
     other = load_release(folder / sub)
     m, n = other.config.get("encode_len"), other.config.get("predict_len")
     if other.architecture != architecture or other.purpose != PURPOSES[0] or other.companion is not None or \
-            other.simlpe is not None or n != ckpt.config.get("predict_len") or \
+            other.simlpe is not None or not isinstance(n, int) or not 1 <= n <= ckpt.config.get("predict_len", 0) or \
             not isinstance(m, int) or not 1 <= m <= ckpt.config.get("encode_len", 0):
         raise CheckpointError(f"{folder / sub}: a {sub} must be a generating {architecture} model without a companion "
-                              "or siMLPe of its own that predicts as many frames (predict_len) and reads no more "
-                              "(encode_len): copy the model folder again")
+                              "or siMLPe of its own that predicts no more frames (predict_len) and reads no more "
+                              "(encode_len) than the release: copy the model folder again")
     return other
 
 

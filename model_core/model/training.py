@@ -356,15 +356,22 @@ def trainable(model: STRNN, phase: str) -> list[torch.nn.Parameter]:
 def initial_weights(path: str | Path, model: STRNN) -> dict[str, torch.Tensor]:
     """``model``'s weights taken from a training state (``train_state.pt``) or a release folder, for
     ``--init``; the residual filter keeps its fresh weights where its width differs (a new filter on a
-    trained net), and is grown into its place where the window is longer (a longer context,
-    ``--encode-len``: :func:`_grown_filter`). Any other difference is an error that names it."""
+    trained net), and is grown into its place where the window is longer (a longer context read whole,
+    ``--encode-len``, or a longer prediction, ``--predict-len``: :func:`_grown_filter`). Any other difference is an
+    error that names it."""
     path = Path(path)
     if path.is_dir():
         release = load_release(path)
         release.require_strnn()
         found = {k: torch.from_numpy(np.asarray(v)) for k, v in release.weights.items()}
+        source = release.config
     else:
-        found = torch.load(path, weights_only=True)["model"]
+        saved = torch.load(path, weights_only=True)
+        found = saved["model"]
+        source = json.loads(saved["config"])["model"] if "config" in saved else None
+    # Where the source's window (reconstructed | predicted frames) starts in this model's: after the frames this
+    # model reconstructs more (a longer context read whole); a longer prediction adds its frames after it.
+    lead = None if source is None else model.cfg.recon_len - (source.get("decode_len") or source["encode_len"])
     out = {}
     for k, v in model.state_dict().items():
         w = found.get(k, v)
@@ -374,7 +381,7 @@ def initial_weights(path: str | Path, model: STRNN) -> dict[str, torch.Tensor]:
             # the true context's weights at zero.
             w = torch.cat([w, torch.zeros(v.shape[0], v.shape[1] - w.shape[1], dtype=w.dtype)], 1)
         if w.shape != v.shape and k.startswith("filter.") and not model.cfg.filter_context:
-            w = _grown_filter(k, w, v, model.cfg.frame_size)
+            w = _grown_filter(k, w, v, model.cfg.frame_size, lead)
         if w.shape != v.shape:
             if not k.startswith("filter."):
                 raise ValueError(f"--init {path}: {k} has shape {tuple(w.shape)}, this model's {tuple(v.shape)}: "
@@ -384,19 +391,24 @@ def initial_weights(path: str | Path, model: STRNN) -> dict[str, torch.Tensor]:
     return out
 
 
-def _grown_filter(key: str, old: torch.Tensor, new: torch.Tensor, frame_size: int) -> torch.Tensor:
-    """The residual filter's first or last layer ``old`` of a shorter window, set into the place of the
-    window's last frames in ``new``'s shape (a longer context reads more frames before the same window): the
-    frames before it start with zero weights, so the filter starts as the old one on the frames it knew.
-    ``old`` itself where the two differ otherwise."""
+def _grown_filter(key: str, old: torch.Tensor, new: torch.Tensor, frame_size: int,
+                  lead: int | None = None) -> torch.Tensor:
+    """The residual filter's first or last layer ``old`` of a shorter window, set into its place in ``new``'s
+    shape: ``lead`` frames after the new window's start (None: at its end, as a longer context read whole puts
+    more frames before the same window; 0: at its start, as a longer prediction adds frames after it). The new
+    frames start with zero weights, so the filter starts as the old one on the frames it knew. ``old`` itself
+    where the two differ otherwise."""
     first, last = key == "filter.net.0.weight", key in ("filter.net.6.weight", "filter.net.6.bias")
     axis = 1 if first else 0
     if not (first or last) or old.dim() != new.dim() or old.shape[axis] >= new.shape[axis] or \
             (new.shape[axis] - old.shape[axis]) % frame_size or \
             any(a != b for i, (a, b) in enumerate(zip(old.shape, new.shape)) if i != axis):
         return old
+    start = new.shape[axis] - old.shape[axis] if lead is None else lead * frame_size
+    if not 0 <= start <= new.shape[axis] - old.shape[axis]:
+        return old
     grown = torch.zeros(new.shape, dtype=old.dtype)
-    grown.narrow(axis, new.shape[axis] - old.shape[axis], old.shape[axis]).copy_(old)
+    grown.narrow(axis, start, old.shape[axis]).copy_(old)
     return grown
 
 

@@ -515,13 +515,32 @@ def test_a_companion_model_shares_the_first_window_only(tmp_path):
     np.testing.assert_allclose(alone, own.extrapolate(seeds, 2 * own.n))
 
 
-def test_a_companion_that_predicts_another_length_is_refused(tmp_path):
+def test_a_companion_of_a_shorter_window_continues_itself_as_far_and_one_of_a_longer_is_refused(tmp_path):
+    """A release that predicts more frames than its companion (a release trained with ``--predict-len 30`` beside a
+    20-frame companion): the companion's share of the first window is its own open loop continued as far (its
+    second window reads its own first); a companion that predicts more than the release is refused."""
+    from model_core.inference.engine import partner_ahead
     from model_core.io.checkpoint import COMPANION
 
     random_release(tmp_path / "pair", n=10)
-    random_release(tmp_path / "pair" / COMPANION, n=5)
+    random_release(tmp_path / "pair" / COMPANION, n=4, seed=5)
+    pair, other = Engine.load(tmp_path / "pair"), Engine.load(tmp_path / "pair" / COMPANION)
+    alone = Engine.load(tmp_path / "pair")
+    alone.companion = None
+    seeds = pair.seeds
+    first = other.predict(seeds)
+    second = other.predict_next(np.concatenate([seeds, first], 1)[:, -other.m:])
+    ahead = partner_ahead(other, seeds, 10)
+    assert ahead.shape == (len(seeds), 10, seeds.shape[2])
+    np.testing.assert_allclose(ahead[:, :4], first, atol=1e-6, rtol=0)
+    np.testing.assert_allclose(ahead[:, 4:8], second, atol=1e-6, rtol=0)
+    np.testing.assert_allclose(pair.predict_first(seeds), 0.5 * (alone.predict(seeds) + ahead), atol=1e-6, rtol=0)
+    np.testing.assert_allclose(TorchEngine.load(tmp_path / "pair").predict_first(seeds), pair.predict_first(seeds),
+                               atol=1e-4, rtol=0)
+    random_release(tmp_path / "short", n=5)
+    random_release(tmp_path / "short" / COMPANION, n=10)
     with pytest.raises(CheckpointError, match="companion"):
-        Engine.load(tmp_path / "pair")
+        Engine.load(tmp_path / "short")
 
 
 def test_a_companion_that_reads_fewer_frames_reads_the_last_of_the_context_and_one_that_reads_more_is_refused(

@@ -261,6 +261,27 @@ def test_a_longer_context_starts_with_the_filter_it_comes_from_on_the_frames_it_
     assert (known - window[:, 10:]).abs().max() > 1e-4  # the old filter does correct those frames
 
 
+def test_a_longer_prediction_starts_with_the_filter_it_comes_from_on_the_frames_it_knew(walk_folder, tmp_path):
+    """``--init`` into a model that predicts more frames (``--predict-len``): the filter is set into the place of
+    the window's first frames (the reconstructed ones and the prediction's first), the new last frames' weights at
+    zero: it corrects the frames it knew as the old filter did and leaves the new ones alone."""
+    first = train(_cfg(walk_folder, tmp_path / "base"), progress=False)
+    longer = _cfg(walk_folder, tmp_path / "longer", model=tiny(predict_len=tiny().predict_len + 10), init=str(first),
+                  steps=0)
+    second = train(longer, progress=False)
+    a, b = load_file(str(first / "model.safetensors")), load_file(str(second / "model.safetensors"))
+    old, new = STRNN(tiny()), STRNN(longer.model)
+    old.load_state_dict({k: torch.from_numpy(v) for k, v in a.items()}, strict=False)
+    new.load_state_dict({k: torch.from_numpy(v) for k, v in b.items()}, strict=False)
+    known_len = old.cfg.recon_len + old.cfg.predict_len
+    window = torch.randn(3, known_len + 10, longer.model.frame_size)
+    with torch.no_grad():
+        grown, known = new.filter(window), old.filter(window[:, :known_len])
+    torch.testing.assert_close(grown[:, :known_len], known)
+    torch.testing.assert_close(grown[:, known_len:], window[:, known_len:])
+    assert (known - window[:, :known_len]).abs().max() > 1e-4  # the old filter does correct those frames
+
+
 def test_a_longer_context_that_decodes_the_last_frames_starts_as_the_model_it_comes_from(walk_folder, tmp_path):
     """``--encode-len 30 --decode-len 20`` from a 20-frame model: every weight is taken as it is (the window the
     decoder and filter cover is as long), training moves them, and the release records both lengths and runs
