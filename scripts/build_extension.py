@@ -29,6 +29,8 @@ REPO = Path(__file__).resolve().parent.parent
 PACKAGES = ("strnn_addon", "model_core")
 FILES = ("blender_manifest.toml", "__init__.py", "README.md", "LICENSE")
 IGNORE = shutil.ignore_patterns("__pycache__", "*.pyc", "*.tmp")
+# a model folder's record of what was tried around it (HISTORY.md) stays in the repository; its card ships
+MODEL_IGNORE = shutil.ignore_patterns("__pycache__", "*.pyc", "*.tmp", "HISTORY.md")
 # model_core modules the extension never imports (training, evaluation, writing BVH, test data):
 # they stay out of the zip (a test walks the extension's imports to keep this list honest).
 NOT_SHIPPED = ("model_core/eval", "model_core/model/training.py", "model_core/model/baseline_training.py",
@@ -62,13 +64,13 @@ def stage(dest: Path, model: Path | None, denoiser: Path | None = None) -> None:
         shutil.rmtree(path) if path.is_dir() else path.unlink()
     model = model or REPO / "models" / "strnn_default"
     if (model / "model.json").exists():
-        shutil.copytree(model, dest / "models" / "strnn_default", ignore=IGNORE)
+        shutil.copytree(model, dest / "models" / "strnn_default", ignore=MODEL_IGNORE)
     else:
         print(f"warning: no model at {model}; the extension will need a Model Folder in its preferences",
               file=sys.stderr)
     denoiser = denoiser or REPO / "models" / "strnn_denoise"
     if (denoiser / "model.json").exists():
-        shutil.copytree(denoiser, dest / "models" / "strnn_denoise", ignore=IGNORE)
+        shutil.copytree(denoiser, dest / "models" / "strnn_denoise", ignore=MODEL_IGNORE)
     else:
         print(f"warning: no denoising model at {denoiser}; Denoise will use the main model", file=sys.stderr)
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import shutil
 import sys
 import zipfile
 from pathlib import Path
@@ -101,6 +102,19 @@ def test_the_zip_holds_only_what_the_extension_imports(tmp_path):
             if isinstance(node, ast.ImportFrom) and node.level and node.module:
                 target = "/".join(package[:len(package) - node.level + 1] + node.module.split("."))
                 assert f"{target}.py" in shipped or f"{target}/__init__.py" in shipped, f"{name} imports {target}"
+
+
+def test_the_zip_ships_each_models_card_and_leaves_its_history_in_the_repository(tmp_path):
+    """The bundled models come with their cards; a model folder's record of runs not shipped (HISTORY.md) does not
+    travel to every user's Blender."""
+    model = tmp_path / "model"
+    shutil.copytree(REPO / "models" / "strnn_default", model)
+    assert (model / "HISTORY.md").is_file()
+    out = build_extension.main(["--out", str(tmp_path / "dist"), "--model", str(model)])
+    names = names_of(out)
+    assert "models/strnn_default/MODEL_CARD.md" in names and "models/strnn_default/model.safetensors" in names
+    assert "models/strnn_default/companion/model.safetensors" in names
+    assert not any(n.endswith("HISTORY.md") for n in names)
 
 
 INSTALL_FROM_URL = """
