@@ -57,11 +57,27 @@ def test_a_simlpe_shares_the_first_window_only(tmp_path, baseline_release):
     np.testing.assert_allclose(both[:, pair.n:], project_to_skeleton(second, lengths), atol=1e-5, rtol=0)
 
 
-@pytest.mark.parametrize("wrong", ["another length", "an STRNN"])
+def test_a_simlpe_of_a_shorter_window_continues_itself_as_far(tmp_path, baseline_release):
+    """A release that predicts more frames than its siMLPe: the siMLPe's share of the first window is its own
+    open loop continued as far (:func:`engine.partner_ahead`)."""
+    random_release(tmp_path / "alone", n=10, seed=0)
+    random_release(tmp_path / "pair", n=10, seed=0)
+    shutil.copytree(baseline_release("simlpe", blocks=2, encode_len=10, predict_len=4), tmp_path / "pair" / SIMLPE)
+    own, pair = Engine.load(tmp_path / "alone"), Engine.load(tmp_path / "pair")
+    seeds, share = pair.seeds, engine_module.SIMLPE_SHARE
+    first = pair.simlpe.predict(seeds)
+    second = pair.simlpe.predict(np.concatenate([seeds, first], 1)[:, -pair.simlpe.m:])
+    ahead = engine_module.partner_ahead(pair.simlpe, seeds, pair.n)
+    np.testing.assert_allclose(ahead[:, :8], np.concatenate([first, second], 1), atol=1e-6, rtol=0)
+    np.testing.assert_allclose(pair.predict_first(seeds), (1 - share) * own.predict(seeds) + share * ahead,
+                               atol=1e-6, rtol=0)
+
+
+@pytest.mark.parametrize("wrong", ["a longer window", "an STRNN"])
 def test_a_simlpe_folder_that_does_not_fit_the_release_is_refused(tmp_path, baseline_release, wrong):
-    random_release(tmp_path / "pair", n=10)
-    if wrong == "another length":
-        shutil.copytree(baseline_release("simlpe", blocks=2, encode_len=10, predict_len=5), tmp_path / "pair" / SIMLPE)
+    random_release(tmp_path / "pair", n=10 if wrong == "an STRNN" else 5)
+    if wrong == "a longer window":
+        shutil.copytree(baseline_release("simlpe", blocks=2, encode_len=10, predict_len=10), tmp_path / "pair" / SIMLPE)
     else:
         random_release(tmp_path / "pair" / SIMLPE, n=10)
     with pytest.raises(CheckpointError, match=f"{SIMLPE}: a {SIMLPE} must be a generating simlpe model"):
