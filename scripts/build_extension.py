@@ -28,9 +28,10 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parent.parent
 PACKAGES = ("strnn_addon", "model_core")
 FILES = ("blender_manifest.toml", "__init__.py", "README.md", "LICENSE")
-IGNORE = shutil.ignore_patterns("__pycache__", "*.pyc", "*.tmp")
+BUILD_LEFTOVERS = ("__pycache__", "*.pyc", "*.tmp")
+IGNORE = shutil.ignore_patterns(*BUILD_LEFTOVERS)
 # a model folder's record of what was tried around it (HISTORY.md) stays in the repository; its card ships
-MODEL_IGNORE = shutil.ignore_patterns("__pycache__", "*.pyc", "*.tmp", "HISTORY.md")
+MODEL_IGNORE = shutil.ignore_patterns(*BUILD_LEFTOVERS, "HISTORY.md")
 # model_core modules the extension never imports (training, evaluation, writing BVH, test data):
 # they stay out of the zip (a test walks the extension's imports to keep this list honest).
 NOT_SHIPPED = ("model_core/eval", "model_core/model/training.py", "model_core/model/baseline_training.py",
