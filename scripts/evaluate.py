@@ -3,7 +3,8 @@
 
 Prediction MPJPE at 80..1000 ms for STRNN, zero- and constant-velocity always, and for
 baseline models (siMLPe, residual GRU, trained by train.py --arch) with --baseline-model;
-long-horizon rollouts with --long-horizon FRAMES --seeds K; denoising against the
+long-horizon rollouts with --long-horizon FRAMES --seeds K (the model's own open loop, and Extend as it ships,
+following each seed's take); denoising against the
 best Butterworth filter and the noisy input with --denoise-std S [S ...]; path following
 (path error, foot skate and knee pops before/after foot lock, synthesis speed) with --paths.
 
@@ -38,6 +39,7 @@ from model_core.io.bvh import BvhError  # noqa: E402
 from model_core.io.checkpoint import DEFAULT_MODEL, CheckpointError, default_denoiser  # noqa: E402
 from model_core.io.files import unwritable, write_json  # noqa: E402
 from model_core.model.dataset import DataError, load_data_config, load_folder  # noqa: E402
+from model_core.ops.extend import MEMORY_S  # noqa: E402
 from model_core.rig.rigs import RigError  # noqa: E402
 
 
@@ -56,7 +58,8 @@ def parse_args(argv=None):
     p.add_argument("--threads", type=int, default=0,
                    help="torch CPU threads for baseline models and path following (0: torch's default)")
     p.add_argument("--json", help="write the results as JSON here")
-    p.add_argument("--long-horizon", type=int, metavar="FRAMES", help="open-loop rollout length")
+    p.add_argument("--long-horizon", type=int, metavar="FRAMES",
+                   help="rollout length: the model's open loop from each seed, and Extend following each seed's take")
     p.add_argument("--seeds", type=int, default=20, help="number of long-horizon seeds")
     p.add_argument("--reference", help="folder of BVH files for D_1nn and speed (default: --data's clips)")
     p.add_argument("--denoise-std", type=float, nargs="+", metavar="S",
@@ -128,6 +131,11 @@ def print_table(result: dict, extra: dict):
         blocks = [sum(b[i] for b in lh["d1nn_per_block"]) / len(lh["d1nn_per_block"])
                   for i in range(len(lh["d1nn_per_block"][0]))]
         print("mean D_1nn per 1000-frame block: " + " ".join(f"{d:.4f}" for d in blocks))
+        ax = lh["as_extend"]
+        print(f"\nAs Extend delivers it (Follow the Clip on; each seed's take, its first {MEMORY_S:g} s at most, "
+              f"extended by {lh['frames']} frames): exploded {ax['exploded']}, frozen {ax['frozen']}; the clip's "
+              f"last second / its take: " + " ".join(f"{v:.2f}" for v in ax["clip_end_speed_ratio"]))
+        print_seeds(ax)
     if "denoise" in result:
         dn = result["denoise"]
         print(f"\nDenoising MPJPE (cm), model {extra['denoise_checkpoint']}: {dn['clips_captured_at_fps']} of "

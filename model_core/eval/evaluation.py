@@ -125,6 +125,12 @@ def pick_seed_windows(clips, count: int, length: int = 20) -> list[tuple[str, np
 
 
 def evaluate_long_horizon(engine, clips, frames: int, seeds: int, reference=None, log=print) -> dict:
+    """Long rollouts of ``frames`` frames from ``seeds`` seeds spread over the clips, judged seed by seed
+    (:func:`metrics.rollout_report`): the model's own open loop from each seed's 20 frames (the top-level keys),
+    and under ``as_extend`` Extend Clip as it ships (:func:`extend.extend_positions`, *Follow the Clip* on), each
+    seed's take, its first :data:`extend.MEMORY_S` seconds at most, the clip it extends: what an animator gets
+    extending the take. Speeds are against the seed's whole take (``seed_take_speed_ratio``); ``as_extend`` also
+    gives the clip's last second against it (``clip_end_speed_ratio``: under 1, the clip comes to rest)."""
     ref_clips = reference or clips
     speed, median = data_speed(ref_clips), data_speed(ref_clips, np.median)
     ref = np.concatenate([segments(pose_vectors(c.features)) for c in ref_clips if len(c.features) >= 40])
@@ -134,13 +140,30 @@ def evaluate_long_horizon(engine, clips, frames: int, seeds: int, reference=None
     log(f"long horizon: {seeds} seeds x {frames} frames open loop")
     # as Extend continues a clip: stances settled, the feet kept out of the floor the seed stands on
     rollouts = engine.extrapolate(seed_feats, frames, settle=True, floor=np.array([floor_height(p) for _, p in chosen]))
-    block = min(1000, frames)
+    judge = functools.partial(_judge_rollouts, by_name=by_name, speed=speed, median=median, ref=ref)
+    out = {"frames": frames, "seeds": seeds} | judge(rollouts, chosen)
+    log(f"long horizon: {seeds} seeds x {frames} frames as Extend, following the clip")
+    most, second = int(MEMORY_S * MODEL_FPS), int(MODEL_FPS)
+    takes = [(name, np.asarray(by_name[name][:most], np.float64)) for name, _ in chosen]
+    extended = [positions_to_features(extend_positions(engine, take[-CONTEXT:], MODEL_FPS, frames, memory=take))[0]
+                for _, take in takes]
+    out["as_extend"] = judge(extended, [(name, take[-CONTEXT:]) for name, take in takes]) | {
+        "clip_frames": [len(take) for _, take in takes],
+        "clip_end_speed_ratio": [float(joint_speed(take[-second - 1:]).mean() / joint_speed(by_name[name]).mean())
+                                 for name, take in takes]}
+    return out
+
+
+def _judge_rollouts(rollouts, chosen, by_name: dict, speed: float, median: float, ref: np.ndarray) -> dict:
+    """The per-seed figures of :func:`evaluate_long_horizon` for rollouts (raw features ``[N, C]`` each) from the
+    seeds ``chosen`` ((take name, seed positions) each), against the data's mean and ``median`` joint ``speed`` and
+    its D_1nn reference segments ``ref``."""
+    block = min(1000, min(len(r) for r in rollouts))
     floors = {name: floor_height(by_name[name]) for name, _ in chosen}
     reports = [rollout_report(r, p, speed, ref, block=block, median_speed=median, floor=floors[name])
                for r, (name, p) in zip(rollouts, chosen)]
     take_speed = [float(joint_speed(by_name[name]).mean()) for name, _ in chosen]
     return {
-        "frames": frames, "seeds": seeds,
         "exploded": int(sum(r.exploded for r in reports)),
         "frozen": int(sum(r.frozen for r in reports)),
         "speed_ratio_last_1000": [r.speed_ratio_last_1000 for r in reports],

@@ -429,7 +429,7 @@ def partner_ahead(partner, context: np.ndarray, frames: int) -> np.ndarray:
     far, so that a partner of a shorter window shares all of a longer one."""
     ctx, out, total = context[:, -partner.m:], [], 0
     while total < frames:
-        new = partner.predict(ctx) if not out else getattr(partner, "predict_next", partner.predict)(ctx)
+        new = partner.predict(ctx) if not out else partner.predict_next(ctx)
         out.append(new)
         total += new.shape[1]
         ctx = np.concatenate([ctx, new], 1)[:, -partner.m:]

@@ -70,3 +70,8 @@ class SiMLPeEngine:
         """Raw context ``[B, m, C]`` -> the next ``n`` raw frames ``[B, n, C]``: read as it is and mirrored, the
         two predictions averaged (the mirrored one mirrored back), as :meth:`Engine.predict` reads."""
         return read_mirrored(self.predict_once, context) if self.mirrored_reading else self.predict_once(context)
+
+    def predict_next(self, context: np.ndarray) -> np.ndarray:
+        """:meth:`predict` for a rollout's windows after the first (:meth:`Engine.predict_next`'s interface): a
+        siMLPe has no decoder to leave out, so it reads its own motion as it reads a clip."""
+        return self.predict(context)

@@ -49,7 +49,7 @@ def test_one_run_writes_exactly_the_metric_keys(walks, tmp_path, capsys):
     assert zero[-1] > zero[0] and const[-1] > const[0]  # errors grow with the horizon
     lh = doc["long_horizon"]
     assert set(lh) == {"frames", "seeds", "exploded", "frozen", "speed_ratio_last_1000", "d1nn_per_block",
-                       "seed_clips", "seed_take_speed_ratio", "d1nn_drift", "feet"}
+                       "seed_clips", "seed_take_speed_ratio", "d1nn_drift", "feet", "as_extend"}
     assert lh["frames"] == 1000 and lh["seeds"] == 2 and len(lh["speed_ratio_last_1000"]) == 2
     assert len(lh["seed_clips"]) == len(lh["seed_take_speed_ratio"]) == 2
     assert set(lh["feet"]) == {"touch_fraction", "floor_offset_cm", "sink_cm", "airborne_fraction",
@@ -57,6 +57,14 @@ def test_one_run_writes_exactly_the_metric_keys(walks, tmp_path, capsys):
     assert all(0 <= v <= 1 for v in lh["feet"]["airborne_fraction"] + lh["feet"]["take_airborne_fraction"])
     assert all(0 <= v < 5 for v in lh["feet"]["skate_cm"])  # cm a frame that the feet it says are down slide
     assert [len(b) for b in lh["d1nn_per_block"]] == [1, 1]
+    ax = lh.pop("as_extend")  # Extend as it ships over the same horizon: the same figures, each seed's take followed
+    assert set(ax) == set(lh) - {"frames", "seeds"} | {"clip_frames", "clip_end_speed_ratio"}
+    assert ax["seed_clips"] == lh["seed_clips"] and ax["clip_frames"] == [150, 150]  # the takes whole (under 20 s)
+    assert ax["exploded"] == ax["frozen"] == 0
+    assert all(0.4 <= v <= 3 for v in ax["seed_take_speed_ratio"])  # the walks still walk 1,000 frames on
+    assert all(0.5 < v < 2 for v in ax["clip_end_speed_ratio"])  # steady walks: their last second as the take
+    assert all(v == 1 for v in ax["feet"]["touch_fraction"]) and all(len(b) == 1 for b in ax["d1nn_per_block"])
+    assert "As Extend delivers it" in printed
     dn = doc["denoise"]
     assert set(dn) == {"std_cm", "mpjpe_cm", "fps", "clips", "clips_captured_at_fps"}
     assert set(dn["mpjpe_cm"]) == {"strnn", "butterworth_best", "noisy"}
