@@ -23,21 +23,20 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..motion.conventions import MODEL_FPS, PARENTS, ROOT
+from ..motion.conventions import MODEL_FPS
 from ..motion.features import root_and_local, wrap_angle, yaw_matrix
-from ..motion.geometry import interpolate_frames, unit
+from ..motion.geometry import interpolate_frames
 from . import gap_memory
 from .extend import MEMORY_S
 from .familiarity import momentum_shares
-from .footlock import LEGS, body_forward, place_leg
 from .normalise import fit_normalisation, model_frames_available, sample_at
 from .seam import blend_seam
+from .skeleton import knee_side, on_skeleton
 from .transfer import bone_lengths
 
 # How many of the continuation's windows are the average of the release and its companion
 # (Engine.extrapolate's paired_windows; None: every window of the gap).
 PAIRED_WINDOWS = None
-_HIP, _KNEE, _ANKLE, _TOE = (np.array([leg[k] for leg in LEGS]) for k in range(4))  # [2]: left, right
 MAX_GAP_S = 4.0  # longest gap the model is asked to bridge (its continuation drifts beyond a few seconds)
 
 
@@ -186,70 +185,6 @@ def fill_from(context: np.ndarray, pred: np.ndarray, target: np.ndarray, momentu
     bent = bend_onto(blend_seam(context, pred, momentum=momentum), context[-1], target)
     leaned = lean_on_interpolation(bent, context[-1], target[0], lean_weights(len(bent), momentum))
     return on_skeleton(leaned, bone_lengths(context), bone_lengths(target[:1]), knee_side(context))
-
-
-# A knee bending less than this (the sine of the thigh's angle to the hip-ankle line) has no side of its own.
-STRAIGHT_SINE = 0.05
-
-
-def _knee_offsets(pos: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(each knee's offset from its hip-ankle line ``[F, 2, 3]``, the hip-ankle directions ``[F, 2, 3]``)."""
-    hip, knee, ankle = pos[:, _HIP], pos[:, _KNEE], pos[:, _ANKLE]
-    axis = unit(ankle - hip)
-    return (knee - hip) - axis * np.sum((knee - hip) * axis, -1, keepdims=True), axis
-
-
-def knee_side(pos: np.ndarray) -> float:
-    """1 where the knees of ``pos`` ``[F, 21, 3]`` bend towards the way the body faces (people's knees
-    do), -1 where they bend the other way (a rig built so), 1 where they never bend."""
-    off, _ = _knee_offsets(np.asarray(pos, np.float64))
-    thigh = np.linalg.norm(pos[:, _KNEE] - pos[:, _HIP], axis=-1)
-    bent = np.linalg.norm(off, axis=-1) > STRAIGHT_SINE * thigh
-    ahead = np.sum(off * body_forward(pos)[:, None], -1)
-    return -1.0 if bent.any() and np.median(ahead[bent]) < 0.0 else 1.0
-
-
-def bend_sides(pos: np.ndarray, side: float) -> np.ndarray:
-    """Unit directions ``[F, 2, 3]`` in which each knee of ``pos`` ``[F, 21, 3]`` bends, never the other way
-    than ``side`` (:func:`knee_side`) says: a knee bent backwards bends as far sideways only, and one that
-    is nearly straight leans forwards (for ``side`` 1), the more the straighter, so that an IK on other
-    lengths never flips it through the leg, as a continuation passing through a straight leg would."""
-    off, axis = _knee_offsets(pos)
-    ahead = side * body_forward(pos)[:, None]
-    ahead = unit(ahead - axis * np.sum(ahead * axis, -1, keepdims=True))
-    thigh = np.linalg.norm(pos[:, _KNEE] - pos[:, _HIP], axis=-1, keepdims=True)
-    off = off - np.minimum(np.sum(off * ahead, -1, keepdims=True), 0.0) * ahead
-    lean = np.maximum(STRAIGHT_SINE * thigh - np.linalg.norm(off, axis=-1, keepdims=True), 0.0)
-    return unit(off + lean * ahead)  # a knee bent the right way keeps its side exactly
-
-
-def on_skeleton(frames: np.ndarray, start: np.ndarray, end: np.ndarray, knees: float = 1.0) -> np.ndarray:
-    """``frames`` ``[N + 1, J, 3]`` (a gap and the target's frame) put back on the body's bones, whose
-    lengths go from the context's ``start`` ``[J]`` to the target's ``end`` ``[J]`` over the gap.
-
-    Bending a continuation onto a target (and leaning on the interpolation) moves each joint by its own
-    offset, so that a leg swinging the other way than the target's is shortened mid-gap (a shin by a
-    quarter), which a rig cannot follow: its solve keeps its bones, misses the ankle by as much and turns
-    the foot round to reach the toe. So every bone keeps its direction and takes its length, from the hips
-    out, and each leg reaches the ankle that the gap has, by Foot Lock's two-bone IK on those lengths
-    (:func:`footlock.place_leg`, within a soft limit short of straight, each knee bending the way ``knees``
-    says: :func:`knee_side`, :func:`bend_sides`); the feet then point at their toes. The target's frame (the
-    last) keeps the target's own lengths, so the gap still arrives at it."""
-    frames = np.asarray(frames, np.float64)
-    s = (np.arange(1, len(frames) + 1) / len(frames))[:, None]
-    lengths = (1.0 - s) * start[None] + s * end[None]  # [N + 1, J]
-    out = np.empty_like(frames)
-    out[:, ROOT] = frames[:, ROOT]
-    for j in range(1, frames.shape[1]):  # parents first
-        p = PARENTS[j]
-        out[:, j] = out[:, p] + unit(frames[:, j] - frames[:, p]) * lengths[:, j, None]
-    l1, l2 = lengths[:, _KNEE], lengths[:, _ANKLE]
-    side = bend_sides(frames, knees)
-    knee, ankle = place_leg(out[:, _HIP], frames[:, _ANKLE], l1, l2, side, np.linalg.norm(
-        out[:, _ANKLE] - out[:, _HIP], axis=-1))
-    toe = ankle + unit(frames[:, _TOE] - frames[:, _ANKLE]) * lengths[:, _TOE, None]
-    out[:, _KNEE], out[:, _ANKLE], out[:, _TOE] = knee, ankle, toe
-    return out.astype(np.float32)
 
 
 # A continuation and the interpolation are two guesses that err apart, and an average of them is nearer

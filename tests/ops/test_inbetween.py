@@ -24,12 +24,11 @@ from model_core.ops.inbetween import (
     inbetween,
     inbetween_positions,
     interpolation,
-    knee_side,
     lean_on_interpolation,
     lean_weights,
-    on_skeleton,
 )
 from model_core.ops.seam import blend_seam
+from model_core.ops.skeleton import knee_side, on_skeleton
 from model_core.ops.transfer import bone_lengths as rest_lengths
 
 
