@@ -50,6 +50,7 @@ def test_the_wheel_is_one_namespaced_package_with_its_models_and_commands(wheel)
     for model in ("strnn_default", "strnn_denoise", "baseline_simlpe", "baseline_residual_gru"):
         assert f"strnn_motion/models/{model}/model.safetensors" in names
         assert f"strnn_motion/models/{model}/MODEL_CARD.md" in names
+    assert not [n for n in names if n.endswith("HISTORY.md")]  # the record of what was tried stays in the repository
     assert "strnn_motion/configs/data.toml" in names and "strnn_motion/model_core/inference/engine.py" in names
     meta = zipfile.ZipFile(wheel)
     (entry,) = [n for n in names if n.endswith("entry_points.txt")]
