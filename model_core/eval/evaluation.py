@@ -15,7 +15,7 @@ from ..motion.conventions import GROUND_AXES, MODEL_FPS
 from ..motion.features import floor_height, positions_to_features
 from ..motion.noise import add_rotation_jitter
 from ..ops.denoise import denoise_positions
-from ..ops.extend import MEMORY_S, extend_positions
+from ..ops.extend import MEMORY_S, clip_floor, extend_positions
 from ..rig.rigs import canonical_clip
 from .metrics import (
     CONTEXT,
@@ -130,7 +130,8 @@ def evaluate_long_horizon(engine, clips, frames: int, seeds: int, reference=None
     and under ``as_extend`` Extend Clip as it ships (:func:`extend.extend_positions`, *Follow the Clip* on), each
     seed's take, its first :data:`extend.MEMORY_S` seconds at most, the clip it extends: what an animator gets
     extending the take. Speeds are against the seed's whole take (``seed_take_speed_ratio``); ``as_extend`` also
-    gives the clip's last second against it (``clip_end_speed_ratio``: under 1, the clip comes to rest)."""
+    gives the clip's last second against it (``clip_end_speed_ratio``: under 1, the clip comes to rest), and judges
+    the feet over the floor Extend keeps them out of, the clip's own where it ends (:func:`extend.clip_floor`)."""
     ref_clips = reference or clips
     speed, median = data_speed(ref_clips), data_speed(ref_clips, np.median)
     ref = np.concatenate([segments(pose_vectors(c.features)) for c in ref_clips if len(c.features) >= 40])
@@ -141,27 +142,31 @@ def evaluate_long_horizon(engine, clips, frames: int, seeds: int, reference=None
     # as Extend continues a clip: stances settled, the feet kept out of the floor the seed stands on
     rollouts = engine.extrapolate(seed_feats, frames, settle=True, floor=np.array([floor_height(p) for _, p in chosen]))
     judge = functools.partial(_judge_rollouts, by_name=by_name, speed=speed, median=median, ref=ref)
-    out = {"frames": frames, "seeds": seeds} | judge(rollouts, chosen)
+    take_floors = [floor_height(by_name[name]) for name, _ in chosen]
+    out = {"frames": frames, "seeds": seeds} | judge(rollouts, chosen, take_floors)
     log(f"long horizon: {seeds} seeds x {frames} frames as Extend, following the clip")
     most, second = int(MEMORY_S * MODEL_FPS), int(MODEL_FPS)
     takes = [(name, np.asarray(by_name[name][:most], np.float64)) for name, _ in chosen]
     extended = [positions_to_features(extend_positions(engine, take[-CONTEXT:], MODEL_FPS, frames, memory=take))[0]
                 for _, take in takes]
-    out["as_extend"] = judge(extended, [(name, take[-CONTEXT:]) for name, take in takes]) | {
+    # judged on the floor Extend keeps the feet out of: the clip's own where it ends (a capture's floor can drift)
+    out["as_extend"] = judge(extended, [(name, take[-CONTEXT:]) for name, take in takes],
+                             [clip_floor(take, MODEL_FPS) for _, take in takes]) | {
         "clip_frames": [len(take) for _, take in takes],
         "clip_end_speed_ratio": [float(joint_speed(take[-second - 1:]).mean() / joint_speed(by_name[name]).mean())
                                  for name, take in takes]}
     return out
 
 
-def _judge_rollouts(rollouts, chosen, by_name: dict, speed: float, median: float, ref: np.ndarray) -> dict:
+def _judge_rollouts(rollouts, chosen, floors: list[float], by_name: dict, speed: float, median: float,
+                    ref: np.ndarray) -> dict:
     """The per-seed figures of :func:`evaluate_long_horizon` for rollouts (raw features ``[N, C]`` each) from the
-    seeds ``chosen`` ((take name, seed positions) each), against the data's mean and ``median`` joint ``speed`` and
-    its D_1nn reference segments ``ref``."""
+    seeds ``chosen`` ((take name, seed positions) each) over their ``floors`` (heights), against the data's mean and
+    ``median`` joint ``speed`` and its D_1nn reference segments ``ref``; the share of frames with both feet in the
+    air is given beside the seed's take's over the same floor."""
     block = min(1000, min(len(r) for r in rollouts))
-    floors = {name: floor_height(by_name[name]) for name, _ in chosen}
-    reports = [rollout_report(r, p, speed, ref, block=block, median_speed=median, floor=floors[name])
-               for r, (name, p) in zip(rollouts, chosen)]
+    reports = [rollout_report(r, p, speed, ref, block=block, median_speed=median, floor=floor)
+               for r, (name, p), floor in zip(rollouts, chosen, floors)]
     take_speed = [float(joint_speed(by_name[name]).mean()) for name, _ in chosen]
     return {
         "exploded": int(sum(r.exploded for r in reports)),
@@ -175,7 +180,7 @@ def _judge_rollouts(rollouts, chosen, by_name: dict, speed: float, median: float
         "feet": {key: [getattr(r.feet, key) if r.feet else float("nan") for r in reports]
                  for key in ("touch_fraction", "floor_offset_cm", "sink_cm", "airborne_fraction", "skate_cm")}
         # the seed's own take in the air as often: a run's flight is not a walk turned into hops
-        | {"take_airborne_fraction": [airborne_fraction(by_name[name], floors[name]) for name, _ in chosen]},
+        | {"take_airborne_fraction": [airborne_fraction(by_name[name], f) for (name, _), f in zip(chosen, floors)]},
     }
 
 

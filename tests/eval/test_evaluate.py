@@ -7,6 +7,7 @@ import json
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from model_core.io.bvh_export import write_bvh
@@ -24,6 +25,28 @@ def walks(tmp_path_factory) -> Path:
     for i in range(3):
         write_bvh(root / f"walk_{i}.bvh", walking_skeleton(frames=150, speed=1.0 + 0.2 * i, radius=4.0 + i))
     return root
+
+
+def test_extend_is_judged_on_the_floor_of_its_clip(tmp_path):
+    """Walks whose floor rises 6 cm half-way through their takes (a capture's floor drifting): Extend walks
+    on the floor where its clip ends, and the long horizon as Extend judges its feet against that floor, not the
+    whole take's (they would read as hovering by as much)."""
+    from model_core.motion.features import floor_height
+    from model_core.ops.extend import clip_floor
+
+    root = tmp_path / "ramp"
+    root.mkdir()
+    ramp = np.clip((np.arange(240) - 100) / 60, 0, 1) * 0.06
+    for i in range(2):
+        walk = walking_skeleton(frames=240, speed=1.1 + 0.2 * i, radius=5.0)
+        walk[..., 1] += ramp[:, None]
+        write_bvh(root / f"ramp_{i}.bvh", walk)
+    out = tmp_path / "eval.json"
+    evaluate.main(["--data", str(root), "--cache", "", "--long-horizon", "300", "--seeds", "2", "--json", str(out)])
+    ax = json.loads(out.read_text())["long_horizon"]["as_extend"]
+    assert clip_floor(walk, 30.0) - floor_height(walk) > 0.05  # the two floors are 6 cm apart
+    assert all(abs(v) < 3 for v in ax["feet"]["floor_offset_cm"]), ax["feet"]
+    assert all(v == 1 for v in ax["feet"]["touch_fraction"]), ax["feet"]
 
 
 def test_one_run_writes_exactly_the_metric_keys(walks, tmp_path, capsys):
