@@ -116,11 +116,13 @@ def data_speed(clips, statistic=np.mean) -> float:
 
 
 def pick_seed_windows(clips, count: int, length: int = 20) -> list[tuple[str, np.ndarray]]:
-    """``count`` seeds spread evenly over the clips (sorted by name): (name, positions ``[length, J, 3]``)."""
+    """``count`` seeds spread evenly over the clips (sorted by name), each clip at most once (so fewer than
+    ``count`` where there are fewer clips: a seed twice is the same rollout twice): (name, positions
+    ``[length, J, 3]``)."""
     usable = sorted((c for c in clips if len(c.positions) >= 2 * length), key=lambda c: c.name)
     if not usable:
         raise ValueError(f"no clip has the {2 * length} frames a seed needs")
-    picks = np.linspace(0, len(usable) - 1, count).round().astype(int)
+    picks = np.unique(np.linspace(0, len(usable) - 1, count).round().astype(int))
     return [(usable[i].name, usable[i].positions[length:2 * length]) for i in picks]
 
 
@@ -138,13 +140,13 @@ def evaluate_long_horizon(engine, clips, frames: int, seeds: int, reference=None
     chosen = pick_seed_windows(clips, seeds, length=max(20, engine.m))  # as many frames as the model reads
     by_name = {c.name: c.positions for c in clips}
     seed_feats = np.stack([positions_to_features(p)[0] for _, p in chosen])
-    log(f"long horizon: {seeds} seeds x {frames} frames open loop")
+    log(f"long horizon: {len(chosen)} seeds x {frames} frames open loop")
     # as Extend continues a clip: stances settled, the feet kept out of the floor the seed stands on
     rollouts = engine.extrapolate(seed_feats, frames, settle=True, floor=np.array([floor_height(p) for _, p in chosen]))
     judge = functools.partial(_judge_rollouts, by_name=by_name, speed=speed, median=median, ref=ref)
     take_floors = [floor_height(by_name[name]) for name, _ in chosen]
-    out = {"frames": frames, "seeds": seeds} | judge(rollouts, chosen, take_floors)
-    log(f"long horizon: {seeds} seeds x {frames} frames as Extend, following the clip")
+    out = {"frames": frames, "seeds": len(chosen)} | judge(rollouts, chosen, take_floors)
+    log(f"long horizon: {len(chosen)} seeds x {frames} frames as Extend, following the clip")
     most, second = int(MEMORY_S * MODEL_FPS), int(MODEL_FPS)
     takes = [(name, np.asarray(by_name[name][:most], np.float64)) for name, _ in chosen]
     extended = [positions_to_features(extend_positions(engine, take[-CONTEXT:], MODEL_FPS, frames, memory=take))[0]

@@ -262,3 +262,17 @@ def test_the_shipped_model_as_extend_is_ahead_of_the_simlpe_on_the_unseen_subjec
     errors, _ = prediction_errors(engine, [np.asarray(t) for t in takes], extra_engines={"simlpe": simlpe})
     theirs = errors["simlpe"][at]
     assert ours < 0.985 * theirs, (ours, theirs)
+
+
+def test_seeds_are_spread_over_the_clips_each_clip_once():
+    """Ten seeds asked of eight takes (the martial-arts group) are eight: a take picked twice gave the same seed and
+    the same rollout twice, counted twice."""
+    from types import SimpleNamespace
+
+    from model_core.eval.evaluation import pick_seed_windows
+
+    takes = [SimpleNamespace(name=f"take_{i}", positions=walking_skeleton(frames=60 + i)) for i in range(8)]
+    seeds = pick_seed_windows(takes, 10)
+    assert [name for name, _ in seeds] == [f"take_{i}" for i in range(8)]
+    assert [name for name, _ in pick_seed_windows(takes, 3)] == ["take_0", "take_4", "take_7"]
+    assert all(p.shape == (20, 21, 3) for _, p in seeds)
