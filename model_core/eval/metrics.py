@@ -20,8 +20,7 @@ from ..motion.geometry import cubic_frames
 from ..ops.familiarity import momentum_shares
 from ..ops.footlock import foot_skate_cm
 from ..ops.fusion import running_median
-from ..ops.seam import blend_seam
-from ..ops.skeleton import on_clip_bones
+from ..ops.skeleton import join_clip
 
 HORIZONS_MS = (80, 160, 320, 400, 560, 1000)
 CONTEXT = 20
@@ -93,7 +92,7 @@ def prediction_errors(engine, clips: list[np.ndarray], horizons_ms=HORIZONS_MS,
     ``{name: engine}`` (baselines, continued as STRNN is; a model that reads more than the windows' 20 context
     frames reads the take before them: :func:`reading_contexts`), and for STRNN with the seam blend Extend
     applies (``strnn_seam_blend``, :func:`seam.blend_seam`, with the clip's momentum where the motion is
-    unfamiliar: :func:`familiarity.momentum_shares`, put back on the clip's bones: :func:`skeleton.on_clip_bones`);
+    unfamiliar: :func:`familiarity.momentum_shares`, put back on the clip's bones: :func:`skeleton.join_clip`);
     and the window count."""
 
     steps = horizon_frames(horizons_ms)
@@ -108,8 +107,7 @@ def prediction_errors(engine, clips: list[np.ndarray], horizons_ms=HORIZONS_MS,
     preds |= {name: extend_batch(e, _read(e, clips, ctx, max(steps)), max(steps))
               for name, e in (extra_engines or {}).items()}
     shares = momentum_shares(engine, read)
-    preds["strnn_seam_blend"] = np.stack([on_clip_bones(np.concatenate([c[-1:], blend_seam(c, p, momentum=k)]), c)[1:]
-                                          for c, p, k in zip(ctx, preds["strnn"], shares)])
+    preds["strnn_seam_blend"] = np.stack([join_clip(c, p, k)[1:] for c, p, k in zip(ctx, preds["strnn"], shares)])
     idx = [s - 1 for s in steps]
     out = {name: [float(v) for v in mpjpe_cm(p[:, idx], fut[:, idx]).mean(0)] for name, p in preds.items()}
     return out, len(ctx)

@@ -12,8 +12,7 @@ from ..motion.conventions import MODEL_FPS
 from ..motion.features import floor_height
 from .familiarity import momentum_shares
 from .normalise import fit_normalisation, model_frames_available, sample_at
-from .seam import blend_seam
-from .skeleton import on_clip_bones
+from .skeleton import join_clip
 
 # Seconds of the clip before its end that Extend Clip reads as the clip's own motion, which long
 # continuations lean on (inference/memory.py): several strides of a walk, without reading a long take whole.
@@ -63,7 +62,7 @@ def extend_positions(engine, pos: np.ndarray, fps: float, frames: int, memory: n
     A long continuation that settles into a stance stands where it is (:func:`stance.settle_stances`), and no
     new frame's feet go under the floor the clip stands on (:func:`stance.ground`): ``floor`` (a height in the same
     space), by default :func:`clip_floor` of ``memory`` (else of ``pos``). Every new frame is on the clip's bones
-    (:func:`skeleton.on_clip_bones`), which the seam, moving each joint by its own offset, would stretch.
+    (:func:`skeleton.join_clip`), which the seam, moving each joint by its own offset, would stretch.
     Returns ``[frames, 21, 3]`` in the same space.
     """
     ctx, norm, model_ctx, momentum = _reading(engine, pos, fps, memory)
@@ -78,8 +77,7 @@ def extend_positions(engine, pos: np.ndarray, fps: float, frames: int, memory: n
     kw["floor"] = (floor - norm.ground) * norm.scale  # in the model's units, as Normalisation.to_model puts it
     new = np.asarray(engine.extend(model_ctx, n_model, settle=True, **kw), dtype=np.float64)
     # model frame 0 is the last context frame
-    seq = np.concatenate([ctx[-1:], blend_seam(ctx, norm.to_user(new), momentum=momentum)])
-    return sample_at(on_clip_bones(seq, ctx), MODEL_FPS, np.arange(1, frames + 1) / fps)
+    return sample_at(join_clip(ctx, norm.to_user(new), momentum), MODEL_FPS, np.arange(1, frames + 1) / fps)
 
 
 def clip_floor(clip: np.ndarray, fps: float) -> float:

@@ -48,7 +48,7 @@ from ..motion.stance import planted_steps
 from .normalise import fit_normalisation, model_frames_available, sample_at
 from .paths import Path, Steering, control_signal, turning_path
 from .seam import SEAM_FRAMES, blend_seam
-from .skeleton import on_clip_bones
+from .skeleton import join_clip
 
 WALK_SPEED = 1.3  # m/s used when the seed barely moves (its own speed cannot steer anything)
 LEAD_IN = 0.3  # metres: a character farther than this from the path's start walks to it first
@@ -297,7 +297,7 @@ def follow_curve_positions_steps(follower: PathFollower, points: np.ndarray, cyc
     if context is None:
         seq, first = new, 0
     else:
-        seq, first = on_clip_bones(np.concatenate([ctx[-1:], blend_seam(ctx, new)]), ctx), 1
+        seq, first = join_clip(ctx, new), 1
     duration = (len(seq) - 1) / MODEL_FPS
     count = frames if frames is not None else int(math.floor(duration * fps + 1e-6)) + 1 - first
     return sample_at(seq, MODEL_FPS, (np.arange(count) + first) / fps)

@@ -11,9 +11,10 @@ from __future__ import annotations
 import numpy as np
 
 from ..motion.conventions import PARENTS, ROOT
+from ..motion.features import body_lengths
 from ..motion.geometry import unit
 from .footlock import LEGS, body_forward, place_leg
-from .transfer import bone_lengths
+from .seam import blend_seam
 
 _HIP, _KNEE, _ANKLE, _TOE = (np.array([leg[k] for leg in LEGS]) for k in range(4))  # [2]: left, right
 
@@ -86,5 +87,12 @@ def on_clip_bones(frames: np.ndarray, clip: np.ndarray) -> np.ndarray:
     """A continuation's ``frames`` ``[N, J, 3]`` on the bones of the ``clip`` ``[C, J, 3]`` it continues
     (:func:`on_skeleton` with the clip's lengths, its knees bending the clip's way): for the seam after a user's
     clip, which moves each joint by its own offset. Returns float64."""
-    lengths = bone_lengths(clip)
+    lengths = body_lengths(clip)
     return on_skeleton(frames, lengths, lengths, knee_side(clip)).astype(np.float64)
+
+
+def join_clip(clip: np.ndarray, new: np.ndarray, momentum: float = 0.0) -> np.ndarray:
+    """``[1 + N, J, 3]``: the ``clip``'s last frame and its continuation ``new`` ``[N, J, 3]`` (same rate) joined as
+    Extend joins them: the jump faded out (:func:`seam.blend_seam`, with ``momentum``) and every frame on the clip's
+    bones (:func:`on_clip_bones`)."""
+    return on_clip_bones(np.concatenate([clip[-1:], blend_seam(clip, new, momentum=momentum)]), clip)

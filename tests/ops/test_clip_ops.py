@@ -205,7 +205,7 @@ def test_extend_keeps_the_clips_bones_through_the_seam(mocap_root, monkeypatch, 
     putting the frames back on the bones (:func:`skeleton.on_clip_bones`) a bone of these takes stretched by a
     quarter or more for a few frames after the cut (measured: 34 % and 40 %), which a rig cannot follow."""
     from model_core.eval.metrics import bone_lengths_of
-    from model_core.ops import extend
+    from model_core.ops import skeleton
     from model_core.rig.rigs import load_clip
 
     engine = Engine.load()
@@ -214,7 +214,7 @@ def test_extend_keeps_the_clips_bones_through_the_seam(mocap_root, monkeypatch, 
     stretch = lambda: float(np.abs(bone_lengths_of(  # noqa: E731
         extend_positions(engine, take[-20:], 30.0, 60, memory=take)) / rest - 1).max())
     kept = stretch()
-    monkeypatch.setattr(extend, "on_clip_bones", lambda seq, _: seq)
+    monkeypatch.setattr(skeleton, "on_clip_bones", lambda seq, _: seq)
     assert kept < 0.01 < 0.25 < stretch(), kept
 
 
