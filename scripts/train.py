@@ -281,7 +281,7 @@ def main(argv=None) -> int:
 def leave(code: int) -> int:
     """``code``, for ``sys.exit``; a torchrun worker (WORLD_SIZE over 1) instead exits here, its output flushed,
     without the interpreter's teardown. Its work is written and its process group destroyed by now, but torch's
-    gloo backend can abort that teardown ("terminate called without an active exception", once in some 50
+    gloo backend can abort that teardown ("terminate called without an active exception", once in about 60
     two-process runs on this project's machines), which torchrun reports as a failed run."""
     if int(os.environ.get("WORLD_SIZE", "1")) <= 1:
         return code
