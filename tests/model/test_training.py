@@ -326,7 +326,7 @@ def test_torchrun_two_cpu_processes(walk_folder, tmp_path):
         pytest.skip("torchrun is not installed beside this Python")
     out, ranks = tmp_path / "ddp", tmp_path / "ranks"
     # each rank's own output goes to its file, with Python's stacks on a fatal signal, so that a failure says
-    # where each rank was (a rank aborted at teardown once, in 1 of several hundred runs, without a stack)
+    # where each rank was (a rank aborted at teardown about once in 60 runs, without a stack, before train.leave)
     cmd = [str(torchrun), "--standalone", "--nproc_per_node", "2", "--log-dir", str(ranks), "--redirects", "3",
            str(REPO / "scripts" / "train.py"),
            "--data", str(walk_folder), "--out", str(out), "--steps", "10", "--batch", "8", "--width", "16",
