@@ -110,6 +110,7 @@ def print_prediction(result: dict):
     print(f"{'  / best base':<20}" + "".join(f"{s / b:8.2f}" for s, b in zip(seam, best)))
     if alone is not None:
         print(f"{'  context only':<20}" + "".join(f"{v:8.2f}" for v in alone))
+    print_against(pred)
     parts = pred.get("as_extend_parts")
     if parts:
         print(f"{'  take track':<20}" + "".join(f"{v:8.2f}" for v in parts["true_track_cm"]))
@@ -119,6 +120,25 @@ def print_prediction(result: dict):
                   f"{parts['travel_ratio']:.2f} x the take's way in {pred['horizons_ms'][-1]} ms (median)")
         print("  (take track: the take's own hips track under Extend's pose, the pose's error alone; take pose: "
               "the take's pose on Extend's track)")
+
+
+def print_against(pred: dict):
+    """As Extend's gap to every other row with its interval, and at which horizons it is surely ahead or behind."""
+    against, iv = pred.get("as_extend_against"), pred.get("intervals")
+    if not against:
+        return
+    print(f"  as Extend - each row (cm), {iv['level']:.0%} interval with the {iv['takes']} takes resampled "
+          f"{iv['draws']} times:")
+    for name, c in against.items():
+        gaps = [f"{g:+.2f} ({lo:+.2f}..{hi:+.2f})" for g, (lo, hi) in zip(c["gap_cm"], c["gap_interval_cm"])]
+        ratios = [f"x{r:.2f} ({lo:.2f}..{hi:.2f})" for r, (lo, hi) in zip(c["ratio"], c["ratio_interval"])]
+        print(f"    {name:<30}" + "".join(f"{cell:>24}" for cell in gaps))
+        print(f"    {'':<30}" + "".join(f"{cell:>24}" for cell in ratios))
+        told = {"ahead": [h for h, (_, hi) in zip(pred["horizons_ms"], c["gap_interval_cm"]) if hi < 0],
+                "behind": [h for h, (lo, _) in zip(pred["horizons_ms"], c["gap_interval_cm"]) if lo > 0]}
+        level = [h for h in pred["horizons_ms"] if h not in told["ahead"] + told["behind"]]
+        print(f"    {'':<30}" + "; ".join(f"{word} at {', '.join(map(str, hs))} ms" for word, hs in
+                                          (*told.items(), ("not told apart", level)) if hs))
 
 
 def print_table(result: dict, extra: dict):

@@ -17,6 +17,7 @@ from ..motion.noise import add_rotation_jitter
 from ..ops.denoise import denoise_positions
 from ..ops.extend import MEMORY_S, clip_floor, extend_positions
 from ..rig.rigs import canonical_clip
+from .intervals import DRAWS, LEVEL, paired_gap
 from .metrics import (
     CONTEXT,
     HORIZONS_MS,
@@ -29,11 +30,12 @@ from .metrics import (
     joint_speed,
     mpjpe_cm,
     pose_vectors,
-    prediction_errors,
     rollout_report,
     segments,
     upsample,
+    window_errors,
     window_starts,
+    window_takes,
 )
 
 
@@ -54,15 +56,24 @@ def evaluate_prediction(engine, clips, baselines: dict | None = None) -> dict:
     """Prediction MPJPE (cm) per horizon of STRNN, the simple baselines, the ``baselines``
     ``{name: engine}`` models and STRNN as Extend delivers it: ``strnn_as_extend``, each window's take up to
     the context's end as the clip (:func:`as_extend_predictions`), and ``strnn_as_extend_context_only``, a clip of
-    the 20 context frames alone (the seam blend on the model's own continuation); and what the first is made of
-    (``as_extend_parts``, :func:`error_parts`)."""
+    the 20 context frames alone (the seam blend on the model's own continuation); what the first is made of
+    (``as_extend_parts``, :func:`error_parts`); and how sure its lead or lag on every other row is
+    (``as_extend_against``: :func:`intervals.paired_gap` over the same windows, whole takes resampled)."""
     positions = [c.positions for c in clips]
-    errors, windows = prediction_errors(engine, positions, extra_engines=baselines)
+    errors = window_errors(engine, positions, extra_engines=baselines)
     errors["strnn_as_extend_context_only"] = errors.pop("strnn_seam_blend")
     last, new, truth = as_extend_predictions(engine, positions)
-    errors["strnn_as_extend"] = horizon_errors(new, truth)
-    return {"horizons_ms": list(HORIZONS_MS), "mpjpe_cm": errors, "windows": windows,
-            "as_extend_parts": error_parts(last, new, truth)}
+    idx = [k - 1 for k in horizon_frames(HORIZONS_MS)]
+    errors["strnn_as_extend"] = mpjpe_cm(new[:, idx], truth[:, idx])
+    takes = window_takes([np.asarray(p) for p in positions], CONTEXT + max(horizon_frames(HORIZONS_MS)))
+    against = {name: paired_gap(errors["strnn_as_extend"], e, takes)
+               for name, e in errors.items() if name != "strnn_as_extend"}
+    return {"horizons_ms": list(HORIZONS_MS), "mpjpe_cm": {name: [float(v) for v in e.mean(0)]
+                                                          for name, e in errors.items()},
+            "windows": len(takes), "as_extend_parts": error_parts(last, new, truth),
+            "as_extend_against": against,
+            "intervals": {"level": LEVEL, "draws": DRAWS, "takes": int(len(np.unique(takes))),
+                          "resampled": "whole takes, each window weighed by how often its take is drawn"}}
 
 
 def as_extend_predictions(engine, clips: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

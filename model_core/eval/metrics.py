@@ -93,8 +93,15 @@ def prediction_errors(engine, clips: list[np.ndarray], horizons_ms=HORIZONS_MS,
     frames reads the take before them: :func:`reading_contexts`), and for STRNN with the seam blend Extend
     applies (``strnn_seam_blend``, :func:`seam.blend_seam`, with the clip's momentum where the motion is
     unfamiliar: :func:`familiarity.momentum_shares`, put back on the clip's bones: :func:`skeleton.join_clip`);
-    and the window count."""
+    and the window count. Each window's own errors: :func:`window_errors`."""
+    errors = window_errors(engine, clips, horizons_ms, extra_engines)
+    return {name: [float(v) for v in e.mean(0)] for name, e in errors.items()}, len(errors["strnn"])
 
+
+def window_errors(engine, clips: list[np.ndarray], horizons_ms=HORIZONS_MS,
+                  extra_engines: dict | None = None) -> dict[str, np.ndarray]:
+    """The rows of :func:`prediction_errors` window by window: ``{name: [W, horizons]}`` (cm), the windows in
+    the order :func:`window_takes` numbers their takes."""
     steps = horizon_frames(horizons_ms)
     ctx, fut = prediction_windows(clips, max(steps))
     last, prev = ctx[:, -1:], ctx[:, -2:-1]
@@ -109,8 +116,13 @@ def prediction_errors(engine, clips: list[np.ndarray], horizons_ms=HORIZONS_MS,
     shares = momentum_shares(engine, read)
     preds["strnn_seam_blend"] = np.stack([join_clip(c, p, k)[1:] for c, p, k in zip(ctx, preds["strnn"], shares)])
     idx = [s - 1 for s in steps]
-    out = {name: [float(v) for v in mpjpe_cm(p[:, idx], fut[:, idx]).mean(0)] for name, p in preds.items()}
-    return out, len(ctx)
+    return {name: mpjpe_cm(p[:, idx], fut[:, idx]) for name, p in preds.items()}
+
+
+def window_takes(clips: list[np.ndarray], frames: int, stride: int = STRIDE) -> np.ndarray:
+    """Which of ``clips`` each window of :func:`window_starts` comes from ``[W]``: windows of one take err
+    together, so a take is what an interval resamples (:func:`intervals.paired_gap`)."""
+    return np.array([i for i, pos in enumerate(clips) for _ in range(0, len(pos) - frames + 1, stride)], dtype=int)
 
 
 # ------------------------------------------------------------------ long horizon

@@ -68,6 +68,13 @@ def test_one_run_writes_exactly_the_metric_keys(walks, tmp_path, capsys):
     assert parts["true_track_cm"][-1] < rows["strnn_as_extend"][-1]
     assert parts["true_pose_cm"][-1] < rows["strnn_as_extend"][-1]
     assert parts["moving_windows"] == doc["windows"] and 0.5 < parts["travel_ratio"] < 1.5  # walks at 1-1.4 m/s
+    against = doc["prediction"]["as_extend_against"]  # as Extend's gap to each other row, with its interval
+    assert set(against) == set(rows) - {"strnn_as_extend"}
+    for name, c in against.items():
+        assert c["gap_cm"] == pytest.approx([a - b for a, b in zip(rows["strnn_as_extend"], rows[name])], abs=1e-4)
+        assert all(lo <= g <= hi for g, (lo, hi) in zip(c["gap_cm"], c["gap_interval_cm"]))
+        assert all(lo <= r <= hi for r, (lo, hi) in zip(c["ratio"], c["ratio_interval"]))
+    assert doc["prediction"]["intervals"]["takes"] == 3 and doc["prediction"]["intervals"]["level"] == 0.95
     zero, const = doc["prediction"]["mpjpe_cm"]["zero_velocity"], doc["prediction"]["mpjpe_cm"]["constant_velocity"]
     assert zero[-1] > zero[0] and const[-1] > const[0]  # errors grow with the horizon
     lh = doc["long_horizon"]
@@ -94,7 +101,8 @@ def test_one_run_writes_exactly_the_metric_keys(walks, tmp_path, capsys):
     assert dn["mpjpe_cm"]["butterworth_best"][0] < dn["mpjpe_cm"]["noisy"][0]  # the filter removes noise
     assert 4.0 < dn["mpjpe_cm"]["noisy"][0] < 5.6  # |N(0, 3 cm I3)| has mean 4.8 cm
     for heading in ("Long horizon", "Denoising", "speed / its take", "walk_0.bvh", "as Extend", "  context only",
-                    "  take track", "x the take's way"):
+                    "  take track", "x the take's way",
+                    "as Extend - each row (cm), 95% interval with the 3 takes resampled 2000 times"):
         assert heading in printed
 
 
