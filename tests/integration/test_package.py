@@ -55,7 +55,7 @@ def test_the_wheel_is_one_namespaced_package_with_its_models_and_commands(wheel)
     meta = zipfile.ZipFile(wheel)
     (entry,) = [n for n in names if n.endswith("entry_points.txt")]
     scripts = meta.read(entry).decode()
-    for command in ("strnn-batch", "strnn-train", "strnn-evaluate", "strnn-demo"):
+    for command in ("strnn-batch", "strnn-train", "strnn-evaluate", "strnn-demo", "strnn-check-extend"):
         assert f"{command} = strnn_motion.scripts." in scripts
     (metadata,) = [n for n in names if n.endswith("METADATA")]
     text = meta.read(metadata).decode()
@@ -75,7 +75,8 @@ def test_installed_the_bundled_model_loads_away_from_the_checkout(installed, tmp
     assert done.stdout.split() == ["20", "20", "True", "False"]  # no top-level model_core; bpy not needed
 
 
-@pytest.mark.parametrize("command", ["strnn-batch", "strnn-train", "strnn-evaluate", "strnn-demo"])
+@pytest.mark.parametrize("command", ["strnn-batch", "strnn-train", "strnn-evaluate", "strnn-demo",
+                                     "strnn-check-extend"])
 def test_installed_commands_answer_help(installed, tmp_path, command):
     done = run(installed, str(installed / "bin" / command), "--help", cwd=tmp_path)
     assert done.returncode == 0, done.stderr
