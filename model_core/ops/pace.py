@@ -25,6 +25,7 @@ RATES = (24.0, 25.0, 30.0, 50.0, 60.0, 120.0)  # capture and scene rates a take 
 MIN_SWING_M = 0.12  # standard deviation of the feet's fore-aft offset (legs of 0.87 m) that counts as stepping
 MIN_CORRELATION = 0.5  # how alike one stride is to the next for the motion to count as periodic
 MIN_STRIDES = 2.0  # the stretch read must hold at least this many strides
+RATE_TOLERANCE = 1e-3  # a rate read from a BVH's rounded Frame Time (0.00833333 s: 120.0000048 fps) is that rate
 
 
 @dataclass
@@ -46,7 +47,7 @@ class Pace:
         would make it so (the rate read at is already the nearest: stepping that slow or fast is the
         motion's own, as in a martial arts stance shifting its feet every few seconds)."""
         rate = self.suggested_rate()
-        if self.plausible or abs(rate - self.fps) < 1e-6:
+        if self.plausible or abs(rate / self.fps - 1.0) < RATE_TOLERANCE:
             return ""
         pace = "slower" if self.stride_s > STRIDE_S[1] else "faster"
         return (f"Its strides take {self.stride_s:.2f} s at {self.fps:g} keys per second, {pace} than people move "

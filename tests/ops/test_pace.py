@@ -46,6 +46,7 @@ def test_no_note_when_the_rate_read_at_is_already_the_nearest():
     """A 120 fps martial arts take shifting its stance every 3.7 s used to be told it "may have been
     captured at 120 fps", the rate it was read at: no rate explains such a pace, so nothing is said."""
     assert Pace(3.67, 120.0).suggested_rate() == 120.0 and Pace(3.67, 120.0).note() == ""
+    assert Pace(3.67, 1 / 0.00833333).note() == ""  # the rate as a BVH's rounded Frame Time gives it (CMU's takes)
     assert "captured at 120 fps" in Pace(3.67, 30.0).note()  # the same strides read at 30: 4 x too slow
 
 
