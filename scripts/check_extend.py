@@ -25,6 +25,7 @@ arguments.
 from __future__ import annotations
 
 import argparse
+import math
 import shutil
 import sys
 from pathlib import Path
@@ -40,10 +41,10 @@ else:  # run by path from a checkout
     import strnn_batch
 
 from model_core.eval.extend_evaluation import feet_lead, limb_speed
-from model_core.eval.metrics import airborne_fraction, feet_report
+from model_core.eval.metrics import CONTEXT, airborne_fraction, feet_report
 from model_core.io.bvh import BvhError, forward_kinematics, read_bvh
 from model_core.io.files import unwritable, write_json
-from model_core.motion.conventions import GROUND_AXES, ROOT
+from model_core.motion.conventions import GROUND_AXES, MODEL_FPS, ROOT
 from model_core.motion.features import floor_height
 from model_core.rig.rigs import RigError, canonical_clip
 
@@ -91,11 +92,17 @@ def parse_args(argv=None):
 
 
 # ------------------------------------------------------------------------------------------ measuring
-def cut_frames(frames: int, at: list[int] | None, horizon: int) -> list[int]:
-    """The cuts (scene frames from 1, the last kept) of a take of ``frames`` frames that leave ``horizon`` frames
-    of the take after them to compare with, and at least 2 before."""
+def context_frames(fps: float) -> int:
+    """Frames a take at ``fps`` needs before a cut for Extend Clip to read the model's 20-frame context (the
+    operator's rule, ``pipeline.min_scene_frames``), and one to spare for how Blender rounds a file's rate."""
+    return max(CONTEXT, math.ceil((CONTEXT - 1) * fps / MODEL_FPS - 1e-6) + 2)
+
+
+def cut_frames(frames: int, at: list[int] | None, horizon: int, fps: float = MODEL_FPS) -> list[int]:
+    """The cuts (scene frames from 1, the last kept) of a take of ``frames`` frames at ``fps`` that leave
+    ``horizon`` frames of the take after them to compare with and the model's context before them."""
     wanted = at if at else [round(frames * q) for q in (0.25, 0.5, 0.75)]
-    return sorted({int(f) for f in wanted if 2 <= f and f + horizon <= frames})
+    return sorted({int(f) for f in wanted if context_frames(fps) <= f and f + horizon <= frames})
 
 
 def _canonical(path: Path) -> np.ndarray | None:
@@ -145,12 +152,15 @@ def measure_walk(take: Path, extended: Path, last_s: float) -> dict:
     feet = feet_report(last, floor, fps)
     ground = list(GROUND_AXES)
     hips = lambda p: float(np.linalg.norm(np.diff(p[:, ROOT][:, ground], axis=0), axis=-1).mean() * fps)
-    speed = limb_speed(last) / limb_speed(clip)
-    return {"frames": len(ext) - len(clip), "speed_ratio": speed, "feet_swing_ratio": feet_lead(last) / feet_lead(clip),
+    ratio = lambda a, b: a / b if b > 1e-9 else float("nan")  # a clip standing stock-still has no pace to keep
+    speed = ratio(limb_speed(last), limb_speed(clip))
+    return {"frames": len(ext) - len(clip), "speed_ratio": speed,
+            "feet_swing_ratio": ratio(feet_lead(last), feet_lead(clip)),
             "touch_fraction": feet.touch_fraction, "floor_offset_cm": feet.floor_offset_cm,
             "airborne_fraction": feet.airborne_fraction, "clip_airborne_fraction": airborne_fraction(clip, floor),
             "hips_m_per_s": hips(last), "clip_hips_m_per_s": hips(clip),
-            "walks": bool(WALK_BAND[0] <= speed <= WALK_BAND[1] and not feet.touch_fraction < 1)}
+            "moves_on": bool(WALK_BAND[0] <= speed <= WALK_BAND[1]),
+            "walks": bool(WALK_BAND[0] <= speed <= WALK_BAND[1] and feet.touch_fraction == 1)}
 
 
 # ------------------------------------------------------------------------------------------ running
@@ -175,9 +185,10 @@ def run_cuts(args) -> tuple[list[dict], list[str]]:
     for take in args.takes:  # --from-frame is one frame for a whole run: the takes are extended cut by cut
         bvh = read_bvh(take)
         horizon = int(round(args.seconds * bvh.fps))
-        cuts = cut_frames(len(bvh.motion), args.at, horizon)
+        cuts = cut_frames(len(bvh.motion), args.at, horizon, bvh.fps)
         if not cuts:
-            failed.append(f"{take}: no cut leaves {horizon} frames of its {len(bvh.motion)} to compare with")
+            failed.append(f"{take}: no cut has the {context_frames(bvh.fps)} frames Extend reads before it and "
+                          f"{horizon} of the take's {len(bvh.motion)} after it to compare with")
         for cut in cuts:
             by_cut.setdefault((cut, horizon), []).append((take, bvh.fps))
     for (cut, horizon), takes in sorted(by_cut.items()):
@@ -236,7 +247,23 @@ def print_walk(rows: list[dict], last_s: float):
               f"{r['feet_swing_ratio']:.2f} x, seconds touching {touch}, lowest foot {r['floor_offset_cm']:.1f} cm "
               f"over the floor, both feet up {r['airborne_fraction']:.2f} (clip {r['clip_airborne_fraction']:.2f}), "
               f"hips {r['hips_m_per_s']:.2f} m/s (clip {r['clip_hips_m_per_s']:.2f}): "
-              f"{'walks' if r['walks'] else 'does not walk'}")
+              f"{verdict(r)}")
+
+
+def verdict(row: dict) -> str:
+    """A walk check's row in words: it walks (the joints at 0.4 to 2.5 x the clip's speed, a foot down in every second
+    that moves), or why not."""
+    if row["walks"]:
+        return "walks"
+    pace = row["speed_ratio"]
+    why = [] if row["moves_on"] else ["the clip stands still" if pace is None or np.isnan(pace) else
+                                      "slows down" if pace < WALK_BAND[0] else "speeds up"]
+    touch = row["touch_fraction"]
+    if touch is None or np.isnan(touch):
+        why.append("no second moves")
+    elif touch < 1:
+        why.append(f"a foot down in {touch:.0%} of the seconds that move")
+    return f"does not walk ({'; '.join(why)})"
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -29,8 +29,10 @@ def extension(tmp_path_factory) -> Path:
 
 def test_cuts_leave_the_frames_to_compare_with():
     assert check_extend.cut_frames(200, None, 15) == [50, 100, 150]  # a quarter, half and three quarters
-    assert check_extend.cut_frames(200, [1, 2, 185, 186, 100, 100], 15) == [2, 100, 185]
+    assert check_extend.cut_frames(200, [1, 20, 21, 185, 186, 100, 100], 15) == [21, 100, 185]
     assert check_extend.cut_frames(16, None, 15) == []
+    assert check_extend.context_frames(30.0) == 21 and check_extend.context_frames(1 / 0.016667) == 40
+    assert check_extend.cut_frames(152, None, 30, 1 / 0.016667) == [76, 114]  # a quarter is under the 40 it reads
 
 
 def test_a_cut_is_measured_against_the_take_and_against_holding(tmp_path):
@@ -61,8 +63,17 @@ def test_a_walk_that_walks_on_and_one_that_stops(tmp_path):
     assert good["frames"] == 330 and good["walks"]
     assert 0.9 < good["speed_ratio"] < 1.1 and 0.9 < good["feet_swing_ratio"] < 1.1 and good["touch_fraction"] == 1
     assert good["hips_m_per_s"] == pytest.approx(good["clip_hips_m_per_s"], rel=0.05)
+    assert check_extend.verdict(good) == "walks"
     bad = check_extend.measure_walk(take, stopped, 5.0)
-    assert bad["speed_ratio"] < 0.4 and not bad["walks"]
+    assert bad["speed_ratio"] < 0.4 and not bad["walks"] and not bad["moves_on"]
+    assert check_extend.verdict(bad) == "does not walk (slows down; no second moves)"
+    standing = np.repeat(walk[:1], 150, axis=0)
+    standing[:, 1:, 1] += 0.05 * np.sin(np.arange(150) / 4)[:, None]  # bobs in place, the hips still
+    clip = write_bvh(tmp_path / "standing.bvh", standing)
+    sways = write_bvh(tmp_path / "sways.bvh", np.concatenate([standing, standing, standing]))
+    still = check_extend.measure_walk(clip, sways, 5.0)  # moves on at its pace, but never walked: not a walk
+    assert still["moves_on"] and not still["walks"] and np.isnan(still["touch_fraction"])
+    assert check_extend.verdict(still) == "does not walk (no second moves)"
 
 
 def test_bad_arguments_are_refused_before_any_work(tmp_path, capsys):
