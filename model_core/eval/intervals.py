@@ -25,11 +25,13 @@ def paired_gap(ours: np.ndarray, theirs: np.ndarray, takes: np.ndarray, draws: i
     _, first, index = np.unique(np.asarray(takes), return_index=True, return_inverse=True)
     count = len(first)
     index = np.argsort(np.argsort(first))[index.reshape(-1)]  # takes numbered as they first come, whatever their labels
+    per_take = lambda e: np.stack([np.bincount(index, e[:, h], count) for h in range(e.shape[1])], 1)  # [T, H]
+    windows = np.bincount(index, minlength=count).astype(np.float64)  # each take's window count
     rng = np.random.default_rng(seed)
     picked = np.stack([np.bincount(rng.integers(0, count, count), minlength=count) for _ in range(draws)])
-    weight = picked[:, index].astype(np.float64)  # [draws, W]: each window as often as its take was drawn
-    ours_drawn, theirs_drawn = weight @ ours, weight @ theirs  # sums over the drawn windows, [draws, H]
-    gap = (ours_drawn - theirs_drawn) / weight.sum(1, keepdims=True)
+    picked = picked.astype(np.float64)  # [draws, T]: how often each take is drawn; its windows weigh as much
+    ours_drawn, theirs_drawn = picked @ per_take(ours), picked @ per_take(theirs)  # sums over the drawn windows
+    gap = (ours_drawn - theirs_drawn) / (picked @ windows)[:, None]
     tails = [50 * (1 - level), 50 * (1 + level)]
     with np.errstate(divide="ignore", invalid="ignore"):
         ratio = ours_drawn / theirs_drawn
