@@ -50,6 +50,7 @@ from model_core.rig.rigs import RigError, canonical_clip
 
 WALK_BAND = (0.4, 2.5)  # a walk still walks: its joints' speed about the hips against the clip's
 FLOOR_S = 3.0  # the clip's floor: its last seconds' (a capture's floor can drift over a long take)
+MARK = ".check_extend"  # in each folder this script makes, which a later run may replace; no other folder is touched
 
 
 def parse_args(argv=None):
@@ -167,7 +168,11 @@ def measure_walk(take: Path, extended: Path, last_s: float) -> dict:
 def extend(args, takes: list[Path], frames: int, from_frame: int | None, folder: Path) -> list[Path | None]:
     """Each of ``takes`` copied to ``folder``/in/NN/ and extended in Blender (:mod:`strnn_batch`, ``--jobs`` at a
     time) into ``folder``/out/NN/NAME.extend.bvh: those files, None for a take whose extension failed."""
-    shutil.rmtree(folder, ignore_errors=True)  # nothing of an earlier run is read as this one's
+    if folder.exists() and not (folder / MARK).is_file():
+        raise FileExistsError(f"{folder} is there and was not made by check_extend.py: choose another --out")
+    shutil.rmtree(folder, ignore_errors=True)  # an earlier run's own folder: none of its files is read as this one's
+    folder.mkdir(parents=True)
+    (folder / MARK).write_text("made by scripts/check_extend.py; it replaces this folder on its next run\n")
     for i, take in enumerate(takes):
         (folder / "in" / f"{i:02d}").mkdir(parents=True)
         shutil.copyfile(take, folder / "in" / f"{i:02d}" / take.name)
@@ -269,12 +274,16 @@ def verdict(row: dict) -> str:
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
     args.out.mkdir(parents=True, exist_ok=True)
-    if args.check == "cuts":
-        rows, failed = run_cuts(args)
-        print_cuts(rows, args.seconds)
-    else:
-        rows, failed = run_walk(args)
-        print_walk(rows, args.last)
+    try:
+        if args.check == "cuts":
+            rows, failed = run_cuts(args)
+            print_cuts(rows, args.seconds)
+        else:
+            rows, failed = run_walk(args)
+            print_walk(rows, args.last)
+    except FileExistsError as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
     for f in failed:
         print(f"failed: {f}", file=sys.stderr)
     if args.json is not None:

@@ -85,6 +85,12 @@ def test_bad_arguments_are_refused_before_any_work(tmp_path, capsys):
             check_extend.main(argv + ["--out", str(tmp_path / "out")])
         assert e.value.code == 2, argv
     assert not (tmp_path / "out").exists()
+    walk = write_bvh(tmp_path / "walk.bvh", walking_skeleton(60))
+    theirs = tmp_path / "mine" / "walk"  # a folder of the user's where this check would write: left alone
+    theirs.mkdir(parents=True)
+    (theirs / "keep.txt").write_text("mine")
+    assert check_extend.main(["walk", str(walk), "--out", str(tmp_path / "mine")]) == 2
+    assert (theirs / "keep.txt").read_text() == "mine" and "not made by check_extend.py" in capsys.readouterr().err
     with pytest.raises(SystemExit) as e:
         check_extend.main(["--help"])
     assert e.value.code == 0 and "holding the last pose" in capsys.readouterr().out
