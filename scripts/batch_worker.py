@@ -13,6 +13,7 @@ from __future__ import annotations
 import contextlib
 import importlib
 import os
+import re
 import sys
 import time
 import traceback
@@ -183,6 +184,8 @@ def run_file(bpy, job: dict) -> list[str]:
         source.select_set(True)
     view_layer.objects.active = obj
     obj.select_set(True)
+    if job.get("keys_per_second"):  # the take's own pace where its file says another rate (--keys-per-second)
+        (obj if source is None else source).strnn_keys_per_second = job["keys_per_second"]
     kwargs = dict(job["kwargs"])
     if job["operator"] == "inbetween" and kwargs.get("use_range"):
         clear_keys(obj, kwargs["frame_start"], kwargs["frame_end"])
@@ -205,7 +208,7 @@ def run_file(bpy, job: dict) -> list[str]:
     action = obj.animation_data.action if obj.animation_data else None
     if action is None:
         raise BatchError(f"strnn.{job['operator']} left the armature without an action")
-    notes = importlib.import_module(f"{ADDON}.strnn_addon.stages.common").record_notes(action)
+    notes = [batch_hint(n) for n in importlib.import_module(f"{ADDON}.strnn_addon.stages.common").record_notes(action)]
     start, end = (int(round(f)) for f in action.frame_range)
     scene = bpy.context.scene
     scene.frame_start, scene.frame_end = start, end
@@ -225,6 +228,13 @@ def run_file(bpy, job: dict) -> list[str]:
         raise BatchError(f"Blender could not write {dst.name}: {blender_error(e)}") from None
     os.replace(tmp, dst)
     return notes
+
+
+def batch_hint(note: str) -> str:
+    """An operator's note as a batch reports it: where it says to set Keys per Second (the sidebar's), how to in a
+    batch."""
+    found = re.search(r"set Keys per Second to (\d+(?:\.\d+)?)", note)
+    return f"{note} (in a batch: --keys-per-second {found.group(1)})" if found else note
 
 
 def to_file_axes(bpy, obj) -> None:

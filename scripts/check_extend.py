@@ -63,6 +63,9 @@ def parse_args(argv=None):
     common.add_argument("--json", type=Path, metavar="FILE", help="also write every figure as JSON here")
     common.add_argument("--extension", type=Path, metavar="ZIP",
                         help="the built extension to install (default: built into dist/ as strnn_batch.py does)")
+    common.add_argument("--keys-per-second", type=float, default=None, metavar="FPS",
+                        help="the rate the takes were captured at where their files say another (passed to "
+                             "strnn_batch.py; seconds here are counted at it too)")
     common.add_argument("--jobs", "-j", type=int, default=1, metavar="N", help="Blender workers at a time")
     common.add_argument("--timeout", type=float, default=900.0, metavar="S", help="seconds a take may take")
     cuts = sub.add_parser("cuts", parents=[common], help="takes cut part way and extended: against holding the pose",
@@ -78,6 +81,8 @@ def parse_args(argv=None):
     args = p.parse_args(argv)
     if args.jobs < 1:
         p.error("--jobs must be at least 1")
+    if args.keys_per_second is not None and not 0.0 < args.keys_per_second <= 1000.0:
+        p.error("--keys-per-second must be over 0 (frames a second, e.g. 60)")
     if args.check == "cuts" and args.seconds <= 0:
         p.error("--seconds must be over 0")
     if args.check == "walk" and (args.frames < 1 or args.last <= 0):
@@ -138,9 +143,10 @@ def measure_cut(take: Path, extended: Path, cut: int, horizon: int) -> dict:
     return out
 
 
-def measure_walk(take: Path, extended: Path, last_s: float) -> dict:
-    """The last ``last_s`` seconds of ``extended`` (``take`` extended) against the clip, on the canonical joints."""
-    fps = read_bvh(take).fps
+def measure_walk(take: Path, extended: Path, last_s: float, fps: float | None = None) -> dict:
+    """The last ``last_s`` seconds of ``extended`` (``take`` extended) against the clip, on the canonical joints;
+    ``fps``: the take's frames a second (default: its file's)."""
+    fps = fps or read_bvh(take).fps
     clip, ext = _canonical(take), _canonical(extended)
     if clip is None or ext is None:
         raise RigError(f"{take}: its rig is not one the project maps to the model's joints; the walk check needs "
@@ -180,6 +186,7 @@ def extend(args, takes: list[Path], frames: int, from_frame: int | None, folder:
             "--timeout", str(args.timeout)]
     argv += ["--from-frame", str(from_frame)] if from_frame is not None else []
     argv += ["--extension", str(args.extension)] if args.extension else []
+    argv += ["--keys-per-second", str(args.keys_per_second)] if args.keys_per_second else []
     strnn_batch.main(argv + [str(folder / "in")])
     made = [folder / "out" / f"{i:02d}" / f"{take.stem}.extend.bvh" for i, take in enumerate(takes)]
     return [path if path.is_file() else None for path in made]
@@ -189,13 +196,14 @@ def run_cuts(args) -> tuple[list[dict], list[str]]:
     rows, failed, by_cut = [], [], {}
     for take in args.takes:  # --from-frame is one frame for a whole run: the takes are extended cut by cut
         bvh = read_bvh(take)
-        horizon = int(round(args.seconds * bvh.fps))
-        cuts = cut_frames(len(bvh.motion), args.at, horizon, bvh.fps)
+        fps = args.keys_per_second or bvh.fps
+        horizon = int(round(args.seconds * fps))
+        cuts = cut_frames(len(bvh.motion), args.at, horizon, fps)
         if not cuts:
-            failed.append(f"{take}: no cut has the {context_frames(bvh.fps)} frames Extend reads before it and "
+            failed.append(f"{take}: no cut has the {context_frames(fps)} frames Extend reads before it and "
                           f"{horizon} of the take's {len(bvh.motion)} after it to compare with")
         for cut in cuts:
-            by_cut.setdefault((cut, horizon), []).append((take, bvh.fps))
+            by_cut.setdefault((cut, horizon), []).append((take, fps))
     for (cut, horizon), takes in sorted(by_cut.items()):
         made = extend(args, [t for t, _ in takes], horizon, cut, args.out / f"cut_{cut}_{horizon}")
         for (take, fps), extended in zip(takes, made):
@@ -215,7 +223,7 @@ def run_walk(args) -> tuple[list[dict], list[str]]:
             failed.append(f"{take}: the extension failed (see above)")
             continue
         try:
-            rows.append({"take": str(take), **measure_walk(take, extended, args.last)})
+            rows.append({"take": str(take), **measure_walk(take, extended, args.last, args.keys_per_second)})
         except (RigError, BvhError) as e:
             failed.append(str(e))
     return rows, failed

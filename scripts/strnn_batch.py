@@ -74,6 +74,12 @@ def build_parser() -> argparse.ArgumentParser:
     io.add_argument("--in-place", action="store_true",
                     help="overwrite each input with its result instead of writing to --out "
                          "(the output format is then the input's)")
+    motion = common.add_argument_group("motion")
+    motion.add_argument("--keys-per-second", type=float, default=None, metavar="FPS",
+                        help="how many of each take's frames make one second of its motion, where its file says "
+                             "otherwise (a 60 fps capture whose header says 120: 60); sets each armature's Keys per "
+                             "Second (STRNN sidebar) before the operator runs (default: the file's own rate, or "
+                             "what a .blend's armature has set)")
     run = common.add_argument_group("running")
     run.add_argument("--jobs", "-j", type=int, default=1, metavar="N",
                      help="files processed at the same time, each in its own process (default: 1)")
@@ -204,6 +210,8 @@ def check_args(parser, args) -> None:
         parser.error(f"--target {args.target}: not a .blend file")
     if args.command == "transfer" and args.in_place:
         parser.error("--in-place is not for transfer: the results go beside the takes in --out")
+    if args.keys_per_second is not None and not 0.0 < args.keys_per_second <= 1000.0:
+        parser.error("--keys-per-second must be over 0 (frames a second, e.g. 60)")
     if args.extension is not None and not args.extension.is_file():
         parser.error(f"--extension {args.extension}: no such file")
     for option in ("model", "denoise_model"):
@@ -498,7 +506,7 @@ def main(argv: list[str] | None = None) -> int:
         jobs.append({"index": len(jobs), "input": str(path.resolve()), "display": display,
                      "output": str(out.resolve()), "shown_output": str(out), "operator": op, "kwargs": kwargs,
                      "path": getattr(args, "path", None), "curve": getattr(args, "curve", ""),
-                     "from_frame": getattr(args, "from_frame", None),
+                     "from_frame": getattr(args, "from_frame", None), "keys_per_second": args.keys_per_second,
                      "target": str(args.target.resolve()) if getattr(args, "target", None) else "",
                      "rig": getattr(args, "rig", ""),
                      "model": str(args.model.resolve()) if args.model else "",

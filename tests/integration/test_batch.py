@@ -150,6 +150,30 @@ def test_extend_from_a_frame_replaces_the_tail(tmp_path, extension, capsys):
     assert code == 0 and frames_of(out / "walk.extend.bvh") == 50  # frames 1-40 kept, 41-50 new, 51-60 gone
 
 
+def test_keys_per_second_reads_a_take_whose_header_says_another_rate(tmp_path, extension, capsys):
+    """A 60 fps walk whose file says 24 plays 2.5 x too slow: extended as it is, the report says to set Keys per
+    Second to 60; with --keys-per-second 60 the operator reads it at its own pace, there is no such note, and the
+    new frames move as far a frame as the take's."""
+    walk = walking_skeleton(240, fps=60.0)  # 1.3 m/s at 60 fps: 2.2 cm a frame; strides of 1.1 s, 2.8 s read at 24
+    take = write_bvh(tmp_path / "walk.bvh", walk, fps=24.0)
+    runs = {}
+    for name, extra in (("plain", []), ("kps", ["--keys-per-second", "60"])):
+        report = tmp_path / f"{name}.json"
+        assert strnn_batch.main(["extend", "--frames", "60", str(take), "--out", str(tmp_path / name),
+                                 "--extension", str(extension), "--report", str(report), *extra]) == 0
+        new = canonical_positions(read_bvh(tmp_path / name / "walk.extend.bvh"))[240:]
+        step = np.linalg.norm(np.diff(new[:, 0, [0, 2]], axis=0), axis=-1).mean()  # the hips, a frame
+        runs[name] = (step, json.loads(report.read_text())["files"][0]["notes"])
+    clip_step = np.linalg.norm(np.diff(canonical_positions(read_bvh(take))[:, 0, [0, 2]], axis=0), axis=-1).mean()
+    assert any("set Keys per Second to 60" in note and note.endswith("(in a batch: --keys-per-second 60)")
+               for note in runs["plain"][1]), runs["plain"][1]
+    assert not any("Keys per Second" in note for note in runs["kps"][1]), runs["kps"][1]
+    assert abs(runs["kps"][0] / clip_step - 1) < 0.25, (runs, clip_step)
+    with pytest.raises(SystemExit) as e:
+        strnn_batch.main(["extend", str(take), "--keys-per-second", "0"])
+    assert e.value.code == 2 and "--keys-per-second must be over 0" in capsys.readouterr().err
+
+
 def test_inbetween_refills_a_gap(tmp_path, extension, capsys):
     """--gap 30 50: those frames' keys are replaced by the model's in-between; the take keeps its length."""
     pos = walking_skeleton(80)

@@ -64,6 +64,11 @@ def test_a_walk_that_walks_on_and_one_that_stops(tmp_path):
     assert 0.9 < good["speed_ratio"] < 1.1 and 0.9 < good["feet_swing_ratio"] < 1.1 and good["touch_fraction"] == 1
     assert good["hips_m_per_s"] == pytest.approx(good["clip_hips_m_per_s"], rel=0.05)
     assert check_extend.verdict(good) == "walks"
+    slow = check_extend.measure_walk(write_bvh(tmp_path / "said24.bvh", walk[:150], fps=24.0),
+                                     write_bvh(tmp_path / "on24.bvh", walk, fps=24.0), 5.0)
+    own = check_extend.measure_walk(tmp_path / "said24.bvh", tmp_path / "on24.bvh", 5.0, fps=30.0)
+    assert slow["clip_hips_m_per_s"] == pytest.approx(0.8 * good["clip_hips_m_per_s"], rel=0.01)  # read at 24
+    assert own["clip_hips_m_per_s"] == pytest.approx(good["clip_hips_m_per_s"], rel=0.01)  # --keys-per-second 30
     bad = check_extend.measure_walk(take, stopped, 5.0)
     assert bad["speed_ratio"] < 0.4 and not bad["walks"] and not bad["moves_on"]
     assert check_extend.verdict(bad) == "does not walk (slows down; no second moves)"
@@ -80,7 +85,8 @@ def test_bad_arguments_are_refused_before_any_work(tmp_path, capsys):
     text = tmp_path / "notes.txt"
     text.write_text("not motion")
     for argv in (["cuts", str(text)], ["cuts", str(tmp_path / "missing.bvh")],
-                 ["cuts", "--seconds", "0", str(text)], ["walk", "--frames", "0", str(text)]):
+                 ["cuts", "--seconds", "0", str(text)], ["walk", "--frames", "0", str(text)],
+                 ["walk", "--keys-per-second", "0", str(text)]):
         with pytest.raises(SystemExit) as e:
             check_extend.main(argv + ["--out", str(tmp_path / "out")])
         assert e.value.code == 2, argv
