@@ -25,7 +25,7 @@ RATES = (24.0, 25.0, 30.0, 50.0, 60.0, 120.0)  # capture and scene rates a take 
 MIN_SWING_M = 0.12  # standard deviation of the feet's fore-aft offset (legs of 0.87 m) that counts as stepping
 MIN_CORRELATION = 0.5  # how alike one stride is to the next for the motion to count as periodic
 MIN_STRIDES = 2.0  # the stretch read must hold at least this many strides
-RATE_TOLERANCE = 1e-3  # a rate read from a BVH's rounded Frame Time (0.00833333 s: 120.0000048 fps) is that rate
+RATE_TOLERANCE = 1e-3  # a rate read from a BVH's rounded Frame Time (0.00833333 s: 120.000048 fps) is that rate
 
 
 @dataclass
