@@ -13,7 +13,6 @@ from __future__ import annotations
 import contextlib
 import importlib
 import os
-import re
 import sys
 import time
 import traceback
@@ -208,7 +207,7 @@ def run_file(bpy, job: dict) -> list[str]:
     action = obj.animation_data.action if obj.animation_data else None
     if action is None:
         raise BatchError(f"strnn.{job['operator']} left the armature without an action")
-    notes = [batch_hint(n) for n in importlib.import_module(f"{ADDON}.strnn_addon.stages.common").record_notes(action)]
+    notes = batch_notes(importlib.import_module(f"{ADDON}.strnn_addon.stages.common"), action)
     start, end = (int(round(f)) for f in action.frame_range)
     scene = bpy.context.scene
     scene.frame_start, scene.frame_end = start, end
@@ -230,11 +229,13 @@ def run_file(bpy, job: dict) -> list[str]:
     return notes
 
 
-def batch_hint(note: str) -> str:
-    """An operator's note as a batch reports it: where it says to set Keys per Second (the sidebar's), how to in a
-    batch."""
-    found = re.search(r"set Keys per Second to (\d+(?:\.\d+)?)", note)
-    return f"{note} (in a batch: --keys-per-second {found.group(1)})" if found else note
+def batch_notes(common, action) -> list[str]:
+    """The notes of the new action's record (``common.record_notes``) as a batch reports them: the pace's, where it
+    says to set Keys per Second (the sidebar's), also says how in a batch, from the rate the record suggests."""
+    pace = action.get(common.RECORD, {}).get("pace", {})
+    rate = pace.get("suggested_keys_per_second")
+    return [f"{note} (in a batch: --keys-per-second {rate:g})" if rate and note == pace.get("note") else note
+            for note in common.record_notes(action)]
 
 
 def to_file_axes(bpy, obj) -> None:

@@ -25,7 +25,6 @@ arguments.
 from __future__ import annotations
 
 import argparse
-import math
 import shutil
 import sys
 from pathlib import Path
@@ -41,10 +40,10 @@ else:  # run by path from a checkout
     import strnn_batch
 
 from model_core.eval.extend_evaluation import feet_lead, limb_speed
-from model_core.eval.metrics import CONTEXT, airborne_fraction, feet_report
+from model_core.eval.metrics import airborne_fraction, feet_report
 from model_core.io.bvh import BvhError, forward_kinematics, read_bvh
 from model_core.io.files import unwritable, write_json
-from model_core.motion.conventions import GROUND_AXES, MODEL_FPS, ROOT
+from model_core.motion.conventions import GROUND_AXES, MODEL_FPS, ROOT, min_scene_frames
 from model_core.motion.features import floor_height
 from model_core.rig.rigs import RigError, canonical_clip
 
@@ -99,9 +98,9 @@ def parse_args(argv=None):
 
 # ------------------------------------------------------------------------------------------ measuring
 def context_frames(fps: float) -> int:
-    """Frames a take at ``fps`` needs before a cut for Extend Clip to read the model's 20-frame context (the
-    operator's rule, ``pipeline.min_scene_frames``), and one to spare for how Blender rounds a file's rate."""
-    return max(CONTEXT, math.ceil((CONTEXT - 1) * fps / MODEL_FPS - 1e-6) + 2)
+    """Frames a take at ``fps`` needs before a cut for Extend Clip to read the model's context (the operator's
+    rule, :func:`conventions.min_scene_frames`), and one to spare for how Blender rounds a file's rate."""
+    return min_scene_frames(fps) + 1
 
 
 def cut_frames(frames: int, at: list[int] | None, horizon: int, fps: float = MODEL_FPS) -> list[int]:
@@ -297,19 +296,8 @@ def main(argv: list[str] | None = None) -> int:
     if args.json is not None:
         doc = {"check": args.check, "rows": rows, "failed": failed}
         doc |= {"seconds": args.seconds} if args.check == "cuts" else {"frames": args.frames, "last_s": args.last}
-        print(f"wrote {write_json(args.json, _plain(doc))}")
+        print(f"wrote {write_json(args.json, doc)}")
     return 1 if failed else 0
-
-
-def _plain(doc):
-    """``doc`` with NaN as None (JSON has no NaN)."""
-    if isinstance(doc, dict):
-        return {k: _plain(v) for k, v in doc.items()}
-    if isinstance(doc, list):
-        return [_plain(v) for v in doc]
-    if isinstance(doc, float) and np.isnan(doc):
-        return None
-    return doc
 
 
 if __name__ == "__main__":

@@ -122,7 +122,7 @@ def window_errors(engine, clips: list[np.ndarray], horizons_ms=HORIZONS_MS,
 def window_takes(clips: list[np.ndarray], frames: int, stride: int = STRIDE) -> np.ndarray:
     """Which of ``clips`` each window of :func:`window_starts` comes from ``[W]``: windows of one take err
     together, so a take is what an interval resamples (:func:`intervals.paired_gap`)."""
-    return np.array([i for i, pos in enumerate(clips) for _ in range(0, len(pos) - frames + 1, stride)], dtype=int)
+    return np.array([i for i, pos in enumerate(clips) for _ in window_starts([pos], frames, stride)], dtype=int)
 
 
 # ------------------------------------------------------------------ long horizon

@@ -288,7 +288,7 @@ class Engine:
     def full_context(self, ctx: np.ndarray) -> np.ndarray:
         """The last ``m`` frames of contexts ``[B, F, C]``; one of fewer frames is led in by its first frame's
         features (the first pose, moving as it moves there), so that a model that reads a longer context than the
-        product asks of a clip (:data:`pipeline.MIN_MODEL_FRAMES`) continues a short clip too."""
+        product asks of a clip (:data:`conventions.MIN_MODEL_FRAMES`) continues a short clip too."""
         if ctx.shape[1] >= self.m:
             return ctx[:, -self.m:]
         if ctx.shape[1] < 1:

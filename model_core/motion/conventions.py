@@ -15,11 +15,18 @@ Glossary
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 
 MODEL_FPS = 30.0
+MIN_MODEL_FRAMES = 20  # the context every operation reads, in model frames
+
+
+def min_scene_frames(fps: float) -> int:
+    """Frames at ``fps`` needed to span :data:`MIN_MODEL_FRAMES` frames at the model's rate."""
+    return max(MIN_MODEL_FRAMES, int(math.ceil((MIN_MODEL_FRAMES - 1) * fps / MODEL_FPS - 1e-6)) + 1)
 UP_AXIS = 1  # Y is up in model_core
 GROUND_AXES = (0, 2)  # X and Z span the ground plane
 

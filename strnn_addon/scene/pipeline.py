@@ -7,7 +7,6 @@ the file changes, so a failed run leaves the scene exactly as it was.
 
 from __future__ import annotations
 
-import math
 import re
 from dataclasses import dataclass
 
@@ -15,12 +14,17 @@ import bpy
 import numpy as np
 
 from ...model_core.motion import rotations
-from ...model_core.motion.conventions import JOINT_INDEX, JOINTS, MODEL_FPS, yup_to_zup, zup_to_yup
+from ...model_core.motion.conventions import (  # noqa: F401  (MIN_MODEL_FRAMES, min_scene_frames: the stages')
+    JOINT_INDEX,
+    JOINTS,
+    MIN_MODEL_FRAMES,
+    min_scene_frames,
+    yup_to_zup,
+    zup_to_yup,
+)
 from ...model_core.rig.controls import ControlSet, visual_local
 from ...model_core.rig.solve import Anchors, Rig, anchor_positions, fk, solve, solved_bones
 from . import anim, controls, mapping, rig_io
-
-MIN_MODEL_FRAMES = 20
 
 
 class UserError(ValueError):
@@ -52,11 +56,6 @@ def keys_per_second(context, obj) -> float:
     """How many of the action's frames make one second of its motion: the armature's Keys per Second
     (a take imported at another rate than it was captured), else the scene's frame rate."""
     return float(getattr(obj, "strnn_keys_per_second", 0.0) or scene_fps(context.scene))
-
-
-def min_scene_frames(fps: float) -> int:
-    """Scene frames needed to span :data:`MIN_MODEL_FRAMES` frames at the model's rate."""
-    return max(MIN_MODEL_FRAMES, int(math.ceil((MIN_MODEL_FRAMES - 1) * fps / MODEL_FPS - 1e-6)) + 1)
 
 
 def check_object(obj, need_action: bool = True) -> None:

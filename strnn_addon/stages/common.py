@@ -169,6 +169,7 @@ def pace_record(context, clip, end: int | None = None) -> dict:
     entry = {"stride_s": round(pace.stride_s, 3), "keys_per_second": float(clip.fps)}
     if pace.note():
         entry["note"] = pace.note()
+        entry["suggested_keys_per_second"] = pace.suggested_rate()
     return {"pace": entry}
 
 
