@@ -16,7 +16,6 @@ machine spinning BLAS threads make every timing many times worse.
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import platform
 import sys
@@ -164,9 +163,9 @@ def main(argv=None) -> int:
     print()
     print(report(res))
     if args.json:
-        args.json.parent.mkdir(parents=True, exist_ok=True)
-        args.json.write_text(json.dumps(res, indent=1))
-        print(f"wrote {args.json}")
+        from model_core.io.files import write_json
+
+        print(f"wrote {write_json(args.json, res)}")
     return 0
 
 

@@ -9,9 +9,12 @@ an error part way leaves the old file as it was.
 from __future__ import annotations
 
 import json
+import math
 import os
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from pathlib import Path
+
+import numpy as np
 
 
 def write_atomic(path: str | Path, write: Callable[[Path], object]) -> Path:
@@ -48,6 +51,22 @@ def write_text(path: str | Path, text: str) -> Path:
     return write_atomic(path, lambda p: p.write_text(text))
 
 
+def json_ready(doc):
+    """``doc`` with what strict JSON cannot hold made plain: a float that is not finite (NaN: a figure with
+    nothing to measure, e.g. no second of locomotion) becomes ``None``, NumPy scalars and arrays Python numbers
+    and lists, tuples lists. Python's ``json`` would write ``NaN``, which JSON readers in other languages and
+    ``jq`` refuse."""
+    if isinstance(doc, Mapping):
+        return {key: json_ready(value) for key, value in doc.items()}
+    if isinstance(doc, (list, tuple, np.ndarray)):
+        return [json_ready(value) for value in doc]
+    if isinstance(doc, np.generic):
+        doc = doc.item()
+    if isinstance(doc, float) and not math.isfinite(doc):
+        return None
+    return doc
+
+
 def write_json(path: str | Path, doc) -> Path:
-    """``doc`` as indented JSON."""
-    return write_text(path, json.dumps(doc, indent=1))
+    """``doc`` as indented, strict JSON (:func:`json_ready`: a figure that is NaN is written as null)."""
+    return write_text(path, json.dumps(json_ready(doc), indent=1, allow_nan=False))
