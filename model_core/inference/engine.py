@@ -96,6 +96,12 @@ LEARNT_BODY_TOLERANCE = 0.05
 # its companion) the rest: chosen on the held-out groups among 0.5 to 0.8 (model card, "What it is").
 SIMLPE_SHARE = 0.6
 
+# How many windows of a rollout lean on the release's regularised STRNN (checkpoint.REGULARISED) as far as the model
+# does not know the clip's motion (Engine.extrapolate's ``unfamiliar``): the first two, 1.33 s, where the motion is
+# still the clip's; every later window is the release's own, as a model trained with dropout and run without it
+# settles long rollouts into a stand (model card, "What it is").
+REGULARISED_WINDOWS = 2
+
 
 class Engine:
     """STRNN inference in NumPy. Build with :meth:`load`."""
@@ -139,6 +145,7 @@ class Engine:
         self.filter_context = bool(cfg.get("filter_context", False))
         self.companion = Engine(ckpt.companion) if ckpt.companion is not None else None
         self.simlpe = SiMLPeEngine(ckpt.simlpe) if ckpt.simlpe is not None else None
+        self.regularised = Engine(ckpt.regularised) if ckpt.regularised is not None else None
         self._gap = _UNREAD  # the release's gap model (Fill Gap's in-betweener): read on first use (gap)
 
     @property
@@ -246,7 +253,7 @@ class Engine:
         once = self.predict_once if decode else partial(self.predict_once, decode=False)
         return read_mirrored(once, context) if self.mirrored_reading else once(context)
 
-    def predict_first(self, context: np.ndarray) -> np.ndarray:
+    def predict_first(self, context: np.ndarray, unfamiliar: float | np.ndarray = 0.0) -> np.ndarray:
         """:meth:`predict` for the first window of a rollout: with a release that holds a second STRNN
         (:data:`checkpoint.COMPANION`), the average of the two models' predictions; with one that holds a siMLPe
         (:data:`checkpoint.SIMLPE`), that weighted with the siMLPe's by :data:`SIMLPE_SHARE`. Models trained
@@ -254,13 +261,29 @@ class Engine:
         the nearer on motion unlike the training data); but window after window an average drifts towards
         a slower, lower idle, so each later window is this model's own (model card). A partner that reads
         fewer frames than this model reads the last of them; one that predicts fewer frames continues its own
-        prediction as far (:func:`partner_ahead`)."""
-        own = self.predict(context)
+        prediction as far (:func:`partner_ahead`). ``unfamiliar`` (one share, or one per context ``[B]``): how far this
+        model's own reading goes towards its regularised model's (:meth:`lean_regularised`) before it is shared."""
+        own = self.lean_regularised(self.predict(context), context, unfamiliar, first=True)
         if self.companion is not None:
             own = 0.5 * (own + partner_ahead(self.companion, context, self.n))
         if self.simlpe is not None:
             own = (1.0 - SIMLPE_SHARE) * own + SIMLPE_SHARE * partner_ahead(self.simlpe, context, self.n)
         return own
+
+    def lean_regularised(self, own: np.ndarray, context: np.ndarray, unfamiliar: float | np.ndarray,
+                         first: bool = False) -> np.ndarray:
+        """This model's prediction ``own`` ``[B, n, C]`` from ``context`` ``[B, m, C]``, ``unfamiliar`` (0 to 1, one or
+        one per context) of the way towards its regularised model's (:data:`checkpoint.REGULARISED`: the release
+        fine-tuned with dropout, which predicts the next second of motion the release does not know better and
+        matches it on motion it does); ``own`` as it is without that model or where the share is 0. ``first``: the
+        rollout's first window (the regularised model reads the context as :meth:`predict` does), else a later one
+        (:meth:`predict_next`)."""
+        share = np.clip(np.asarray(unfamiliar, np.float32), 0.0, 1.0)
+        if self.regularised is None or not share.any():
+            return own
+        other = self.regularised.predict(context) if first else self.regularised.predict_next(context)
+        share = share.reshape(-1, 1, 1) if share.ndim else share
+        return (1.0 - share) * own + share * other
 
     def predict_next(self, context: np.ndarray) -> np.ndarray:
         """:meth:`predict` for a rollout's windows after the first, whose context is the model's own motion
@@ -298,7 +321,7 @@ class Engine:
     def extrapolate(self, seed: np.ndarray, frames: int, keep_bone_lengths: bool = True,
                     paired_windows: int | None = 1, memory: ClipMemory | None = None,
                     first_motion: float | np.ndarray = 1.0, settle: bool = False,
-                    floor: float | np.ndarray | None = None) -> np.ndarray:
+                    floor: float | np.ndarray | None = None, unfamiliar: float | np.ndarray = 0.0) -> np.ndarray:
         """Open-loop generation: repeat (take the last m frames, predict n more).
 
         ``seed``: raw features ``[m, C]`` or ``[B, m, C]``; returns ``[frames, C]`` or
@@ -324,7 +347,12 @@ class Engine:
         chunks, total = [], 0
         while total < frames:
             paired = paired_windows is None or len(chunks) < paired_windows
-            new = self.predict_first(ctx) if paired else self.predict_next(ctx)
+            if paired:
+                new = self.predict_first(ctx, unfamiliar if len(chunks) < REGULARISED_WINDOWS else 0.0)
+            else:
+                new = self.predict_next(ctx)
+                if len(chunks) < REGULARISED_WINDOWS:
+                    new = self.lean_regularised(new, ctx, unfamiliar)
             if memory is not None and (chunks or memory.first_scale is not None):
                 new = np.stack([memory.lean(c, w, first=not chunks, window=len(chunks)) for c, w in zip(ctx, new)])
             if not chunks:

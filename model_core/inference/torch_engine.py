@@ -54,6 +54,7 @@ class TorchEngine:
         self._std = torch.from_numpy(ckpt.std).to(self.device)
         self.companion = TorchEngine(ckpt.companion, device) if ckpt.companion is not None else None
         self.simlpe = SiMLPeEngine(ckpt.simlpe) if ckpt.simlpe is not None else None  # tiny: NumPy is as quick
+        self.regularised = TorchEngine(ckpt.regularised, device) if ckpt.regularised is not None else None
 
     @classmethod
     def load(cls, folder: str | Path | None = None, device: str | torch.device = "cpu") -> TorchEngine:
@@ -83,6 +84,7 @@ class TorchEngine:
     predict_next = Engine.predict_next
     predict_once = Engine.predict_once
     predict_first = Engine.predict_first
+    lean_regularised = Engine.lean_regularised
     full_context = Engine.full_context
     extrapolate = Engine.extrapolate
     reconstruct = Engine.reconstruct

@@ -31,6 +31,10 @@ COMPANION = "companion"
 # rollout is then a weighted average of the STRNN's prediction (and its companion's) with the siMLPe's
 # (Engine.predict_first, SIMLPE_SHARE), which predicts the next 20 frames of motion unlike the training data better.
 SIMLPE = "simlpe"
+# A release may hold a regularised STRNN in this subfolder (the release fine-tuned with dropout, which leans towards
+# the motion it learnt): on motion the release does not know, its first windows go that share of the way to this
+# model's (Engine.extrapolate's ``unfamiliar``, REGULARISED_WINDOWS), which is nearer the truth there.
+REGULARISED = "regularised"
 # A release may hold its gap model in this subfolder: the learnt in-betweener Fill Gap uses
 # (model_core/inference/gap_engine.py); without it Fill Gap bends the STRNN's continuation onto the target.
 GAP = "gap"
@@ -72,6 +76,7 @@ class Checkpoint:
     seed_names: list[str]
     companion: Checkpoint | None = None  # the second model of the first window (COMPANION)
     simlpe: Checkpoint | None = None  # the siMLPe that shares the first window (SIMLPE)
+    regularised: Checkpoint | None = None  # the STRNN unfamiliar motion's first windows lean on (REGULARISED)
     gap_folder: Path | None = None  # the release's gap model's folder (GAP), read by load_gap on first use
 
     def load_gap(self):
@@ -228,24 +233,33 @@ def load_release(folder: str | Path | None = None) -> Checkpoint:
             ckpt.companion = _partner(folder, ckpt, COMPANION, ARCHITECTURES[0])
         if (folder / SIMLPE / "model.json").exists():
             ckpt.simlpe = _partner(folder, ckpt, SIMLPE, ARCHITECTURES[1])
+        if (folder / REGULARISED / "model.json").exists():
+            ckpt.regularised = _partner(folder, ckpt, REGULARISED, ARCHITECTURES[0])
+            if any(ckpt.regularised.config.get(k) != ckpt.config.get(k) for k in ("encode_len", "predict_len")):
+                raise CheckpointError(f"{folder / REGULARISED}: a {REGULARISED} model must read (encode_len) and "
+                                      "predict (predict_len) as many frames as the release: copy the model folder "
+                                      "again")
         if (folder / GAP / "model.json").exists():
             ckpt.gap_folder = folder / GAP
     return ckpt
 
 
 def _partner(folder: Path, ckpt: Checkpoint, sub: str, architecture: str) -> Checkpoint:
-    """A model the release shares its first window with (:data:`COMPANION`, an STRNN; :data:`SIMLPE`, a siMLPe):
+    """A model the release shares its first windows with (:data:`COMPANION`, an STRNN; :data:`SIMLPE`, a siMLPe;
+    :data:`REGULARISED`, an STRNN):
     a generating ``architecture`` model without partners of its own that predicts and reads no more frames than the
     release (it reads the last of the release's context frames, and continues its own prediction as far as the
     release's window reaches)."""
     other = load_release(folder / sub)
     m, n = other.config.get("encode_len"), other.config.get("predict_len")
-    if other.architecture != architecture or other.purpose != PURPOSES[0] or other.companion is not None or \
-            other.simlpe is not None or not isinstance(n, int) or not 1 <= n <= ckpt.config.get("predict_len", 0) or \
-            not isinstance(m, int) or not 1 <= m <= ckpt.config.get("encode_len", 0):
-        raise CheckpointError(f"{folder / sub}: a {sub} must be a generating {architecture} model without a companion "
-                              "or siMLPe of its own that predicts no more frames (predict_len) and reads no more "
-                              "(encode_len) than the release: copy the model folder again")
+    own_partners = (other.companion, other.simlpe, other.regularised)
+    if other.architecture != architecture or other.purpose != PURPOSES[0] or any(p is not None for p in own_partners) \
+            or not isinstance(n, int) or not 1 <= n <= ckpt.config.get("predict_len", 0) or not isinstance(m, int) \
+            or not 1 <= m <= ckpt.config.get("encode_len", 0):
+        raise CheckpointError(f"{folder / sub}: a {sub} must be a generating {architecture} model without a "
+                              "companion, siMLPe or regularised model of its own that predicts no more frames "
+                              "(predict_len) and reads no more (encode_len) than the release: copy the model folder "
+                              "again")
     return other
 
 

@@ -58,7 +58,9 @@ def extend_positions(engine, pos: np.ndarray, fps: float, frames: int, memory: n
     same frame as ``pos``; usually more of the clip before it): the clip's own motion, which each predicted
     window leans on where the continuation comes back to something the clip did (the first only as far as the
     model does not know the context's motion: :func:`inference.memory.first_scale`). Where the model does not
-    know the motion and the clip has come to rest, the first window stays near the last pose (:func:`first_motion`).
+    know the motion and the clip has come to rest, the first window stays near the last pose (:func:`first_motion`),
+    and as far as it does not know it, the first two windows lean on the release's regularised model
+    (:meth:`Engine.extrapolate`'s ``unfamiliar``).
     A long continuation that settles into a stance stands where it is (:func:`stance.settle_stances`), and no
     new frame's feet go under the floor the clip stands on (:func:`stance.ground`): ``floor`` (a height in the same
     space), by default :func:`clip_floor` of ``memory`` (else of ``pos``). Every new frame is on the clip's bones
@@ -72,6 +74,8 @@ def extend_positions(engine, pos: np.ndarray, fps: float, frames: int, memory: n
     still = first_motion(model_ctx, momentum)
     if still < 1.0:
         kw["first_motion"] = still
+    if momentum > 0:  # the first windows lean on the release's regularised model as far as the motion is unfamiliar
+        kw["unfamiliar"] = momentum
     if floor is None:
         floor = clip_floor(pos if memory is None else memory, fps)
     kw["floor"] = (floor - norm.ground) * norm.scale  # in the model's units, as Normalisation.to_model puts it

@@ -584,3 +584,74 @@ def test_the_shipped_model_carries_its_companion():
     engine = Engine.load()
     assert engine.companion is not None and engine.companion.m <= engine.m and engine.companion.n == engine.n
     assert engine.companion.ckpt.meta["training"]  # how it was made is in its model.json
+
+
+def test_a_regularised_model_shares_the_first_two_windows_as_far_as_the_motion_is_unfamiliar(tmp_path):
+    """A release with a regularised STRNN (checkpoint.REGULARISED): with ``unfamiliar`` 0 a rollout is the release's
+    own, exactly; with a share per seed, the release's reading in the first window (before its companion shares it)
+    and its second window go that share of the way to the regularised model's, and the third window is the release's
+    own again, in both engines. A regularised model that reads or predicts other frames than the release is
+    refused."""
+    from model_core.inference.engine import REGULARISED_WINDOWS
+    from model_core.io.checkpoint import COMPANION, REGULARISED
+
+    assert REGULARISED_WINDOWS == 2
+    random_release(tmp_path / "alone", seed=0)
+    random_release(tmp_path / "alone" / COMPANION, seed=5)
+    random_release(tmp_path / "both", seed=0)
+    random_release(tmp_path / "both" / COMPANION, seed=5)
+    random_release(tmp_path / "both" / REGULARISED, seed=7)
+    own, both = Engine.load(tmp_path / "alone"), Engine.load(tmp_path / "both")
+    reg, comp = Engine.load(tmp_path / "both" / REGULARISED), Engine.load(tmp_path / "alone" / COMPANION)
+    assert own.regularised is None and both.regularised is not None and reg.regularised is None
+    seeds = both.seeds
+    frames = 3 * both.n
+    np.testing.assert_array_equal(both.extrapolate(seeds, frames), own.extrapolate(seeds, frames))
+    share = np.linspace(0.0, 1.0, len(seeds)).astype(np.float32)
+    out = both.extrapolate(seeds, frames, unfamiliar=share)
+    lengths, s = bone_lengths(seeds), share[:, None, None]
+    first = project_to_skeleton(0.5 * ((1 - s) * own.predict(seeds) + s * reg.predict(seeds) + comp.predict(seeds)),
+                                lengths)
+    np.testing.assert_allclose(out[:, :both.n], first, atol=1e-5, rtol=0)
+    ctx = np.concatenate([seeds, first], 1)[:, -both.m:]
+    second = project_to_skeleton((1 - s) * own.predict_next(ctx) + s * reg.predict_next(ctx), lengths)
+    np.testing.assert_allclose(out[:, both.n:2 * both.n], second, atol=1e-5, rtol=0)
+    ctx = np.concatenate([ctx, second], 1)[:, -both.m:]
+    np.testing.assert_allclose(out[:, 2 * both.n:], project_to_skeleton(own.predict_next(ctx), lengths), atol=1e-5,
+                               rtol=0)
+    assert np.abs(out[-1, :2 * both.n] - own.extrapolate(seeds, frames)[-1, :2 * both.n]).max() > 1e-3  # it counts
+    np.testing.assert_allclose(out[0], own.extrapolate(seeds, frames)[0], atol=1e-6, rtol=0)  # a share of 0: none
+    in_torch = TorchEngine.load(tmp_path / "both").extrapolate(seeds, frames, unfamiliar=share)
+    np.testing.assert_allclose(in_torch, out, atol=1e-4, rtol=0)
+    random_release(tmp_path / "odd", m=10, n=10)
+    random_release(tmp_path / "odd" / REGULARISED, m=10, n=5, seed=7)
+    with pytest.raises(CheckpointError, match="regularised"):
+        Engine.load(tmp_path / "odd")
+
+
+def test_extend_leans_on_a_regularised_model_only_where_the_model_does_not_know_the_motion(tmp_path):
+    """Extend (:func:`extend.extend_positions`) passes the clip's momentum share (how far the model does not know its
+    motion; :func:`familiarity.momentum_shares`) as ``unfamiliar``: beside the shipped release, with a regularised
+    model added (its companion standing in), a clip the model knows is extended exactly as before, one it does not
+    know otherwise."""
+    from model_core.io.checkpoint import COMPANION, REGULARISED
+    from model_core.ops.extend import extend_positions
+    from model_core.ops.familiarity import momentum_shares
+    from model_core.ops.normalise import fit_normalisation
+
+    release = tmp_path / "release"
+    release.mkdir()
+    for item in DEFAULT_MODEL.iterdir():
+        if item.name != REGULARISED:
+            (release / item.name).symlink_to(item)
+    (release / REGULARISED).symlink_to(DEFAULT_MODEL / COMPANION)
+    shipped, added = Engine.load(), Engine.load(release)
+    shipped.regularised = None
+    assert added.regularised is not None
+    clips = [features_to_positions(seed) for seed in shipped.seeds]
+    shares = [momentum_shares(shipped, fit_normalisation(c).to_model(c)[None])[0] for c in clips]
+    known, unknown = shares.index(0.0), shares.index(1.0)
+    for k, differs in ((known, False), (unknown, True)):
+        before = extend_positions(shipped, clips[k], 30.0, 45)
+        after = extend_positions(added, clips[k], 30.0, 45)
+        assert (np.abs(after - before).max() > 1e-3) == differs, k
