@@ -261,11 +261,13 @@ class Engine:
         the nearer on motion unlike the training data); but window after window an average drifts towards
         a slower, lower idle, so each later window is this model's own (model card). A partner that reads
         fewer frames than this model reads the last of them; one that predicts fewer frames continues its own
-        prediction as far (:func:`partner_ahead`). ``unfamiliar`` (one share, or one per context ``[B]``): how far this
-        model's own reading goes towards its regularised model's (:meth:`lean_regularised`) before it is shared."""
-        own = self.lean_regularised(self.predict(context), context, unfamiliar, first=True)
+        prediction as far (:func:`partner_ahead`). ``unfamiliar`` (one share, or one per context ``[B]``): how far the
+        STRNNs' prediction (this model's, with its companion's) goes towards the regularised model's
+        (:meth:`lean_regularised`) before the siMLPe shares it."""
+        own = self.predict(context)
         if self.companion is not None:
             own = 0.5 * (own + partner_ahead(self.companion, context, self.n))
+        own = self.lean_regularised(own, context, unfamiliar, first=True)
         if self.simlpe is not None:
             own = (1.0 - SIMLPE_SHARE) * own + SIMLPE_SHARE * partner_ahead(self.simlpe, context, self.n)
         return own

@@ -588,7 +588,7 @@ def test_the_shipped_model_carries_its_companion():
 
 def test_a_regularised_model_shares_the_first_two_windows_as_far_as_the_motion_is_unfamiliar(tmp_path):
     """A release with a regularised STRNN (checkpoint.REGULARISED): with ``unfamiliar`` 0 a rollout is the release's
-    own, exactly; with a share per seed, the release's reading in the first window (before its companion shares it)
+    own, exactly; with a share per seed, the first window's STRNNs (the release's reading averaged with its companion's)
     and its second window go that share of the way to the regularised model's, and the third window is the release's
     own again, in both engines. A regularised model that reads or predicts other frames than the release is
     refused."""
@@ -610,7 +610,7 @@ def test_a_regularised_model_shares_the_first_two_windows_as_far_as_the_motion_i
     share = np.linspace(0.0, 1.0, len(seeds)).astype(np.float32)
     out = both.extrapolate(seeds, frames, unfamiliar=share)
     lengths, s = bone_lengths(seeds), share[:, None, None]
-    first = project_to_skeleton(0.5 * ((1 - s) * own.predict(seeds) + s * reg.predict(seeds) + comp.predict(seeds)),
+    first = project_to_skeleton((1 - s) * 0.5 * (own.predict(seeds) + comp.predict(seeds)) + s * reg.predict(seeds),
                                 lengths)
     np.testing.assert_allclose(out[:, :both.n], first, atol=1e-5, rtol=0)
     ctx = np.concatenate([seeds, first], 1)[:, -both.m:]
