@@ -25,7 +25,7 @@ try:
 except ImportError:
     sys.exit("error: training needs PyTorch: bash scripts/setup.sh installs it; with pip: strnn-motion[torch]")
 
-from model_core.io.checkpoint import COMPANION, PURPOSES, SIMLPE  # noqa: E402
+from model_core.io.checkpoint import COMPANION, PURPOSES, REGULARISED, SIMLPE  # noqa: E402
 from model_core.model.dataset import DataError  # noqa: E402
 from model_core.model.strnn import STRNNConfig  # noqa: E402
 from model_core.model.training import TrainConfig, export_state, train  # noqa: E402
@@ -236,6 +236,11 @@ def strnn_run(args, argv):
         print(f"note: {args.init} has a siMLPe ({SIMLPE}/) that shares the first predicted window; this run did not "
               f"train it. Copy it to {Path(release) / SIMLPE} (or train one on this run's data with --arch simlpe), "
               "or the new release predicts without it.", file=sys.stderr)
+    if args.init and (Path(args.init) / REGULARISED / "model.json").exists():
+        print(f"note: {args.init} has a regularised model ({REGULARISED}/) that the first two windows of unfamiliar "
+              f"motion lean on; this run did not train it. Fine-tune this run's release the same way with "
+              f"--dropout 0.2 (--init {release}) and copy that run's release folder to {Path(release) / REGULARISED}, "
+              "or Extend continues unfamiliar motion without it.", file=sys.stderr)
     return release
 
 

@@ -182,7 +182,8 @@ class BaselineEngine:
     mirrored_reading = Engine.mirrored_reading
     predict = predict_next = Engine.predict  # one model, no decoder: every window the same
     predict_first = Engine.predict_first
-    companion = simlpe = None  # a baseline release is one model
+    lean_regularised = Engine.lean_regularised
+    companion = simlpe = regularised = None  # a baseline release is one model
     full_context = Engine.full_context
     extrapolate = Engine.extrapolate
     extend = Engine.extend

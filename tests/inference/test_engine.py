@@ -586,6 +586,15 @@ def test_the_shipped_model_carries_its_companion():
     assert engine.companion.ckpt.meta["training"]  # how it was made is in its model.json
 
 
+def test_the_shipped_model_carries_its_regularised_model_fine_tuned_from_it_with_dropout():
+    engine = Engine.load()
+    reg = engine.regularised
+    assert reg is not None and (reg.m, reg.n) == (engine.m, engine.n)
+    training = reg.ckpt.meta["training"]  # how it was made is in its model.json: the release's command, with dropout
+    assert "--dropout 0.2" in training["command"] and "--init models/strnn_default" in training["command"]
+    assert training["init"]["training"]["command"] == engine.ckpt.meta["training"]["command"]
+
+
 def test_a_regularised_model_shares_the_first_two_windows_as_far_as_the_motion_is_unfamiliar(tmp_path):
     """A release with a regularised STRNN (checkpoint.REGULARISED): with ``unfamiliar`` 0 a rollout is the release's
     own, exactly; with a share per seed, the first window's STRNNs (the release's reading averaged with its companion's)

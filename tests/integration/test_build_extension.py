@@ -114,6 +114,7 @@ def test_the_zip_ships_each_models_card_and_leaves_its_history_in_the_repository
     names = names_of(out)
     assert "models/strnn_default/MODEL_CARD.md" in names and "models/strnn_default/model.safetensors" in names
     assert "models/strnn_default/companion/model.safetensors" in names
+    assert "models/strnn_default/regularised/model.safetensors" in names
     assert not any(n.endswith("HISTORY.md") for n in names)
 
 

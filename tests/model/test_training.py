@@ -428,6 +428,12 @@ def test_fine_tuning_a_release_with_partners_says_how_to_carry_them(walk_folder,
     assert main([*tiny_run, "--out", str(tmp_path / "tuned2"), "--init", str(base)]) == 0
     err = capsys.readouterr().err
     assert "siMLPe (simlpe/)" in err and str(tmp_path / "tuned2" / "release" / "simlpe") in err
+    assert "regularised" not in err
+    shutil.copytree(base, base / "regularised", ignore=shutil.ignore_patterns("companion", "simlpe", "regularised"))
+    assert main([*tiny_run, "--out", str(tmp_path / "tuned3"), "--init", str(base)]) == 0
+    err = capsys.readouterr().err
+    assert "regularised model (regularised/)" in err and "--dropout 0.2" in err
+    assert str(tmp_path / "tuned3" / "release" / "regularised") in err
 
 
 def test_noisy_contexts_with_rotation_jitter_keep_bone_lengths_and_position_noise_does_not(walk_folder):
