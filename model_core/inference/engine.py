@@ -274,12 +274,12 @@ class Engine:
 
     def lean_regularised(self, own: np.ndarray, context: np.ndarray, unfamiliar: float | np.ndarray,
                          first: bool = False) -> np.ndarray:
-        """This model's prediction ``own`` ``[B, n, C]`` from ``context`` ``[B, m, C]``, ``unfamiliar`` (0 to 1, one or
-        one per context) of the way towards its regularised model's (:data:`checkpoint.REGULARISED`: the release
-        fine-tuned with dropout, which predicts the next second of motion the release does not know better and
-        matches it on motion it does); ``own`` as it is without that model or where the share is 0. ``first``: the
-        rollout's first window (the regularised model reads the context as :meth:`predict` does), else a later one
-        (:meth:`predict_next`)."""
+        """A prediction ``own`` ``[B, n, C]`` from ``context`` ``[B, m, C]`` (this model's, or in a first window its
+        and its companion's average) moved ``unfamiliar`` (0 to 1, one or one per context) of the way towards the
+        regularised model's (:data:`checkpoint.REGULARISED`: the release fine-tuned with dropout, nearer the truth
+        over the next second of motion the release does not know, further on motion it does, where the share is 0);
+        ``own`` as it is without that model or where every share is 0. ``first``: the rollout's first window (the
+        regularised model reads the context as :meth:`predict` does), else a later one (:meth:`predict_next`)."""
         share = np.clip(np.asarray(unfamiliar, np.float32), 0.0, 1.0)
         if self.regularised is None or not share.any():
             return own
