@@ -58,7 +58,9 @@ def json_ready(doc):
     ``jq`` refuse."""
     if isinstance(doc, Mapping):
         return {key: json_ready(value) for key, value in doc.items()}
-    if isinstance(doc, (list, tuple, np.ndarray)):
+    if isinstance(doc, np.ndarray):
+        return json_ready(doc.tolist())  # a 0-d array is one number
+    if isinstance(doc, (list, tuple)):
         return [json_ready(value) for value in doc]
     if isinstance(doc, np.generic):
         doc = doc.item()

@@ -59,10 +59,11 @@ def test_json_holds_a_figure_with_nothing_to_measure_as_null_and_numpy_as_number
     # evaluate.py's feet figures are NaN for a rollout with no second of locomotion; JSON has no NaN, and a
     # strict reader (jq, a browser, another language) refuses the whole file if one is written.
     doc = {"touch_fraction": [float("nan"), 1.0, np.float32(0.5)], "speed": np.float64(math.inf),
-           "rows": (np.int64(3), np.array([1.5, np.nan])), "ok": True, "name": None}
+           "rows": (np.int64(3), np.array([1.5, np.nan])), "ok": True, "name": None,
+           "mean": np.asarray(2.5)}
     path = write_json(tmp_path / "evaluation.json", doc)
     back = json.loads(path.read_text(), parse_constant=_strict)
     assert back == {"touch_fraction": [None, 1.0, 0.5], "speed": None, "rows": [3, [1.5, None]], "ok": True,
-                    "name": None}
+                    "name": None, "mean": 2.5}
     with pytest.raises(ValueError, match="not JSON"):
         json.loads(json.dumps(float("nan")), parse_constant=_strict)  # what json.dumps alone writes
