@@ -146,7 +146,7 @@ def print_table(result: dict, extra: dict):
     if "long_horizon" in result:
         lh = result["long_horizon"]
         print(f"\nLong horizon: {lh['seeds']} seeds x {lh['frames']} frames: exploded {lh['exploded']}, "
-              f"frozen {lh['frozen']}")
+              f"frozen {lh['frozen']} (still for 2 s or more, longer than their take ever is)")
         print_seeds(lh)
         blocks = [sum(b[i] for b in lh["d1nn_per_block"]) / len(lh["d1nn_per_block"])
                   for i in range(len(lh["d1nn_per_block"][0]))]

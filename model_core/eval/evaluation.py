@@ -32,6 +32,7 @@ from .metrics import (
     pose_vectors,
     rollout_report,
     segments,
+    still_frames,
     upsample,
     window_errors,
     window_starts,
@@ -144,7 +145,9 @@ def evaluate_long_horizon(engine, clips, frames: int, seeds: int, reference=None
     seed's take, its first :data:`extend.MEMORY_S` seconds at most, the clip it extends: what an animator gets
     extending the take. Speeds are against the seed's whole take (``seed_take_speed_ratio``); ``as_extend`` also
     gives the clip's last second against it (``clip_end_speed_ratio``: under 1, the clip comes to rest), and judges
-    the feet over the floor Extend keeps them out of, the clip's own where it ends (:func:`extend.clip_floor`)."""
+    the feet over the floor Extend keeps them out of, the clip's own where it ends (:func:`extend.clip_floor`).
+    ``frozen`` counts the rollouts that hold still (:func:`metrics.still_frames`) for 2 s or more and longer than
+    their seed's take ever does; ``still_frames`` and ``take_still_frames`` give both runs seed by seed."""
     ref_clips = reference or clips
     speed, median = data_speed(ref_clips), data_speed(ref_clips, np.median)
     ref = np.concatenate([segments(pose_vectors(c.features)) for c in ref_clips if len(c.features) >= 40])
@@ -181,9 +184,14 @@ def _judge_rollouts(rollouts, chosen, floors: list[float], by_name: dict, speed:
     reports = [rollout_report(r, p, speed, ref, block=block, median_speed=median, floor=floor)
                for r, (name, p), floor in zip(rollouts, chosen, floors)]
     take_speed = [float(joint_speed(by_name[name]).mean()) for name, _ in chosen]
+    # a rollout is frozen where it holds still for 2 s or more and longer than its seed's take ever does (a raised
+    # hand the take holds up for 2.4 s, held as long, is the take's motion, not a rollout that died)
+    take_still = [still_frames(by_name[name], median) for name, _ in chosen]
     return {
         "exploded": int(sum(r.exploded for r in reports)),
-        "frozen": int(sum(r.frozen for r in reports)),
+        "frozen": int(sum(r.frozen and r.still_frames > t for r, t in zip(reports, take_still))),
+        "still_frames": [r.still_frames for r in reports],
+        "take_still_frames": take_still,
         "speed_ratio_last_1000": [r.speed_ratio_last_1000 for r in reports],
         "d1nn_per_block": [r.d1nn_per_block for r in reports],
         "seed_clips": [name for name, _ in chosen],

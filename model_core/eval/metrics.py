@@ -147,10 +147,22 @@ def longest_run(mask: np.ndarray) -> int:
 @dataclass
 class RolloutReport:
     exploded: bool
-    frozen: bool
+    frozen: bool  # still (:func:`still_frames`) for FREEZE_FRAMES frames or more
     speed_ratio_last_1000: float
     d1nn_per_block: list[float]
     feet: FeetReport | None = None
+    still_frames: int = 0  # the longest run of frames held still (:func:`still_frames`)
+
+
+# A rollout is still where its joints' mean speed is under FREEZE_SHARE of the data's median, frozen where it stays
+# so for FREEZE_FRAMES frames (2 s) or more.
+FREEZE_SHARE, FREEZE_FRAMES = 0.1, 60
+
+
+def still_frames(pos: np.ndarray, median_speed: float) -> int:
+    """The longest run of frames of ``pos`` ``[F, J, 3]`` whose joints' mean speed is under :data:`FREEZE_SHARE`
+    of ``median_speed`` (m / frame): how long the motion holds still."""
+    return longest_run(joint_speed(pos) < FREEZE_SHARE * median_speed) if len(pos) > 1 else 0
 
 
 # Grounding of generated motion: in locomotion (the root faster than this) the lowest foot joint
@@ -226,14 +238,15 @@ def rollout_report(feats: np.ndarray, seed_pos: np.ndarray, data_speed: float, r
     """Judge one open-loop rollout (raw features ``[N, C]``) against its seed positions ``[m, J, 3]``.
 
     ``data_speed``: the data's mean joint speed (m / frame), for the speed ratio; ``median_speed``
-    (default: ``data_speed``): its median, for the freeze test (below 10 % of it for 60 frames);
+    (default: ``data_speed``): its median, for the freeze test (below :data:`FREEZE_SHARE` of it for
+    :data:`FREEZE_FRAMES` frames);
     ``floor``: the floor height of the seed's take, for the grounding of the last ``block`` frames."""
     pos = features_to_positions(feats)
     finite = bool(np.isfinite(pos).all())
     rest = np.median(bone_lengths_of(seed_pos), 0)
     exploded = not finite or bool((np.abs(bone_lengths_of(pos) / rest - 1.0) > 0.10).any())
     speed = joint_speed(pos) if finite else np.zeros(len(pos) - 1)
-    frozen = longest_run(speed < 0.1 * (data_speed if median_speed is None else median_speed)) >= 60
+    still = longest_run(speed < FREEZE_SHARE * (data_speed if median_speed is None else median_speed))
     ratio = float(speed[-block:].mean() / data_speed) if finite else float("nan")
     blocks = []
     for b in range(0, len(feats) - block + 1, block):
@@ -241,7 +254,7 @@ def rollout_report(feats: np.ndarray, seed_pos: np.ndarray, data_speed: float, r
         blocks.append(float(d1nn(seg, ref_segments).mean()) if finite and len(seg) else float("nan"))
     feet = feet_report(pos[-block:], floor, contacts=feats[-block:, LAYOUT.contacts]) \
         if finite and floor is not None else None
-    return RolloutReport(exploded, frozen, ratio, blocks, feet)
+    return RolloutReport(exploded, still >= FREEZE_FRAMES, ratio, blocks, feet, int(still))
 
 
 # ------------------------------------------------------------------ denoising

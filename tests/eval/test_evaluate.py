@@ -79,7 +79,9 @@ def test_one_run_writes_exactly_the_metric_keys(walks, tmp_path, capsys):
     assert zero[-1] > zero[0] and const[-1] > const[0]  # errors grow with the horizon
     lh = doc["long_horizon"]
     assert set(lh) == {"frames", "seeds", "exploded", "frozen", "speed_ratio_last_1000", "d1nn_per_block",
-                       "seed_clips", "seed_take_speed_ratio", "d1nn_drift", "feet", "as_extend"}
+                       "seed_clips", "seed_take_speed_ratio", "d1nn_drift", "feet", "as_extend", "still_frames",
+                       "take_still_frames"}
+    assert lh["take_still_frames"] == [0, 0] and len(lh["still_frames"]) == 2  # walks never stand still
     assert lh["frames"] == 1000 and lh["seeds"] == 2 and len(lh["speed_ratio_last_1000"]) == 2
     assert len(lh["seed_clips"]) == len(lh["seed_take_speed_ratio"]) == 2
     assert set(lh["feet"]) == {"touch_fraction", "floor_offset_cm", "sink_cm", "airborne_fraction",

@@ -52,6 +52,28 @@ def test_a_held_pose_is_a_freeze_and_a_grown_skeleton_an_explosion():
     assert report.exploded and np.isnan(report.speed_ratio_last_1000)
 
 
+def test_a_rollout_is_frozen_only_where_it_holds_still_longer_than_its_take_ever_does():
+    """The long horizon's ``frozen`` (evaluation._judge_rollouts): a rollout that stands still for 79 frames is
+    frozen after a take that never stands still (a walk), not after one that holds a pose for 100 frames; both
+    runs are given seed by seed (``still_frames``, ``take_still_frames``)."""
+    from model_core.eval.evaluation import _judge_rollouts
+
+    pos, feats = _walk(400)
+    speed = float(joint_speed(pos).mean())
+    ref = segments(pose_vectors(feats[:200]))
+    rollout = feats[:300].copy()
+    rollout[100:180] = feats[100]  # 80 frames alike: 79 frames of no motion
+    rollout[100:180, 63:66] = 0.0  # and no root motion
+    holds = np.concatenate([pos[:150], np.repeat(pos[150:151], 100, 0), pos[151:300] - pos[151] + pos[150]])
+    takes = {"walk": pos, "holds": holds}
+    judged = _judge_rollouts([rollout, rollout], [("walk", pos[:20]), ("holds", holds[:20])], [0.0, 0.0], takes,
+                             speed, speed, ref)
+    assert judged["still_frames"] == [79, 79] and judged["take_still_frames"][0] == 0
+    assert judged["take_still_frames"][1] >= 99
+    assert judged["frozen"] == 1  # after the walk only
+    assert rollout_report(rollout, pos[:20], speed, ref, block=100).frozen  # the report itself: 2 s or more
+
+
 def test_freeze_threshold_is_a_tenth_of_the_median_speed():
     pos, feats = _walk(400)
     speed = float(joint_speed(pos).mean())
