@@ -23,14 +23,15 @@ MEMORY_S = 20.0
 # metres a model frame at the model's scale): a fighter paused at the cut is better left near the pause than
 # given a move the model invents. The speed is the clip's most recent (0.13 s), so that a move that has just
 # ended reads as the pause it is, not as the move before it. The later windows are the model's own from there.
-# Chosen on the held-out groups (model card, "A clip at rest in motion the model does not know"). 0: off.
+# Chosen on the held-out groups (model card, "A clip at rest in motion the model does not know"). 0: off (and
+# STILL_KNOWN_SPEED with it).
 STILL_SPEED, STILL_POWER, STILL_FRAMES = 0.01, 2.0, 4
 # Where the model knows the motion (momentum share 0) a clip reads as at rest only under STILL_KNOWN_SPEED (the
 # same power): a raised hand held still, a bow paused at its lowest, a stance kept. The model's own move there is a
 # guess at when the performer moves on, and it guesses early; held, the first window is nearer the take at 0.5 s
 # more often (the held-out style: further than holding the pose in 78 of 617 windows, against 119). Between the two
 # the held share is their mean weighed by the momentum share. Chosen on the held-out groups and the validation split
-# (model card, "A clip at rest in motion the model knows"). 0: off.
+# (models/strnn_default/HISTORY.md, "a clip at rest in motion the model knows is held too"). 0: off.
 STILL_KNOWN_SPEED = 0.003
 # The report says the first window was held near the last pose when it kept at most this share of its motion.
 HELD_NOTE = 0.75
