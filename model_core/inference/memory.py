@@ -38,6 +38,13 @@ FIRST_SCALE, FIRST_FAMILIAR = 0.3, 0.1
 # clip that ends in a pause does not replay its pause for ever. Chosen on the held-out groups and the validation
 # split (model card, "Long extensions play on"). LONG_FROM None: every window leans as the second does.
 LONG_FROM, LONG_SHARE, LONG_SCALE, PLAYHEAD_TIE = 2, 0.9, 10.0, 0.1
+# What the clip followed over the last RECENT windows (and their neighbours) is not taken again from LONG_FROM on,
+# where a stretch elsewhere is left: a clip that ends in a pause neither replays its last window for ever nor
+# ping-pongs between its last few (a fighter's closing guard looped in 1.3 s cycles for a minute); where the clip
+# runs out, the continuation goes back to where it matches best outside them and plays on from there. Where that
+# leaves under a window's worth of the clip (a clip of a cycle or two), the oldest are let go first. 1: only the
+# stretch just followed.
+RECENT = 15
 # The channels compared: joint positions and root motion (contacts follow the motion, they are not matched).
 _CHANNELS = np.r_[np.arange(LAYOUT.size)[LAYOUT.positions], np.arange(LAYOUT.size)[LAYOUT.root]]
 
@@ -52,6 +59,7 @@ class ClipMemory:
         self.first_scale = first_scale  # the first window's scale (:func:`first_scale`; None: not leant on)
         self.scale = np.asarray(std, np.float32)[_CHANNELS]
         self.last = None  # the stretch last followed (index into ends)
+        self.recent: list[int] = []  # the stretches followed in the last RECENT windows, oldest first
         self.playhead = None  # the stretch that follows it, where the clip goes on
         first = max(m, MATCH_FRAMES)  # a stretch ends at frame e - 1 and is followed by frames e .. e + n - 1
         self.ends = np.arange(first, len(self.feats) - n + 1)
@@ -72,16 +80,15 @@ class ClipMemory:
         probe = np.asarray(context[-MATCH_FRAMES:, _CHANNELS], np.float32) / self.scale
         distance = ((self.keys - probe) ** 2).mean((1, 2))
         long = not first and LONG_FROM is not None and window >= LONG_FROM
-        if long and self.last is not None:  # not the stretch just followed again, nor its neighbours
-            distance = distance.copy()
-            distance[max(0, self.last - self.n + 1):self.last + self.n] = np.inf
-            if not np.isfinite(distance).any():  # a clip too short for anything else
-                distance[self.last] = ((self.keys[self.last] - probe) ** 2).mean()
-        best = int(np.argmin(distance))
+        allowed = self._unfollowed(distance) if long and self.recent else distance  # not what was just followed
+        best = int(np.argmin(allowed))
+        # the playhead goes forward only, so it never loops: it is exempt from the rule above
         if long and self.playhead is not None and distance[self.playhead] <= distance[best] + PLAYHEAD_TIE:
             best = self.playhead
         self.last = best
-        self.playhead = best + self.n if best + self.n < len(self.ends) else None
+        self.recent = (self.recent + [best])[-max(1, RECENT):]
+        # where the clip goes on: the stretch a window on, or its last where it ends sooner (its last frames are played)
+        self.playhead = min(best + self.n, len(self.ends) - 1) if best < len(self.ends) - 1 else None
         end = self.ends[best]
         frames = self.feats[end:end + self.n].copy()
         jump = last - self.feats[end - 1]
@@ -92,6 +99,25 @@ class ClipMemory:
             return float(np.exp(-distance[best] / self.first_scale)) if self.first_scale else 0.0, frames
         share, scale = (LONG_SHARE, LONG_SCALE) if long else (SHARE, SCALE)
         return float(share * np.exp(-distance[best] / scale)), frames
+
+    def _unfollowed(self, distance: np.ndarray) -> np.ndarray:
+        """``distance`` with the stretches followed in the last :data:`RECENT` windows and their neighbours ruled out;
+        where that leaves under a window's worth of stretches (a short clip) the oldest are let go first, so that a
+        clip of a cycle or two plays its cycle, and the one just followed stays ruled out while anything is left."""
+        for k in range(len(self.recent), 0, -1):
+            out = self._without(distance, self.recent[-k:])
+            left = np.isfinite(out).sum()
+            if left >= self.n or (k == 1 and left):
+                return out
+        out = np.full_like(distance, np.inf)  # a clip too short for anything else: the stretch just followed
+        out[self.last] = distance[self.last]
+        return out
+
+    def _without(self, distance: np.ndarray, followed: list[int]) -> np.ndarray:
+        out = distance.copy()
+        for r in followed:
+            out[max(0, r - self.n + 1):r + self.n] = np.inf
+        return out
 
     def lean(self, context: np.ndarray, predicted: np.ndarray, first: bool = False, window: int = 1) -> np.ndarray:
         """``predicted`` ``[n, C]`` (the model's window after ``context`` ``[T, C]``; ``first``: the rollout's

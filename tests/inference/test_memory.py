@@ -154,3 +154,44 @@ def test_later_windows_play_on_through_the_clip_and_never_replay_the_stretch_jus
     followed = going.last
     going.follow(walk[40:100], window=mem.LONG_FROM + 1)  # the continuation did what the clip did next
     assert going.last == followed + 20
+
+
+def _followed(clip: ClipMemory, context: np.ndarray, windows: int) -> list[int]:
+    """The stretches (their ends' frames) ``clip`` follows over ``windows`` long windows from one ``context``."""
+    out = []
+    for w in range(mem.LONG_FROM, mem.LONG_FROM + windows):
+        clip.follow(context, window=w)
+        out.append(int(clip.ends[clip.last]))
+    return out
+
+
+def test_a_continuation_at_rest_does_not_loop_the_clips_last_pause(monkeypatch):
+    """A clip that walks for 800 frames and ends in a 2 s pause, continued at rest: from ``LONG_FROM`` on nothing
+    followed in the last ``RECENT`` windows (or within a window of it) is followed again but where the clip plays
+    on (the stretch after the one just followed, or the clip's last), so once the pause has been played the
+    continuation goes back into the walk instead of swinging between two stretches of the pause (what it did with
+    only the stretch just followed ruled out: a fighter's closing guard looped for a minute)."""
+    walk = walk_features(800)
+    feats = np.concatenate([walk, np.repeat(walk[-1:], 60, 0)])
+    still = feats[-40:]
+    ends = _followed(ClipMemory(feats, 20, 20, np.ones(LAYOUT.size, np.float32)), still, 2 * mem.RECENT)
+    for i, e in enumerate(ends[1:], start=1):
+        plays_on = 0 < e - ends[i - 1] <= 20
+        assert plays_on or all(abs(e - f) >= 20 for f in ends[max(0, i - mem.RECENT):i]), ends
+    assert min(ends) < 800  # back into the walk
+    monkeypatch.setattr(mem, "RECENT", 1)
+    looped = _followed(ClipMemory(feats, 20, 20, np.ones(LAYOUT.size, np.float32)), still, 2 * mem.RECENT)
+    assert min(looped) >= 800 and len(set(looped)) <= 3  # within the pause, back and forth
+
+
+def test_a_clip_of_a_cycle_or_two_plays_its_cycle(monkeypatch):
+    """Where the clip offers too few stretches to keep ``RECENT`` windows apart (82 frames, one stride and a bit),
+    the oldest are let go first, as long as a window's worth of stretches is left: the continuation follows the
+    same stretches as with only the stretch just followed ruled out, never that one twice running, and plays the
+    clip to its last stretch."""
+    feats = walk_features(82)
+    clip = ClipMemory(feats, 20, 20, np.ones(LAYOUT.size, np.float32))
+    walking = _followed(clip, feats[-40:], 12)
+    assert all(a != b for a, b in zip(walking, walking[1:])) and clip.ends[-1] in walking, walking
+    monkeypatch.setattr(mem, "RECENT", 1)
+    assert walking == _followed(ClipMemory(feats, 20, 20, np.ones(LAYOUT.size, np.float32)), feats[-40:], 12)

@@ -269,6 +269,25 @@ def test_a_long_extension_of_a_wave_keeps_waving(mocap_root, monkeypatch):
     assert plays_on > 0.4 > settles
 
 
+def test_a_long_extension_of_a_fight_that_ends_in_a_pause_goes_on_fighting(mocap_root, monkeypatch):
+    """Martial arts the model never learnt (08, whose fighter ends in a guard) extended by 2,000 frames as Extend
+    Clip makes it, following the clip: its last 1,000 frames move at 0.4 x the take's joint speed or more, as the
+    long horizon measures it. With only the stretch just followed ruled out (``memory.RECENT`` 1) the continuation
+    swung between the clip's last two stretches, its closing guard, for the whole minute (0.09 x)."""
+    from model_core.eval.metrics import joint_speed
+    from model_core.inference import memory
+    from model_core.rig.rigs import load_clip
+
+    engine = Engine.load()
+    take = load_clip(mocap_root / "cmu/acrnn-dance/martial/08.bvh").astype(np.float64)
+    clip = take[:600]
+    ratio = lambda: joint_speed(extend_positions(engine, clip[-20:], 30.0, 2000, memory=clip)[-1000:]).mean() \
+        / joint_speed(take).mean()  # noqa: E731
+    fights_on = ratio()
+    monkeypatch.setattr(memory, "RECENT", 1)
+    assert fights_on > 0.4 > ratio()
+
+
 @pytest.mark.parametrize("path", ["bandai-namco/dataset-2/dataset-2_wave-both-hands_active_031.bvh",
                                   "cmu/iclone/006_01.bvh", "cmu/acrnn-dance/martial/08.bvh"])
 def test_later_windows_without_the_decoder_continue_as_with_it(mocap_root, path):
