@@ -42,8 +42,9 @@ LONG_FROM, LONG_SHARE, LONG_SCALE, PLAYHEAD_TIE = 2, 0.9, 10.0, 0.1
 # where a stretch elsewhere is left: a clip that ends in a pause neither replays its last window for ever nor
 # ping-pongs between its last few (a fighter's closing guard looped in 1.3 s cycles for a minute); where the clip
 # runs out, the continuation goes back to where it matches best outside them and plays on from there. Where that
-# leaves under a window's worth of the clip (a clip of a cycle or two), the oldest are let go first. 1: only the
-# stretch just followed.
+# leaves under a window's worth of the clip (a clip of a cycle or two), the oldest are let go first. Chosen on the
+# held-out groups and the validation split (models/strnn_default/HISTORY.md, "a long extension no longer loops the
+# clip's last seconds"): 10 s. 1: only the stretch just followed.
 RECENT = 15
 # The channels compared: joint positions and root motion (contacts follow the motion, they are not matched).
 _CHANNELS = np.r_[np.arange(LAYOUT.size)[LAYOUT.positions], np.arange(LAYOUT.size)[LAYOUT.root]]
@@ -114,6 +115,7 @@ class ClipMemory:
         return out
 
     def _without(self, distance: np.ndarray, followed: list[int]) -> np.ndarray:
+        """``distance`` with each stretch of ``followed`` and those within a window of it ruled out (infinite)."""
         out = distance.copy()
         for r in followed:
             out[max(0, r - self.n + 1):r + self.n] = np.inf
