@@ -19,7 +19,7 @@ import numpy as np
 from ..model_core.inference.steps import drive
 from ..model_core.io.checkpoint import DEFAULT_MODEL, default_denoiser
 from ..model_core.ops.denoise import denoise_positions_steps, result_familiarity
-from ..model_core.ops.extend import extend_positions, first_window
+from ..model_core.ops.extend import extend_positions, first_window, following
 from ..model_core.ops.familiarity import clip_familiarity
 from ..model_core.ops.follow import PathFollower, follow_curve_positions_steps
 from ..model_core.ops.inbetween import inbetween_positions
@@ -219,6 +219,12 @@ def run_first_window(prefs, positions: np.ndarray, fps: float, memory: np.ndarra
     with threads(prefs):
         return _kept(_key("first_window", engine, positions, fps, memory),
                      lambda: first_window(engine, positions, fps, memory))
+
+
+def run_following(prefs, memory: np.ndarray, fps: float, frames: int):
+    """What *Follow the Clip* has to follow in ``memory`` for an extension of ``frames`` (:func:`extend.following`;
+    None where the extension ends before it plays on through the clip)."""
+    return following(generator_from_prefs(prefs), memory, fps, frames)
 
 
 def run_inbetween(prefs, before: np.ndarray, after: np.ndarray, fps: float, frames: int,

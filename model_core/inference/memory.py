@@ -128,6 +128,13 @@ class ClipMemory:
         return predicted + share * (frames[:len(predicted)] - predicted) if share > 0 else predicted
 
 
+def play_frames(m: int, n: int) -> int:
+    """The fewest frames (the model's rate) a clip needs for a long continuation to play on through it, for a model
+    that reads ``m`` frames and predicts ``n``: two of its stretches a window apart. A shorter clip gives every long
+    window the same stretch to follow, and the continuation repeats the clip's last ``n`` frames."""
+    return max(m, MATCH_FRAMES) + 2 * n
+
+
 def first_scale(momentum: float) -> float | None:
     """The first window's scale for a context whose momentum share is ``momentum`` (:data:`FIRST_SCALE`)."""
     if FIRST_SCALE <= 0.0:

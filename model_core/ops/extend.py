@@ -7,6 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..inference import memory as clip_memory
 from ..inference.memory import first_scale
 from ..motion.conventions import MODEL_FPS
 from ..motion.features import floor_height
@@ -57,6 +58,35 @@ class FirstWindow:
                 f"stay near the last pose ({1.0 - self.motion:.0%} of the model's move held back) rather than "
                 "invent a move: if the performer was about to move, key it or extend from a frame where the "
                 "clip still moves")
+
+
+@dataclass(frozen=True)
+class Following:
+    """What *Follow the Clip* has to follow in a long extension (:func:`following`)."""
+    seconds: float  # the clip it reads, in seconds
+    needed_s: float  # the least that lets a long continuation play on through the clip (memory.play_frames)
+    window_s: float  # one window of the model's
+    from_s: float  # from when the continuation plays on through the clip (memory.LONG_FROM windows)
+
+    def note(self) -> str:
+        """A sentence for the operator's report; empty unless the clip is too short to play on through."""
+        if self.seconds >= self.needed_s:
+            return ""
+        return (f"The action gives Follow the Clip {self.seconds:.2f} s to follow, under the {self.needed_s:.2g} s "
+                f"it needs to play on, so after the first {self.from_s:.1f} s the new frames keep repeating one "
+                f"{self.window_s:.2f} s stretch of it: extend a longer action, or turn Follow the Clip off for the "
+                "model's own continuation")
+
+
+def following(engine, memory: np.ndarray, fps: float, frames: int) -> Following | None:
+    """What :func:`extend_positions` has to follow in ``memory`` ``[M, 21, 3]`` at ``fps`` for an extension of
+    ``frames`` scene frames, for the operator's report; None where the extension ends before it plays on through the
+    clip (:data:`memory.LONG_FROM`), so the clip's length does not matter."""
+    window_s, long_from = engine.n / MODEL_FPS, clip_memory.LONG_FROM
+    if long_from is None or frames / fps <= long_from * window_s:
+        return None
+    return Following(len(_at_model_rate(memory, fps)) / MODEL_FPS,
+                     clip_memory.play_frames(engine.m, engine.n) / MODEL_FPS, window_s, long_from * window_s)
 
 
 def extend_positions(engine, pos: np.ndarray, fps: float, frames: int, memory: np.ndarray | None = None,

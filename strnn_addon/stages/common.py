@@ -144,6 +144,18 @@ def first_window_record(found) -> dict:
     return {"first_window": entry}
 
 
+def following_record(found) -> dict:
+    """The record's ``follow_clip`` entry (:class:`extend.Following`): how many seconds of the clip Follow the Clip
+    had, how many it needs to play on through it, and the note the operator reports where it had fewer; empty
+    where it did not follow the clip or the extension ends before it plays on (``found`` None)."""
+    if found is None:
+        return {}
+    entry = {"seconds": round(found.seconds, 3), "needed_s": round(found.needed_s, 3)}
+    if found.note():
+        entry["note"] = found.note()
+    return {"follow_clip": entry}
+
+
 PACE_SECONDS = 8.0  # how much of the action, up to its end, the pace is read from
 PACE_SAMPLES = 96  # at most this many frames of it are read (evaluated rigs pay per frame)
 
@@ -174,9 +186,10 @@ def pace_record(context, clip, end: int | None = None) -> dict:
 
 
 def record_notes(action) -> list[str]:
-    """The notes of a new action's record (its pace, familiarity and held first window), in that order."""
+    """The notes of a new action's record (its pace, familiarity, held first window and what Follow the Clip had
+    to follow), in that order."""
     record = action.get(RECORD, {})
-    notes = [record.get(key, {}).get("note", "") for key in ("pace", "familiarity", "first_window")]
+    notes = [record.get(key, {}).get("note", "") for key in ("pace", "familiarity", "first_window", "follow_clip")]
     return [str(note) for note in notes if note]
 
 

@@ -13,6 +13,7 @@ from ..scene.pipeline import UserError
 from .common import (
     familiarity_record,
     first_window_record,
+    following_record,
     lock,
     made_by,
     model_call,
@@ -93,6 +94,9 @@ def extend_steps(context, obj, *, frames: int = 120, context_frames: int = 0, fo
     record.update(familiarity_record(model_call(engine_bridge.run_familiarity, prefs(context), pos, clip.fps)))
     held = model_call(engine_bridge.run_first_window, prefs(context), pos, clip.fps, followed)
     record.update(first_window_record(held))
+    if followed is not None:
+        record.update(following_record(model_call(engine_bridge.run_following, prefs(context), followed, clip.fps,
+                                                  frames)))
     record.update(pace_record(context, clip, end))
     replace = None if end == clip.last else (end + 0.5, float("inf"))  # the old tail goes
     return write_new(context, clip, "extended", new_frames, loc, rot, previous, replace, record,

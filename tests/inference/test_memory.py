@@ -195,3 +195,18 @@ def test_a_clip_of_a_cycle_or_two_plays_its_cycle(monkeypatch):
     assert all(a != b for a, b in zip(walking, walking[1:])) and clip.ends[-1] in walking, walking
     monkeypatch.setattr(mem, "RECENT", 1)
     assert walking == _followed(ClipMemory(feats, 20, 20, np.ones(LAYOUT.size, np.float32)), feats[-40:], 12)
+
+
+@pytest.mark.parametrize("short", [True, False])
+def test_a_clip_shorter_than_play_frames_follows_one_stretch_for_ever(short):
+    """``memory.play_frames`` is where a clip starts to offer two stretches a window apart: one frame shorter, every
+    long window after the first two follows the same stretch (the report's note, ``extend.Following``); that long,
+    they take turns, a window apart."""
+    frames = mem.play_frames(20, 20) - (1 if short else 0)
+    feats = walk_features(frames)
+    clip = ClipMemory(feats, 20, 20, np.ones(LAYOUT.size, np.float32))
+    ends = _followed(clip, feats[-40:], 8)[2:]
+    if short:
+        assert len(set(ends)) == 1, ends
+    else:
+        assert len(set(ends)) == 2 and abs(ends[0] - ends[1]) >= 20, ends

@@ -269,6 +269,20 @@ def test_a_long_extension_of_a_wave_keeps_waving(mocap_root, monkeypatch):
     assert plays_on > 0.4 > settles
 
 
+def test_extend_says_when_the_clip_is_too_short_to_play_on():
+    """``extend.following``: a clip under ``memory.play_frames`` (2 s for the shipped model) extended past the
+    windows that play on through the clip gets a note that says what that means (one stretch repeated) and what to
+    do; a 2 s clip, and an extension that ends before those windows, get none (None for the latter)."""
+    from model_core.ops.extend import following
+
+    engine = Engine.load()
+    short = following(engine, walking_skeleton(45).astype(np.float64), 30.0, 120)
+    assert short.seconds == pytest.approx(1.5) and short.needed_s == pytest.approx(2.0)
+    assert "repeating one 0.67 s stretch" in short.note() and "Follow the Clip off" in short.note()
+    assert following(engine, walking_skeleton(120).astype(np.float64), 60.0, 240).note() == ""  # 2 s at 60 fps
+    assert following(engine, walking_skeleton(45).astype(np.float64), 30.0, 40) is None  # ends within 1.33 s
+
+
 def test_a_long_extension_of_a_fight_that_ends_in_a_pause_goes_on_fighting(mocap_root, monkeypatch):
     """Martial arts the model never learnt (08, whose fighter ends in a guard) extended by 2,000 frames as Extend
     Clip makes it, following the clip: its last 1,000 frames move at 0.4 x the take's joint speed or more, as the
