@@ -59,13 +59,17 @@ class ClipMemory:
         self.n = n
         self.first_scale = first_scale  # the first window's scale (:func:`first_scale`; None: not leant on)
         self.scale = np.asarray(std, np.float32)[_CHANNELS]
-        self.last = None  # the stretch last followed (index into ends)
-        self.recent: list[int] = []  # the stretches followed in the last RECENT windows, oldest first
+        self.recent: list[int] = []  # the stretches followed in the last RECENT windows (index into ends), oldest first
         self.playhead = None  # the stretch that follows it, where the clip goes on
         first = max(m, MATCH_FRAMES)  # a stretch ends at frame e - 1 and is followed by frames e .. e + n - 1
         self.ends = np.arange(first, len(self.feats) - n + 1)
         self.keys = np.stack([self.feats[e - MATCH_FRAMES:e, _CHANNELS] for e in self.ends]) / self.scale \
             if len(self.ends) else np.zeros((0, MATCH_FRAMES, len(_CHANNELS)), np.float32)
+
+    @property
+    def last(self) -> int | None:
+        """The stretch last followed (index into ends; None before the first window)."""
+        return self.recent[-1] if self.recent else None
 
     def __len__(self) -> int:
         """How many stretches the clip offers (0: too short to lean on)."""
@@ -86,7 +90,6 @@ class ClipMemory:
         # the playhead goes forward only, so it never loops: it is exempt from the rule above
         if long and self.playhead is not None and distance[self.playhead] <= distance[best] + PLAYHEAD_TIE:
             best = self.playhead
-        self.last = best
         self.recent = (self.recent + [best])[-max(1, RECENT):]
         # where the clip goes on: the stretch a window on, or its last where it ends sooner (its last frames are played)
         self.playhead = min(best + self.n, len(self.ends) - 1) if best < len(self.ends) - 1 else None
@@ -130,8 +133,8 @@ class ClipMemory:
 
 def play_frames(m: int, n: int) -> int:
     """The fewest frames (the model's rate) a clip needs for a long continuation to play on through it, for a model
-    that reads ``m`` frames and predicts ``n``: two of its stretches a window apart. A shorter clip gives every long
-    window the same stretch to follow, and the continuation repeats the clip's last ``n`` frames."""
+    that reads ``m`` frames and predicts ``n``: two of its stretches a window apart. In a shorter clip every long
+    window after the first follows the same stretch, and the continuation keeps repeating its ``n`` frames."""
     return max(m, MATCH_FRAMES) + 2 * n
 
 

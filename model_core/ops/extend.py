@@ -85,7 +85,7 @@ def following(engine, memory: np.ndarray, fps: float, frames: int) -> Following 
     window_s, long_from = engine.n / MODEL_FPS, clip_memory.LONG_FROM
     if long_from is None or frames / fps <= long_from * window_s:
         return None
-    return Following(len(_at_model_rate(memory, fps)) / MODEL_FPS,
+    return Following(model_frames_available(len(memory), fps) / MODEL_FPS,
                      clip_memory.play_frames(engine.m, engine.n) / MODEL_FPS, window_s, long_from * window_s)
 
 
