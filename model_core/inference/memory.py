@@ -19,7 +19,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..motion.conventions import LAYOUT
+from ..motion.conventions import LAYOUT, MODEL_FPS
+from ..motion.stance import STANCE_SHARE
 
 SHARE = 0.8  # the clip's share of a window where its frames match the continuation's exactly
 SCALE = 1.0  # the mean squared normalised distance at which the share has fallen to SHARE / e
@@ -46,6 +47,16 @@ LONG_FROM, LONG_SHARE, LONG_SCALE, PLAYHEAD_TIE = 2, 0.9, 10.0, 0.1
 # held-out groups and the validation split (models/strnn_default/HISTORY.md, "a long extension no longer loops the
 # clip's last seconds"): 10 s. 1: only the stretch just followed.
 RECENT = 15
+# A clip too short to play on through (under play_frames: a raised hand of 1.5 s) offers no two stretches a window
+# apart, so from LONG_FROM on a continuation following it kept repeating one window of it for ever (the arms pumping
+# in a 0.67 s cycle at 0.2 to 0.5 x the take's speed). There the long windows follow the clip played on instead
+# (played_on): back and forth where the clip stands (raised hands come down the way they went up, never faster than
+# the clip moves them), round where it does not (a run's next stride is its first; played backwards, a run or a walk
+# in place would step backwards). It stands where its root's mean ground speed is under TRAVEL_SPEED and every heel
+# and toe is down in stance.STANCE_SHARE of its frames (459 of the data's 463 clips under 2 s stand, all raised
+# hands; the 4 others run). Chosen on the validation split's 17 clips under 2 s (models/strnn_default/HISTORY.md,
+# "a clip too short to play on is played back and forth").
+TRAVEL_SPEED = 0.3  # m / s (the long horizon's locomotion threshold)
 # The channels compared: joint positions and root motion (contacts follow the motion, they are not matched).
 _CHANNELS = np.r_[np.arange(LAYOUT.size)[LAYOUT.positions], np.arange(LAYOUT.size)[LAYOUT.root]]
 
@@ -65,6 +76,10 @@ class ClipMemory:
         self.ends = np.arange(first, len(self.feats) - n + 1)
         self.keys = np.stack([self.feats[e - MATCH_FRAMES:e, _CHANNELS] for e in self.ends]) / self.scale \
             if len(self.ends) else np.zeros((0, MATCH_FRAMES, len(_CHANNELS)), np.float32)
+        # what the long windows of a clip too short to play on through follow (None: the clip itself)
+        long_enough = max(play_frames(m, n), (RECENT + 3) * n)  # never short of stretches the rule leaves
+        self.played_on = ClipMemory(played_on(self.feats, long_enough), m, n, std) \
+            if MATCH_FRAMES < len(self.feats) < play_frames(m, n) else None
 
     @property
     def last(self) -> int | None:
@@ -78,13 +93,16 @@ class ClipMemory:
     def follow(self, context: np.ndarray, first: bool = False, window: int = 1) -> tuple[float, np.ndarray]:
         """(the clip's share, the ``n`` frames ``[n, C]`` that followed its stretch nearest ``context`` ``[T, C]``,
         moved to start where ``context`` ends); share 0 (and the context's last frame held) without stretches.
-        ``window``: the rollout's window this is for (0 the first; from :data:`LONG_FROM` on the clip plays on)."""
+        ``window``: the rollout's window this is for (0 the first; from :data:`LONG_FROM` on the clip plays on,
+        a clip too short for that :func:`played_on`)."""
+        long = not first and LONG_FROM is not None and window >= LONG_FROM
+        if long and self.played_on is not None:
+            return self.played_on.follow(context, first, window)
         last = np.asarray(context[-1], np.float32)
         if not len(self.ends):
             return 0.0, np.repeat(last[None], self.n, 0)
         probe = np.asarray(context[-MATCH_FRAMES:, _CHANNELS], np.float32) / self.scale
         distance = ((self.keys - probe) ** 2).mean((1, 2))
-        long = not first and LONG_FROM is not None and window >= LONG_FROM
         allowed = self._unfollowed(distance) if long and self.recent else distance  # not what was just followed
         best = int(np.argmin(allowed))
         # the playhead goes forward only, so it never loops: it is exempt from the rule above
@@ -134,8 +152,42 @@ class ClipMemory:
 def play_frames(m: int, n: int) -> int:
     """The fewest frames (the model's rate) a clip needs for a long continuation to play on through it, for a model
     that reads ``m`` frames and predicts ``n``: two of its stretches a window apart. In a shorter clip every long
-    window after the first follows the same stretch, and the continuation keeps repeating its ``n`` frames."""
+    window would follow the same stretch, repeating its ``n`` frames; they follow the clip :func:`played_on`."""
     return max(m, MATCH_FRAMES) + 2 * n
+
+
+def stands(feats: np.ndarray) -> bool:
+    """Whether a clip ``[F, C]`` (raw features at the model's rate) stands where it is: its root's mean ground speed
+    under :data:`TRAVEL_SPEED` and every heel and toe down in ``STANCE_SHARE`` of its frames (raised or waving
+    hands, a bow). Such a clip too short to play on through is played back and forth, any other round
+    (:func:`played_on`)."""
+    feats = np.asarray(feats)
+    speed = float(np.linalg.norm(feats[:, LAYOUT.velocity], axis=1).mean()) * MODEL_FPS
+    return speed < TRAVEL_SPEED and float((feats[:, LAYOUT.contacts] > 0.5).all(-1).mean()) >= STANCE_SHARE
+
+
+def played_on(feats: np.ndarray, frames: int) -> np.ndarray:
+    """A clip ``[F, C]`` (raw features at the model's rate) played on to at least ``frames`` frames: back and forth
+    where it :func:`stands` (played backwards, the root's velocity and turn reversed), round where it does not (each
+    repeat moved to start where the last ended, the jump fading out over :data:`ALIGN_FRAMES`, as a followed
+    stretch's does). Each part starts on the frame the last ended on."""
+    feats = np.asarray(feats, np.float32)
+    if stands(feats):
+        back = feats[::-1].copy()
+        back[:, LAYOUT.root] *= -1.0
+        cycle = [back[1:], feats[1:]]
+    else:
+        again = feats.copy()
+        jump = feats[-1] - feats[0]
+        jump[LAYOUT.contacts] = 0.0
+        again += np.clip(1.0 - np.arange(len(feats)) / ALIGN_FRAMES, 0.0, 1.0)[:, None] * jump
+        cycle = [again[1:]]
+    parts, total = [feats], len(feats)
+    while total < frames:
+        part = cycle[(len(parts) - 1) % len(cycle)]
+        parts.append(part)
+        total += len(part)
+    return np.concatenate(parts)
 
 
 def first_scale(momentum: float) -> float | None:

@@ -10,7 +10,7 @@ import numpy as np
 from ..inference import memory as clip_memory
 from ..inference.memory import first_scale
 from ..motion.conventions import MODEL_FPS
-from ..motion.features import floor_height
+from ..motion.features import floor_height, positions_to_features
 from .familiarity import momentum_shares
 from .normalise import fit_normalisation, model_frames_available, sample_at
 from .skeleton import join_clip
@@ -67,15 +67,24 @@ class Following:
     needed_s: float  # the least that lets a long continuation play on through the clip (memory.play_frames)
     window_s: float  # one window of the model's
     from_s: float  # from when the continuation plays on through the clip (memory.LONG_FROM windows)
+    stands: bool  # the clip stands where it is (memory.stands): a clip too short to play on is played back and forth
+
+    @property
+    def plays(self) -> str:
+        """How a clip too short to play on through is played on (:func:`memory.played_on`): "back and forth" where
+        it stands, else "round"; empty where the clip is long enough."""
+        if self.seconds >= self.needed_s:
+            return ""
+        return "back and forth" if self.stands else "round"
 
     def note(self) -> str:
         """A sentence for the operator's report; empty unless the clip is too short to play on through."""
-        if self.seconds >= self.needed_s:
+        if not self.plays:
             return ""
         return (f"The action gives Follow the Clip {self.seconds:.2f} s to follow, under the {self.needed_s:.2g} s "
-                f"it needs to play on, so after the first {self.from_s:.1f} s the new frames keep repeating one "
-                f"{self.window_s:.2f} s stretch of it: extend a longer action, or turn Follow the Clip off for the "
-                "model's own continuation")
+                f"it needs to play on through, so after the first {self.from_s:.1f} s the new frames play it "
+                f"{self.plays}, over and over: extend a longer action for a continuation that plays on, or turn "
+                "Follow the Clip off for the model's own continuation")
 
 
 def following(engine, memory: np.ndarray, fps: float, frames: int) -> Following | None:
@@ -85,8 +94,13 @@ def following(engine, memory: np.ndarray, fps: float, frames: int) -> Following 
     window_s, long_from = engine.n / MODEL_FPS, clip_memory.LONG_FROM
     if long_from is None or frames / fps <= long_from * window_s:
         return None
-    return Following(model_frames_available(len(memory), fps) / MODEL_FPS,
-                     clip_memory.play_frames(engine.m, engine.n) / MODEL_FPS, window_s, long_from * window_s)
+    available = model_frames_available(len(memory), fps)
+    stands = False
+    if available < clip_memory.play_frames(engine.m, engine.n):  # read as the model reads it, where it matters
+        clip = _at_model_rate(memory, fps)
+        stands = clip_memory.stands(positions_to_features(fit_normalisation(clip).to_model(clip))[0])
+    return Following(available / MODEL_FPS, clip_memory.play_frames(engine.m, engine.n) / MODEL_FPS, window_s,
+                     long_from * window_s, stands)
 
 
 def extend_positions(engine, pos: np.ndarray, fps: float, frames: int, memory: np.ndarray | None = None,

@@ -210,14 +210,16 @@ def test_extend_says_when_the_motion_is_unfamiliar(real_model, addon):
 
 def test_extend_says_when_the_action_is_too_short_for_follow_the_clip(real_model, addon):
     """A 1.5 s action extended by 4 s with Follow the Clip on: the new action's record says how much the clip gave and
-    how much it needs, and the report tells the animator what that means and what to do; a 4 s action gets the
-    entry without a note, and with Follow the Clip off there is nothing to say."""
+    how much it needs, and how the clip was played on (back and forth or round), and the report tells the animator
+    what that means and what to do; a 4 s action gets the entry without a note, and with Follow the Clip off there
+    is nothing to say."""
     common = importlib.import_module(addon.__name__ + ".strnn_addon.stages.common")
     fps = bpy.context.scene.render.fps
     obj = mixamo_walk(int(1.5 * fps))
     assert bpy.ops.strnn.extend_clip(frames=4 * fps) == {"FINISHED"}
     entry = action_of(obj)["strnn"]["follow_clip"].to_dict()
     assert entry["seconds"] < entry["needed_s"] and "Follow the Clip off" in entry["note"]
+    assert f"play it {entry['plays']}, over and over" in entry["note"]  # the crude walk's hips barely travel
     assert "The action gives Follow the Clip" in common.report_note(action_of(obj))
     for seconds, follow in ((4, True), (1.5, False)):
         bpy.ops.wm.read_homefile(use_empty=True)

@@ -49,11 +49,17 @@ def test_motion_the_clip_never_did_gets_no_share():
     np.testing.assert_allclose(clip.lean(far, predicted), predicted, atol=1e-5)
 
 
-def test_a_clip_too_short_to_lean_on_changes_nothing():
+def test_a_clip_too_short_to_lean_on_is_followed_only_played_on():
+    """A clip one frame short of a context and a window offers no stretch: the windows before ``LONG_FROM`` are the
+    model's alone; the later ones follow the clip played on (``memory.played_on``)."""
     engine = Engine.load()
-    pos = walking_skeleton(39)  # one frame short of a context and a window
-    assert len(ClipMemory(positions_to_features(pos)[0], engine.m, engine.n, engine.std)) == 0
-    np.testing.assert_allclose(engine.extend(pos, 45, memory=pos), engine.extend(pos, 45), atol=1e-6)
+    pos = walking_skeleton(39)
+    clip = ClipMemory(positions_to_features(pos)[0], engine.m, engine.n, engine.std)
+    assert len(clip) == 0 and clip.played_on is not None
+    early = mem.LONG_FROM * engine.n
+    np.testing.assert_allclose(engine.extend(pos, early, memory=pos), engine.extend(pos, early), atol=1e-6)
+    later = engine.extend(pos, early + engine.n, memory=pos) - engine.extend(pos, early + engine.n)
+    assert np.abs(later[early:]).max() > 0.01
 
 
 def test_the_first_window_is_the_models_and_later_windows_lean_on_the_clip():
@@ -157,11 +163,12 @@ def test_later_windows_play_on_through_the_clip_and_never_replay_the_stretch_jus
 
 
 def _followed(clip: ClipMemory, context: np.ndarray, windows: int) -> list[int]:
-    """The stretches (their ends' frames) ``clip`` follows over ``windows`` long windows from one ``context``."""
-    out = []
+    """The stretches (their ends' frames) ``clip`` follows over ``windows`` long windows from one ``context``: of
+    the clip played on where it is too short to play on through (``ClipMemory.played_on``)."""
+    out, followed = [], clip.played_on or clip
     for w in range(mem.LONG_FROM, mem.LONG_FROM + windows):
         clip.follow(context, window=w)
-        out.append(int(clip.ends[clip.last]))
+        out.append(int(followed.ends[followed.last]))
     return out
 
 
@@ -198,15 +205,48 @@ def test_a_clip_of_a_cycle_or_two_plays_its_cycle(monkeypatch):
 
 
 @pytest.mark.parametrize("short", [True, False])
-def test_a_clip_shorter_than_play_frames_follows_one_stretch_for_ever(short):
-    """``memory.play_frames`` is where a clip starts to offer two stretches a window apart: one frame shorter, every
-    long window after the first two follows the same stretch (the report's note, ``extend.Following``); that long,
-    they take turns, a window apart."""
+def test_a_clip_shorter_than_play_frames_is_followed_played_on(short, monkeypatch):
+    """``memory.play_frames`` is where a clip starts to offer two stretches a window apart. One frame shorter, every
+    long window followed the same stretch (the arms of a 1.5 s raised hand pumping in a 0.67 s cycle for ever): the
+    long windows follow the clip played on (``memory.played_on``), playing on through it window after window; that
+    long, the clip's own two stretches take turns, a window apart."""
     frames = mem.play_frames(20, 20) - (1 if short else 0)
     feats = walk_features(frames)
     clip = ClipMemory(feats, 20, 20, np.ones(LAYOUT.size, np.float32))
+    assert (clip.played_on is not None) == short
     ends = _followed(clip, feats[-40:], 8)[2:]
     if short:
-        assert len(set(ends)) == 1, ends
+        assert len(set(ends)) >= 4 and any(b - a == 20 for a, b in zip(ends, ends[1:])), ends
+        monkeypatch.setattr(mem, "play_frames", lambda m, n: 0)  # as it was: the clip's own stretches
+        alone = ClipMemory(feats, 20, 20, np.ones(LAYOUT.size, np.float32))
+        assert alone.played_on is None and len(set(_followed(alone, feats[-40:], 8)[2:])) == 1
     else:
         assert len(set(ends)) == 2 and abs(ends[0] - ends[1]) >= 20, ends
+
+
+def test_a_clip_that_stands_is_played_back_and_forth_and_one_that_steps_round():
+    """``memory.played_on``: a clip that stands (raised hands: both feet down, the root all but still) goes on
+    backwards from its last frame, the root's velocity and turn reversed, and forwards again from its first, so no
+    frame jumps further than the clip's own frames do; a walk (or a walk on the spot) goes round, each repeat moved
+    to start where the last ended and its jump faded out over ``ALIGN_FRAMES``, walking forwards."""
+    walk = walk_features(50)
+    still = walk.copy()
+    still[:, LAYOUT.root] = 0.0
+    still[:, LAYOUT.velocity] = 0.002  # swaying 6 cm/s, both feet down: it stands
+    still[:, LAYOUT.contacts] = 1.0
+    assert mem.stands(still) and not mem.stands(walk)
+    on_the_spot = walk.copy()
+    on_the_spot[:, LAYOUT.root] = 0.0
+    assert not mem.stands(on_the_spot)  # its feet step
+    played = mem.played_on(still, 200)
+    assert len(played) >= 200
+    np.testing.assert_array_equal(played[:50], still)
+    np.testing.assert_allclose(played[49:99, LAYOUT.positions], still[::-1, LAYOUT.positions])
+    np.testing.assert_allclose(played[50:99, LAYOUT.velocity], -0.002)
+    np.testing.assert_allclose(played[99:148], still[1:])  # and forwards again
+    step = lambda f: np.abs(np.diff(f[:, LAYOUT.positions], axis=0)).max()  # noqa: E731
+    assert step(played) <= step(still) + 1e-6
+    round_ = mem.played_on(walk, 200)
+    assert len(round_) >= 200 and np.all(round_[:, LAYOUT.velocity][:, 1] * walk[:, LAYOUT.velocity][:, 1].mean() > 0)
+    np.testing.assert_allclose(round_[49], walk[-1])  # the repeat starts where the clip ended ...
+    np.testing.assert_allclose(round_[49 + mem.ALIGN_FRAMES:99], walk[mem.ALIGN_FRAMES:], atol=1e-6)  # ... as itself

@@ -271,14 +271,24 @@ def test_a_long_extension_of_a_wave_keeps_waving(mocap_root, monkeypatch):
 
 def test_extend_says_when_the_clip_is_too_short_to_play_on():
     """``extend.following``: a clip under ``memory.play_frames`` (2 s for the shipped model) extended past the
-    windows that play on through the clip gets a note that says what that means (one stretch repeated) and what to
-    do; a 2 s clip, and an extension that ends before those windows, get none (None for the latter)."""
+    windows that play on through the clip gets a note that says what that means (the clip played round where it
+    travels, back and forth where it stays in place: ``memory.played_on``) and what to do; a 2 s clip, and an
+    extension that ends before those windows, get none (None for the latter)."""
+    from model_core.motion.conventions import JOINT_INDEX
     from model_core.ops.extend import following
 
     engine = Engine.load()
-    short = following(engine, walking_skeleton(45).astype(np.float64), 30.0, 120)
+    walk = walking_skeleton(45).astype(np.float64)
+    short = following(engine, walk, 30.0, 120)
     assert short.seconds == pytest.approx(1.5) and short.needed_s == pytest.approx(2.0)
-    assert "repeating one 0.67 s stretch" in short.note() and "Follow the Clip off" in short.note()
+    assert short.plays == "round" and "play it round, over and over" in short.note()
+    assert "Follow the Clip off" in short.note()
+    on_the_spot = following(engine, walk - walk[:, :1] * np.array([1.0, 0.0, 1.0]), 30.0, 120)
+    assert on_the_spot.plays == "round"  # a walk on the spot steps: played backwards it would step backwards
+    raising = np.repeat(walk[:1], 45, 0)  # standing, the right hand raised 30 cm over 1.5 s
+    raising[:, [JOINT_INDEX["r_wrist"], JOINT_INDEX["r_fingertip"]], 1] += np.linspace(0.0, 0.3, 45)[:, None]
+    standing = following(engine, raising, 30.0, 120)
+    assert standing.plays == "back and forth" and "play it back and forth" in standing.note()
     assert following(engine, walking_skeleton(120).astype(np.float64), 60.0, 240).note() == ""  # 2 s at 60 fps
     assert following(engine, walking_skeleton(45).astype(np.float64), 30.0, 40) is None  # ends within 1.33 s
 
@@ -300,6 +310,28 @@ def test_a_long_extension_of_a_fight_that_ends_in_a_pause_goes_on_fighting(mocap
     fights_on = ratio()
     monkeypatch.setattr(memory, "RECENT", 1)
     assert fights_on > 0.4 > ratio()
+
+
+def test_a_long_extension_of_a_raised_hand_too_short_to_play_on_goes_on_raising_it(mocap_root, monkeypatch):
+    """A 1.6 s take of raised hands (validation's raise-up-both-hands active 047, under ``memory.play_frames``)
+    extended by 2,000 frames as Extend Clip makes it: played back and forth (``memory.played_on``) its last 1,000
+    frames move at 0.4 x the take's joint speed or more, no joint ever faster than the take's fastest; following the
+    clip's own stretches, the arms pumped in one 0.67 s stretch at 0.36 x."""
+    from model_core.eval.metrics import joint_speed
+    from model_core.inference import memory
+    from model_core.rig.rigs import load_clip
+
+    engine = Engine.load()
+    take = load_clip(mocap_root / "bandai-namco/dataset-2/dataset-2_raise-up-both-hands_active_047.bvh")
+    take = take.astype(np.float64)
+    assert len(take) < memory.play_frames(engine.m, engine.n)
+    last = lambda: extend_positions(engine, take[-20:], 30.0, 2000, memory=take)[-1000:]  # noqa: E731
+    ratio = lambda p: joint_speed(p).mean() / joint_speed(take).mean()  # noqa: E731
+    fastest = lambda p: np.linalg.norm(np.diff(p, axis=0), axis=-1).max()  # noqa: E731
+    played_on = last()
+    assert ratio(played_on) > 0.4 and fastest(played_on) <= 1.05 * fastest(take)
+    monkeypatch.setattr(memory, "play_frames", lambda m, n: 0)  # the clip's own stretches alone
+    assert ratio(last()) < 0.4
 
 
 @pytest.mark.parametrize("path", ["bandai-namco/dataset-2/dataset-2_wave-both-hands_active_031.bvh",
