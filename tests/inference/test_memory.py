@@ -224,10 +224,11 @@ def test_a_clip_shorter_than_play_frames_is_followed_played_on(short, monkeypatc
         assert len(set(ends)) == 2 and abs(ends[0] - ends[1]) >= 20, ends
 
 
-def test_a_clip_that_stands_is_played_back_and_forth_and_one_that_steps_round():
+def test_a_clip_that_stands_is_played_back_and_forth_and_one_that_steps_round(monkeypatch):
     """``memory.played_on``: a clip that stands (raised hands: both feet down, the root all but still) goes on
     backwards from its last frame, the root's velocity and turn reversed, and forwards again from its first, so no
-    frame jumps further than the clip's own frames do; a walk (or a walk on the spot) goes round, each repeat moved
+    frame jumps further than the clip's own frames do, and each turn is eased over ``EASE_FRAMES`` either side (a
+    hand slows to its turn instead of bouncing off it); a walk (or a walk on the spot) goes round, each repeat moved
     to start where the last ended and its jump faded out over ``ALIGN_FRAMES``, walking forwards."""
     walk = walk_features(50)
     still = walk.copy()
@@ -238,15 +239,19 @@ def test_a_clip_that_stands_is_played_back_and_forth_and_one_that_steps_round():
     on_the_spot = walk.copy()
     on_the_spot[:, LAYOUT.root] = 0.0
     assert not mem.stands(on_the_spot)  # its feet step
-    played = mem.played_on(still, 200)
-    assert len(played) >= 200
-    np.testing.assert_array_equal(played[:50], still)
-    np.testing.assert_allclose(played[49:99, LAYOUT.positions], still[::-1, LAYOUT.positions])
-    np.testing.assert_allclose(played[50:99, LAYOUT.velocity], -0.002)
-    np.testing.assert_allclose(played[99:148], still[1:])  # and forwards again
+    played, k = mem.played_on(still, 200), 2 * mem.EASE_FRAMES  # frames further than k from a turn are the clip's
+    assert len(played) >= 200 and mem.EASE_FRAMES > 0
+    np.testing.assert_array_equal(played[:50 - k], still[:50 - k])
+    np.testing.assert_allclose(played[49 + k:99 - k, LAYOUT.positions], still[::-1][k:50 - k, LAYOUT.positions])
+    np.testing.assert_allclose(played[49 + k:99 - k, LAYOUT.velocity], -0.002)
+    np.testing.assert_allclose(played[98 + k:148 - k], still[k:50 - k])  # and forwards again
     step = lambda f: np.abs(np.diff(f[:, LAYOUT.positions], axis=0)).max()  # noqa: E731
+    turn = lambda f: np.abs(np.diff(f[:, LAYOUT.positions], 2, axis=0)).max()  # noqa: E731
     assert step(played) <= step(still) + 1e-6
     round_ = mem.played_on(walk, 200)
     assert len(round_) >= 200 and np.all(round_[:, LAYOUT.velocity][:, 1] * walk[:, LAYOUT.velocity][:, 1].mean() > 0)
-    np.testing.assert_allclose(round_[49], walk[-1])  # the repeat starts where the clip ended ...
-    np.testing.assert_allclose(round_[49 + mem.ALIGN_FRAMES:99], walk[mem.ALIGN_FRAMES:], atol=1e-6)  # ... as itself
+    assert step(round_) <= step(walk) + 1e-6  # the repeat goes on from where the clip ended, no frame jumping
+    again = round_[49 + mem.ALIGN_FRAMES:98 - k]  # and is the clip itself once its jump has faded out
+    np.testing.assert_allclose(again, walk[mem.ALIGN_FRAMES:49 - k], atol=1e-6)
+    monkeypatch.setattr(mem, "EASE_FRAMES", 0)
+    assert turn(played) < 0.75 * turn(mem.played_on(still, 200))  # turned sharply, not eased
