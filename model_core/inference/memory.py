@@ -49,13 +49,13 @@ LONG_FROM, LONG_SHARE, LONG_SCALE, PLAYHEAD_TIE = 2, 0.9, 10.0, 0.1
 RECENT = 15
 # A clip too short to play on through (under play_frames: a raised hand of 1.5 s) offers no two stretches a window
 # apart, so from LONG_FROM on a continuation following it kept repeating one window of it for ever (the arms pumping
-# in a 0.67 s cycle at 0.2 to 0.5 x the take's speed). There the long windows follow the clip played on instead
+# in a 0.67 s cycle at 0.2 to 0.8 x the take's speed). There the long windows follow the clip played on instead
 # (played_on): back and forth where the clip stands (raised hands come down the way they went up, never faster than
-# the clip moves them), round where it does not (a run's next stride is its first; played backwards, a run or a walk
-# in place would step backwards). It stands where its root's mean ground speed is under TRAVEL_SPEED and every heel
-# and toe is down in stance.STANCE_SHARE of its frames (459 of the data's 463 clips under 2 s stand, all raised
-# hands; the 4 others run). Chosen on the validation split's 17 clips under 2 s (models/strnn_default/HISTORY.md,
-# "a clip too short to play on is played back and forth").
+# the clip moves them), round where it does not (a run goes on from a stride before its end, in step; played
+# backwards, a run or a walk on the spot would step backwards). It stands where its root's mean ground speed is under
+# TRAVEL_SPEED and every heel and toe is down in stance.STANCE_SHARE of its frames (459 of the data's 463 clips under
+# 2 s stand, all raised hands; the 4 others run). Chosen on the validation split's 17 clips under 2 s
+# (models/strnn_default/HISTORY.md, "a clip too short to play on is played back and forth").
 TRAVEL_SPEED = 0.3  # m / s (the long horizon's locomotion threshold)
 # Where played_on turns back or goes round, the motion is eased over EASE_FRAMES either side (_eased): a raised hand
 # cut while still rising turned back at once, a bounce up to 3.3 x as hard as any in its take; eased over 2 frames,
@@ -174,18 +174,20 @@ def stands(feats: np.ndarray) -> bool:
 def played_on(feats: np.ndarray, frames: int) -> np.ndarray:
     """A clip ``[F, C]`` (raw features at the model's rate) played on to at least ``frames`` frames: back and forth
     where it :func:`stands` (played backwards, the root's velocity and turn reversed), round where it does not (each
-    repeat moved to start where the last ended, the jump fading out over :data:`ALIGN_FRAMES`, as a followed
-    stretch's does). Each part starts on the frame the last ended on, the motion eased there (:data:`EASE_FRAMES`)."""
+    repeat going on from the frame most like the clip's end, :func:`_most_like_the_end`, so a run's next stride is in
+    step, moved to start where the last ended, the jump fading out over :data:`ALIGN_FRAMES` as a followed stretch's
+    does). Each part starts on the frame the last ended on, the motion eased there (:data:`EASE_FRAMES`)."""
     feats = np.asarray(feats, np.float32)
     if stands(feats):
         back = feats[::-1].copy()
         back[:, LAYOUT.root] *= -1.0
         cycle = [back[1:], feats[1:]]
     else:
-        again = feats.copy()
-        jump = feats[-1] - feats[0]
+        start = _most_like_the_end(feats)
+        again = feats[start:].copy()
+        jump = feats[-1] - feats[start]
         jump[LAYOUT.contacts] = 0.0
-        again += np.clip(1.0 - np.arange(len(feats)) / ALIGN_FRAMES, 0.0, 1.0)[:, None] * jump
+        again += np.clip(1.0 - np.arange(len(again)) / ALIGN_FRAMES, 0.0, 1.0)[:, None] * jump
         cycle = [again[1:]]
     parts, total, joins = [feats], len(feats), []
     while total < frames:
@@ -194,6 +196,19 @@ def played_on(feats: np.ndarray, frames: int) -> np.ndarray:
         joins.append(total - 1)
         total += len(part)
     return _eased(np.concatenate(parts), joins, EASE_FRAMES)
+
+
+def _most_like_the_end(feats: np.ndarray, frames: int = 5) -> int:
+    """The frame of a clip ``[F, C]`` whose last ``frames`` frames are most like the clip's last ones, at least
+    :data:`ALIGN_FRAMES` before its end (a repeat's jump fades out before it repeats again): where a stepping clip
+    goes on from, in step (0 for a clip too short to tell)."""
+    k = max(1, min(frames, len(feats) // 4))
+    last = feats[len(feats) - k:, _CHANNELS]
+    candidates = np.arange(k - 1, len(feats) - 1 - ALIGN_FRAMES)
+    if not len(candidates):
+        return 0
+    distance = [float(((feats[i - k + 1:i + 1, _CHANNELS] - last) ** 2).mean()) for i in candidates]
+    return int(candidates[int(np.argmin(distance))])
 
 
 def _eased(feats: np.ndarray, joins: list[int], k: int) -> np.ndarray:

@@ -228,8 +228,9 @@ def test_a_clip_that_stands_is_played_back_and_forth_and_one_that_steps_round(mo
     """``memory.played_on``: a clip that stands (raised hands: both feet down, the root all but still) goes on
     backwards from its last frame, the root's velocity and turn reversed, and forwards again from its first, so no
     frame jumps further than the clip's own frames do, and each turn is eased over ``EASE_FRAMES`` either side (a
-    hand slows to its turn instead of bouncing off it); a walk (or a walk on the spot) goes round, each repeat moved
-    to start where the last ended and its jump faded out over ``ALIGN_FRAMES``, walking forwards."""
+    hand slows to its turn instead of bouncing off it); a walk (or a walk on the spot) goes round, walking forwards,
+    each repeat going on in step from a gait cycle before the clip's end, moved to start where the last ended and its
+    jump faded out over ``ALIGN_FRAMES``."""
     walk = walk_features(50)
     still = walk.copy()
     still[:, LAYOUT.root] = 0.0
@@ -251,7 +252,9 @@ def test_a_clip_that_stands_is_played_back_and_forth_and_one_that_steps_round(mo
     round_ = mem.played_on(walk, 200)
     assert len(round_) >= 200 and np.all(round_[:, LAYOUT.velocity][:, 1] * walk[:, LAYOUT.velocity][:, 1].mean() > 0)
     assert step(round_) <= step(walk) + 1e-6  # the repeat goes on from where the clip ended, no frame jumping
-    again = round_[49 + mem.ALIGN_FRAMES:98 - k]  # and is the clip itself once its jump has faded out
-    np.testing.assert_allclose(again, walk[mem.ALIGN_FRAMES:49 - k], atol=1e-6)
+    start = mem._most_like_the_end(walk)  # it goes on from a frame in step with its end: a gait cycle (33 frames) back
+    assert abs((len(walk) - 1 - start) - 30.0 / 0.9) < 2
+    again = round_[49 + mem.ALIGN_FRAMES:49 + (49 - start) - k]  # the clip itself once the repeat's jump has faded out
+    np.testing.assert_allclose(again, walk[start + mem.ALIGN_FRAMES:49 - k], atol=1e-6)
     monkeypatch.setattr(mem, "EASE_FRAMES", 0)
     assert turn(played) < 0.75 * turn(mem.played_on(still, 200))  # turned sharply, not eased
