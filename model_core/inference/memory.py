@@ -198,6 +198,13 @@ def played_on(feats: np.ndarray, frames: int) -> np.ndarray:
     return _eased(np.concatenate(parts), joins, EASE_FRAMES)
 
 
+def cycle_frames(feats: np.ndarray) -> int:
+    """How many frames a clip ``[F, C]`` too short to play on through takes to come round again as
+    :func:`played_on` plays it: there and back where it :func:`stands`, else from its end's look-alike to its end."""
+    feats = np.asarray(feats)
+    return 2 * (len(feats) - 1) if stands(feats) else len(feats) - 1 - _most_like_the_end(feats)
+
+
 def _most_like_the_end(feats: np.ndarray, frames: int = 5) -> int:
     """The frame of a clip ``[F, C]`` whose last ``frames`` frames are most like the clip's last ones, at least
     :data:`ALIGN_FRAMES` before its end (a repeat's jump fades out before it repeats again): where a stepping clip

@@ -68,6 +68,7 @@ class Following:
     window_s: float  # one window of the model's
     from_s: float  # from when the continuation plays on through the clip (memory.LONG_FROM windows)
     stands: bool  # the clip stands where it is (memory.stands): a clip too short to play on is played back and forth
+    cycle_s: float  # how often such a clip comes round again as it is played on (memory.cycle_frames; 0: long enough)
 
     @property
     def plays(self) -> str:
@@ -83,8 +84,8 @@ class Following:
             return ""
         return (f"The action gives Follow the Clip {self.seconds:.2f} s to follow, under the {self.needed_s:.2g} s "
                 f"it needs to play on through, so after the first {self.from_s:.1f} s the new frames play it "
-                f"{self.plays}, over and over: extend a longer action for a continuation that plays on, or turn "
-                "Follow the Clip off for the model's own continuation")
+                f"{self.plays}, over and over (every {self.cycle_s:.1f} s): extend a longer action for a continuation "
+                "that plays on, or turn Follow the Clip off for the model's own continuation")
 
 
 def following(engine, memory: np.ndarray, fps: float, frames: int) -> Following | None:
@@ -95,12 +96,13 @@ def following(engine, memory: np.ndarray, fps: float, frames: int) -> Following 
     if long_from is None or frames / fps <= long_from * window_s:
         return None
     available = model_frames_available(len(memory), fps)
-    stands = False
+    stands, cycle = False, 0
     if available < clip_memory.play_frames(engine.m, engine.n):  # read as the model reads it, where it matters
         clip = _at_model_rate(memory, fps)
-        stands = clip_memory.stands(positions_to_features(fit_normalisation(clip).to_model(clip))[0])
+        feats = positions_to_features(fit_normalisation(clip).to_model(clip))[0]
+        stands, cycle = clip_memory.stands(feats), clip_memory.cycle_frames(feats)
     return Following(available / MODEL_FPS, clip_memory.play_frames(engine.m, engine.n) / MODEL_FPS, window_s,
-                     long_from * window_s, stands)
+                     long_from * window_s, stands, cycle / MODEL_FPS)
 
 
 def extend_positions(engine, pos: np.ndarray, fps: float, frames: int, memory: np.ndarray | None = None,

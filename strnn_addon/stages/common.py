@@ -147,13 +147,13 @@ def first_window_record(found) -> dict:
 def following_record(found) -> dict:
     """The record's ``follow_clip`` entry (:class:`extend.Following`): how many seconds of the clip Follow the Clip
     had, how many it needs to play on through it, and where it had fewer how it played the clip on (``plays``:
-    "back and forth" or "round") and the note the operator reports; empty where it did not follow the clip or the
-    extension ends before it plays on (``found`` None)."""
+    "back and forth" or "round"; ``cycle_s``: how often it comes round again) and the note the operator reports;
+    empty where it did not follow the clip or the extension ends before it plays on (``found`` None)."""
     if found is None:
         return {}
     entry = {"seconds": round(found.seconds, 3), "needed_s": round(found.needed_s, 3)}
     if found.note():
-        entry |= {"plays": found.plays, "note": found.note()}
+        entry |= {"plays": found.plays, "cycle_s": round(found.cycle_s, 3), "note": found.note()}
     return {"follow_clip": entry}
 
 

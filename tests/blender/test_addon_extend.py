@@ -219,7 +219,7 @@ def test_extend_says_when_the_action_is_too_short_for_follow_the_clip(real_model
     assert bpy.ops.strnn.extend_clip(frames=4 * fps) == {"FINISHED"}
     entry = action_of(obj)["strnn"]["follow_clip"].to_dict()
     assert entry["seconds"] < entry["needed_s"] and "Follow the Clip off" in entry["note"]
-    assert f"play it {entry['plays']}, over and over" in entry["note"]  # the crude walk's hips barely travel
+    assert f"play it {entry['plays']}, over and over (every {entry['cycle_s']:.1f} s)" in entry["note"]
     assert "The action gives Follow the Clip" in common.report_note(action_of(obj))
     for seconds, follow in ((4, True), (1.5, False)):
         bpy.ops.wm.read_homefile(use_empty=True)

@@ -253,7 +253,8 @@ def test_a_clip_that_stands_is_played_back_and_forth_and_one_that_steps_round(mo
     assert len(round_) >= 200 and np.all(round_[:, LAYOUT.velocity][:, 1] * walk[:, LAYOUT.velocity][:, 1].mean() > 0)
     assert step(round_) <= step(walk) + 1e-6  # the repeat goes on from where the clip ended, no frame jumping
     start = mem._most_like_the_end(walk)  # it goes on from a frame in step with its end: a gait cycle (33 frames) back
-    assert abs((len(walk) - 1 - start) - 30.0 / 0.9) < 2
+    assert abs((len(walk) - 1 - start) - 30.0 / 0.9) < 2 and mem.cycle_frames(walk) == len(walk) - 1 - start
+    assert mem.cycle_frames(still) == 2 * (len(still) - 1)  # there and back
     again = round_[49 + mem.ALIGN_FRAMES:49 + (49 - start) - k]  # the clip itself once the repeat's jump has faded out
     np.testing.assert_allclose(again, walk[start + mem.ALIGN_FRAMES:49 - k], atol=1e-6)
     monkeypatch.setattr(mem, "EASE_FRAMES", 0)

@@ -289,6 +289,8 @@ def test_extend_says_when_the_clip_is_too_short_to_play_on():
     raising[:, [JOINT_INDEX["r_wrist"], JOINT_INDEX["r_fingertip"]], 1] += np.linspace(0.0, 0.3, 45)[:, None]
     standing = following(engine, raising, 30.0, 120)
     assert standing.plays == "back and forth" and "play it back and forth" in standing.note()
+    assert standing.cycle_s == pytest.approx(2 * 44 / 30) and "(every 2.9 s)" in standing.note()  # there and back
+    assert 0.0 < short.cycle_s < 1.5  # the walk comes round from a gait cycle before its end
     assert following(engine, walking_skeleton(120).astype(np.float64), 60.0, 240).note() == ""  # 2 s at 60 fps
     assert following(engine, walking_skeleton(45).astype(np.float64), 30.0, 40) is None  # ends within 1.33 s
 
