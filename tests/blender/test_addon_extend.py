@@ -327,3 +327,28 @@ def test_foot_lock_leaves_the_extensions_feet_at_rest(real_model, addon, tmp_pat
         creep[lock] = fl.foot_skate_cm(pos[59:], contacts[59:])
     print("extension creep unlocked / locked (cm per frame):", creep)
     assert creep[True] < 0.2 * creep[False] and creep[True] < 0.1
+
+
+def test_an_armature_scaled_and_turned_as_an_fbx_import_makes_it_is_extended_as_any_other(addon, real_model,
+                                                                                         tmp_path):
+    """An FBX import (a Mixamo character) keeps its bones Y-up in centimetres and makes the armature object Z-up at
+    metres with a 90 degree turn about X and a scale of 0.01. The same walk so built and imported plainly (metres,
+    Z-up) are extended alike: the new frames' joints, as Blender evaluates them in the world, within 0.1 mm."""
+    import math
+
+    path = walk_bvh(tmp_path, frames=90)
+    extended = []
+    for fbx_like in (False, True):
+        bpy.ops.wm.read_homefile(use_empty=True)
+        if fbx_like:  # the file read as it is (its Y up), then the object turned and scaled as an FBX import does
+            obj = import_bvh(path, global_scale=100.0, axis_forward="Y", axis_up="Z")
+            obj.rotation_euler, obj.scale = (math.pi / 2, 0.0, 0.0), (0.01, 0.01, 0.01)
+        else:
+            obj = import_bvh(path)
+        bpy.context.view_layer.update()
+        last = int(action_of(obj).frame_range[1])
+        assert bpy.ops.strnn.extend_clip(frames=60) == {"FINISHED"}
+        extended.append(evaluated_joints(addon, obj, np.arange(last + 1, last + 61)))
+    plain, fbx = extended
+    assert np.ptp(plain[..., 2]) > 1.0  # a standing body, Z up, in metres
+    np.testing.assert_allclose(fbx, plain, atol=1e-4)
