@@ -65,7 +65,6 @@ class Following:
     """What *Follow the Clip* has to follow in a long extension (:func:`following`)."""
     seconds: float  # the clip it reads, in seconds
     needed_s: float  # the least that lets a long continuation play on through the clip (memory.play_frames)
-    window_s: float  # one window of the model's
     from_s: float  # from when the continuation plays on through the clip (memory.LONG_FROM windows)
     stands: bool  # the clip stands where it is (memory.stands): a clip too short to play on is played back and forth
     cycle_s: float  # how often such a clip comes round again as it is played on (memory.cycle_frames; 0: long enough)
@@ -101,7 +100,7 @@ def following(engine, memory: np.ndarray, fps: float, frames: int) -> Following 
         clip = _at_model_rate(memory, fps)
         feats = positions_to_features(fit_normalisation(clip).to_model(clip))[0]
         stands, cycle = clip_memory.stands(feats), clip_memory.cycle_frames(feats)
-    return Following(available / MODEL_FPS, clip_memory.play_frames(engine.m, engine.n) / MODEL_FPS, window_s,
+    return Following(available / MODEL_FPS, clip_memory.play_frames(engine.m, engine.n) / MODEL_FPS,
                      long_from * window_s, stands, cycle / MODEL_FPS)
 
 
