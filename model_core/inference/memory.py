@@ -17,6 +17,8 @@ continuation has walked to. Chosen on the held-out groups (model card, "Extend f
 
 from __future__ import annotations
 
+from functools import cached_property
+
 import numpy as np
 
 from ..motion.conventions import LAYOUT, MODEL_FPS
@@ -72,7 +74,7 @@ class ClipMemory:
 
     def __init__(self, feats: np.ndarray, m: int, n: int, std: np.ndarray, first_scale: float | None = None):
         self.feats = np.asarray(feats, np.float32)
-        self.n = n
+        self.m, self.n, self.std = m, n, std
         self.first_scale = first_scale  # the first window's scale (:func:`first_scale`; None: not leant on)
         self.scale = np.asarray(std, np.float32)[_CHANNELS]
         self.recent: list[int] = []  # the stretches followed in the last RECENT windows (index into ends), oldest first
@@ -81,10 +83,16 @@ class ClipMemory:
         self.ends = np.arange(first, len(self.feats) - n + 1)
         self.keys = np.stack([self.feats[e - MATCH_FRAMES:e, _CHANNELS] for e in self.ends]) / self.scale \
             if len(self.ends) else np.zeros((0, MATCH_FRAMES, len(_CHANNELS)), np.float32)
-        # what the long windows of a clip too short to play on through follow (None: the clip itself)
-        long_enough = max(play_frames(m, n), (RECENT + 3) * n)  # never short of stretches the rule leaves
-        self.played_on = ClipMemory(played_on(self.feats, long_enough), m, n, std) \
-            if MATCH_FRAMES < len(self.feats) < play_frames(m, n) else None
+
+    @cached_property
+    def played_on(self) -> ClipMemory | None:
+        """What the long windows of a clip too short to play on through follow (:func:`played_on`; None: the clip
+        itself), made the first time a long window asks: an extension that ends before :data:`LONG_FROM` never
+        makes it."""
+        if not MATCH_FRAMES < len(self.feats) < play_frames(self.m, self.n):
+            return None
+        long_enough = max(play_frames(self.m, self.n), (RECENT + 3) * self.n)  # never short of what the rule leaves
+        return ClipMemory(played_on(self.feats, long_enough), self.m, self.n, self.std)
 
     @property
     def last(self) -> int | None:

@@ -96,8 +96,8 @@ def following(engine, memory: np.ndarray, fps: float, frames: int) -> Following 
         return None
     available = model_frames_available(len(memory), fps)
     stands, cycle = False, 0
-    if available < clip_memory.play_frames(engine.m, engine.n):  # read as the model reads it, where it matters
-        clip = _at_model_rate(memory, fps)
+    if available < clip_memory.play_frames(engine.m, engine.n):  # where it matters: at the model's rate and scale
+        clip = _at_model_rate(memory, fps)  # (the engine reads it on the body it learnt where the rig is unlike it)
         feats = positions_to_features(fit_normalisation(clip).to_model(clip))[0]
         stands, cycle = clip_memory.stands(feats), clip_memory.cycle_frames(feats)
     return Following(available / MODEL_FPS, clip_memory.play_frames(engine.m, engine.n) / MODEL_FPS,
