@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from ..io.bvh import Bvh, BvhError, forward_kinematics, read_bvh, resample
-from ..motion.conventions import JOINT_INDEX, JOINTS, MODEL_FPS, STANDARD_LEG_LENGTH, UP_AXIS
+from ..motion.conventions import JOINT_INDEX, JOINTS, MODEL_FPS, PARENT_NAMES, STANDARD_LEG_LENGTH, UP_AXIS
 
 # Hand length (wrist to middle finger tip) as a fraction of the forearm's.
 _HAND_TO_FOREARM = 0.73
@@ -124,8 +124,15 @@ def _match(family: dict[str, list[str]], names: list[str]) -> tuple[dict[str, st
     return found, missing
 
 
-def detect_rig(names: list[str], source: str = "skeleton") -> RigMap:
-    """Auto-detect the rig family from joint names; raise :class:`RigError` listing what is missing."""
+def detect_rig(names: list[str], source: str = "skeleton", parents=None, offsets=None) -> RigMap:
+    """The rig family of a skeleton from its joint names; raise :class:`RigError` listing what is missing.
+
+    A skeleton no known family spells in full is mapped, where ``parents`` (int indices, -1 for roots) is
+    given (and ``offsets``, each joint's from its parent, where End Sites may be zero-length), as the
+    Blender bone map maps an armature (:func:`bonemap.auto_map`: bone words, sides, where the
+    limbs meet), family ``"generic"``, if that finds every joint and each lies below its parent's in the
+    hierarchy: LAFAN1's ``LeftToe``, Unreal's ``pelvis``/``thigh_l``/``ball_l``, Daz's ``lThigh``/``lToe``.
+    """
     best = None
     for fam, table in RIG_FAMILIES.items():
         found, missing = _match(table, names)
@@ -134,10 +141,60 @@ def detect_rig(names: list[str], source: str = "skeleton") -> RigMap:
         if best is None or len(missing) < len(best[2]):
             best = (fam, found, missing)
     fam, _, missing = best
+    hierarchy = ""
+    if parents is not None:
+        generic, missing_generic, hierarchy = _generic(names, [int(p) for p in parents], offsets)
+        if generic is not None:
+            return generic
+        if len(missing_generic) < len(missing):
+            fam, missing = "generic", missing_generic
     raise RigError(
         f"{source}: unknown rig; closest family is {fam!r} but these canonical joints were not found: "
-        f"{', '.join(missing)}. Known families: {', '.join(RIG_FAMILIES)}."
+        f"{', '.join(missing) or 'none'}{hierarchy}. Known families: {', '.join(RIG_FAMILIES)}, and any "
+        "skeleton whose joint names say the body part and side (Hips, LeftUpLeg, thigh_l, lShin, ...)."
     )
+
+
+def _generic(names: list[str], parents: list[int], offsets=None) -> tuple[RigMap | None, list[str], str]:
+    """(rig map, [], "") of a skeleton mapped by bone words and hierarchy, or (None, joints not found,
+    what in the hierarchy is wrong) where that does not give a whole body. A tail at no distance from its
+    bone (a zero-length End Site, as Bandai's hands have) is no joint: a finger tip is then estimated."""
+    from .bonemap import auto_map  # bonemap reads this module's families
+
+    _, mapping = auto_map(names, parents)
+    children: dict[int, list[int]] = {}
+    for i, p in enumerate(parents):
+        children.setdefault(p, []).append(i)
+    sources: dict[str, str | None] = {}
+    missing = []
+    for joint in JOINTS:
+        bone, tail = mapping.get(joint, ("", False))
+        if bone and tail:  # the joint at a bone's tail: its End Site, or its one child
+            end = f"{bone}_end"
+            kids = children.get(names.index(bone), [])
+            bone = end if end in names else (names[kids[0]] if len(kids) == 1 else "")
+            if bone and offsets is not None and np.linalg.norm(offsets[names.index(bone)]) < 1e-6:
+                bone = ""
+        if bone:
+            sources[joint] = bone
+        elif joint.endswith("fingertip"):
+            sources[joint] = None  # estimated from the wrist
+        else:
+            missing.append(joint)
+    if missing:
+        return None, missing, ""
+    index = {n: i for i, n in enumerate(names)}
+    for joint, parent in PARENT_NAMES.items():
+        if parent is None or sources[joint] is None:
+            continue
+        below, above = index[sources[joint]], index[sources[parent]]
+        b = parents[below]
+        while b >= 0 and b != above:
+            b = parents[b]
+        if b != above:
+            return None, [], (f" (read by body part and side, {joint} -> {sources[joint]!r} is not below "
+                              f"{parent} -> {sources[parent]!r} in the hierarchy)")
+    return RigMap("generic", sources), [], ""
 
 
 def leg_length(pos: np.ndarray) -> float:
@@ -151,7 +208,7 @@ def leg_length(pos: np.ndarray) -> float:
 
 def canonical_positions(bvh: Bvh, rig: RigMap | None = None) -> np.ndarray:
     """Canonical joint positions ``[frames, 21, 3]`` in file units at the file's frame rate."""
-    rig = rig or detect_rig(bvh.names, bvh.path)
+    rig = rig or detect_rig(bvh.names, bvh.path, bvh.parents, bvh.offsets)
     gpos, grot = forward_kinematics(bvh)
     out = np.empty((bvh.frames, len(JOINTS), 3))
     for j, joint in enumerate(JOINTS):
