@@ -79,19 +79,32 @@ def _family_map(names: list[str]) -> tuple[str, Mapping]:
 
 
 def _by_words(names: list[str], mapping: Mapping) -> None:
-    """Fill joints still open from bone words and sides, in place."""
+    """Fill joints still open from bone words and sides, in place. A word matches a bone's base exactly
+    first; failing that, the base with its numbering removed, words in order, then the lowest number
+    (MakeHuman's and MPFB's ``upperleg01.L`` / ``upperleg02.L``: the joint is at the first segment's head)."""
     parsed = [split_side(n) for n in names]
+    numbered = [(s, *_numbering(b)) for s, b in parsed]
     used = {bone for bone, _ in mapping.values()}
     for joint in JOINTS:
         if joint in mapping:
             continue
         side, key = (joint[0], joint[2:]) if joint[1] == "_" else (None, joint)
-        for word in _WORDS.get(key, ()):
-            hit = next((n for n, (s, b) in zip(names, parsed) if s == side and b == word and n not in used), None)
-            if hit:
-                mapping[joint] = (hit, False)
-                used.add(hit)
-                break
+        words = _WORDS.get(key, ())
+        hit = next((n for word in words for n, (s, b) in zip(names, parsed)
+                    if s == side and b == word and n not in used), None)
+        if hit is None:
+            hits = [(w, number, n) for w, word in enumerate(words) for n, (s, b, number) in zip(names, numbered)
+                    if s == side and b == word and number is not None and n not in used]
+            hit = min(hits)[2] if hits else None
+        if hit:
+            mapping[joint] = (hit, False)
+            used.add(hit)
+
+
+def _numbering(base: str) -> tuple[str, int | None]:
+    """(base without its trailing number, the number or None): ``"upperleg02"`` -> (``"upperleg"``, 2)."""
+    m = re.match(r"^(?P<word>.*?[a-z])(?P<number>\d+)$", base)
+    return (m["word"], int(m["number"])) if m else (base, None)
 
 
 def _chain(parents: list[int], b: int) -> list[int]:

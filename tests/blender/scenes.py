@@ -148,6 +148,43 @@ def rigify_bones() -> list[tuple]:
     return bones
 
 
+def makehuman_bones() -> list[tuple]:
+    """(name, parent, head, tail) of a MakeHuman / MPFB default skeleton: ``root``, ``spine05`` up to
+    ``spine01``, ``neck01..03``, limbs in numbered segments (``upperleg01.L``, ``upperleg02.L``, ...),
+    ``pelvis.L`` from the root to each leg, ``toe1-1.L``."""
+    j = _rest_joints()
+    up, fwd = np.array([0, 0, 0.1]), np.array([0, -0.06, 0])
+    spine = [_mid(j["spine"], j["spine1"], t) for t in (0.0, 0.25, 0.5, 0.75, 1.0)] + [j["neck"]]
+    names = ["spine05", "spine04", "spine03", "spine02", "spine01"]
+    bones = [("root", None, j["hips"], j["spine"])]
+    bones += [(names[k], "root" if k == 0 else names[k - 1], spine[k], spine[k + 1]) for k in range(5)]
+    neck = [_mid(j["neck"], j["head"], t) for t in (0.0, 1 / 3, 2 / 3, 1.0)]
+    bones += [(f"neck0{k + 1}", "spine01" if k == 0 else f"neck0{k}", neck[k], neck[k + 1]) for k in range(3)]
+    bones += [("head", "neck03", j["head"], j["head"] + up * 2)]
+
+    def segments(name, parent, a, b, S):
+        return [(f"{name}01.{S}", parent, a, _mid(a, b)), (f"{name}02.{S}", f"{name}01.{S}", _mid(a, b), b)]
+
+    for s, S in (("l", "L"), ("r", "R")):
+        arm = j[f"{s}_arm"]
+        bones += [(f"clavicle.{S}", "spine01", _mid(j["neck"], arm, 0.3) - up, _mid(j["neck"], arm, 0.9)),
+                  (f"shoulder01.{S}", f"clavicle.{S}", _mid(j["neck"], arm, 0.9), arm)]
+        bones += segments("upperarm", f"shoulder01.{S}", arm, j[f"{s}_elbow"], S)
+        bones += segments("lowerarm", f"upperarm02.{S}", j[f"{s}_elbow"], j[f"{s}_wrist"], S)
+        hand = [_mid(j[f"{s}_wrist"], j[f"{s}_fingertip"], t) for t in (0.0, 0.45, 0.65, 0.85, 1.0)]
+        bones += [(f"wrist.{S}", f"lowerarm02.{S}", hand[0], hand[1])]
+        bones += [(f"finger3-{k}.{S}", f"wrist.{S}" if k == 1 else f"finger3-{k - 1}.{S}", hand[k], hand[k + 1])
+                  for k in (1, 2, 3)]
+        bones += [(f"pelvis.{S}", "root", j["hips"], j[f"{s}_upleg"])]
+        bones += segments("upperleg", f"pelvis.{S}", j[f"{s}_upleg"], j[f"{s}_knee"], S)
+        bones += segments("lowerleg", f"upperleg02.{S}", j[f"{s}_knee"], j[f"{s}_foot"], S)
+        bones += [(f"foot.{S}", f"lowerleg02.{S}", j[f"{s}_foot"], j[f"{s}_toe"]),
+                  (f"toe1-1.{S}", f"foot.{S}", j[f"{s}_toe"], j[f"{s}_toe"] + fwd),
+                  (f"toe3-1.{S}", f"foot.{S}", j[f"{s}_toe"] + np.array([0.03 if s == "l" else -0.03, 0, 0]),
+                   j[f"{s}_toe"] + fwd)]
+    return bones
+
+
 def build_armature(name: str, bones: list[tuple], rotation_mode: str = "QUATERNION"):
     """An armature object made in edit mode from (name, parent, head, tail), active and selected."""
     arm = bpy.data.armatures.new(name)
@@ -220,6 +257,14 @@ def rigify_walk(frames: int = 60):
     obj = build_armature("Rigify", rigify_bones())
     key_walk(obj, frames, "DEF-spine", ("DEF-thigh.L", "DEF-thigh.R"), ("DEF-shin.L", "DEF-shin.R"),
              ("DEF-upper_arm.L", "DEF-upper_arm.R"))
+    return obj
+
+
+def makehuman_walk(frames: int = 60):
+    """A MakeHuman / MPFB-style armature (quaternions) with a keyed walk."""
+    obj = build_armature("MakeHuman", makehuman_bones())
+    key_walk(obj, frames, "root", ("upperleg01.L", "upperleg01.R"), ("lowerleg01.L", "lowerleg01.R"),
+             ("upperarm01.L", "upperarm01.R"))
     return obj
 
 

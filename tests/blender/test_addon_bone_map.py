@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import bpy
 import pytest
-from scenes import build_armature, find_mocap, import_bvh, mixamo_bones, rigify_bones, walk_bvh
+from scenes import build_armature, find_mocap, import_bvh, makehuman_bones, mixamo_bones, rigify_bones, walk_bvh
 
 from model_core.motion.conventions import JOINTS
 
@@ -57,6 +57,17 @@ def test_generic_left_right_heuristic_maps_unreal_names(addon):
                                                                                "neck_01")
     assert (found["l_knee"], found["r_toe"], found["l_arm"]) == ("calf_l", "ball_r", "upperarm_l")
     assert found["l_fingertip"] == "hand_l" and obj.strnn_map.l_fingertip_tail
+
+
+def test_makehuman_names_in_numbered_segments_map_to_each_limbs_first_segment(addon):
+    """MakeHuman and MPFB split each limb in two (upperleg01.L, upperleg02.L): the joint is the first's head."""
+    obj = build_armature("MakeHuman", makehuman_bones())
+    found = auto_map(obj)
+    assert all(found.values()), [k for k, v in found.items() if not v]
+    assert (found["hips"], found["spine"], found["spine1"], found["neck"]) == ("root", "spine05", "spine01", "neck01")
+    assert (found["l_upleg"], found["l_knee"], found["r_arm"], found["r_elbow"]) == (
+        "upperleg01.L", "lowerleg01.L", "upperarm01.R", "lowerarm01.R")
+    assert (found["l_foot"], found["l_toe"], found["r_wrist"]) == ("foot.L", "toe1-1.L", "wrist.R")
 
 
 def test_unmappable_rig_lists_missing_joints(addon):

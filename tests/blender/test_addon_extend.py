@@ -20,6 +20,7 @@ from scenes import (
     find_mocap,
     import_bvh,
     key_snapshot,
+    makehuman_walk,
     mixamo_walk,
     rigify_walk,
     same_keys,
@@ -148,7 +149,7 @@ def test_extend_real_clip_with_model(real_model, addon, family):
     check_real_extension(addon, obj, 60)
 
 
-@pytest.mark.parametrize("make", [mixamo_walk, rigify_walk], ids=["mixamo", "rigify"])
+@pytest.mark.parametrize("make", [mixamo_walk, rigify_walk, makehuman_walk], ids=["mixamo", "rigify", "makehuman"])
 def test_extend_built_armature_with_model(real_model, addon, make):
     check_real_extension(addon, make(60), 60)
 
