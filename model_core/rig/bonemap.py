@@ -146,6 +146,49 @@ def _by_hierarchy(names: list[str], parents: list[int], mapping: Mapping) -> Non
             mapping["neck"] = (names[path[path.index(s) - 1]], False)
 
 
+# Joints whose distal word some skeletons give to the next joint down: SMPL's (AMASS's) L_Ankle -> L_Foot
+# (the ball of the foot) and L_Wrist -> L_Hand (the knuckles). (joint, distal words, proximal words, leaf)
+_PROXIMAL = (("foot", ("foot",), ("ankle",), "toe"), ("wrist", ("hand",), ("wrist",), "fingertip"))
+
+
+def _is_below(parents: list[int], a: int, b: int) -> bool:
+    """Whether bone ``a`` lies below bone ``b`` (``b`` a strict ancestor of ``a``)."""
+    a = parents[a]
+    while a >= 0 and a != b:
+        a = parents[a]
+    return a == b
+
+
+def _proximal_first(names: list[str], parents: list[int], mapping: Mapping) -> None:
+    """Where a joint took a distal word (``L_Foot``) and a bone of the proximal word (``L_Ankle``) lies above
+    it on the same side, the joint is the proximal bone and the distal one is the leaf below it: the toe at its
+    head, the finger tip at its tail. In place."""
+    parsed = [split_side(n) for n in names]
+    idx = {n: i for i, n in enumerate(names)}
+    for side in "lr":
+        for key, distal, proximal, leaf in _PROXIMAL:
+            joint = f"{side}_{key}"
+            bone, tail = mapping.get(joint, ("", True))
+            if tail or parsed[idx[bone]][1] not in distal:
+                continue
+            above = [i for i, (s, b) in enumerate(parsed) if s == side and b in proximal
+                     and _is_below(parents, idx[bone], i)]
+            if above:
+                mapping[joint] = (names[above[-1]], False)
+                mapping.setdefault(f"{side}_{leaf}", (bone, leaf == "fingertip"))
+
+
+def _chest_where_the_arms_meet(names: list[str], parents: list[int], mapping: Mapping) -> None:
+    """A chest a known family's names gave lower than where the two arms meet (SMPL's Spine2, where its arms
+    hang from Spine3) moves up to where they meet. In place."""
+    idx = {n: i for i, n in enumerate(names)}
+    if "spine1" not in mapping or any(j not in mapping or mapping[j][1] for j in ("l_arm", "r_arm")):
+        return
+    meet = _common(parents, idx[mapping["l_arm"][0]], idx[mapping["r_arm"][0]])
+    if meet >= 0 and _is_below(parents, meet, idx[mapping["spine1"][0]]):
+        mapping["spine1"] = (names[meet], False)
+
+
 def auto_map(names: list[str], parents: list[int]) -> tuple[str, Mapping]:
     """Map bones (``names``, ``parents`` int indices, -1 for roots) onto the canonical joints.
 
@@ -157,6 +200,8 @@ def auto_map(names: list[str], parents: list[int]) -> tuple[str, Mapping]:
         family = "generic"  # the family's names left body joints open
     if len(mapping) < len(JOINTS):
         _by_words(names, mapping)
+        _proximal_first(names, parents, mapping)
+        _chest_where_the_arms_meet(names, parents, mapping)
         _by_hierarchy(names, parents, mapping)
     for side in "lr":
         for leaf in ("fingertip", "toe"):

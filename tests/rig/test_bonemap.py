@@ -48,3 +48,28 @@ def test_missing_joints_are_listed():
     _, mapping = auto_map(*chain("a", "b", "c"))
     assert set(missing(mapping)) == set(JOINTS) - set(mapping)
     assert "l_knee" in missing(mapping)
+
+
+SMPL = [("Pelvis", None), ("L_Hip", "Pelvis"), ("R_Hip", "Pelvis"), ("Spine1", "Pelvis"), ("L_Knee", "L_Hip"),
+        ("R_Knee", "R_Hip"), ("Spine2", "Spine1"), ("L_Ankle", "L_Knee"), ("R_Ankle", "R_Knee"), ("Spine3", "Spine2"),
+        ("L_Foot", "L_Ankle"), ("R_Foot", "R_Ankle"), ("Neck", "Spine3"), ("L_Collar", "Spine3"),
+        ("R_Collar", "Spine3"), ("Head", "Neck"), ("L_Shoulder", "L_Collar"), ("R_Shoulder", "R_Collar"),
+        ("L_Elbow", "L_Shoulder"), ("R_Elbow", "R_Shoulder"), ("L_Wrist", "L_Elbow"), ("R_Wrist", "R_Elbow"),
+        ("L_Hand", "L_Wrist"), ("R_Hand", "R_Wrist")]
+
+
+@pytest.mark.parametrize("spell", [str, lambda n: n.lower().replace("l_", "left_").replace("r_", "right_")],
+                         ids=["amass", "smplx_addon"])
+def test_smpl_joints_map_the_ankle_wrist_and_chest_not_the_next_joint_down(spell):
+    """SMPL (AMASS, the SMPL-X add-on) names the ball of the foot L_Foot below L_Ankle, the knuckles L_Hand below
+    L_Wrist, and hangs the arms from Spine3 (a Mixamo chest name, Spine2, sits lower)."""
+    names = [spell(n) for n, _ in SMPL]
+    parents = [[n for n, _ in SMPL].index(p) if p else -1 for _, p in SMPL]
+    family, mapping = auto_map(names, parents)
+    got = mapping
+    want = {"hips": "Pelvis", "spine": "Spine1", "spine1": "Spine3", "neck": "Neck", "head": "Head",
+            "l_upleg": "L_Hip", "l_knee": "L_Knee", "l_foot": "L_Ankle", "l_toe": "L_Foot",
+            "r_arm": "R_Shoulder", "r_elbow": "R_Elbow", "r_wrist": "R_Wrist"}
+    assert family == "generic" and not missing(mapping)
+    assert {j: got[j] for j in want} == {j: (spell(b), False) for j, b in want.items()}
+    assert got["l_fingertip"] == (spell("L_Hand"), True)
