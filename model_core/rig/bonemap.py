@@ -18,19 +18,22 @@ from .rigs import RIG_FAMILIES, normalise_name
 
 Mapping = dict[str, tuple[str, bool]]
 
-# Bone words per canonical joint (side removed, lower case, only letters and digits), best first.
+# Bone words per canonical joint (side removed, lower case, only letters and digits), best first. Daz's
+# Genesis 3 and 8 split limbs into Bend and Twist bones (lThighBend, lShldrBend): the joint is the Bend's head.
 _WORDS: dict[str, tuple[str, ...]] = {
     "hips": ("hips", "hip", "pelvis"), "head": ("head",), "neck": ("neck", "neck1", "neck01"),
-    "upleg": ("upleg", "upperleg", "thigh", "legupper", "hip"),
+    "upleg": ("upleg", "upperleg", "thigh", "legupper", "thighbend", "hip"),
     "knee": ("leg", "lowerleg", "shin", "calf", "knee", "leglower"),
     "foot": ("foot", "ankle"), "toe": ("toebase", "toe", "toes", "ball"),
-    "arm": ("arm", "upperarm", "uparm", "armupper", "shoulder"),
-    "elbow": ("forearm", "lowerarm", "elbow", "armlower"), "wrist": ("hand", "wrist"),
+    "arm": ("arm", "upperarm", "uparm", "armupper", "shldr", "shldrbend", "shoulder"),
+    "elbow": ("forearm", "lowerarm", "elbow", "armlower", "forearmbend"), "wrist": ("hand", "wrist"),
     "fingertip": ("handmiddle4", "middle4", "handmiddle3end", "middle3", "fmiddle03", "middlefinger3"),
 }
 _SUFFIX = re.compile(r"^(?P<base>.+?)[._\-\s](?P<side>l|r|left|right)(?:[._]\d+)?$")
 _PREFIX = re.compile(r"^(?P<side>left|right|l|r)[._\-\s]?(?P<base>.+)$")
 _INFIX = re.compile(r"^(?P<pre>.+?)[._\-\s](?P<side>l|r|left|right)[._\-\s](?P<base>.+)$")
+# A centre marker: VRoid's ``J_Bip_C_Neck``, Auto-Rig Pro's ``neck.x``.
+_CENTRE = re.compile(r"^(?:.+?[._\-\s]c[._\-\s](?P<base>.+)|(?P<suffixed>.+?)[._]x)$")
 _CAMEL = re.compile(r"^(?:[^:|]*[:|])?(?P<side>[lrLR])(?=[A-Z][a-z])(?P<base>.+)$")
 _LEAVES = ("fingertip", "toe")  # joints a hand's or foot's tail can stand in for
 _STRIP = re.compile(r"^(def|org|mch|bip\d*|b|cc_base)[._\-\s]+")
@@ -54,6 +57,9 @@ def split_side(name: str) -> tuple[str | None, str]:
             side, base = camel["side"].lower(), camel["base"].lower()
         elif m and low[1:2] in "._- ":
             side, base = m["side"], m["base"]
+        else:
+            centre = _CENTRE.match(low)
+            base = centre["base"] or centre["suffixed"] if centre else base
     base = re.sub(r"[^a-z0-9]", "", _STRIP.sub("", base))
     return side, base
 

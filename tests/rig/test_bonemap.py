@@ -13,6 +13,8 @@ from model_core.rig.bonemap import auto_map, missing, split_side
     ("LeftUpLeg", ("l", "upleg")), ("mixamorig:RightHand", ("r", "hand")), ("lThigh", ("l", "thigh")),
     ("LHipJoint", ("l", "hipjoint")), ("upperarm_l", ("l", "upperarm")), ("L_Foot", ("l", "foot")),
     ("Root", (None, "root")), ("spine_01", (None, "spine01")), ("ball_r", ("r", "ball")),
+    ("J_Bip_C_Neck", (None, "neck")), ("J_Bip_L_UpperLeg", ("l", "upperleg")), ("neck.x", (None, "neck")),
+    ("upperleg01.L", ("l", "upperleg01")),
 ])
 def test_split_side(name, want):
     assert split_side(name) == want
@@ -73,3 +75,43 @@ def test_smpl_joints_map_the_ankle_wrist_and_chest_not_the_next_joint_down(spell
     assert family == "generic" and not missing(mapping)
     assert {j: got[j] for j in want} == {j: (spell(b), False) for j, b in want.items()}
     assert got["l_fingertip"] == (spell("L_Hand"), True)
+
+
+def _tree(pairs: list[tuple[str, str | None]]) -> tuple[list[str], list[int]]:
+    names = [n for n, _ in pairs]
+    return names, [names.index(p) if p else -1 for _, p in pairs]
+
+
+def _sided(pairs, sides):
+    return [(n.format(S=s), p and p.format(S=s)) for s in sides for n, p in pairs]
+
+
+VROID = [("J_Bip_C_Hips", None), ("J_Bip_C_Spine", "J_Bip_C_Hips"), ("J_Bip_C_Chest", "J_Bip_C_Spine"),
+         ("J_Bip_C_UpperChest", "J_Bip_C_Chest"), ("J_Bip_C_Neck", "J_Bip_C_UpperChest"),
+         ("J_Bip_C_Head", "J_Bip_C_Neck")] + _sided(
+    [("J_Bip_{S}_UpperLeg", "J_Bip_C_Hips"), ("J_Bip_{S}_LowerLeg", "J_Bip_{S}_UpperLeg"),
+     ("J_Bip_{S}_Foot", "J_Bip_{S}_LowerLeg"), ("J_Bip_{S}_ToeBase", "J_Bip_{S}_Foot"),
+     ("J_Bip_{S}_Shoulder", "J_Bip_C_UpperChest"), ("J_Bip_{S}_UpperArm", "J_Bip_{S}_Shoulder"),
+     ("J_Bip_{S}_LowerArm", "J_Bip_{S}_UpperArm"), ("J_Bip_{S}_Hand", "J_Bip_{S}_LowerArm")], "LR")
+GENESIS8 = [("hip", None), ("pelvis", "hip"), ("abdomenLower", "hip"), ("abdomenUpper", "abdomenLower"),
+            ("chestLower", "abdomenUpper"), ("chestUpper", "chestLower"), ("neckLower", "chestUpper"),
+            ("neckUpper", "neckLower"), ("head", "neckUpper")] + _sided(
+    [("{S}ThighBend", "pelvis"), ("{S}ThighTwist", "{S}ThighBend"), ("{S}Shin", "{S}ThighTwist"),
+     ("{S}Foot", "{S}Shin"), ("{S}Toe", "{S}Foot"), ("{S}Collar", "chestUpper"), ("{S}ShldrBend", "{S}Collar"),
+     ("{S}ShldrTwist", "{S}ShldrBend"), ("{S}ForearmBend", "{S}ShldrTwist"), ("{S}ForearmTwist", "{S}ForearmBend"),
+     ("{S}Hand", "{S}ForearmTwist")], "lr")
+
+
+@pytest.mark.parametrize("tree, want", [
+    (VROID, {"hips": "J_Bip_C_Hips", "spine": "J_Bip_C_Spine", "spine1": "J_Bip_C_UpperChest",
+             "neck": "J_Bip_C_Neck", "head": "J_Bip_C_Head", "l_knee": "J_Bip_L_LowerLeg",
+             "r_arm": "J_Bip_R_UpperArm"}),
+    (GENESIS8, {"hips": "hip", "spine": "abdomenLower", "spine1": "chestUpper", "neck": "neckLower",
+                "l_upleg": "lThighBend", "l_knee": "lShin", "r_arm": "rShldrBend", "r_elbow": "rForearmBend"}),
+], ids=["vroid", "genesis8"])
+def test_centre_markers_and_bend_twist_limbs_map_fully(tree, want):
+    """VRoid marks the body's middle with _C_ (J_Bip_C_Neck); Daz's Genesis 3 and 8 split each limb into a Bend and
+    a Twist bone, the joint at the Bend's head."""
+    _, mapping = auto_map(*_tree(tree))
+    assert not missing(mapping)
+    assert {j: mapping[j][0] for j in want} == want
