@@ -17,6 +17,7 @@ import numpy as np
 
 from ..io.bvh import Bvh, BvhError, forward_kinematics, read_bvh, resample
 from ..motion.conventions import JOINT_INDEX, JOINTS, MODEL_FPS, PARENT_NAMES, STANDARD_LEG_LENGTH, UP_AXIS
+from ..motion.geometry import shortest_arc
 
 # Hand length (wrist to middle finger tip) as a fraction of the forearm's.
 _HAND_TO_FOREARM = 0.73
@@ -233,12 +234,44 @@ def load_clip(path: str | Path, fps: float | None = None, rate: float = MODEL_FP
 
 
 def canonical_clip(bvh, rate: float = MODEL_FPS) -> np.ndarray:
-    """A read BVH (:func:`read_bvh`) as :func:`load_clip` returns it."""
+    """A read BVH (:func:`read_bvh`) as :func:`load_clip` returns it, stood up where the file stands its
+    body along another axis (:func:`upright_rotation`: a Z-up file)."""
     pos = canonical_positions(bvh)
+    turn = upright_rotation(pos)
+    if turn is not None:
+        pos = pos @ turn.T
     legs = leg_length(pos)
     if not np.isfinite(legs) or legs <= 1e-6:
         raise BvhError(f"{bvh.path}: legs have zero length; cannot normalise the skeleton's scale")
     return on_ground(resample(pos * (STANDARD_LEG_LENGTH / legs), bvh.fps, rate))
+
+
+# A body stands along an axis where its head is within 45 degrees of it from the feet in this share of frames.
+STANDING_SHARE = 0.75
+
+
+def standing_axis(pos: np.ndarray) -> np.ndarray | None:
+    """The file axis (+-X, +-Y or +-Z, a unit vector) the body of canonical joints ``pos`` ``[F, 21, 3]``
+    stands along: its head within 45 degrees of it from the middle of its feet in :data:`STANDING_SHARE` of
+    the frames; None where no axis holds so many (a take lying down or tumbling)."""
+    feet = pos[:, [JOINT_INDEX["l_foot"], JOINT_INDEX["r_foot"]]].mean(1)
+    v = pos[:, JOINT_INDEX["head"]] - feet
+    n = np.linalg.norm(v, axis=-1)
+    v = v[n > 1e-9] / n[n > 1e-9, None]
+    for axis in range(3):
+        for sign in (1.0, -1.0):
+            if len(v) and np.mean(sign * v[:, axis] > np.cos(np.pi / 4)) >= STANDING_SHARE:
+                return np.eye(3)[axis] * sign
+    return None
+
+
+def upright_rotation(pos: np.ndarray) -> np.ndarray | None:
+    """The smallest rotation ``[3, 3]`` that stands the body of ``pos`` up along +Y where it stands along another
+    axis (:func:`standing_axis`; a Z-up file's +Z, a file upside down), else None."""
+    axis = standing_axis(pos)
+    if axis is None or axis[UP_AXIS] > 0:
+        return None
+    return shortest_arc(axis, np.eye(3)[UP_AXIS])
 
 
 def on_ground(pos: np.ndarray) -> np.ndarray:

@@ -135,3 +135,34 @@ def test_a_skeleton_read_by_name_whose_hierarchy_disagrees_says_where(tmp_path):
                        .replace("JOINT @", "JOINT LeftFoot"))
     with pytest.raises(RigError, match=r"unknown rig.*l_foot -> 'LeftFoot' is not below l_knee -> 'LeftLeg'"):
         load_clip(swapped)
+
+
+_TURNS = {"z_up": [[1, 0, 0], [0, 0, -1], [0, 1, 0]], "x_up": [[0, 1, 0], [-1, 0, 0], [0, 0, 1]],
+          "upside_down": [[1, 0, 0], [0, -1, 0], [0, 0, -1]]}
+
+
+@pytest.mark.parametrize("turn", list(_TURNS))
+def test_a_take_that_stands_along_another_axis_is_stood_up(tmp_path, turn):
+    """A Z-up file (AMASS conversions, some exporters), or one standing along X or upside down, reads as the same
+    motion as its Y-up twin: the same heights over the floor and the same distances between joints."""
+    pos = walking_skeleton(60)
+    want = load_clip(write_bvh(tmp_path / "y_up.bvh", pos))
+    got = load_clip(write_bvh(tmp_path / f"{turn}.bvh", pos @ np.array(_TURNS[turn], float).T))
+    np.testing.assert_allclose(got[..., 1], want[..., 1], atol=1e-5)
+    dist = lambda p: np.linalg.norm(p[:, :, None] - p[:, None], axis=-1)
+    np.testing.assert_allclose(dist(got), dist(want), atol=1e-5)
+
+
+def test_a_take_lying_down_half_the_time_is_left_as_it_is(tmp_path):
+    """No axis holds three quarters of the frames: the file's own up is kept (a take of someone lying down is
+    not stood up)."""
+    from model_core.io.bvh import read_bvh
+    from model_core.rig.rigs import canonical_positions, standing_axis
+
+    pos = walking_skeleton(60)
+    pos[30:] = pos[30:] @ np.array(_TURNS["z_up"], float).T
+    path = write_bvh(tmp_path / "half.bvh", pos)
+    assert standing_axis(canonical_positions(read_bvh(path))) is None
+    clip = load_clip(path)
+    head = clip[:, JOINTS.index("head")] - clip[:, [JOINTS.index("l_foot"), JOINTS.index("r_foot")]].mean(1)
+    assert (head[:30, 1] > 1.2).all() and (head[30:, 2] > 1.2).all()  # standing, then lying along +Z, as written
