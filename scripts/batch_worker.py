@@ -74,6 +74,23 @@ def read_checked(path: Path) -> None:
         raise BatchError(f"broken BVH: {str(e).removeprefix(str(path) + ':')}") from None
 
 
+def file_axes(path: Path) -> tuple[str, str]:
+    """(forward, up) axes for Blender's BVH importer: the default ``("-Z", "Y")``, or the axis the take's body
+    stands along where that is another (a Z-up file: ``("Y", "Z")``), so that the armature stands in Blender
+    (``rigs.standing_axis``). A rig the project cannot read by itself keeps the default."""
+    from model_core.io.bvh import BvhError, read_bvh
+    from model_core.rig.rigs import RigError, canonical_positions, standing_axis
+
+    try:
+        axis = standing_axis(canonical_positions(read_bvh(path)))
+    except (BvhError, RigError):
+        axis = None
+    if axis is None or axis[1] > 0:
+        return "-Z", "Y"
+    up = ("-" if axis.sum() < 0 else "") + "XYZ"[int(abs(axis).argmax())]
+    return ("Y" if up.endswith("Z") else "-Z"), up
+
+
 def blender_error(e: Exception) -> str:
     """The last meaningful line of a bpy.ops RuntimeError (Blender packs tracebacks in the message)."""
     lines = [line.strip() for line in str(e).splitlines() if line.strip() and not line.strip().startswith(
@@ -162,10 +179,13 @@ def run_file(bpy, job: dict) -> list[str]:
         if src.suffix.lower() != ".bvh":
             raise BatchError("transfer takes BVH takes; a .blend is a target (--target), not a take")
         target = open_target(bpy, job)
+    axes = ("-Z", "Y")
     if src.suffix.lower() == ".bvh":
         check_bvh_text(src)
+        axes = file_axes(src)
         try:
-            bpy.ops.import_anim.bvh(filepath=str(src), update_scene_fps=True, update_scene_duration=True)
+            bpy.ops.import_anim.bvh(filepath=str(src), update_scene_fps=True, update_scene_duration=True,
+                                    axis_forward=axes[0], axis_up=axes[1])
         except RuntimeError as e:
             raise BatchError(f"Blender's BVH importer could not read it: {blender_error(e)}") from None
     else:
@@ -208,6 +228,9 @@ def run_file(bpy, job: dict) -> list[str]:
     if action is None:
         raise BatchError(f"strnn.{job['operator']} left the armature without an action")
     notes = batch_notes(importlib.import_module(f"{ADDON}.strnn_addon.stages.common"), action)
+    if axes[1] != "Y":
+        notes.append(f"the take stands along its file's {axes[1]} axis, not Y: read with Up {axes[1]} so that it "
+                     "stands, and written back in the file's own axes")
     start, end = (int(round(f)) for f in action.frame_range)
     scene = bpy.context.scene
     scene.frame_start, scene.frame_end = start, end
@@ -217,7 +240,7 @@ def run_file(bpy, job: dict) -> list[str]:
         if dst.suffix.lower() == ".bvh":
             view_layer.objects.active = obj
             if src.suffix.lower() == ".bvh":
-                to_file_axes(bpy, obj)
+                to_file_axes(bpy, obj, *axes)
             bpy.ops.export_anim.bvh(filepath=str(tmp), frame_start=start, frame_end=end,
                                     check_existing=False)
         else:
@@ -238,17 +261,17 @@ def batch_notes(common, action) -> list[str]:
             for note in common.record_notes(action)]
 
 
-def to_file_axes(bpy, obj) -> None:
-    """Turn the armature back into the BVH file's axes (Y up) before Blender's exporter writes it.
+def to_file_axes(bpy, obj, forward: str = "-Z", up: str = "Y") -> None:
+    """Turn the armature back into the BVH file's axes (``forward`` and ``up`` as it was imported with:
+    Y up by default) before Blender's exporter writes it.
 
-    The importer turned the file's Y-up into Blender's Z-up, and the exporter writes armature space
-    with no axis option, so without this a take comes back lying on its back. The turn goes into the
+    The importer turned the file's axes into Blender's (Y-up into Z-up), and the exporter writes armature
+    space with no axis option, so without this a take comes back lying on its back. The turn goes into the
     armature's rest (its keys are relative to the bones, so the motion turns with them)."""
-    from math import pi
+    from bpy_extras.io_utils import axis_conversion
 
-    from mathutils import Matrix
-
-    obj.matrix_world = Matrix.Rotation(-pi / 2, 4, "X") @ obj.matrix_world
+    turn = axis_conversion(from_forward=forward, from_up=up).to_4x4().inverted()
+    obj.matrix_world = turn @ obj.matrix_world
     for other in bpy.context.view_layer.objects:
         other.select_set(other is obj)
     bpy.context.view_layer.objects.active = obj

@@ -142,6 +142,29 @@ def test_in_place_overwrites_only_when_asked(tmp_path, extension, capsys):
     assert [p.name for p in tmp_path.iterdir()] == ["walk.bvh"]
 
 
+def test_a_z_up_take_is_extended_standing_and_written_back_in_its_own_axes(tmp_path, extension, capsys):
+    """A take whose file stands the body along Z (AMASS conversions, some exporters) is read with Up Z, so that it
+    stands in Blender: extended as its Y-up twin is (the same heights over the floor), written back Z-up with
+    its own frames unchanged, and the report says so."""
+    walk = walking_skeleton(60)
+    z_up = np.array([[1.0, 0, 0], [0, 0, -1], [0, 1, 0]])  # file Y -> Z
+    takes = {"y": write_bvh(tmp_path / "y" / "walk.bvh", walk),
+             "z": write_bvh(tmp_path / "z" / "walk.bvh", walk @ z_up.T)}
+    out = {}
+    for name, take in takes.items():
+        report = tmp_path / f"{name}.json"
+        assert strnn_batch.main(["extend", "--frames", "30", str(take), "--out", str(tmp_path / f"out_{name}"),
+                                 "--extension", str(extension), "--report", str(report)]) == 0
+        out[name] = (canonical_positions(read_bvh(tmp_path / f"out_{name}" / "walk.extend.bvh")),
+                     json.loads(report.read_text())["files"][0]["notes"])
+    (y, y_notes), (z, z_notes) = out["y"], out["z"]
+    taken = canonical_positions(read_bvh(takes["z"]))
+    assert np.abs(z[:60] - taken).max() < 0.01 * np.abs(taken).max()  # the take's own frames, in its own axes
+    assert np.abs(z[60:, :, 2] - y[60:, :, 1]).max() < 0.01  # new frames: Z-up heights are the Y-up twin's
+    assert any("stands along its file's Z axis" in note for note in z_notes), z_notes
+    assert not any("stands along" in note for note in y_notes), y_notes
+
+
 def test_extend_from_a_frame_replaces_the_tail(tmp_path, extension, capsys):
     clip = write_bvh(tmp_path / "walk.bvh", walking_skeleton(60))
     out = tmp_path / "out"
