@@ -21,8 +21,10 @@ import numpy as np
 
 from ...model_core.inference.steps import drive
 from ...model_core.io.checkpoint import CheckpointError
+from ...model_core.motion.conventions import UP_AXIS, yup_to_zup
 from ...model_core.ops import footlock
 from ...model_core.ops.pace import Pace, stride_period
+from ...model_core.rig.rigs import standing_axis
 from .. import engine_bridge
 from ..props import preferences
 from ..scene import anim, pipeline
@@ -165,32 +167,52 @@ def pace_record(context, clip, end: int | None = None) -> dict:
     """The record's ``pace`` entry: the stride of the action's locomotion (up to its last
     :data:`PACE_SECONDS` before ``end``) at the keys per second it was read at, and the note the
     operator reports when that stride is one people do not take (keys at another rate than the
-    take's: set Keys per Second). Empty for motion without strides."""
+    take's: set Keys per Second). Empty for motion without strides. With it, read from the same frames, the
+    ``stance`` entry where the body stands along another axis than up (:func:`stance_record`)."""
     end = clip.last if end is None else int(end)
     span = min(end - clip.first, int(PACE_SECONDS * clip.fps))
     if span < 8:
         return {}
     step = max(1, math.ceil(span / PACE_SAMPLES))
     frames = np.arange(end - span, end + 1, step, dtype=np.float64)
+    pos = pipeline.joint_positions(context, clip, frames)
+    record = stance_record(pos)
     try:  # every ``step``-th key: read at ``fps / step``; the stride in seconds is the same
-        stride = stride_period(pipeline.joint_positions(context, clip, frames), clip.fps / step)
+        stride = stride_period(pos, clip.fps / step)
     except ValueError:  # legs of zero length: the operation itself says so
-        return {}
+        return record
     if stride is None:
-        return {}
+        return record
     pace = Pace(stride, float(clip.fps))
     entry = {"stride_s": round(pace.stride_s, 3), "keys_per_second": float(clip.fps)}
     if pace.note():
         entry["note"] = pace.note()
         entry["suggested_keys_per_second"] = pace.suggested_rate()
-    return {"pace": entry}
+    return {"pace": entry, **record}
+
+
+def stance_record(pos) -> dict:
+    """The record's ``stance`` entry where the body of ``pos`` (Y-up, model axes) stands along another axis than
+    up in most frames (``rigs.standing_axis``: a BVH imported with the wrong Up axis lies on its back), with the
+    note that says so and how to fix it; empty where it stands up, or lies or tumbles only some of the time."""
+    axis = standing_axis(pos)
+    if axis is None or axis[UP_AXIS] > 0:
+        return {}
+    scene = yup_to_zup(axis)
+    label = ("-" if scene.sum() < 0 else "") + "XYZ"[int(np.abs(scene).argmax())]
+    note = (f"The character stands along the scene's {label} axis in most of the action, not up (Z), and the model "
+            "learnt bodies standing on a floor, so the result may not hold: a BVH imported with the wrong Up axis? "
+            "Import it again with Transform > Up set to the file's (Z for a Z-up file), or turn the armature "
+            "object to stand")
+    return {"stance": {"axis": label, "note": note}}
 
 
 def record_notes(action) -> list[str]:
-    """The notes of a new action's record (its pace, familiarity, held first window and what Follow the Clip had
-    to follow), in that order."""
+    """The notes of a new action's record (its stance, pace, familiarity, held first window and what Follow the
+    Clip had to follow), in that order."""
     record = action.get(RECORD, {})
-    notes = [record.get(key, {}).get("note", "") for key in ("pace", "familiarity", "first_window", "follow_clip")]
+    notes = [record.get(key, {}).get("note", "") for key in ("stance", "pace", "familiarity", "first_window",
+                                                            "follow_clip")]
     return [str(note) for note in notes if note]
 
 

@@ -209,6 +209,25 @@ def test_extend_says_when_the_motion_is_unfamiliar(real_model, addon):
     assert common.report_note(action_of(obj)).startswith(". This motion is unlike")
 
 
+def test_extend_says_when_the_character_lies_as_a_z_up_file_imported_y_up_does(real_model, addon, tmp_path):
+    """A Z-up BVH imported with the importer's default Up (Y) lies on its back in the scene: Extend still runs, and
+    its record and report say the character stands along the scene's -Y and how to import it standing. Imported
+    with Up Z, it stands and nothing is said."""
+    from model_core.io.bvh_export import write_bvh
+    from model_core.motion.synthetic import walking_skeleton
+
+    take = write_bvh(tmp_path / "z_up.bvh", walking_skeleton(60) @ np.array([[1.0, 0, 0], [0, 0, -1], [0, 1, 0]]).T)
+    notes = {}
+    for up, forward in (("Y", "-Z"), ("Z", "Y")):
+        bpy.ops.wm.read_homefile(use_empty=True)
+        obj = import_bvh(take, axis_up=up, axis_forward=forward)
+        assert bpy.ops.strnn.extend_clip(frames=10) == {"FINISHED"}
+        notes[up] = action_of(obj)["strnn"].get("stance", {}).get("note", "")
+    assert "stands along the scene's -Y axis" in notes["Y"] and "Transform > Up" in notes["Y"], notes
+    common = importlib.import_module(addon.__name__ + ".strnn_addon.stages.common")
+    assert notes["Z"] == "" and "stands along" not in common.report_note(action_of(bpy.context.active_object))
+
+
 def test_extend_says_when_the_action_is_too_short_for_follow_the_clip(real_model, addon):
     """A 1.5 s action extended by 4 s with Follow the Clip on: the new action's record says how much the clip gave and
     how much it needs, and how the clip was played on (back and forth or round), and the report tells the animator
