@@ -193,7 +193,7 @@ def solve_frames(context, clip: Clip, frames: np.ndarray, positions: np.ndarray)
     reference pose (:func:`reference_pose`): read and solved :data:`CHUNK_FRAMES` frames at a time, so a
     long take never holds more than one chunk's reference and working arrays."""
     frames = np.asarray(frames, dtype=np.float64)
-    targets = to_armature(clip, positions)
+    targets = to_armature(clip, positions, world_at(context, clip, frames))
     n, b = len(frames), len(clip.rig.names)
     loc, rot = np.empty((n, b, 3), np.float32), np.empty((n, b, 3, 3), np.float32)
     cache = rig_io.KeyCache()
@@ -227,10 +227,21 @@ def world_scale(clip: Clip) -> float:
     return float(abs(np.linalg.det(clip.world[:3, :3])) ** (1 / 3))
 
 
-def to_armature(clip: Clip, pos_yup: np.ndarray) -> np.ndarray:
-    """World Y-up positions ``[F, 21, 3]`` -> armature space (Blender axes)."""
-    inv = np.linalg.inv(clip.world)
-    return np.einsum("ij,fkj->fki", inv[:3, :3], yup_to_zup(pos_yup)) + inv[:3, 3]
+def world_at(context, clip: Clip, frames: np.ndarray) -> np.ndarray:
+    """The armature object's world matrices ``[F, 4, 4]`` at scene ``frames``: its matrix now where the object
+    stays put, else as Blender evaluates it frame by frame (an action that moves the object itself, a parent,
+    constraints), so that new frames land where the object will be, wherever the playhead stands."""
+    frames = np.asarray(frames, dtype=np.float64)
+    if not rig_io.object_moves(clip.obj, clip.channels.fcurves if clip.channels else []):
+        return np.broadcast_to(clip.world, (len(frames), 4, 4))
+    return rig_io.world_matrices_evaluated(context, clip.obj, frames)
+
+
+def to_armature(clip: Clip, pos_yup: np.ndarray, world: np.ndarray | None = None) -> np.ndarray:
+    """World Y-up positions ``[F, 21, 3]`` -> armature space (Blender axes), through the object's world matrix
+    now or ``world`` ``[F, 4, 4]``, frame by frame (:func:`world_at`)."""
+    inv = np.linalg.inv(np.broadcast_to(clip.world if world is None else world, (len(pos_yup), 4, 4)))
+    return np.einsum("fij,fkj->fki", inv[:, :3, :3], yup_to_zup(pos_yup)) + inv[:, None, :3, 3]
 
 
 def written_bones(clip: Clip) -> list[int]:

@@ -177,6 +177,29 @@ def needs_scene_evaluation(obj, fcurves) -> str:
     return ""
 
 
+def object_moves(obj, fcurves) -> bool:
+    """Whether the armature object's own world matrix can change from frame to frame: its action (``fcurves``) or
+    drivers animate the object itself, or it has a parent or constraints."""
+    ad = obj.animation_data
+    paths = [fc.data_path for fc in fcurves] + ([d.data_path for d in ad.drivers] if ad else [])
+    return bool(obj.parent or len(obj.constraints) or any(not p.startswith("pose.bones") for p in paths))
+
+
+def world_matrices_evaluated(context, obj, frames: np.ndarray) -> np.ndarray:
+    """The object's world matrices ``[F, 4, 4]`` at scene ``frames``, Blender evaluating each frame; the scene's
+    current frame is restored."""
+    scene = context.scene
+    keep = (scene.frame_current, scene.frame_subframe)
+    world = np.empty((len(frames), 4, 4))
+    try:
+        for k, f in enumerate(frames):
+            scene.frame_set(int(np.floor(f)), subframe=float(f - np.floor(f)))
+            world[k] = world_matrix(obj)
+    finally:
+        scene.frame_set(keep[0], subframe=keep[1])
+    return world
+
+
 def pose_matrices_fast(obj, rig: Rig, fcurves, frames: np.ndarray, cache: KeyCache | None = None) -> np.ndarray:
     """Armature-space pose matrices ``[F, B, 4, 4]`` by NumPy forward kinematics."""
     loc, rot, scale = read_local_pose(obj, rig, fcurves, frames, cache)

@@ -84,10 +84,10 @@ def extend_steps(context, obj, *, frames: int = 120, context_frames: int = 0, fo
                        passes=SETTLE_PASSES)
         new_pos = new_pos[len(pos):]
     yield "solve"
-    targets = pipeline.to_armature(clip, new_pos)
+    new_frames = end + 1 + np.arange(frames, dtype=np.float64)
+    targets = pipeline.to_armature(clip, new_pos, pipeline.world_at(context, clip, new_frames))
     loc, rot = solve(clip.rig, clip.anchors, targets, np.repeat(held_loc, frames, 0), np.repeat(held_rot, frames, 0))
     yield "write"
-    new_frames = end + 1 + np.arange(frames, dtype=np.float64)
     record = made_by("Extend Clip", clip, engine_bridge.model_used(prefs(context)), frames=frames,
                      context_frames=len(ctx_frames), follow_clip_frames=len(mem_frames) if follow_clip else 0,
                      foot_lock=foot_lock, from_frame=from_frame)

@@ -55,11 +55,11 @@ def follow_curve_steps(context, obj, *, curve: str = "", frames: int = 0, speed:
         new_pos = lock(joined, clip.fps, fixed=np.arange(len(joined)) < known)[known:]
     yield "solve"
     n = len(new_pos)
-    loc, rot = solve(clip.rig, clip.anchors, pipeline.to_armature(clip, new_pos), np.repeat(held_loc, n, 0),
-                     np.repeat(held_rot, n, 0))
-    yield "write"
     start = clip.last + 1 if clip.action is not None else context.scene.frame_start
     new_frames = start + np.arange(n, dtype=np.float64)
+    targets = pipeline.to_armature(clip, new_pos, pipeline.world_at(context, clip, new_frames))
+    loc, rot = solve(clip.rig, clip.anchors, targets, np.repeat(held_loc, n, 0), np.repeat(held_rot, n, 0))
+    yield "write"
     record = made_by("Follow Curve", clip, engine_bridge.model_used(prefs(context)), curve=curve_obj.name,
                      frames=n, speed=float(speed), foot_lock=foot_lock)
     if context_pos is not None:

@@ -58,8 +58,9 @@ def transfer_steps(context, obj, *, source: str = "", foot_lock: bool = True, sc
         new_pos = lock(new_pos, src.fps)
     yield "solve"
     n = len(frames)
-    loc, rot = solve(target.rig, target.anchors, pipeline.to_armature(target, new_pos), np.repeat(ref_loc, n, 0),
-                     np.repeat(ref_rot, n, 0))
+    loc, rot = solve(target.rig, target.anchors, pipeline.to_armature(target, new_pos,
+                                                                      pipeline.world_at(context, target, frames)),
+                     np.repeat(ref_loc, n, 0), np.repeat(ref_rot, n, 0))
     yield "write"
     record = made_by("Transfer Motion", src, source=src.obj.name, target=obj.name, foot_lock=foot_lock)
     return write_fresh(context, target, f"{src.action.name}.transfer", frames, loc, rot, record, scene_range)

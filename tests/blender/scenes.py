@@ -268,6 +268,20 @@ def makehuman_walk(frames: int = 60):
     return obj
 
 
+def object_walk(frames: int = 60, step: float = 0.02):
+    """:func:`mixamo_walk` whose travel is keyed on the armature object itself (as game pipelines' root motion and
+    many hand-keyed shots have it), the hips bone walking in place."""
+    obj = mixamo_walk(frames)
+    for fc in fcurves_of(obj):
+        if fc.data_path == 'pose.bones["mixamorig:Hips"].location' and fc.array_index == 1:
+            for key in fc.keyframe_points:
+                key.co[1] = key.handle_left[1] = key.handle_right[1] = 0.0
+    for f in range(1, frames + 1):
+        obj.location = (0.0, -step * f, 0.0)
+        obj.keyframe_insert("location", frame=f)
+    return obj
+
+
 def addon_module(addon, name: str):
     """A submodule of the installed extension, e.g. ``addon_module(addon, "strnn_addon.scene.pipeline")``."""
     import importlib

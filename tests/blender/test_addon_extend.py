@@ -22,6 +22,7 @@ from scenes import (
     key_snapshot,
     makehuman_walk,
     mixamo_walk,
+    object_walk,
     rigify_walk,
     same_keys,
     walk_bvh,
@@ -207,6 +208,21 @@ def test_extend_says_when_the_motion_is_unfamiliar(real_model, addon):
     assert "unlike what the model learnt" in found["note"]
     common = importlib.import_module(addon.__name__ + ".strnn_addon.stages.common")
     assert common.report_note(action_of(obj)).startswith(". This motion is unlike")
+
+
+@pytest.mark.parametrize("playhead", [1, 30, 60])
+def test_an_action_that_moves_the_object_itself_is_extended_from_where_it_ends(real_model, addon, playhead):
+    """The walk's travel is keyed on the armature object: wherever the playhead stands when Extend runs, the new
+    frames go on from where the action ends (they used to be put through the object's matrix at the playhead,
+    and with it at frame 1 the character jumped back 1.2 m at the seam)."""
+    obj = object_walk(60)
+    bpy.context.scene.frame_set(playhead)
+    old, new, before = extend(30)
+    check_new_action(obj, old, new, before, 30)
+    pos = evaluated_joints(addon, obj, np.arange(55, 91))
+    step = np.linalg.norm(np.diff(pos[:, 0], axis=0), axis=-1)  # the hips' world step, a frame
+    assert step.max() < 0.05, step  # 2 cm a frame before the seam; no jump
+    assert pos[0, 0, 1] - pos[-1, 0, 1] > 0.3  # and it walks on along -Y, as the take
 
 
 def test_extend_says_when_the_character_lies_as_a_z_up_file_imported_y_up_does(real_model, addon, tmp_path):
