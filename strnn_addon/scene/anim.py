@@ -28,9 +28,7 @@ class Channels:
         if not is_layered(action):
             self.fcurves = action.fcurves
             return
-        slot = anim_data.action_slot if anim_data and anim_data.action == action else None
-        if slot is None and len(action.slots):
-            slot = action.slots[0]
+        slot = _slot_for(action, anim_data)
         from bpy_extras import anim_utils
 
         if ensure:
@@ -55,6 +53,21 @@ class Channels:
         grp = self.channelbag.groups.get(group) or self.channelbag.groups.new(group)
         fc.group = grp
         return fc
+
+
+def _slot_for(action, anim_data):
+    """The slot of ``action`` the object of ``anim_data`` animates through: its own slot where ``action`` is its
+    action; in a copy of its action not yet assigned (a new action being written), the slot named like its own,
+    so that an action shared by several objects, each on a slot of its own, gets the keys in the right one; else
+    the first slot (None where there is none)."""
+    current = getattr(anim_data, "action_slot", None) if anim_data else None
+    if current is not None:
+        if anim_data.action == action:
+            return current
+        same = next((s for s in action.slots if s.identifier == current.identifier), None)
+        if same is not None:
+            return same
+    return action.slots[0] if len(action.slots) else None
 
 
 def ensure_channelbag(action, slot):

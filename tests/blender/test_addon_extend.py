@@ -225,6 +225,36 @@ def test_an_action_that_moves_the_object_itself_is_extended_from_where_it_ends(r
     assert pos[0, 0, 1] - pos[-1, 0, 1] > 0.3  # and it walks on along -Y, as the take
 
 
+def test_an_action_shared_by_two_armatures_each_on_its_own_slot_is_extended_on_the_right_slot(real_model, addon):
+    """Blender 4.4 and later let one action animate several objects, each through a slot of its own. Extending the
+    second armature writes its new keys into its own slot of the new action (they went into the first slot, and
+    the second armature stood still in every new frame); the first armature's motion is untouched."""
+    a, b = mixamo_walk(60), mixamo_walk(60)
+    shared, own = action_of(a), action_of(b)
+    if not hasattr(shared, "slots"):
+        pytest.skip("actions have no slots before Blender 4.4")
+    anim = addon_module(addon, "strnn_addon.scene.anim")
+    slot = shared.slots.new(id_type="OBJECT", name="Second")
+    bag = anim.ensure_channelbag(shared, slot)
+    for fc in anim.Channels(own, b.animation_data).fcurves:
+        new = bag.fcurves.new(fc.data_path, index=fc.array_index)
+        new.keyframe_points.add(len(fc.keyframe_points))
+        for key, src in zip(new.keyframe_points, fc.keyframe_points):
+            key.co, key.handle_left, key.handle_right = src.co, src.handle_left, src.handle_right
+    b.animation_data.action = shared
+    b.animation_data.action_slot = slot
+    frames = np.arange(1, 61)
+    a_before = evaluated_joints(addon, a, frames)
+    bpy.context.view_layer.objects.active = b
+    old, new, before = extend(30)
+    check_new_action(b, old, new, before, 30)
+    assert b.animation_data.action_slot.identifier == slot.identifier
+    pos = evaluated_joints(addon, b, np.arange(55, 91))
+    step = np.linalg.norm(np.diff(pos[:, 0], axis=0), axis=-1)
+    assert step[6:].min() > 0.003, step  # the second armature walks on in the new frames
+    assert action_of(a) is shared and np.abs(evaluated_joints(addon, a, frames) - a_before).max() < 1e-6
+
+
 def test_extend_says_when_the_character_lies_as_a_z_up_file_imported_y_up_does(real_model, addon, tmp_path):
     """A Z-up BVH imported with the importer's default Up (Y) lies on its back in the scene: Extend still runs, and
     its record and report say the character stands along the scene's -Y and how to import it standing. Imported
