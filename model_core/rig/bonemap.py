@@ -64,8 +64,13 @@ def split_side(name: str) -> tuple[str | None, str]:
     return side, base
 
 
+# Families read only where they find every body joint (their names mean other joints in other rigs).
+WHOLE_ONLY = {"rigify_metarig"}
+
+
 def _family_map(names: list[str]) -> tuple[str, Mapping]:
-    """The known family matching most joints: (family, partial mapping)."""
+    """The known family matching most joints: (family, partial mapping); a family of :data:`WHOLE_ONLY` only where
+    it finds every joint but the leaves."""
     lookup = {normalise_name(n): n for n in names}
     best: tuple[str, Mapping] = ("", {})
     for family, table in RIG_FAMILIES.items():
@@ -79,6 +84,8 @@ def _family_map(names: list[str]) -> tuple[str, Mapping]:
                 if c.endswith("_end") and c[:-4] in lookup:
                     found[joint] = (lookup[c[:-4]], True)
                     break
+        if family in WHOLE_ONLY and any(j not in found and not j.endswith(_LEAVES) for j in JOINTS):
+            continue
         if len(found) > len(best[1]):
             best = (family, found)
     return best

@@ -83,6 +83,15 @@ RIG_FAMILIES: dict[str, dict[str, list[str]]] = {
         "{s}_toe": ["ORG-toe.{S}"], "{s}_arm": ["ORG-upper_arm.{S}"], "{s}_elbow": ["ORG-forearm.{S}"],
         "{s}_wrist": ["ORG-hand.{S}"], "{s}_fingertip": ["ORG-f_middle.03.{S}_end", "ORG-f_middle.03.{S}"],
     }, ("L", ""), ("R", "")),
+    # Rigify's human metarig itself (animated as it is, before a rig is generated from it): bones without prefixes.
+    # Read only where every body joint is found (``bonemap.WHOLE_ONLY``): its ``spine`` is a hips bone, where other
+    # rigs' ``spine`` is the spine.
+    "rigify_metarig": _sided({
+        "hips": ["spine"], "spine": ["spine.001"], "spine1": ["spine.003"], "neck": ["spine.004"],
+        "head": ["spine.006"], "{s}_upleg": ["thigh.{S}"], "{s}_knee": ["shin.{S}"], "{s}_foot": ["foot.{S}"],
+        "{s}_toe": ["toe.{S}"], "{s}_arm": ["upper_arm.{S}"], "{s}_elbow": ["forearm.{S}"], "{s}_wrist": ["hand.{S}"],
+        "{s}_fingertip": ["f_middle.03.{S}_end", "f_middle.03.{S}"],
+    }, ("L", ""), ("R", "")),
     "rigify_deform": _sided({
         "hips": ["DEF-spine"], "spine": ["DEF-spine.001"], "spine1": ["DEF-spine.003"],
         "neck": ["DEF-spine.004"], "head": ["DEF-spine.006"],

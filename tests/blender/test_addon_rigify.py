@@ -292,3 +292,22 @@ def test_transfer_with_foot_lock_keeps_feet_on_the_floor(walking_rig, addon):
     feet = got[:, [names[n] for n in ("l_foot", "l_toe", "r_foot", "r_toe")], 2]
     lowest = feet.min(1)
     assert np.percentile(lowest, 5) > -0.03 and np.percentile(lowest, 50) < 0.05, np.percentile(lowest, [5, 50])
+
+
+def test_the_metarig_itself_is_mapped_and_extended(addon, real_model):
+    """Rigify's human metarig animated as it is (before a rig is generated): its bones carry no prefix and its
+    head is spine.006, so the bone map used to leave the head and neck open and every operator refused it."""
+    addon_utils.enable("rigify", default_set=True)
+    bpy.ops.wm.read_homefile(use_empty=True)
+    bpy.ops.object.armature_human_metarig_add()
+    obj = bpy.context.active_object
+    key_walk(obj, 60, "spine", ("thigh.L", "thigh.R"), ("shin.L", "shin.R"), ("upper_arm.L", "upper_arm.R"))
+    assert bpy.ops.strnn.auto_map() == {"FINISHED"}
+    assert obj.strnn_map.family == "rigify_metarig"
+    assert (obj.strnn_map.hips, obj.strnn_map.neck, obj.strnn_map.head) == ("spine", "spine.004", "spine.006")
+    old = action_of(obj)
+    assert bpy.ops.strnn.extend_clip(frames=30) == {"FINISHED"}
+    assert action_of(obj) is not old and action_of(obj).frame_range[1] == 90
+    pos = evaluated_joints(addon, obj, np.arange(55, 91))
+    step = np.linalg.norm(np.diff(pos[:, 0], axis=0), axis=-1)
+    assert np.isfinite(pos).all() and step.max() < 0.05 and step[5:].mean() > 0.003, step
