@@ -164,7 +164,7 @@ def _by_hierarchy(names: list[str], parents: list[int], mapping: Mapping) -> Non
 _PROXIMAL = (("foot", ("foot",), ("ankle",), "toe"), ("wrist", ("hand",), ("wrist",), "fingertip"))
 
 
-def _is_below(parents: list[int], a: int, b: int) -> bool:
+def is_below(parents: list[int], a: int, b: int) -> bool:
     """Whether bone ``a`` lies below bone ``b`` (``b`` a strict ancestor of ``a``)."""
     a = parents[a]
     while a >= 0 and a != b:
@@ -185,7 +185,7 @@ def _proximal_first(names: list[str], parents: list[int], mapping: Mapping) -> N
             if tail or parsed[idx[bone]][1] not in distal:
                 continue
             above = [i for i, (s, b) in enumerate(parsed) if s == side and b in proximal
-                     and _is_below(parents, idx[bone], i)]
+                     and is_below(parents, idx[bone], i)]
             if above:
                 mapping[joint] = (names[above[-1]], False)
                 mapping.setdefault(f"{side}_{leaf}", (bone, leaf == "fingertip"))
@@ -198,7 +198,7 @@ def _chest_where_the_arms_meet(names: list[str], parents: list[int], mapping: Ma
     if "spine1" not in mapping or any(j not in mapping or mapping[j][1] for j in ("l_arm", "r_arm")):
         return
     meet = _common(parents, idx[mapping["l_arm"][0]], idx[mapping["r_arm"][0]])
-    if meet >= 0 and _is_below(parents, meet, idx[mapping["spine1"][0]]):
+    if meet >= 0 and is_below(parents, meet, idx[mapping["spine1"][0]]):
         mapping["spine1"] = (names[meet], False)
 
 

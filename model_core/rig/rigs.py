@@ -169,7 +169,7 @@ def _generic(names: list[str], parents: list[int], offsets=None) -> tuple[RigMap
     """(rig map, [], "") of a skeleton mapped by bone words and hierarchy, or (None, joints not found,
     what in the hierarchy is wrong) where that does not give a whole body. A tail at no distance from its
     bone (a zero-length End Site, as Bandai's hands have) is no joint: a finger tip is then estimated."""
-    from .bonemap import auto_map  # bonemap reads this module's families
+    from .bonemap import auto_map, is_below  # bonemap reads this module's families
 
     _, mapping = auto_map(names, parents)
     children: dict[int, list[int]] = {}
@@ -197,11 +197,7 @@ def _generic(names: list[str], parents: list[int], offsets=None) -> tuple[RigMap
     for joint, parent in PARENT_NAMES.items():
         if parent is None or sources[joint] is None:
             continue
-        below, above = index[sources[joint]], index[sources[parent]]
-        b = parents[below]
-        while b >= 0 and b != above:
-            b = parents[b]
-        if b != above:
+        if not is_below(parents, index[sources[joint]], index[sources[parent]]):
             return None, [], (f" (read by body part and side, {joint} -> {sources[joint]!r} is not below "
                               f"{parent} -> {sources[parent]!r} in the hierarchy)")
     return RigMap("generic", sources), [], ""
