@@ -185,6 +185,30 @@ def makehuman_bones() -> list[tuple]:
     return bones
 
 
+def smpl_bones() -> list[tuple]:
+    """(name, parent, head, tail) of an SMPL skeleton as the SMPL-X add-on and AMASS conversions name it: the ankle
+    above ``L_Foot`` (the ball of the foot), the wrist above ``L_Hand`` (the knuckles), ``Spine1..3`` with the arms
+    hanging from ``Spine3``."""
+    j = _rest_joints()
+    up, fwd = np.array([0, 0, 0.1]), np.array([0, -0.06, 0])
+    spine = [_mid(j["spine"], j["spine1"], t) for t in (0.0, 0.5, 1.0)]
+    bones = [("Pelvis", None, j["hips"], j["spine"]), ("Spine1", "Pelvis", spine[0], spine[1]),
+             ("Spine2", "Spine1", spine[1], spine[2]), ("Spine3", "Spine2", spine[2], j["neck"]),
+             ("Neck", "Spine3", j["neck"], j["head"]), ("Head", "Neck", j["head"], j["head"] + up * 2)]
+    for s, S in (("l", "L"), ("r", "R")):
+        knuckles = _mid(j[f"{s}_wrist"], j[f"{s}_fingertip"], 0.45)
+        bones += [(f"{S}_Collar", "Spine3", _mid(j["neck"], j[f"{s}_arm"], 0.3) - up, j[f"{s}_arm"]),
+                  (f"{S}_Shoulder", f"{S}_Collar", j[f"{s}_arm"], j[f"{s}_elbow"]),
+                  (f"{S}_Elbow", f"{S}_Shoulder", j[f"{s}_elbow"], j[f"{s}_wrist"]),
+                  (f"{S}_Wrist", f"{S}_Elbow", j[f"{s}_wrist"], knuckles),
+                  (f"{S}_Hand", f"{S}_Wrist", knuckles, j[f"{s}_fingertip"]),
+                  (f"{S}_Hip", "Pelvis", j[f"{s}_upleg"], j[f"{s}_knee"]),
+                  (f"{S}_Knee", f"{S}_Hip", j[f"{s}_knee"], j[f"{s}_foot"]),
+                  (f"{S}_Ankle", f"{S}_Knee", j[f"{s}_foot"], j[f"{s}_toe"]),
+                  (f"{S}_Foot", f"{S}_Ankle", j[f"{s}_toe"], j[f"{s}_toe"] + fwd)]
+    return bones
+
+
 def build_armature(name: str, bones: list[tuple], rotation_mode: str = "QUATERNION"):
     """An armature object made in edit mode from (name, parent, head, tail), active and selected."""
     arm = bpy.data.armatures.new(name)
@@ -265,6 +289,13 @@ def makehuman_walk(frames: int = 60):
     obj = build_armature("MakeHuman", makehuman_bones())
     key_walk(obj, frames, "root", ("upperleg01.L", "upperleg01.R"), ("lowerleg01.L", "lowerleg01.R"),
              ("upperarm01.L", "upperarm01.R"))
+    return obj
+
+
+def smpl_walk(frames: int = 60):
+    """An SMPL-named armature (quaternions) with a keyed walk."""
+    obj = build_armature("SMPL", smpl_bones())
+    key_walk(obj, frames, "Pelvis", ("L_Hip", "R_Hip"), ("L_Knee", "R_Knee"), ("L_Shoulder", "R_Shoulder"))
     return obj
 
 

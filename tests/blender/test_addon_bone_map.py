@@ -4,7 +4,16 @@ from __future__ import annotations
 
 import bpy
 import pytest
-from scenes import build_armature, find_mocap, import_bvh, makehuman_bones, mixamo_bones, rigify_bones, walk_bvh
+from scenes import (
+    build_armature,
+    find_mocap,
+    import_bvh,
+    makehuman_bones,
+    mixamo_bones,
+    rigify_bones,
+    smpl_bones,
+    walk_bvh,
+)
 
 from model_core.motion.conventions import JOINTS
 
@@ -68,6 +77,14 @@ def test_makehuman_names_in_numbered_segments_map_to_each_limbs_first_segment(ad
     assert (found["l_upleg"], found["l_knee"], found["r_arm"], found["r_elbow"]) == (
         "upperleg01.L", "lowerleg01.L", "upperarm01.R", "lowerarm01.R")
     assert (found["l_foot"], found["l_toe"], found["r_wrist"]) == ("foot.L", "toe1-1.L", "wrist.R")
+
+
+def test_smpl_armature_maps_the_ankle_wrist_and_chest(addon):
+    found = auto_map(build_armature("SMPL", smpl_bones()))
+    assert all(found.values()), [k for k, v in found.items() if not v]
+    assert (found["spine1"], found["l_foot"], found["l_toe"], found["r_wrist"]) == ("Spine3", "L_Ankle", "L_Foot",
+                                                                                   "R_Wrist")
+    assert found["l_fingertip"] == "L_Hand" and bpy.context.active_object.strnn_map.l_fingertip_tail
 
 
 def test_unmappable_rig_lists_missing_joints(addon):

@@ -25,6 +25,7 @@ from scenes import (
     object_walk,
     rigify_walk,
     same_keys,
+    smpl_walk,
     walk_bvh,
 )
 
@@ -150,7 +151,8 @@ def test_extend_real_clip_with_model(real_model, addon, family):
     check_real_extension(addon, obj, 60)
 
 
-@pytest.mark.parametrize("make", [mixamo_walk, rigify_walk, makehuman_walk], ids=["mixamo", "rigify", "makehuman"])
+@pytest.mark.parametrize("make", [mixamo_walk, rigify_walk, makehuman_walk, smpl_walk],
+                         ids=["mixamo", "rigify", "makehuman", "smpl"])
 def test_extend_built_armature_with_model(real_model, addon, make):
     check_real_extension(addon, make(60), 60)
 
