@@ -99,7 +99,9 @@ def read_bvh(path: str | Path, fps: float | None = None) -> Bvh:
         if key in ("ROOT", "JOINT"):
             if key == "JOINT" and not stack:
                 raise _error(path, line, "JOINT outside of a ROOT block")
-            _, name = take()
+            name_line, name = take()
+            while pos < len(tokens) and tokens[pos][0] == name_line and tokens[pos][1] != "{":
+                name += "_" + take()[1]  # a name with spaces (3ds Max's "Bip01 L Thigh"), joined as Blender joins it
             bvh.names.append(name)
             parents.append(stack[-1] if stack else -1)
             is_end.append(False)

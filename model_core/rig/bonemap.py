@@ -145,6 +145,8 @@ def _by_hierarchy(names: list[str], parents: list[int], mapping: Mapping) -> Non
             mapping["hips"] = (names[c], False)
     if not have("spine1") and have("l_arm") and have("r_arm"):
         c = _common(parents, idx[mapping["l_arm"][0]], idx[mapping["r_arm"][0]])
+        if c >= 0 and have("neck") and names[c] == mapping["neck"][0]:
+            c = parents[c]  # the arms hang from the neck (3ds Max's Biped): the chest is the bone below it
         if c >= 0:
             mapping["spine1"] = (names[c], False)
     if have("hips") and have("spine1") and not have("spine"):

@@ -134,3 +134,11 @@ def test_resample_24_to_30_is_exact_on_linear_motion():
 def test_resample_same_rate_is_identity():
     x = np.random.default_rng(0).normal(size=(10, 21, 3))
     assert resample(x, 30.0, 30.0) is x
+
+
+def test_joint_names_with_spaces_are_joined_with_underscores(write_text):
+    """3ds Max's Biped writes names such as ``Bip01 L Thigh``; they read as Blender's importer names the bones."""
+    text = _one_joint("Xposition Yposition Zposition", "Zrotation Xrotation Yrotation", "0 0 0 0 0 0")
+    text = text.replace("ROOT Root", "ROOT Bip01 Pelvis").replace("JOINT Arm\n  {", "JOINT Bip01 L Thigh {")
+    path = write_text("spaces.bvh", text)  # the second name with its brace on the same line
+    assert read_bvh(path).names[:2] == ["Bip01_Pelvis", "Bip01_L_Thigh"]

@@ -102,16 +102,29 @@ GENESIS8 = [("hip", None), ("pelvis", "hip"), ("abdomenLower", "hip"), ("abdomen
      ("{S}Hand", "{S}ForearmTwist")], "lr")
 
 
+# 3ds Max's Biped, as a BVH names it once its spaces are joined: the thighs hang from Spine, the clavicles from Neck.
+BIPED = [("Bip01", None), ("Bip01_Pelvis", "Bip01"), ("Bip01_Spine", "Bip01_Pelvis"),
+         ("Bip01_Spine1", "Bip01_Spine"), ("Bip01_Spine2", "Bip01_Spine1"), ("Bip01_Neck", "Bip01_Spine2"),
+         ("Bip01_Head", "Bip01_Neck")] + _sided(
+    [("Bip01_{S}_Clavicle", "Bip01_Neck"), ("Bip01_{S}_UpperArm", "Bip01_{S}_Clavicle"),
+     ("Bip01_{S}_Forearm", "Bip01_{S}_UpperArm"), ("Bip01_{S}_Hand", "Bip01_{S}_Forearm"),
+     ("Bip01_{S}_Thigh", "Bip01_Spine"), ("Bip01_{S}_Calf", "Bip01_{S}_Thigh"), ("Bip01_{S}_Foot", "Bip01_{S}_Calf"),
+     ("Bip01_{S}_Toe0", "Bip01_{S}_Foot")], "LR")
+
+
 @pytest.mark.parametrize("tree, want", [
+    (BIPED, {"hips": "Bip01_Pelvis", "spine": "Bip01_Spine", "spine1": "Bip01_Spine2", "neck": "Bip01_Neck",
+             "l_upleg": "Bip01_L_Thigh", "l_knee": "Bip01_L_Calf", "l_toe": "Bip01_L_Toe0",
+             "r_arm": "Bip01_R_UpperArm"}),
     (VROID, {"hips": "J_Bip_C_Hips", "spine": "J_Bip_C_Spine", "spine1": "J_Bip_C_UpperChest",
              "neck": "J_Bip_C_Neck", "head": "J_Bip_C_Head", "l_knee": "J_Bip_L_LowerLeg",
              "r_arm": "J_Bip_R_UpperArm"}),
     (GENESIS8, {"hips": "hip", "spine": "abdomenLower", "spine1": "chestUpper", "neck": "neckLower",
                 "l_upleg": "lThighBend", "l_knee": "lShin", "r_arm": "rShldrBend", "r_elbow": "rForearmBend"}),
-], ids=["vroid", "genesis8"])
+], ids=["biped", "vroid", "genesis8"])
 def test_centre_markers_and_bend_twist_limbs_map_fully(tree, want):
     """VRoid marks the body's middle with _C_ (J_Bip_C_Neck); Daz's Genesis 3 and 8 split each limb into a Bend and
-    a Twist bone, the joint at the Bend's head."""
+    a Twist bone, the joint at the Bend's head; 3ds Max's Biped hangs its arms from the neck."""
     _, mapping = auto_map(*_tree(tree))
     assert not missing(mapping)
     assert {j: mapping[j][0] for j in want} == want

@@ -75,6 +75,11 @@ _NAMINGS = {
     "daz": ({"Hips": "hip", "Spine": "abdomen", "Spine1": "chest", "Neck": "neck", "Head": "head"},
             lambda side, limb: side[0].lower() + dict(zip(_LIMBS, ("Shldr", "ForeArm", "Hand", "Mid1", "Thigh",
                                                                    "Shin", "Foot", "Toe")))[limb]),
+    # 3ds Max's Biped: names with spaces, which the reader joins with underscores as Blender's importer does
+    "biped": ({"Hips": "Bip01 Pelvis", "Spine": "Bip01 Spine", "Spine1": "Bip01 Spine1", "Neck": "Bip01 Neck",
+               "Head": "Bip01 Head", "LeftShoulder": "Bip01 L Clavicle", "RightShoulder": "Bip01 R Clavicle"},
+              lambda side, limb: f"Bip01 {side[0]} " + dict(zip(_LIMBS, ("UpperArm", "Forearm", "Hand", "Finger2",
+                                                                        "Thigh", "Calf", "Foot", "Toe0")))[limb]),
     # SMPL's joints, as AMASS conversions name them: the ankle above L_Foot (the ball of the foot), the wrist
     # above L_Hand, three spine joints with the arms hanging from the third.
     "smpl": ({"Hips": "Pelvis", "Spine": "Spine1", "Spine1": "Spine3", "LeftShoulder": "L_Collar",
