@@ -14,6 +14,7 @@ import contextlib
 import importlib
 import os
 import sys
+import tempfile
 import time
 import traceback
 from pathlib import Path
@@ -21,6 +22,7 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parent.parent
 REPO_MODULE = "strnn_batch"
 ADDON = f"bl_ext.{REPO_MODULE}.strnn_motion"
+BOM = b"\xef\xbb\xbf"  # UTF-8's byte-order mark
 
 
 class BatchError(Exception):
@@ -30,7 +32,7 @@ class BatchError(Exception):
 def check_bvh_text(path: Path) -> None:
     """Fail with a plain reason for files Blender's importer would choke on."""
     try:
-        text = path.read_text(errors="strict")
+        text = path.read_text(encoding="utf-8-sig", errors="strict")  # a byte-order mark is no content
     except UnicodeDecodeError:
         raise BatchError("not a BVH file: it is not text") from None
     words = text.split()
@@ -72,6 +74,20 @@ def read_checked(path: Path) -> None:
         read_bvh(path)
     except BvhError as e:
         raise BatchError(f"broken BVH: {str(e).removeprefix(str(path) + ':')}") from None
+
+
+@contextlib.contextmanager
+def without_byte_order_mark(path: Path):
+    """``path``, or where the file starts with a UTF-8 byte-order mark (some Windows tools write one; Blender's BVH
+    importer then calls it 'not a BVH file') a copy without it, of the same name in a temporary folder."""
+    data = path.read_bytes()
+    if not data.startswith(BOM):
+        yield path
+        return
+    with tempfile.TemporaryDirectory() as folder:
+        copy = Path(folder) / path.name
+        copy.write_bytes(data[len(BOM):])
+        yield copy
 
 
 def file_axes(path: Path) -> tuple[str, str]:
@@ -183,11 +199,12 @@ def run_file(bpy, job: dict) -> list[str]:
     if src.suffix.lower() == ".bvh":
         check_bvh_text(src)
         axes = file_axes(src)
-        try:
-            bpy.ops.import_anim.bvh(filepath=str(src), update_scene_fps=True, update_scene_duration=True,
-                                    axis_forward=axes[0], axis_up=axes[1])
-        except RuntimeError as e:
-            raise BatchError(f"Blender's BVH importer could not read it: {blender_error(e)}") from None
+        with without_byte_order_mark(src) as readable:
+            try:
+                bpy.ops.import_anim.bvh(filepath=str(readable), update_scene_fps=True, update_scene_duration=True,
+                                        axis_forward=axes[0], axis_up=axes[1])
+            except RuntimeError as e:
+                raise BatchError(f"Blender's BVH importer could not read it: {blender_error(e)}") from None
     else:
         try:
             bpy.ops.wm.open_mainfile(filepath=str(src), load_ui=False)

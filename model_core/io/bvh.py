@@ -60,7 +60,8 @@ def read_bvh(path: str | Path, fps: float | None = None) -> Bvh:
     """
     path = str(path)
     try:
-        with open(path, encoding="utf-8", errors="replace") as f:
+        # utf-8-sig: past the byte-order mark some Windows tools write
+        with open(path, encoding="utf-8-sig", errors="replace") as f:
             lines = f.read().splitlines()
     except OSError as e:
         raise BvhError(f"{path}: cannot read file ({e.strerror})") from e

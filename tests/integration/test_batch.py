@@ -165,6 +165,16 @@ def test_a_z_up_take_is_extended_standing_and_written_back_in_its_own_axes(tmp_p
     assert not any("stands along" in note for note in y_notes), y_notes
 
 
+def test_a_take_that_starts_with_a_byte_order_mark_is_extended(tmp_path, extension, capsys):
+    """Some Windows tools start a BVH with a UTF-8 byte-order mark; Blender's importer reads it, and so does the
+    batch (it used to call it 'not a BVH file')."""
+    take = write_bvh(tmp_path / "walk.bvh", walking_skeleton(40))
+    take.write_bytes(b"\xef\xbb\xbf" + take.read_bytes())
+    assert strnn_batch.main(["extend", "--frames", "10", str(take), "--out", str(tmp_path / "out"),
+                             "--extension", str(extension)]) == 0
+    assert frames_of(tmp_path / "out" / "walk.extend.bvh") == 50
+
+
 def test_extend_from_a_frame_replaces_the_tail(tmp_path, extension, capsys):
     clip = write_bvh(tmp_path / "walk.bvh", walking_skeleton(60))
     out = tmp_path / "out"

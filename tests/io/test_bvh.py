@@ -142,3 +142,10 @@ def test_joint_names_with_spaces_are_joined_with_underscores(write_text):
     text = text.replace("ROOT Root", "ROOT Bip01 Pelvis").replace("JOINT Arm\n  {", "JOINT Bip01 L Thigh {")
     path = write_text("spaces.bvh", text)  # the second name with its brace on the same line
     assert read_bvh(path).names[:2] == ["Bip01_Pelvis", "Bip01_L_Thigh"]
+
+
+def test_a_byte_order_mark_before_hierarchy_is_read_past(write_text):
+    """Some Windows tools start a text file with a UTF-8 byte-order mark; Blender's importer reads such a file."""
+    text = _one_joint("Xposition Yposition Zposition", "Zrotation Xrotation Yrotation", "0 0 0 0 0 0")
+    path = write_text("bom.bvh", "\ufeff" + text)
+    assert read_bvh(path).names[:2] == ["Root", "Arm"]
