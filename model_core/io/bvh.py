@@ -192,18 +192,19 @@ def read_bvh(path: str | Path, fps: float | None = None) -> Bvh:
     return bvh
 
 
-MIN_FRAME_TIME, MAX_FRAME_TIME = 1.0 / 240.0, 1.0 / 10.0  # seconds: the capture rates a header can mean
+# seconds: the capture rates a header can mean (optical systems record up to 360 frames a second and more; video 10)
+MIN_FRAME_TIME, MAX_FRAME_TIME = 1.0 / 500.0, 1.0 / 10.0
 
 
 def check_frame_time(path: str, line: int, frame_time: float) -> None:
-    """A :class:`BvhError` unless a header's Frame Time is a plausible capture rate (240 to 10 fps)."""
+    """A :class:`BvhError` unless a header's Frame Time is a plausible capture rate (500 to 10 fps)."""
     fix = (" fix the header, or give the folder its true rate in configs/data.toml [fps_overrides] (the "
            "batch CLI and the extension read the header as it is)")
     if not frame_time > 0:
         raise _error(path, line, f"Frame Time must be positive, found {frame_time}:" + fix)
     if not MIN_FRAME_TIME * 0.999 <= frame_time <= MAX_FRAME_TIME * 1.001:
         raise _error(path, line, f"Frame Time {frame_time:g} s ({1 / frame_time:g} fps) is far from any capture "
-                                 f"rate (1/240 to 1/10 s):" + fix)
+                                 f"rate (1/500 to 1/10 s):" + fix)
 
 
 def _is_float(s: str) -> bool:

@@ -97,8 +97,9 @@ def test_implausible_frame_times_are_refused_with_the_fix(write_text, time, what
     assert read_bvh(path, fps=30.0).fps == 30.0  # a folder override replaces the header
 
 
-def test_capture_rates_from_10_to_240_fps_are_read(write_text):
-    for fps in (10, 24, 30, 60, 120, 240):
+def test_capture_rates_from_10_to_500_fps_are_read(write_text):
+    """Video to optical capture (Vicon and Qualisys record at 250, OptiTrack at 360 frames a second)."""
+    for fps in (10, 24, 30, 60, 120, 240, 250, 360, 500):
         path = write_text(f"r{fps}.bvh", HEADER + f"Frames: 1\nFrame Time: {1 / fps:.6f}\n0 0 0 0 0 0\n")
         assert abs(read_bvh(path).fps - fps) < 0.001 * fps
 
