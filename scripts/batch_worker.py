@@ -29,8 +29,8 @@ class BatchError(Exception):
     """A per-file failure with a reason meant for the summary (no traceback)."""
 
 
-def check_bvh_text(path: Path) -> None:
-    """Fail with a plain reason for files Blender's importer would choke on."""
+def check_bvh_text(path: Path):
+    """Fail with a plain reason for files Blender's importer would choke on; the file as the project reads it."""
     try:
         text = path.read_text(encoding="utf-8-sig", errors="strict")  # a byte-order mark is no content
     except UnicodeDecodeError:
@@ -60,10 +60,10 @@ def check_bvh_text(path: Path) -> None:
         [float(v) for line in rows[:frames] for v in line.split()]
     except ValueError as e:
         raise BatchError(f"broken BVH: a frame line holds a non-number ({e})") from None
-    read_checked(path)
+    return read_checked(path)
 
 
-def read_checked(path: Path) -> None:
+def read_checked(path: Path):
     """The project's own BVH reader over the whole file, the one check every entry point shares: a
     Frame Time no capture rate has, non-finite values, a malformed hierarchy (file, line and fix)."""
     if str(REPO) not in sys.path:
@@ -71,7 +71,7 @@ def read_checked(path: Path) -> None:
     from model_core.io.bvh import BvhError, read_bvh
 
     try:
-        read_bvh(path)
+        return read_bvh(path)
     except BvhError as e:
         raise BatchError(f"broken BVH: {str(e).removeprefix(str(path) + ':')}") from None
 
@@ -90,15 +90,22 @@ def without_byte_order_mark(path: Path):
         yield copy
 
 
-def file_axes(path: Path) -> tuple[str, str]:
-    """(forward, up) axes for Blender's BVH importer: the default ``("-Z", "Y")``, or the axis the take's body
-    stands along where that is another (a Z-up file: ``("Y", "Z")``), so that the armature stands in Blender
-    (``rigs.standing_axis``). A rig the project cannot read by itself keeps the default."""
-    from model_core.io.bvh import BvhError, read_bvh
+AXES_FRAMES = 600  # at most this many of a take's frames, evenly spread, say which axis its body stands along
+
+
+def file_axes(bvh) -> tuple[str, str]:
+    """(forward, up) axes for Blender's BVH importer of the read file ``bvh``: the default ``("-Z", "Y")``, or the
+    axis the take's body stands along where that is another (a Z-up file: ``("Y", "Z")``), so that the armature
+    stands in Blender (``rigs.standing_axis``, on :data:`AXES_FRAMES` of its frames). A rig the project cannot
+    read by itself keeps the default."""
+    import dataclasses
+
+    from model_core.io.bvh import BvhError
     from model_core.rig.rigs import RigError, canonical_positions, standing_axis
 
+    step = max(1, -(-bvh.frames // AXES_FRAMES))
     try:
-        axis = standing_axis(canonical_positions(read_bvh(path)))
+        axis = standing_axis(canonical_positions(dataclasses.replace(bvh, motion=bvh.motion[::step])))
     except (BvhError, RigError):
         axis = None
     if axis is None or axis[1] > 0:
@@ -197,8 +204,7 @@ def run_file(bpy, job: dict) -> list[str]:
         target = open_target(bpy, job)
     axes = ("-Z", "Y")
     if src.suffix.lower() == ".bvh":
-        check_bvh_text(src)
-        axes = file_axes(src)
+        axes = file_axes(check_bvh_text(src))
         with without_byte_order_mark(src) as readable:
             try:
                 bpy.ops.import_anim.bvh(filepath=str(readable), update_scene_fps=True, update_scene_duration=True,
