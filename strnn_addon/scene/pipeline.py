@@ -22,7 +22,7 @@ from ...model_core.motion.conventions import (  # noqa: F401  (MIN_MODEL_FRAMES,
     yup_to_zup,
     zup_to_yup,
 )
-from ...model_core.rig.controls import ControlSet, visual_local
+from ...model_core.rig.controls import Control, ControlSet, visual_local
 from ...model_core.rig.solve import Anchors, Rig, anchor_positions, fk, solve, solved_bones
 from . import anim, controls, mapping, rig_io
 
@@ -124,7 +124,12 @@ def rig_of(obj) -> tuple[Rig, Anchors, dict, ControlSet | None]:
     except mapping.MapError as e:
         raise UserError(str(e)) from e
     if found is None:
-        check_not_driven(obj, [rig.names[b] for b in solved_bones(rig, anchors)])
+        written = [rig.names[b] for b in solved_bones(rig, anchors)]
+        check_not_driven(obj, written)
+        if rig_io.own_inheritance(obj, written):  # keys set by solving alone would land elsewhere: bake them
+            hips = bone_map["hips"][0]
+            found = ControlSet("own bones", [Control(name, name, name == hips) for name in written])
+            anchors, bone_map, rig = mapping.resolve(obj, rig, joint_skeleton=True)
     return rig, anchors, bone_map, found
 
 

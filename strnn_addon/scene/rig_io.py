@@ -177,6 +177,21 @@ def needs_scene_evaluation(obj, fcurves) -> str:
     return ""
 
 
+def own_inheritance(obj, bones: list[str]) -> list[str]:
+    """Those of ``bones`` and their ancestors whose pose does not simply follow their parent's: Inherit Rotation off
+    (a hinge) or Local Location off (Bone Properties > Relations). The solve's forward kinematics assumes the
+    usual inheritance, so keys it computes for such a rig would put the bones elsewhere."""
+    out, seen = [], set()
+    for name in bones:
+        bone = obj.data.bones[name]
+        while bone is not None and bone.name not in seen:
+            seen.add(bone.name)
+            if not bone.use_inherit_rotation or not bone.use_local_location:
+                out.append(bone.name)
+            bone = bone.parent
+    return out
+
+
 def object_moves(obj, fcurves) -> bool:
     """Whether the armature object's own world matrix can change from frame to frame: its action (``fcurves``) or
     drivers animate the object itself, or it has a parent or constraints."""

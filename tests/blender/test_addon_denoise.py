@@ -100,6 +100,26 @@ def test_an_action_that_moves_the_object_itself_is_kept_where_it_is(real_model, 
     assert moved.max() < tolerance, moved.max()
 
 
+@pytest.mark.parametrize("bone, flag", [("mixamorig:LeftLeg", "use_inherit_rotation"),
+                                        ("mixamorig:Hips", "use_local_location")], ids=["hinge", "location"])
+def test_a_rig_whose_bones_do_not_simply_follow_their_parents_is_written_where_the_solve_puts_it(
+        real_model, addon, bone, flag):
+    """A mapped bone with Inherit Rotation off (a hinge) or Local Location off: keys computed by the solve's own
+    forward kinematics put the joints up to 0.31 m (hinge) and 1.07 m (location) off; such a rig is now written by
+    the visual bake control rigs use, each written bone its own control, so Denoise at strength 0 leaves every
+    frame where it was, and Extend's new frames sit where its solve put them."""
+    obj = mixamo_walk(40)
+    setattr(obj.data.bones[bone], flag, False)
+    frames = np.arange(1, 41)
+    before = evaluated_joints(addon, obj, frames)
+    assert bpy.ops.strnn.denoise_action(strength=0.0) == {"FINISHED"}
+    assert np.linalg.norm(evaluated_joints(addon, obj, frames) - before, axis=-1).max() < 1e-3
+    assert action_of(obj)["strnn"]["controls"]["set"] == "own bones"
+    assert bpy.ops.strnn.extend_clip(frames=20) == {"FINISHED"}
+    baked = action_of(obj)["strnn"]["controls"]
+    assert baked["set"] == "own bones" and baked["max_error_cm"] < 0.5, dict(baked)
+
+
 def test_steps_report_model_progress_and_stop_without_changes(real_model, addon, tmp_path):
     """What the operator's modal runs; closing it in the model stage (Esc) changes nothing."""
     obj = import_bvh(walk_bvh(tmp_path, frames=400))
