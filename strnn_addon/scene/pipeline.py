@@ -124,10 +124,9 @@ def rig_of(obj) -> tuple[Rig, Anchors, dict, ControlSet | None]:
     except mapping.MapError as e:
         raise UserError(str(e)) from e
     if found is None:
-        written = [rig.names[b] for b in solved_bones(rig, anchors)]
-        check_not_driven(obj, written)
+        written, hips = [rig.names[b] for b in solved_bones(rig, anchors)], bone_map["hips"][0]
+        check_not_driven(obj, written, hips)
         if rig_io.own_inheritance(obj, written):  # keys set by solving alone would land elsewhere: bake them
-            hips = bone_map["hips"][0]
             found = ControlSet("own bones", [Control(name, name, name == hips) for name in written])
             anchors, bone_map, rig = mapping.resolve(obj, rig, joint_skeleton=True)
     return rig, anchors, bone_map, found
@@ -138,10 +137,23 @@ OVERRIDING = {"COPY_TRANSFORMS", "COPY_ROTATION", "CHILD_OF", "DAMPED_TRACK", "T
               "STRETCH_TO", "ARMATURE", "TRANSFORM", "IK", "SPLINE_IK"}
 
 
-def check_not_driven(obj, bones: list[str]) -> None:
-    """A :class:`UserError` when a bone that would be keyed follows a constraint that overrides its keys,
-    saying to key its controls instead."""
+def check_not_driven(obj, bones: list[str], moved: str = "") -> None:
+    """A :class:`UserError` when a bone that would be keyed follows a constraint that overrides its keys, or a
+    driver sets one of the channels it would be keyed on (its rotation; the location of ``moved``, the hips
+    bone), saying to key its controls instead."""
+    ad = obj.animation_data
+    driven = {(d.data_path, d.array_index) for d in ad.drivers} if ad else set()
     for name in bones:
+        pb = obj.pose.bones[name]
+        base = f'pose.bones["{bpy.utils.escape_identifier(name)}"].'
+        prop = {"QUATERNION": "rotation_quaternion", "AXIS_ANGLE": "rotation_axis_angle"}.get(pb.rotation_mode,
+                                                                                             "rotation_euler")
+        paths = (base + prop, base + "location") if name == moved else (base + prop,)
+        hit = next(((p, i) for p, i in sorted(driven) if p in paths), None)
+        if hit is not None:
+            raise UserError(f"Bone {name!r} has a driver on {hit[0].removeprefix(base)}[{hit[1]}], so keys written on "
+                            "it would not show: remove the driver, or set the bones the animator keys in STRNN > "
+                            "Bone Map > Controls")
         for con in obj.pose.bones[name].constraints:
             if con.type in OVERRIDING and not con.mute and con.influence > 0:
                 target = getattr(con, "subtarget", "") or getattr(getattr(con, "target", None), "name", "")

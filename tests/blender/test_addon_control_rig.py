@@ -16,6 +16,7 @@ from scenes import (
     key_snapshot,
     key_walk,
     mixamo_bones,
+    mixamo_walk,
     same_keys,
 )
 
@@ -55,6 +56,24 @@ def test_without_controls_the_operators_say_what_to_set(addon):
     with pytest.raises(RuntimeError, match="follows.*constraint.*Controls"):
         bpy.ops.strnn.extend_clip(frames=10)
     assert same_keys(before, key_snapshot(obj))
+
+
+@pytest.mark.parametrize("channel", ["rotation_quaternion", "location"])
+def test_a_bone_whose_keyed_channel_a_driver_sets_is_refused_and_nothing_changes(addon, channel):
+    """A driver overrides a channel's keys: a knee whose rotation, or hips whose location, a driver sets would not
+    show what an operator keys on it. The operator says which bone and channel, and changes nothing; a driver on a
+    channel no operator keys (the knee's location) is left alone."""
+    obj = mixamo_walk(40)
+    bone = "mixamorig:Hips" if channel == "location" else "mixamorig:LeftLeg"
+    fc = obj.pose.bones[bone].driver_add(channel, 1)
+    fc.driver.expression = "0.0"
+    before = key_snapshot(obj)
+    with pytest.raises(RuntimeError, match=rf"Bone '{bone}' has a driver on {channel}\[1\].*remove the driver"):
+        bpy.ops.strnn.extend_clip(frames=10)
+    assert same_keys(before, key_snapshot(obj)) and action_of(obj).name == "MixamoAction"
+    obj.animation_data.drivers.remove(fc)
+    obj.pose.bones["mixamorig:LeftLeg"].driver_add("location", 0).driver.expression = "0.0"
+    assert bpy.ops.strnn.extend_clip(frames=10) == {"FINISHED"}
 
 
 def test_with_controls_extend_keys_them_and_the_deform_bones_follow(addon, fake_model):
