@@ -104,8 +104,24 @@ def prepare_any(context, obj) -> Clip:
 def clip_of(context, obj, action, channels, first: int, last: int) -> Clip:
     """The :class:`Clip` of a checked armature (see :func:`rig_of`)."""
     rig, anchors, bone_map, found = rig_of(obj)
+    check_evaluated(context, obj, channels.fcurves if channels else [], found)
     return Clip(obj, action, channels, rig, anchors, bone_map, rig_io.world_matrix(obj),
                 keys_per_second(context, obj), first, last, found)
+
+
+def check_evaluated(context, obj, fcurves, found: ControlSet | None) -> None:
+    """A :class:`UserError` where reading or writing ``obj`` needs Blender to evaluate it frame by frame
+    (constraints, drivers, a moving object, controls to bake) but it is disabled in viewports, itself or through
+    its collections: Blender then leaves its pose as it is at every frame."""
+    if not rig_io.disabled_in_viewports(obj, context.scene):
+        return
+    why = ("its controls are set by a visual bake" if found is not None
+           else rig_io.needs_scene_evaluation(obj, fcurves)
+           or ("the object itself moves" if rig_io.object_moves(obj, fcurves) else ""))
+    if why:
+        raise UserError(f"{obj.name!r} is disabled in viewports (itself or its collection), so Blender does not "
+                        f"evaluate its pose, which this needs ({why}): enable it (Object Properties > Visibility > "
+                        "Show in Viewports, or the collection's screen icon in the Outliner) and run it again")
 
 
 def rig_of(obj) -> tuple[Rig, Anchors, dict, ControlSet | None]:

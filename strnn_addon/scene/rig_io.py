@@ -177,6 +177,20 @@ def needs_scene_evaluation(obj, fcurves) -> str:
     return ""
 
 
+def disabled_in_viewports(obj, scene) -> bool:
+    """Whether ``obj`` is left out of ``scene``'s evaluation: disabled in viewports itself, or reachable only
+    through collections that are (hidden with H it is still evaluated)."""
+    if obj.hide_viewport:
+        return True
+
+    def reaches(coll) -> bool:
+        if getattr(coll, "hide_viewport", False):
+            return False
+        return obj.name in coll.objects or any(reaches(child) for child in coll.children)
+
+    return not reaches(scene.collection)
+
+
 def own_inheritance(obj, bones: list[str]) -> list[str]:
     """Those of ``bones`` and their ancestors whose pose does not simply follow their parent's: Inherit Rotation off
     (a hinge) or Local Location off (Bone Properties > Relations). The solve's forward kinematics assumes the
