@@ -112,16 +112,22 @@ def clip_of(context, obj, action, channels, first: int, last: int) -> Clip:
 def check_evaluated(context, obj, fcurves, found: ControlSet | None) -> None:
     """A :class:`UserError` where reading or writing ``obj`` needs Blender to evaluate it frame by frame
     (constraints, drivers, a moving object, controls to bake) but it is disabled in viewports, itself or through
-    its collections: Blender then leaves its pose as it is at every frame."""
-    if not rig_io.disabled_in_viewports(obj, context.scene):
+    its collections (Blender then leaves its pose as it is at every frame), or shows its Rest Position (every
+    frame evaluates to the rest pose)."""
+    disabled, at_rest = rig_io.disabled_in_viewports(obj, context.scene), obj.data.pose_position == "REST"
+    if not disabled and not at_rest:
         return
     why = ("its controls are set by a visual bake" if found is not None
            else rig_io.needs_scene_evaluation(obj, fcurves)
            or ("the object itself moves" if rig_io.object_moves(obj, fcurves) else ""))
-    if why:
+    if why and disabled:
         raise UserError(f"{obj.name!r} is disabled in viewports (itself or its collection), so Blender does not "
                         f"evaluate its pose, which this needs ({why}): enable it (Object Properties > Visibility > "
                         "Show in Viewports, or the collection's screen icon in the Outliner) and run it again")
+    if why:
+        raise UserError(f"{obj.name!r} shows its Rest Position, so Blender evaluates every frame in the rest pose, and "
+                        f"this needs its animated pose ({why}): switch it to Pose Position (Armature Properties > "
+                        "Skeleton) and run it again")
 
 
 def rig_of(obj) -> tuple[Rig, Anchors, dict, ControlSet | None]:

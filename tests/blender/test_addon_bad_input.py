@@ -91,24 +91,27 @@ def test_bad_frame_range(addon, tmp_path, op, start, end, match):
 
 
 @pytest.mark.parametrize("op", ACTION_OPS)
-@pytest.mark.parametrize("how", ["object", "collection"])
+@pytest.mark.parametrize("how", ["object", "collection", "rest_position"])
 def test_a_rig_disabled_in_viewports_that_needs_evaluating_is_refused(addon, tmp_path, op, how):
-    """Disabled in viewports (itself or its collection), an armature is left out of Blender's evaluation, so a
-    rig read or written frame by frame through it (here a bone with a constraint) kept one pose at every frame
-    (Denoise at strength 0 moved its joints 0.95 m). Refused with the way to enable it; hidden with H it is still
-    evaluated, and a rig whose keys alone say its pose runs disabled too."""
+    """Disabled in viewports (itself or its collection), an armature is left out of Blender's evaluation, and in
+    Rest Position every frame evaluates to the rest pose, so a rig read or written frame by frame through Blender
+    (here a bone with a constraint) kept one pose at every frame (Denoise at strength 0 moved its joints 0.95 m).
+    Refused with the way out; hidden with H it is still evaluated, and a rig whose keys alone say its pose runs."""
     obj = import_bvh(walk_bvh(tmp_path, frames=40))
     bone = obj.pose.bones[0]
     con = bone.constraints.new("LIMIT_ROTATION")
     if how == "object":
         obj.hide_viewport = True
+    elif how == "rest_position":
+        obj.data.pose_position = "REST"
     else:
         coll = bpy.data.collections.new("Rigs")
         bpy.context.scene.collection.children.link(coll)
         coll.objects.link(obj)
         bpy.context.scene.collection.objects.unlink(obj)
         coll.hide_viewport = True
-    refuse(op, r"disabled in viewports.*has constraints.*Show in Viewports")
+    refuse(op, r"Rest Position.*has constraints.*Pose Position" if how == "rest_position" else
+           r"disabled in viewports.*has constraints.*Show in Viewports")
     bone.constraints.remove(con)
     assert getattr(bpy.ops.strnn, op)() == {"FINISHED"}
 
