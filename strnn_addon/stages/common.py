@@ -239,6 +239,9 @@ def write_new(context, clip, suffix, frames, loc, rot, previous, replace, record
     try:
         error = pipeline.write_pose(context, clip, action, frames, loc, rot, previous, replace, bones)
         action[RECORD] = with_bake(record, clip, error, frames)
+        if action.use_frame_range:  # a manual frame range the animator set: widened to hold the written frames
+            action.frame_start = min(action.frame_start, float(frames[0]))
+            action.frame_end = max(action.frame_end, float(frames[-1]))
         pipeline.finish(context, clip, action, scene_range)
     except Exception:
         bpy.data.actions.remove(action)

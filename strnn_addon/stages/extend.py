@@ -98,6 +98,7 @@ def extend_steps(context, obj, *, frames: int = 120, context_frames: int = 0, fo
         record.update(following_record(model_call(engine_bridge.run_following, prefs(context), followed, clip.fps,
                                                   frames)))
     record.update(pace_record(context, clip, end))
-    replace = None if end == clip.last else (end + 0.5, float("inf"))  # the old tail goes
+    # the written bones' keys after the end go: the old tail (from a frame), or keys past a manual frame range's end
+    replace = (end + 0.5, float("inf"))
     return write_new(context, clip, "extended", new_frames, loc, rot, previous, replace, record,
                      scene_range=scene_range)

@@ -66,8 +66,8 @@ def follow_curve_steps(context, obj, *, curve: str = "", frames: int = 0, speed:
         record.update(familiarity_record(engine_bridge.run_familiarity(prefs(context), context_pos, clip.fps)))
         record.update(pace_record(context, clip))
     if clip.action is not None:
-        return write_new(context, clip, "curve", new_frames, loc, rot, previous, None, record,
-                         scene_range=scene_range)
+        return write_new(context, clip, "curve", new_frames, loc, rot, previous, (clip.last + 0.5, float("inf")),
+                         record, scene_range=scene_range)  # keys past a manual frame range's end go
     return write_fresh(context, clip, f"{clip.obj.name}.curve", new_frames, loc, rot, record, scene_range)
 
 

@@ -257,6 +257,25 @@ def test_an_action_shared_by_two_armatures_each_on_its_own_slot_is_extended_on_t
     assert action_of(a) is shared and np.abs(evaluated_joints(addon, a, frames) - a_before).max() < 1e-6
 
 
+def test_an_action_with_a_manual_frame_range_is_extended_from_the_ranges_end(real_model, addon):
+    """A manual frame range (Action > Manual Frame Range, 1-30 on 60 frames of keys) is the clip the animator
+    declared: Extend goes on from frame 30, the written bones' keys after it give way to the new frames (they
+    were left in, and the motion jumped back to them after the new frames), and the new action's range widens to
+    hold them (it stayed 1-30, leaving them outside)."""
+    obj = mixamo_walk(60)
+    old = action_of(obj)
+    old.use_frame_range = True
+    old.frame_start, old.frame_end = 1, 30
+    before = key_snapshot(obj)
+    assert bpy.ops.strnn.extend_clip(frames=20) == {"FINISHED"}
+    new = action_of(obj)
+    assert new is not old and same_keys(before, key_snapshot(obj, old)) and tuple(old.frame_range) == (1, 30)
+    assert new.use_frame_range and tuple(new.frame_range) == (1, 50)
+    assert max(k.co[0] for fc in fcurves_of(obj) for k in fc.keyframe_points) == 50
+    pos = evaluated_joints(addon, obj, np.arange(25, 51))
+    assert np.linalg.norm(np.diff(pos[:, 0], axis=0), axis=-1).max() < 0.05  # the hips go on from frame 30
+
+
 def test_extend_says_when_the_character_lies_as_a_z_up_file_imported_y_up_does(real_model, addon, tmp_path):
     """A Z-up BVH imported with the importer's default Up (Y) lies on its back in the scene: Extend still runs, and
     its record and report say the character stands along the scene's -Y and how to import it standing. Imported
