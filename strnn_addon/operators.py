@@ -8,7 +8,7 @@ from . import props as options
 from .props import joint_label
 from .scene import anim, controls, mapping
 from .scene.curves import find_curve
-from .scene.pipeline import UserError, check_object, rig_of
+from .scene.pipeline import OWN_BONES, UserError, check_object, rig_of
 from .scene.simplify import simplify_keys
 from .stages.common import RECORD, STAGES, report_note, run
 from .stages.denoise import denoise_steps
@@ -333,6 +333,9 @@ class STRNN_OT_auto_map(bpy.types.Operator):
             self.report({"WARNING"}, f"Mapped all 21 joints ({family} rig), but: {e}")
             return {"FINISHED"}
         keyed = f"; results are keyed on its {found_controls.name} controls" if found_controls else ""
+        if found_controls is not None and found_controls.name == OWN_BONES:
+            keyed = ("; results are keyed on its bones by a visual bake (bones that do not simply follow their "
+                     "parents, or NLA strips under its action)")
         self.report({"INFO"}, f"Mapped all 21 joints ({family} rig){keyed}")
         return {"FINISHED"}
 

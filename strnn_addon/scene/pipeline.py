@@ -109,6 +109,9 @@ def clip_of(context, obj, action, channels, first: int, last: int) -> Clip:
                 keys_per_second(context, obj), first, last, found)
 
 
+OWN_BONES = "own bones"  # the controls of a plain rig keyed by the visual bake: each written bone its own
+
+
 def check_evaluated(context, obj, fcurves, found: ControlSet | None) -> None:
     """A :class:`UserError` where reading or writing ``obj`` needs Blender to evaluate it frame by frame
     (constraints, drivers, a moving object, controls to bake) but it is disabled in viewports, itself or through
@@ -145,11 +148,21 @@ def rig_of(obj) -> tuple[Rig, Anchors, dict, ControlSet | None]:
         anchors, bone_map, rig = mapping.resolve(obj, rig, joint_skeleton=found is not None)
     except mapping.MapError as e:
         raise UserError(str(e)) from e
+    ad = obj.animation_data
+    fcurves = anim.Channels(ad.action, ad).fcurves if ad and ad.action else []
+    layered = rig_io.nla_beneath(obj, fcurves)
+    if layered and ad.action is not None and ad.action_blend_type != "REPLACE":
+        raise UserError(f"{obj.name!r}'s action blends over its NLA strips by {ad.action_blend_type.title()}, so new "
+                        "keys would add to the strips' motion: set the action's Blending to Replace (NLA Editor, the "
+                        "action's track, Sidebar > Animation Data), or bake the strips into one action (Object > "
+                        "Animation > Bake Action), and run it again")
     if found is None:
         written, hips = [rig.names[b] for b in solved_bones(rig, anchors)], bone_map["hips"][0]
         check_not_driven(obj, written, hips)
-        if rig_io.own_inheritance(obj, written):  # keys set by solving alone would land elsewhere: bake them
-            found = ControlSet("own bones", [Control(name, name, name == hips) for name in written])
+        # keys set by solving alone would land elsewhere (bones that do not simply follow their parents), or blend
+        # with NLA strips under the action: bake them, each written bone its own control
+        if rig_io.own_inheritance(obj, written) or layered:
+            found = ControlSet(OWN_BONES, [Control(name, name, name == hips) for name in written])
             anchors, bone_map, rig = mapping.resolve(obj, rig, joint_skeleton=True)
     return rig, anchors, bone_map, found
 

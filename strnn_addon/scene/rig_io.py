@@ -14,6 +14,7 @@ import numpy as np
 
 from ...model_core.motion import rotations
 from ...model_core.rig.solve import Rig, fk
+from . import anim
 
 _ROT_PATHS = {"QUATERNION": "rotation_quaternion", "AXIS_ANGLE": "rotation_axis_angle"}
 
@@ -170,6 +171,8 @@ def needs_scene_evaluation(obj, fcurves) -> str:
     ad = obj.animation_data
     if ad and len(ad.drivers):
         return "the object has drivers"
+    if nla_beneath(obj, fcurves):
+        return "NLA strips play under its action"
     if any(not fc.data_path.startswith("pose.bones") for fc in fcurves):
         return "the action animates the object itself"
     if obj.constraints or obj.parent:
@@ -189,6 +192,23 @@ def disabled_in_viewports(obj, scene) -> bool:
         return obj.name in coll.objects or any(reaches(child) for child in coll.children)
 
     return not reaches(scene.collection)
+
+
+def nla_beneath(obj, fcurves) -> bool:
+    """Whether NLA strips under the object's action show in its pose (a layered shot: the body's motion in strips,
+    the action a tweak over them), so that the action's keys (``fcurves``) alone do not say it: the action blends
+    other than Replace or at less than full influence, or a strip animates a channel the action does not key."""
+    ad = obj.animation_data
+    if not (ad and ad.use_nla):
+        return False
+    strips = [s for t in ad.nla_tracks if not t.mute for s in t.strips if s.action is not None and not s.mute]
+    if not strips:
+        return False
+    if ad.action is None or ad.action_blend_type != "REPLACE" or ad.action_influence < 1.0:
+        return True
+    keyed = {(fc.data_path, fc.array_index) for fc in fcurves}
+    return any((fc.data_path, fc.array_index) not in keyed
+               for s in strips for fc in anim.Channels(s.action, None).fcurves)
 
 
 def own_inheritance(obj, bones: list[str]) -> list[str]:

@@ -120,6 +120,39 @@ def test_a_rig_whose_bones_do_not_simply_follow_their_parents_is_written_where_t
     assert baked["set"] == "own bones" and baked["max_error_cm"] < 0.5, dict(baked)
 
 
+@pytest.mark.parametrize("blend", ["REPLACE", "COMBINE"])
+def test_an_action_layered_over_nla_strips_is_read_and_written_with_them(real_model, addon, blend):
+    """The walk in an NLA strip, the active action a head tweak over it: the operators read only the action's keys
+    (the legs at rest), and wrote that as keys over the walk (Denoise at strength 0 moved the joints 0.89 m).
+    Now the pose is read as Blender plays it, strips and all, and written by the visual bake: every frame stays
+    where it was. An action that adds to the strips (Combine, Add) is refused with how to set it to Replace."""
+    obj = mixamo_walk(60)
+    ad = obj.animation_data
+    walk = ad.action
+    ad.nla_tracks.new().strips.new("walk", 1, walk)
+    tweak = bpy.data.actions.new("tweak")
+    ad.action = tweak
+    if getattr(ad, "action_slot", True) is None and len(tweak.slots):
+        ad.action_slot = tweak.slots[0]
+    head = obj.pose.bones["mixamorig:Head"]
+    for frame, tilt in ((1, 0.0), (60, 0.05)):
+        head.rotation_quaternion = (1.0, tilt, 0.0, 0.0)
+        head.keyframe_insert("rotation_quaternion", frame=frame)
+    frames = np.arange(1, 61)
+    before = evaluated_joints(addon, obj, frames)
+    ad.action_blend_type = blend
+    bpy.context.scene.frame_set(30)
+    if blend != "REPLACE":
+        snapshot = key_snapshot(obj)
+        with pytest.raises(RuntimeError, match=r"blends over its NLA strips by Combine.*Blending to Replace"):
+            bpy.ops.strnn.denoise_action(strength=0.0)
+        assert ad.action is tweak and same_keys(snapshot, key_snapshot(obj))
+        return
+    assert bpy.ops.strnn.denoise_action(strength=0.0) == {"FINISHED"}
+    assert ad.action is not tweak and action_of(obj)["strnn"]["controls"]["set"] == "own bones"
+    assert np.linalg.norm(evaluated_joints(addon, obj, frames) - before, axis=-1).max() < 1e-3
+
+
 def test_steps_report_model_progress_and_stop_without_changes(real_model, addon, tmp_path):
     """What the operator's modal runs; closing it in the model stage (Esc) changes nothing."""
     obj = import_bvh(walk_bvh(tmp_path, frames=400))
