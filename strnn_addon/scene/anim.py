@@ -143,6 +143,7 @@ def write_keys(fc, frames: np.ndarray, values: np.ndarray, replace: tuple[float,
     for attr, arr in merged.items():
         points.foreach_set(attr, np.ascontiguousarray(arr[order]).ravel())
     fc.update()
+    _keep_handles(fc, keep)
 
 
 def _append(fc, frames: np.ndarray, values: np.ndarray) -> bool:
@@ -154,6 +155,7 @@ def _append(fc, frames: np.ndarray, values: np.ndarray) -> bool:
     points.foreach_get("co", co)
     if n and frames[0] <= co[-2] + 1e-3:
         return False
+    before = _read_keys(fc)
     interp = np.empty(n, dtype=np.int32)
     points.foreach_get("interpolation", interp)
     new_interp = int(interp[-1]) if n else 1  # 1 = LINEAR
@@ -167,7 +169,34 @@ def _append(fc, frames: np.ndarray, values: np.ndarray) -> bool:
         buf[2 * n:] = new_co
         points.foreach_set(attr, buf)
     fc.update()
+    _keep_handles(fc, before)
     return True
+
+
+def _keep_handles(fc, kept: dict[str, np.ndarray]) -> None:
+    """Give the keys of ``kept`` (:func:`_read_keys` of the keys that were there before) back the handles they had,
+    where Blender's automatic handles moved them because a neighbour came or went: the curve between two kept keys
+    then stays as it was (a hand-keyed pass keeps its last stretch when keys follow it). Such a key's handles
+    become free (they no longer follow their neighbours)."""
+    if not len(kept["co"]):
+        return
+    now = _read_keys(fc)
+    at = np.searchsorted(now["co"][:, 0], kept["co"][:, 0])
+    at = np.clip(at, 0, len(now["co"]) - 1)
+    same = np.abs(now["co"][at, 0] - kept["co"][:, 0]) < 1e-3
+    moved = same & ((np.abs(now["handle_left"][at] - kept["handle_left"]).max(1) > 1e-6)
+                    | (np.abs(now["handle_right"][at] - kept["handle_right"]).max(1) > 1e-6))
+    if not moved.any():
+        return
+    free = bpy.types.Keyframe.bl_rna.properties["handle_left_type"].enum_items["FREE"].value
+    idx = at[moved]
+    for attr in ("handle_left_type", "handle_right_type"):
+        now[attr][idx] = free
+    for attr in ("handle_left", "handle_right"):
+        now[attr][idx] = kept[attr][moved]
+    points = fc.keyframe_points
+    for attr in ("handle_left_type", "handle_right_type", "handle_left", "handle_right"):
+        points.foreach_set(attr, np.ascontiguousarray(now[attr]).ravel())
 
 
 def _auto_clamped() -> int:

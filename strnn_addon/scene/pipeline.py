@@ -46,6 +46,7 @@ class Clip:
     first: int
     last: int
     controls: ControlSet | None = None  # a control rig's: ``rig`` is then its joint skeleton, written by a bake
+    layered: bool = False  # NLA strips under the action show through it (rig_io.nla_beneath)
 
 
 def scene_fps(scene) -> float:
@@ -104,9 +105,10 @@ def prepare_any(context, obj) -> Clip:
 def clip_of(context, obj, action, channels, first: int, last: int) -> Clip:
     """The :class:`Clip` of a checked armature (see :func:`rig_of`)."""
     rig, anchors, bone_map, found = rig_of(obj)
-    check_evaluated(context, obj, channels.fcurves if channels else [], found)
+    fcurves = channels.fcurves if channels else []
+    check_evaluated(context, obj, fcurves, found)
     return Clip(obj, action, channels, rig, anchors, bone_map, rig_io.world_matrix(obj),
-                keys_per_second(context, obj), first, last, found)
+                keys_per_second(context, obj), first, last, found, rig_io.nla_beneath(obj, fcurves))
 
 
 OWN_BONES = "own bones"  # the controls of a plain rig keyed by the visual bake: each written bone its own
@@ -379,22 +381,44 @@ def write_controls(context, clip: Clip, channels: anim.Channels, frames: np.ndar
     chosen = keyed_controls(clip, bones)
     index = {n: b for b, n in enumerate(clip.rig.names)}
     targets = {c.drives: pose[:, index[c.drives]] for c in chosen}
+    played = _played(context, clip, frames) if clip.layered else None  # before the bake turns any bone
     baked = controls.bake(context, clip.obj, clip.controls, frames, targets)
     for k, c in enumerate(chosen):
         pb = clip.obj.pose.bones[c.bone]
         prop, values = encode_rotation(pb.rotation_mode, baked.rot[:, k], previous.get(pb.name))
-        _key_property(clip, channels, pb, prop, frames, values, replace)
+        fill = None
+        if played is not None:  # a channel the action lacks takes the pose as played on its other frames
+            at, full, loc_p, rot_p = played
+            fill = (at, encode_rotation(pb.rotation_mode, rot_p[:, full.index(c.bone)], None)[1])
+        _key_property(clip, channels, pb, prop, frames, values, replace, fill)
         if c.location:
-            _key_property(clip, channels, pb, "location", frames, baked.loc[:, k], replace)
+            fill = None if played is None else (played[0], played[2][:, played[1].index(c.bone)])
+            _key_property(clip, channels, pb, "location", frames, baked.loc[:, k], replace, fill)
     edges = np.array([f for f in (frames[0] - 1, frames[-1] + 1) if clip.first <= f <= clip.last])
     controls.key_switches(channels, clip.obj, clip.controls, frames, edges)
     return baked.error
 
 
+def _played(context, clip: Clip, frames: np.ndarray) -> tuple[np.ndarray, list[str], np.ndarray, np.ndarray] | None:
+    """The action's frames other than ``frames`` and every bone's local ``loc`` ``[F, B, 3]`` and ``rot``
+    ``[F, B, 3, 3]`` there as Blender plays them (NLA strips and all): (frames, bone names, loc, rot); None where
+    there is no other frame."""
+    span = np.arange(clip.first, clip.last + 1, dtype=np.float64)
+    at = span[~np.isin(span, np.asarray(frames, dtype=np.float64))]
+    if not len(at):
+        return None
+    full = rig_io.read_rig(clip.obj)
+    pose, _ = rig_io.pose_matrices_evaluated(context, clip.obj, full, at)
+    loc, rot = visual_local(full, pose)
+    return at, full.names, loc, rot
+
+
 def _key_property(clip: Clip, channels: anim.Channels, pb, prop: str, frames: np.ndarray, values: np.ndarray,
-                  replace: tuple[float, float] | None) -> None:
+                  replace: tuple[float, float] | None, fill: tuple[np.ndarray, np.ndarray] | None = None) -> None:
     """Key ``values`` ``[F, n]`` on each array index of a pose bone property. A channel the action did
-    not animate gets its static value keyed just outside ``frames`` first, so other frames keep it."""
+    not animate gets its static value keyed just outside ``frames`` first, so other frames keep it; or, with
+    ``fill`` (frames, values ``[G, n]``: where NLA strips show through the action), those values on those frames,
+    so that the new channel keeps the pose the strips play there instead of hiding them."""
     path = f'pose.bones["{bpy.utils.escape_identifier(pb.name)}"].{prop}'
     static = np.asarray(getattr(pb, prop), dtype=np.float64)
     edges = np.array([f for f in (frames[0] - 1, frames[-1] + 1) if clip.first <= f <= clip.last])
@@ -402,7 +426,9 @@ def _key_property(clip: Clip, channels: anim.Channels, pb, prop: str, frames: np
         fc = channels.find(path, i)
         if fc is None:
             fc = channels.ensure(path, i, pb.name)
-            if len(edges):
+            if fill is not None and len(fill[0]):
+                anim.write_keys(fc, fill[0], fill[1][:, i])
+            elif len(edges):
                 anim.write_keys(fc, edges, np.full(len(edges), static[i]))
         anim.write_keys(fc, frames, values[:, i], replace)
 

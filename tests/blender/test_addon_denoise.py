@@ -125,7 +125,8 @@ def test_an_action_layered_over_nla_strips_is_read_and_written_with_them(real_mo
     """The walk in an NLA strip, the active action a head tweak over it: the operators read only the action's keys
     (the legs at rest), and wrote that as keys over the walk (Denoise at strength 0 moved the joints 0.89 m).
     Now the pose is read as Blender plays it, strips and all, and written by the visual bake: every frame stays
-    where it was. An action that adds to the strips (Combine, Add) is refused with how to set it to Replace."""
+    where it was, and a channel the action lacks takes the strips' pose on the frames an operation leaves. An
+    action that adds to the strips (Combine, Add) is refused with how to set it to Replace."""
     obj = mixamo_walk(60)
     ad = obj.animation_data
     walk = ad.action
@@ -151,6 +152,18 @@ def test_an_action_layered_over_nla_strips_is_read_and_written_with_them(real_mo
     assert bpy.ops.strnn.denoise_action(strength=0.0) == {"FINISHED"}
     assert ad.action is not tweak and action_of(obj)["strnn"]["controls"]["set"] == "own bones"
     assert np.linalg.norm(evaluated_joints(addon, obj, frames) - before, axis=-1).max() < 1e-3
+    # a gap filled and an extension: the new channels take the strips' pose on the action's other frames
+    # (they held one pose there, over the walk: 1.37 m off)
+    for op, kw in (("inbetween", {"use_range": True, "frame_start": 25, "frame_end": 34, "foot_lock": False}),
+                   ("extend_clip", {"frames": 20})):
+        ad.action = tweak  # (bones the tweak does not key keep the pose the last action left them in)
+        if getattr(ad, "action_slot", True) is None and len(tweak.slots):
+            ad.action_slot = tweak.slots[0]
+        kept = np.setdiff1d(frames, np.arange(24, 36)) if op == "inbetween" else frames
+        played = evaluated_joints(addon, obj, kept)
+        assert getattr(bpy.ops.strnn, op)(**kw) == {"FINISHED"}
+        moved = np.linalg.norm(evaluated_joints(addon, obj, kept) - played, axis=-1)
+        assert moved.max() < 5e-3, (op, moved.max())  # (the head's two tweak keys: Bezier handles move a little)
 
 
 def test_steps_report_model_progress_and_stop_without_changes(real_model, addon, tmp_path):

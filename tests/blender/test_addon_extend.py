@@ -257,6 +257,21 @@ def test_an_action_shared_by_two_armatures_each_on_its_own_slot_is_extended_on_t
     assert action_of(a) is shared and np.abs(evaluated_joints(addon, a, frames) - a_before).max() < 1e-6
 
 
+def test_a_hand_keyed_pass_keeps_its_frames_when_extended(real_model, addon):
+    """Keys every 10th frame with Bezier curves between (a blocking pass): keys following the last one made Blender
+    recompute its automatic handles, and the last stretch of the original motion moved (up to 4.7 cm at frame
+    58). The keys that were there keep their handles, so every original frame stays as it was."""
+    obj = mixamo_walk(61)
+    for fc in fcurves_of(obj):
+        for key in [k for k in fc.keyframe_points if (round(k.co[0]) - 1) % 10][::-1]:
+            fc.keyframe_points.remove(key)
+        fc.update()
+    frames = np.arange(1, 62)
+    before = evaluated_joints(addon, obj, frames)
+    assert bpy.ops.strnn.extend_clip(frames=20) == {"FINISHED"}
+    assert np.abs(evaluated_joints(addon, obj, frames) - before).max() < 1e-5
+
+
 def test_an_action_with_a_manual_frame_range_is_extended_from_the_ranges_end(real_model, addon):
     """A manual frame range (Action > Manual Frame Range, 1-30 on 60 frames of keys) is the clip the animator
     declared: Extend goes on from frame 30, the written bones' keys after it give way to the new frames (they
