@@ -193,13 +193,16 @@ def _proximal_first(names: list[str], parents: list[int], mapping: Mapping) -> N
                 mapping.setdefault(f"{side}_{leaf}", (bone, leaf == "fingertip"))
 
 
-def _chest_where_the_arms_meet(names: list[str], parents: list[int], mapping: Mapping) -> None:
-    """A chest a known family's names gave lower than where the two arms meet (SMPL's Spine2, where its arms
-    hang from Spine3) moves up to where they meet. In place."""
+def chest_where_the_arms_meet(names: list[str], parents: list[int], mapping: Mapping) -> None:
+    """A chest a known family's names gave lower than where the two arms meet moves up to where they meet: SMPL's
+    Spine2 (Mixamo's name) where its arms hang from Spine3, Xsens MVN's Chest2 (CMU's name) where they hang from
+    Chest4. In place."""
     idx = {n: i for i, n in enumerate(names)}
     if "spine1" not in mapping or any(j not in mapping or mapping[j][1] for j in ("l_arm", "r_arm")):
         return
     meet = _common(parents, idx[mapping["l_arm"][0]], idx[mapping["r_arm"][0]])
+    if meet >= 0 and "neck" in mapping and names[meet] == mapping["neck"][0]:
+        meet = parents[meet]  # the arms hang from the neck (3ds Max's Biped): the chest is the bone below it
     if meet >= 0 and is_below(parents, meet, idx[mapping["spine1"][0]]):
         mapping["spine1"] = (names[meet], False)
 
@@ -216,8 +219,9 @@ def auto_map(names: list[str], parents: list[int]) -> tuple[str, Mapping]:
     if len(mapping) < len(JOINTS):
         _by_words(names, mapping)
         _proximal_first(names, parents, mapping)
-        _chest_where_the_arms_meet(names, parents, mapping)
+        chest_where_the_arms_meet(names, parents, mapping)  # before the spine is read off the path below it
         _by_hierarchy(names, parents, mapping)
+    chest_where_the_arms_meet(names, parents, mapping)  # a whole family's chest too
     for side in "lr":
         for leaf in ("fingertip", "toe"):
             joint = f"{side}_{leaf}"

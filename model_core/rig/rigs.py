@@ -147,6 +147,12 @@ def detect_rig(names: list[str], source: str = "skeleton", parents=None, offsets
     for fam, table in RIG_FAMILIES.items():
         found, missing = _match(table, names)
         if not missing:
+            if parents is not None:  # the chest where the arms meet, if that is above the family's (Xsens' Chest4)
+                from .bonemap import chest_where_the_arms_meet
+
+                mapping = {j: (b, False) for j, b in found.items() if b is not None}
+                chest_where_the_arms_meet(names, [int(p) for p in parents], mapping)
+                found["spine1"] = mapping["spine1"][0]
             return RigMap(fam, found)
         if best is None or len(missing) < len(best[2]):
             best = (fam, found, missing)

@@ -171,3 +171,22 @@ def test_a_take_lying_down_half_the_time_is_left_as_it_is(tmp_path):
     clip = load_clip(path)
     head = clip[:, JOINTS.index("head")] - clip[:, [JOINTS.index("l_foot"), JOINTS.index("r_foot")]].mean(1)
     assert (head[:30, 1] > 1.2).all() and (head[30:, 2] > 1.2).all()  # standing, then lying along +Z, as written
+
+
+def test_a_whole_family_whose_arms_hang_higher_takes_the_chest_where_they_meet():
+    """Xsens MVN's BVH spells the CMU 'LeftHip' family whole, but its arms hang from Chest4, not Chest2: read with
+    its hierarchy (as every file is), the chest is where the arms meet, in the reader and in the bone map alike."""
+    from model_core.rig.bonemap import auto_map
+
+    parent = {"Hips": None, "Chest": "Hips", "Chest2": "Chest", "Chest3": "Chest2", "Chest4": "Chest3",
+              "Neck": "Chest4", "Head": "Neck"}
+    for s in ("Left", "Right"):
+        parent |= {f"{s}Collar": "Chest4", f"{s}Shoulder": f"{s}Collar", f"{s}Elbow": f"{s}Shoulder",
+                   f"{s}Wrist": f"{s}Elbow", f"{s}Hip": "Hips", f"{s}Knee": f"{s}Hip", f"{s}Ankle": f"{s}Knee",
+                   f"{s}Toe": f"{s}Ankle"}
+    names = list(parent)
+    parents = [names.index(parent[n]) if parent[n] else -1 for n in names]
+    assert detect_rig(names).sources["spine1"] == "Chest2"  # by names alone, the family's chest
+    rig = detect_rig(names, parents=parents)
+    assert rig.family == "cmu_bvh11" and (rig.sources["spine"], rig.sources["spine1"]) == ("Chest", "Chest4")
+    assert auto_map(names, parents)[1]["spine1"] == ("Chest4", False)
