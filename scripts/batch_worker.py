@@ -80,13 +80,14 @@ def read_checked(path: Path):
 def without_byte_order_mark(path: Path):
     """``path``, or where the file starts with a UTF-8 byte-order mark (some Windows tools write one; Blender's BVH
     importer then calls it 'not a BVH file') a copy without it, of the same name in a temporary folder."""
-    data = path.read_bytes()
-    if not data.startswith(BOM):
+    with open(path, "rb") as f:
+        marked = f.read(len(BOM)) == BOM
+    if not marked:
         yield path
         return
     with tempfile.TemporaryDirectory() as folder:
         copy = Path(folder) / path.name
-        copy.write_bytes(data[len(BOM):])
+        copy.write_bytes(path.read_bytes()[len(BOM):])
         yield copy
 
 
@@ -101,7 +102,7 @@ def file_axes(bvh) -> tuple[str, str]:
     import dataclasses
 
     from model_core.io.bvh import BvhError
-    from model_core.rig.rigs import RigError, canonical_positions, standing_axis
+    from model_core.rig.rigs import RigError, axis_name, canonical_positions, standing_axis
 
     step = max(1, -(-bvh.frames // AXES_FRAMES))
     try:
@@ -110,7 +111,7 @@ def file_axes(bvh) -> tuple[str, str]:
         axis = None
     if axis is None or axis[1] > 0:
         return "-Z", "Y"
-    up = ("-" if axis.sum() < 0 else "") + "XYZ"[int(abs(axis).argmax())]
+    up = axis_name(axis)
     return ("Y" if up.endswith("Z") else "-Z"), up
 
 

@@ -144,9 +144,7 @@ def _by_hierarchy(names: list[str], parents: list[int], mapping: Mapping) -> Non
         if c >= 0:
             mapping["hips"] = (names[c], False)
     if not have("spine1") and have("l_arm") and have("r_arm"):
-        c = _common(parents, idx[mapping["l_arm"][0]], idx[mapping["r_arm"][0]])
-        if c >= 0 and have("neck") and names[c] == mapping["neck"][0]:
-            c = parents[c]  # the arms hang from the neck (3ds Max's Biped): the chest is the bone below it
+        c = _arms_meet(names, parents, mapping)
         if c >= 0:
             mapping["spine1"] = (names[c], False)
     if have("hips") and have("spine1") and not have("spine"):
@@ -193,6 +191,16 @@ def _proximal_first(names: list[str], parents: list[int], mapping: Mapping) -> N
                 mapping.setdefault(f"{side}_{leaf}", (bone, leaf == "fingertip"))
 
 
+def _arms_meet(names: list[str], parents: list[int], mapping: Mapping) -> int:
+    """The bone where the mapped arms meet (-1 if none), or the one below it where that is the mapped neck (3ds
+    Max's Biped hangs its arms from the neck)."""
+    idx = {n: i for i, n in enumerate(names)}
+    meet = _common(parents, idx[mapping["l_arm"][0]], idx[mapping["r_arm"][0]])
+    if meet >= 0 and "neck" in mapping and names[meet] == mapping["neck"][0]:
+        meet = parents[meet]
+    return meet
+
+
 def chest_where_the_arms_meet(names: list[str], parents: list[int], mapping: Mapping) -> None:
     """A chest a known family's names gave lower than where the two arms meet moves up to where they meet: SMPL's
     Spine2 (Mixamo's name) where its arms hang from Spine3, Xsens MVN's Chest2 (CMU's name) where they hang from
@@ -200,9 +208,7 @@ def chest_where_the_arms_meet(names: list[str], parents: list[int], mapping: Map
     idx = {n: i for i, n in enumerate(names)}
     if "spine1" not in mapping or any(j not in mapping or mapping[j][1] for j in ("l_arm", "r_arm")):
         return
-    meet = _common(parents, idx[mapping["l_arm"][0]], idx[mapping["r_arm"][0]])
-    if meet >= 0 and "neck" in mapping and names[meet] == mapping["neck"][0]:
-        meet = parents[meet]  # the arms hang from the neck (3ds Max's Biped): the chest is the bone below it
+    meet = _arms_meet(names, parents, mapping)
     if meet >= 0 and is_below(parents, meet, idx[mapping["spine1"][0]]):
         mapping["spine1"] = (names[meet], False)
 

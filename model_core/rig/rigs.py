@@ -276,6 +276,11 @@ def standing_axis(pos: np.ndarray) -> np.ndarray | None:
     return None
 
 
+def axis_name(axis: np.ndarray) -> str:
+    """``"X"``, ``"-Z"``, ...: the name of a unit axis (:func:`standing_axis`), as Blender's importers spell it."""
+    return ("-" if axis.sum() < 0 else "") + "XYZ"[int(np.abs(axis).argmax())]
+
+
 def upright_rotation(pos: np.ndarray) -> np.ndarray | None:
     """The smallest rotation ``[3, 3]`` that stands the body of ``pos`` up along +Y where it stands along another
     axis (:func:`standing_axis`; a Z-up file's +Z, a file upside down), else None."""

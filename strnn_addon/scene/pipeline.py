@@ -181,14 +181,10 @@ def check_not_driven(obj, bones: list[str], moved: str = "") -> None:
     ad = obj.animation_data
     driven = {(d.data_path, d.array_index) for d in ad.drivers} if ad else set()
     for name in bones:
-        pb = obj.pose.bones[name]
-        base = f'pose.bones["{bpy.utils.escape_identifier(name)}"].'
-        prop = {"QUATERNION": "rotation_quaternion", "AXIS_ANGLE": "rotation_axis_angle"}.get(pb.rotation_mode,
-                                                                                             "rotation_euler")
-        paths = (base + prop, base + "location") if name == moved else (base + prop,)
-        hit = next(((p, i) for p, i in sorted(driven) if p in paths), None)
+        props = (rig_io.rotation_property(obj.pose.bones[name]),) + (("location",) if name == moved else ())
+        hit = next(((prop, i) for prop in props for p, i in sorted(driven) if p == _bone_path(name, prop)), None)
         if hit is not None:
-            raise UserError(f"Bone {name!r} has a driver on {hit[0].removeprefix(base)}[{hit[1]}], so keys written on "
+            raise UserError(f"Bone {name!r} has a driver on {hit[0]}[{hit[1]}], so keys written on "
                             "it would not show: remove the driver, or set the bones the animator keys in STRNN > "
                             "Bone Map > Controls")
         for con in obj.pose.bones[name].constraints:
@@ -381,13 +377,19 @@ def write_controls(context, clip: Clip, channels: anim.Channels, frames: np.ndar
     chosen = keyed_controls(clip, bones)
     index = {n: b for b, n in enumerate(clip.rig.names)}
     targets = {c.drives: pose[:, index[c.drives]] for c in chosen}
-    played = _played(context, clip, frames) if clip.layered else None  # before the bake turns any bone
+    # where NLA strips show through, a channel the action lacks takes the pose as played on its other frames: read
+    # before the bake turns any bone, and only if such a channel will be made
+    lacking = clip.layered and any(
+        channels.find(_bone_path(c.bone, prop), 0) is None
+        for c in chosen for prop in (rig_io.rotation_property(clip.obj.pose.bones[c.bone]),)
+        + (("location",) if c.location else ()))
+    played = _played(context, clip, frames) if lacking else None
     baked = controls.bake(context, clip.obj, clip.controls, frames, targets)
     for k, c in enumerate(chosen):
         pb = clip.obj.pose.bones[c.bone]
         prop, values = encode_rotation(pb.rotation_mode, baked.rot[:, k], previous.get(pb.name))
         fill = None
-        if played is not None:  # a channel the action lacks takes the pose as played on its other frames
+        if played is not None and channels.find(_bone_path(c.bone, prop), 0) is None:
             at, full, loc_p, rot_p = played
             fill = (at, encode_rotation(pb.rotation_mode, rot_p[:, full.index(c.bone)], None)[1])
         _key_property(clip, channels, pb, prop, frames, values, replace, fill)
@@ -413,13 +415,18 @@ def _played(context, clip: Clip, frames: np.ndarray) -> tuple[np.ndarray, list[s
     return at, full.names, loc, rot
 
 
+def _bone_path(bone: str, prop: str) -> str:
+    """The F-curve data path of a pose bone's property."""
+    return f'pose.bones["{bpy.utils.escape_identifier(bone)}"].{prop}'
+
+
 def _key_property(clip: Clip, channels: anim.Channels, pb, prop: str, frames: np.ndarray, values: np.ndarray,
                   replace: tuple[float, float] | None, fill: tuple[np.ndarray, np.ndarray] | None = None) -> None:
     """Key ``values`` ``[F, n]`` on each array index of a pose bone property. A channel the action did
     not animate gets its static value keyed just outside ``frames`` first, so other frames keep it; or, with
     ``fill`` (frames, values ``[G, n]``: where NLA strips show through the action), those values on those frames,
     so that the new channel keeps the pose the strips play there instead of hiding them."""
-    path = f'pose.bones["{bpy.utils.escape_identifier(pb.name)}"].{prop}'
+    path = _bone_path(pb.name, prop)
     static = np.asarray(getattr(pb, prop), dtype=np.float64)
     edges = np.array([f for f in (frames[0] - 1, frames[-1] + 1) if clip.first <= f <= clip.last])
     for i in range(values.shape[1]):

@@ -141,8 +141,14 @@ def _channel(chans, bone: str, prop: str, current, frames: np.ndarray, cache: Ke
     return out
 
 
+def rotation_property(pb) -> str:
+    """The pose bone property its rotation mode keys: ``rotation_quaternion``, ``rotation_axis_angle`` or
+    ``rotation_euler``."""
+    return _ROT_PATHS.get(pb.rotation_mode, "rotation_euler")
+
+
 def rotation_values(chans, pb, frames: np.ndarray, cache: KeyCache | None = None) -> np.ndarray:
-    prop = _ROT_PATHS.get(pb.rotation_mode, "rotation_euler")
+    prop = rotation_property(pb)
     return _channel(chans, pb.name, prop, getattr(pb, prop), frames, cache)
 
 

@@ -24,7 +24,7 @@ from ...model_core.io.checkpoint import CheckpointError
 from ...model_core.motion.conventions import UP_AXIS, yup_to_zup
 from ...model_core.ops import footlock
 from ...model_core.ops.pace import Pace, stride_period
-from ...model_core.rig.rigs import standing_axis
+from ...model_core.rig.rigs import axis_name, standing_axis
 from .. import engine_bridge
 from ..props import preferences
 from ..scene import anim, pipeline
@@ -198,8 +198,7 @@ def stance_record(pos) -> dict:
     axis = standing_axis(pos)
     if axis is None or axis[UP_AXIS] > 0:
         return {}
-    scene = yup_to_zup(axis)
-    label = ("-" if scene.sum() < 0 else "") + "XYZ"[int(np.abs(scene).argmax())]
+    label = axis_name(yup_to_zup(axis))
     note = (f"The character stands along the scene's {label} axis in most of the action, not up (Z), and the model "
             "learnt bodies standing on a floor, so the result may not hold: a BVH imported with the wrong Up axis? "
             "Import it again with Transform > Up set to the file's (Z for a Z-up file), or turn the armature "
