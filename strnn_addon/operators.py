@@ -336,7 +336,11 @@ class STRNN_OT_auto_map(bpy.types.Operator):
         if found_controls is not None and found_controls.name == OWN_BONES:
             keyed = ("; results are keyed on its bones by a visual bake (bones that do not simply follow their "
                      "parents, or NLA strips under its action)")
-        self.report({"INFO"}, f"Mapped all 21 joints ({family} rig){keyed}")
+        placed = mapping.bonemap.placed(found)
+        if placed:
+            keyed += "; " + "; ".join(f"it has no {joint_label(j)} bone, so that joint is placed between "
+                                      f"{joint_label(a)} and {joint_label(b)}" for j, (a, b, _) in placed.items())
+        self.report({"INFO"}, f"Mapped {'all 21' if not placed else 21 - len(placed)} joints ({family} rig){keyed}")
         return {"FINISHED"}
 
 

@@ -7,6 +7,7 @@ import textwrap
 import bpy
 
 from ..model_core.motion.conventions import JOINTS
+from ..model_core.rig.solve import placed_between
 from .operators import check_message
 from .props import TAIL_JOINTS, joint_label
 from .scene import controls
@@ -187,12 +188,17 @@ class STRNN_PT_bone_map(_ArmatureSidebar, bpy.types.Panel):
         row = layout.row(align=True)
         row.operator("strnn.auto_map", icon="AUTOMERGE_ON")
         row.operator("strnn.clear_map", text="", icon="X")
-        missing = [j for j in JOINTS if not getattr(props, j) or getattr(props, j) not in arm.bones]
+        present = {j for j in JOINTS if getattr(props, j) and getattr(props, j) in arm.bones}
+        placed = placed_between(present)
+        missing = [j for j in JOINTS if j not in present and j not in placed]
         if missing:
             layout.label(text=f"Missing: {', '.join(joint_label(j) for j in missing)}", icon="ERROR")
         else:
-            layout.label(text=f"All 21 joints mapped{f' ({props.family})' if props.family else ''}",
-                         icon="CHECKMARK")
+            layout.label(text=f"{'All 21' if not placed else len(present)} joints mapped"
+                              f"{f' ({props.family})' if props.family else ''}", icon="CHECKMARK")
+        for joint, (below, above, _) in placed.items():
+            layout.label(text=f"No {joint_label(joint)} bone: placed between {joint_label(below)} and "
+                              f"{joint_label(above)}", icon="INFO")
         col = layout.column(align=True)
         for joint in JOINTS:
             row = col.row(align=True)

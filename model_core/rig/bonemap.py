@@ -7,6 +7,8 @@ into the tail of the last bone). The known families of :data:`rigs.RIG_FAMILIES`
 are tried first; what they leave open is filled by a generic left/right heuristic
 (``.L`` / ``_L`` / ``Left`` / ``l`` prefixes and suffixes, common bone words) and by
 the hierarchy (the chest is where the two arms meet, the hips where the legs meet).
+A rig with one spine bone has no chest of its own, one whose head sits on its chest no neck:
+those joints are left out and placed between their neighbours (:data:`solve.PLACED`).
 """
 
 from __future__ import annotations
@@ -15,6 +17,7 @@ import re
 
 from ..motion.conventions import JOINTS, PARENT_NAMES
 from .rigs import RIG_FAMILIES, normalise_name
+from .solve import placed_between
 
 Mapping = dict[str, tuple[str, bool]]
 
@@ -228,6 +231,7 @@ def auto_map(names: list[str], parents: list[int]) -> tuple[str, Mapping]:
         chest_where_the_arms_meet(names, parents, mapping)  # before the spine is read off the path below it
         _by_hierarchy(names, parents, mapping)
     chest_where_the_arms_meet(names, parents, mapping)  # a whole family's chest too
+    _no_bone_of_their_own(mapping)
     for side in "lr":
         for leaf in ("fingertip", "toe"):
             joint = f"{side}_{leaf}"
@@ -237,6 +241,20 @@ def auto_map(names: list[str], parents: list[int]) -> tuple[str, Mapping]:
     return family, mapping
 
 
+def _no_bone_of_their_own(mapping: Mapping) -> None:
+    """Leave out a chest or a neck found at the same place as the joint below it (the arms of a rig with one spine
+    bone meet on it, where the spine is too): :func:`solve.placed_between` places it. In place."""
+    for joint, below in (("spine1", "spine"), ("neck", "spine1")):
+        if joint in mapping and mapping.get(below) == mapping[joint]:
+            del mapping[joint]
+
+
 def missing(mapping: Mapping) -> list[str]:
-    """Canonical joints with no bone in ``mapping``."""
-    return [j for j in JOINTS if not mapping.get(j) or not mapping[j][0]]
+    """Canonical joints with no bone in ``mapping`` that cannot be placed between others (:func:`placed`)."""
+    present = {j for j in JOINTS if mapping.get(j) and mapping[j][0]}
+    return [j for j in JOINTS if j not in present and j not in placed_between(present)]
+
+
+def placed(mapping: Mapping) -> dict[str, tuple[str, str, float]]:
+    """The torso joints ``mapping`` has no bone for, placed between their neighbours (:func:`solve.placed_between`)."""
+    return placed_between({j for j in JOINTS if mapping.get(j) and mapping[j][0]})

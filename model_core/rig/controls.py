@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..motion.conventions import JOINTS, PARENT_NAMES
-from .solve import Rig, SolveError
+from .solve import Rig, SolveError, placed_between
 
 
 @dataclass(frozen=True)
@@ -101,12 +101,15 @@ def joint_rig(rig: Rig, mapping: dict[str, tuple[str, bool]]) -> Rig:
     the real bones in between where that bone is a real ancestor (a clavicle between chest and upper
     arm). Raises :class:`SolveError` when a joint has no bone on ``rig``."""
     index = {n: i for i, n in enumerate(rig.names)}
-    missing = [j for j in JOINTS if j not in mapping or mapping[j][0] not in index]
+    placed = placed_between({j for j in JOINTS if mapping.get(j) and mapping[j][0]})
+    missing = [j for j in JOINTS if j not in placed and (j not in mapping or mapping[j][0] not in index)]
     if missing:
         raise SolveError(f"no bone mapped for: {', '.join(missing)}")
     order: list[int] = []
     parent_of: dict[int, int] = {}
     for joint in JOINTS:  # parents first
+        if joint in placed:  # no bone of its own: the one below it carries it
+            continue
         b = index[mapping[joint][0]]
         if b in parent_of:  # a tail on a bone already placed (a foot's tail as the toe)
             continue
@@ -114,7 +117,8 @@ def joint_rig(rig: Rig, mapping: dict[str, tuple[str, bool]]) -> Rig:
             parent_of[b] = -1
             order.append(b)
             continue
-        top = index[mapping[PARENT_NAMES[joint]][0]]
+        parent = PARENT_NAMES[joint]
+        top = index[mapping[placed[parent][0] if parent in placed else parent][0]]
         up = _ancestors(rig, b)
         between = up[:up.index(top)] if top in up else []
         above = top

@@ -10,7 +10,7 @@ estimated by extending the hand along its own rest direction.
 from __future__ import annotations
 
 import re
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -108,10 +108,13 @@ class RigError(ValueError):
 
 @dataclass
 class RigMap:
-    """Which source joint feeds each canonical joint (None: estimated tip)."""
+    """Which source joint feeds each canonical joint (None: estimated tip, or placed: ``between``); ``between``:
+    torso joints the skeleton has none for, {joint: (joint below, joint above, share of the way)}
+    (:func:`solve.placed_between`)."""
 
     family: str
     sources: dict[str, str | None]
+    between: dict[str, tuple[str, str, float]] = field(default_factory=dict)
 
 
 def normalise_name(name: str) -> str:
@@ -175,9 +178,10 @@ def _generic(names: list[str], parents: list[int], offsets=None) -> tuple[RigMap
     """(rig map, [], "") of a skeleton mapped by bone words and hierarchy, or (None, joints not found,
     what in the hierarchy is wrong) where that does not give a whole body. A tail at no distance from its
     bone (a zero-length End Site, as Bandai's hands have) is no joint: a finger tip is then estimated."""
-    from .bonemap import auto_map, is_below  # bonemap reads this module's families
+    from .bonemap import auto_map, is_below, placed  # bonemap reads this module's families
 
     _, mapping = auto_map(names, parents)
+    between = placed(mapping)
     children: dict[int, list[int]] = {}
     for i, p in enumerate(parents):
         children.setdefault(p, []).append(i)
@@ -193,8 +197,8 @@ def _generic(names: list[str], parents: list[int], offsets=None) -> tuple[RigMap
                 bone = ""
         if bone:
             sources[joint] = bone
-        elif joint.endswith("fingertip"):
-            sources[joint] = None  # estimated from the wrist
+        elif joint.endswith("fingertip") or joint in between:
+            sources[joint] = None  # estimated from the wrist, or placed between its neighbours
         else:
             missing.append(joint)
     if missing:
@@ -203,10 +207,11 @@ def _generic(names: list[str], parents: list[int], offsets=None) -> tuple[RigMap
     for joint, parent in PARENT_NAMES.items():
         if parent is None or sources[joint] is None:
             continue
+        parent = between[parent][0] if parent in between else parent
         if not is_below(parents, index[sources[joint]], index[sources[parent]]):
             return None, [], (f" (read by body part and side, {joint} -> {sources[joint]!r} is not below "
                               f"{parent} -> {sources[parent]!r} in the hierarchy)")
-    return RigMap("generic", sources), [], ""
+    return RigMap("generic", sources, between), [], ""
 
 
 def leg_length(pos: np.ndarray) -> float:
@@ -228,10 +233,14 @@ def canonical_positions(bvh: Bvh, rig: RigMap | None = None) -> np.ndarray:
         if src is not None:
             out[:, j] = gpos[:, bvh.index(src)]
             continue
+        if joint in rig.between:
+            continue  # placed once its neighbours are read
         wrist = bvh.index(rig.sources[joint.replace("fingertip", "wrist")])
         rest_dir = bvh.offsets[wrist]  # rest frames align with the world, so this is the hand's axis too
         tip = rest_dir * _HAND_TO_FOREARM
         out[:, j] = gpos[:, wrist] + np.einsum("fij,j->fi", grot[:, wrist], tip)
+    for joint, (below, above, share) in rig.between.items():
+        out[:, JOINT_INDEX[joint]] = (1.0 - share) * out[:, JOINT_INDEX[below]] + share * out[:, JOINT_INDEX[above]]
     return out
 
 

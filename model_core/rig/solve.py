@@ -12,7 +12,9 @@ Glossary
   ``[F, B, 3, 3]`` relative to the rest pose, so that
   ``pose[b] = pose[parent] @ inv(rest[parent]) @ rest[b] @ T(loc) @ R(rot)``.
 - Anchor: where a canonical joint sits on the rig: bone ``index`` and whether it is
-  the bone's head (``tail=False``) or tail.
+  the bone's head (``tail=False``) or tail; or, for a torso joint the rig has no bone for
+  (:data:`PLACED`: one spine bone, no neck bone), a share of the way between the mapped
+  torso joints below and above it.
 
 The solve keeps the rig's bone lengths: only the root bone (the one mapped to the
 hips) moves; every other mapped bone is rotated so that it points at its canonical
@@ -25,7 +27,7 @@ Bones with no canonical child and bones outside the map keep their reference pos
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -38,6 +40,29 @@ _PLANE_TWIST = {"l_upleg": ("l_knee", "l_foot"), "r_upleg": ("r_knee", "r_foot")
 # Plane normals shorter than this (sine of the bend angle) give no twist; full twist above _TWIST_FULL.
 _TWIST_NONE, _TWIST_FULL = 0.05, 0.25
 CHILDREN = {j: tuple(c for c in JOINTS if PARENT_NAMES[c] == j) for j in JOINTS}
+
+# Torso joints a rig may have no bone for: a chest where the rig has one spine bone, a neck where its head sits
+# on its chest. Such a joint is placed on the line between the mapped torso joints below and above it, at the
+# share of the way that the body the model learnt gives it (its bones' lengths from the spine up, metres: the
+# release's seed windows, :func:`features.learnt_body`), and the bone below it turns to carry what it carries.
+PLACED = ("spine1", "neck")
+_TORSO = ("spine", "spine1", "neck", "head")
+_TORSO_LENGTHS = {"spine1": 0.098, "neck": 0.178, "head": 0.070}
+
+
+def placed_between(present) -> dict[str, tuple[str, str, float]]:
+    """{joint: (torso joint below, torso joint above, share of the way from below)} for each joint of
+    :data:`PLACED` not in ``present`` (the mapped joints' names)."""
+    out = {}
+    for joint in PLACED:
+        if joint in present:
+            continue
+        k = _TORSO.index(joint)
+        below = next(t for t in reversed(_TORSO[:k]) if t in present or t not in PLACED)
+        above = next(t for t in _TORSO[k + 1:] if t in present or t not in PLACED)
+        span = lambda a, b: sum(_TORSO_LENGTHS[t] for t in _TORSO[_TORSO.index(a) + 1:_TORSO.index(b) + 1])
+        out[joint] = (below, above, span(below, joint) / span(below, above))
+    return out
 
 
 class SolveError(ValueError):
@@ -79,36 +104,54 @@ class Rig:
 
 @dataclass
 class Anchors:
-    """Where each canonical joint sits: ``bone`` int ``[21]`` and ``tail`` bool ``[21]``."""
+    """Where each canonical joint sits: ``bone`` int ``[21]`` and ``tail`` bool ``[21]``; ``between``: the joints
+    placed between two others (:data:`PLACED`), {joint index: (index below, index above, share)}, whose ``bone``
+    is the one of the joint below them (the bone that carries them)."""
 
     bone: np.ndarray
     tail: np.ndarray
+    between: dict[int, tuple[int, int, float]] = field(default_factory=dict)
 
     @classmethod
     def from_map(cls, rig: Rig, mapping: dict[str, tuple[str, bool]]) -> Anchors:
-        """``mapping``: canonical joint -> (bone name, use tail). Raises :class:`SolveError`."""
-        missing = [j for j in JOINTS if not mapping.get(j) or mapping[j][0] not in rig.names]
+        """``mapping``: canonical joint -> (bone name, use tail); a joint of :data:`PLACED` it leaves out is placed
+        between its neighbours (:func:`placed_between`). Raises :class:`SolveError`."""
+        present = {j for j in JOINTS if mapping.get(j) and mapping[j][0]}
+        placed = placed_between(present)
+        missing = [j for j in JOINTS if j not in placed and (j not in present or mapping[j][0] not in rig.names)]
         if missing:
             raise SolveError(f"no bone mapped for: {', '.join(missing)}")
-        bone = np.array([rig.index(mapping[j][0]) for j in JOINTS])
-        tail = np.array([bool(mapping[j][1]) for j in JOINTS])
-        out = cls(bone, tail)
+        between = {JOINT_INDEX[j]: (JOINT_INDEX[a], JOINT_INDEX[b], share) for j, (a, b, share) in placed.items()}
+        bone = np.array([rig.index(mapping[placed[j][0] if j in placed else j][0]) for j in JOINTS])
+        tail = np.array([j not in placed and bool(mapping[j][1]) for j in JOINTS])
+        out = cls(bone, tail, between)
         out.check(rig)
         return out
 
+    def carrier(self, j: int) -> int:
+        """The joint whose bone carries joint ``j``: itself, or for a placed joint the mapped one below it."""
+        return self.between[j][0] if j in self.between else j
+
     def check(self, rig: Rig) -> None:
-        """Each canonical child must sit below its parent joint's bone, at a distinct place."""
+        """Each canonical child must sit below its parent joint's bone, at a distinct place (a placed joint's
+        neighbours: the one above below the one below)."""
         for j, name in enumerate(JOINTS):
             parent = PARENT_NAMES[name]
             if parent is None:
                 if self.tail[j]:
                     raise SolveError("the hips joint must be a bone head, not a tail")
                 continue
-            p = JOINT_INDEX[parent]
+            if j in self.between:
+                continue
+            p = self.carrier(JOINT_INDEX[parent])
             same = self.bone[j] == self.bone[p] and self.tail[j] == self.tail[p]
             if same or not rig.is_ancestor(int(self.bone[p]), int(self.bone[j])) or self.tail[p]:
                 raise SolveError(f"joint {name} (bone {rig.names[self.bone[j]]!r}) must be a different place "
-                                 f"below joint {parent} (bone {rig.names[self.bone[p]]!r})")
+                                 f"below joint {JOINTS[p]} (bone {rig.names[self.bone[p]]!r})")
+
+    def on_bones(self) -> dict[int, str]:
+        """{bone: canonical joint} of the joints at bone heads (the bones the solve aims)."""
+        return {int(self.bone[j]): name for j, name in enumerate(JOINTS) if not self.tail[j] and j not in self.between}
 
 
 def compose(loc: np.ndarray, rot: np.ndarray) -> np.ndarray:
@@ -137,7 +180,10 @@ def anchor_positions(rig: Rig, anchors: Anchors, pose: np.ndarray) -> np.ndarray
     offset = np.zeros((len(anchors.bone), 4))
     offset[:, 1] = np.where(anchors.tail, rig.lengths[anchors.bone], 0.0)
     offset[:, 3] = 1.0
-    return np.einsum("fjab,jb->fja", m, offset)[..., :3]
+    out = np.einsum("fjab,jb->fja", m, offset)[..., :3]
+    for j, (below, above, share) in anchors.between.items():
+        out[:, j] = (1.0 - share) * out[:, below] + share * out[:, above]
+    return out
 
 
 def _kabsch(u: np.ndarray, t: np.ndarray, w: np.ndarray) -> np.ndarray:
@@ -176,7 +222,7 @@ def _aim(rig: Rig, anchors: Anchors, joint: str, ref: tuple, head: np.ndarray, b
     is where the bone's head is now, ``base_rot`` its orientation with its reference local rotation."""
     ref_pose, ref_anchor = ref
     b = int(anchors.bone[JOINT_INDEX[joint]])
-    kids = [JOINT_INDEX[c] for c in CHILDREN[joint]]
+    kids = _carried(anchors, joint)
     if not kids:
         return base_rot
     g_ref, head_ref = ref_pose[:, b, :3, :3], ref_pose[:, b, :3, 3]
@@ -196,17 +242,26 @@ def _aim(rig: Rig, anchors: Anchors, joint: str, ref: tuple, head: np.ndarray, b
     return g
 
 
+def _carried(anchors: Anchors, joint: str) -> list[int]:
+    """The joints the bone at ``joint`` points at: its canonical children, a placed child (:data:`PLACED`) by its
+    own children in its place (the torso child first)."""
+    out = []
+    for c in CHILDREN[joint]:
+        out += _carried(anchors, c) if JOINT_INDEX[c] in anchors.between else [JOINT_INDEX[c]]
+    return out
+
+
 def _bridges(rig: Rig, anchors: Anchors, joint_at: dict[int, str]) -> dict[int, list[int]]:
     """{bone: joint indices} for unmapped bones that carry canonical joints directly (as the
     parent of their bones, or by their tail) strictly below the canonical parent's bone."""
     out: dict[int, list[int]] = {}
     for j, name in enumerate(JOINTS):
         parent = PARENT_NAMES[name]
-        if parent is None:
+        if parent is None or j in anchors.between:
             continue
         c = int(anchors.bone[j])
         b = c if anchors.tail[j] else int(rig.parents[c])
-        top = int(anchors.bone[JOINT_INDEX[parent]])
+        top = int(anchors.bone[JOINT_INDEX[parent]])  # a placed parent's is the bone carrying it
         if b >= 0 and b not in joint_at and b != top and rig.is_ancestor(top, b):
             out.setdefault(b, []).append(j)
     return out
@@ -236,7 +291,7 @@ def solve(rig: Rig, anchors: Anchors, targets: np.ndarray, ref_loc: np.ndarray,
     targets = np.asarray(targets, dtype=np.float64)
     ref_pose = fk(rig, ref_loc, ref_rot)
     ref = (ref_pose, anchor_positions(rig, anchors, ref_pose))
-    joint_at = {int(anchors.bone[j]): name for j, name in enumerate(JOINTS) if not anchors.tail[j]}
+    joint_at = anchors.on_bones()
     bridges = _bridges(rig, anchors, joint_at)
     hips = int(anchors.bone[JOINT_INDEX["hips"]])
     loc, rot = np.array(ref_loc, dtype=np.float64), np.array(ref_rot, dtype=np.float64)
@@ -261,5 +316,5 @@ def solve(rig: Rig, anchors: Anchors, targets: np.ndarray, ref_loc: np.ndarray,
 
 def solved_bones(rig: Rig, anchors: Anchors) -> list[int]:
     """Bones whose rotation :func:`solve` sets (the others keep their reference pose), parents first."""
-    joint_at = {int(anchors.bone[j]): name for j, name in enumerate(JOINTS) if not anchors.tail[j]}
+    joint_at = anchors.on_bones()
     return sorted(set(joint_at) | set(_bridges(rig, anchors, joint_at)))

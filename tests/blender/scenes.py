@@ -120,6 +120,24 @@ def mixamo_bones() -> list[tuple]:
     return [("mixamorig:" + n, p and "mixamorig:" + p, h, t) for n, p, h, t in bones]
 
 
+def fewer_torso_bones(drop: tuple[str, ...]) -> list[tuple]:
+    """:func:`mixamo_bones` without the torso bones ``drop`` (``Spine1``, ``Spine2``: one spine bone; ``Neck``: the
+    head on the chest), plain names: each remaining bone's tail reaches the next one's head, and what hung from a
+    dropped bone hangs from the bone below it, as in game rigs with a minimal humanoid torso."""
+    bones = [(n.split(":")[1], p and p.split(":")[1], h, t) for n, p, h, t in mixamo_bones()]
+    kept = {n: (p, h, t) for n, p, h, t in bones if n not in drop}
+    heads = {n: h for n, _, h, _ in bones}
+    torso = [n for n in ("Hips", "Spine", "Spine1", "Spine2", "Neck", "Head") if n in kept]
+    out = []
+    for n, (p, h, t) in kept.items():
+        while p in drop:
+            p = next(q for m, q, _, _ in bones if m == p)
+        if n in torso[:-1]:
+            t = heads[torso[torso.index(n) + 1]]
+        out.append((n, p, h, t))
+    return out
+
+
 def rigify_bones() -> list[tuple]:
     """(name, parent, head, tail) of Rigify-style deform bones (``DEF-`` names, split limbs)."""
     j = _rest_joints()

@@ -3,9 +3,14 @@
 from __future__ import annotations
 
 import bpy
+import numpy as np
 import pytest
 from scenes import (
+    action_of,
+    addon_module,
     build_armature,
+    evaluated_joints,
+    fewer_torso_bones,
     find_mocap,
     import_bvh,
     makehuman_bones,
@@ -15,7 +20,7 @@ from scenes import (
     walk_bvh,
 )
 
-from model_core.motion.conventions import JOINTS
+from model_core.motion.conventions import JOINT_INDEX, JOINTS
 
 FAMILY_CLIPS = {
     "bandai_namco": "bandai-namco/dataset-2/dataset-2_walk_normal_001.bvh",
@@ -117,3 +122,65 @@ def test_bvh_imports_of_every_rig_family_map_fully(addon, family):
     found = auto_map(obj)
     assert all(found.values()), [k for k, v in found.items() if not v]
     assert obj.strnn_map.family == family
+
+
+FEWER_TORSO_BONES = {"one_spine": ("Spine1", "Spine2"), "no_neck": ("Neck",),
+                     "spine_and_head": ("Spine1", "Spine2", "Neck")}
+PLACED = {"one_spine": {"spine1"}, "no_neck": {"neck"}, "spine_and_head": {"spine1", "neck"}}
+
+
+@pytest.mark.parametrize("kind", sorted(FEWER_TORSO_BONES))
+def test_a_rig_with_fewer_torso_bones_maps_all_it_has_and_places_the_rest(addon, kind):
+    """One spine bone (no chest of its own), a head on the chest (no neck bone), or both (a minimal game
+    humanoid): every joint the rig has a bone for is mapped, the chest or neck left to be placed between its
+    neighbours, and the operators take the map."""
+    obj = build_armature("Game", fewer_torso_bones(FEWER_TORSO_BONES[kind]))
+    found = auto_map(obj)
+    assert {j for j, bone in found.items() if not bone} == PLACED[kind]
+    assert found["spine"] == "Spine" and found["head"] == "Head" and found["l_arm"] == "LeftArm"
+    pipeline = addon_module(addon, "strnn_addon.scene.pipeline")
+    _, anchors, _, _ = pipeline.rig_of(obj)
+    assert {JOINTS[j] for j in anchors.between} == PLACED[kind]
+
+
+def walk_onto(obj, folder):
+    """A walk (real motion capture where it is unpacked) moved onto ``obj`` with Transfer Motion: (the source,
+    the frames written)."""
+    mocap = find_mocap()
+    take = "bandai-namco/dataset-2/dataset-2_walk_normal_001.bvh"
+    path = mocap / take if mocap is not None and (mocap / take).exists() else walk_bvh(folder, frames=120)
+    source = import_bvh(path, update_scene_fps=True, update_scene_duration=True)
+    source.location.x = -2.0
+    for other in bpy.context.view_layer.objects:
+        other.select_set(other in (source, obj))
+    bpy.context.view_layer.objects.active = obj
+    assert bpy.ops.strnn.transfer_motion(foot_lock=False) == {"FINISHED"}
+    new = action_of(obj)
+    return source, np.arange(int(new.frame_range[0]), int(new.frame_range[1]) + 1)
+
+
+@pytest.mark.parametrize("kind", sorted(FEWER_TORSO_BONES))
+def test_motion_moved_onto_a_rig_with_fewer_torso_bones_follows_and_extends(addon, real_model, tmp_path, kind):
+    """A walk moved onto such a rig puts its every joint where the source's motion on the rig's proportions
+    has it (the one spine bone turning to carry the arms and the head), and Extend walks it on from there."""
+    obj = build_armature("Game", fewer_torso_bones(FEWER_TORSO_BONES[kind]))
+    rest = evaluated_joints(addon, obj, [1])
+    source, frames = walk_onto(obj, tmp_path)
+    transfer = addon_module(addon, "model_core.ops.transfer")
+    conventions = addon_module(addon, "model_core.motion.conventions")
+    want = conventions.yup_to_zup(transfer.retarget(conventions.zup_to_yup(evaluated_joints(addon, source, frames)),
+                                                   conventions.zup_to_yup(rest)))
+    err = np.linalg.norm(evaluated_joints(addon, obj, frames) - want, axis=-1).mean(0)
+    own = [k for j, k in JOINT_INDEX.items() if j not in PLACED[kind]]
+    print(kind, "transfer, mean cm per joint:", np.round(100 * err, 2))
+    assert err[own].max() < 0.01 and err.max() < 0.02  # metres; a placed joint lies on its neighbours' line
+    bpy.data.objects.remove(source)
+    obj.select_set(True)
+    bpy.context.view_layer.objects.active = obj
+    last = int(action_of(obj).frame_range[1])
+    assert bpy.ops.strnn.extend_clip(frames=90) == {"FINISHED"}
+    pos = evaluated_joints(addon, obj, np.arange(last - 29, last + 91))
+    step = np.linalg.norm(np.diff(pos, axis=0), axis=-1).mean(-1)
+    seam, speed = step[29] / step[:29].max(), step[30:].mean() / step[:29].mean()
+    print(kind, f"extend: seam {seam:.2f}, speed {speed:.2f}")
+    assert seam < 1.5 and 0.6 < speed < 1.6

@@ -48,8 +48,8 @@ def test_end_site_candidates_become_tails():
 
 def test_missing_joints_are_listed():
     _, mapping = auto_map(*chain("a", "b", "c"))
-    assert set(missing(mapping)) == set(JOINTS) - set(mapping)
-    assert "l_knee" in missing(mapping)
+    assert set(missing(mapping)) == set(JOINTS) - set(mapping) - {"spine1", "neck"}  # those two can be placed
+    assert "l_knee" in missing(mapping) and "spine" in missing(mapping) and "head" in missing(mapping)
 
 
 SMPL = [("Pelvis", None), ("L_Hip", "Pelvis"), ("R_Hip", "Pelvis"), ("Spine1", "Pelvis"), ("L_Knee", "L_Hip"),

@@ -190,3 +190,43 @@ def test_a_whole_family_whose_arms_hang_higher_takes_the_chest_where_they_meet()
     rig = detect_rig(names, parents=parents)
     assert rig.family == "cmu_bvh11" and (rig.sources["spine"], rig.sources["spine1"]) == ("Chest", "Chest4")
     assert auto_map(names, parents)[1]["spine1"] == ("Chest4", False)
+
+
+def _without_neck(path, out):
+    """The BVH file at ``path`` without its Neck joint: the head hangs from the chest (the neck's offset added to
+    its own), the neck's three rotation channels dropped from every frame."""
+    lines = open(path).read().splitlines()
+    start = next(i for i, t in enumerate(lines) if t.strip() == "JOINT Neck")
+    indent = len(lines[start]) - len(lines[start].lstrip())
+    end = next(i for i in range(start + 1, len(lines)) if lines[i] == " " * indent + "}")
+    offset = np.array(lines[start + 2].split()[1:], float)
+    head = next(i for i in range(start, end) if lines[i].strip() == "JOINT Head") + 2
+    lines[head] = "OFFSET " + " ".join(f"{v:.6f}" for v in np.array(lines[head].split()[1:], float) + offset)
+    column = sum(int(t.split()[1]) for t in lines[:start] if t.strip().startswith("CHANNELS"))
+    motion = lines.index("MOTION") + 3
+    frames = [t.split() for t in lines[motion:]]
+    lines = lines[:start] + lines[start + 4:end] + lines[end + 1:motion] + [
+        " ".join(f[:column] + f[column + 3:]) for f in frames]
+    out.write_text("\n".join(lines) + "\n")
+    return out
+
+
+def test_a_skeleton_without_a_neck_joint_places_the_neck_between_chest_and_head(tmp_path):
+    """A skeleton whose head hangs from its chest is read by body part and hierarchy, the neck placed on the line
+    from the chest to the head at the share of the way the model's body has it; every other joint as before."""
+    path = write_bvh(tmp_path / "walk.bvh", walking_skeleton(60))
+    bare = _without_neck(path, tmp_path / "no_neck.bvh")
+    from model_core.io.bvh import read_bvh
+
+    bvh = read_bvh(bare)
+    assert "Neck" not in bvh.names
+    rig = detect_rig(bvh.names, str(bare), bvh.parents, bvh.offsets)
+    assert rig.family == "generic" and set(rig.between) == {"neck"}
+    below, above, share = rig.between["neck"]
+    assert (below, above) == ("spine1", "head") and 0.5 < share < 0.9
+    before, after = load_clip(path), load_clip(bare)
+    j = {name: k for k, name in enumerate(JOINTS)}
+    between = (1 - share) * after[:, j["spine1"]] + share * after[:, j["head"]]
+    assert np.allclose(after[:, j["neck"]], between, atol=1e-6)
+    others = [k for name, k in j.items() if name not in ("neck", "head")]
+    assert np.abs(after[:, others] - before[:, others]).max() < 1e-4

@@ -9,7 +9,9 @@ from model_core.io.bvh import local_transforms, read_bvh
 from model_core.io.bvh_export import write_bvh
 from model_core.motion import rotations
 from model_core.motion.conventions import JOINTS
+from model_core.motion.geometry import rotvec_to_matrix
 from model_core.motion.synthetic import walking_skeleton
+from model_core.rig.controls import joint_rig
 from model_core.rig.rigs import detect_rig
 from model_core.rig.solve import Anchors, Rig, SolveError, anchor_positions, fk, solve, solved_bones
 
@@ -84,3 +86,50 @@ def test_map_that_does_not_fit_the_hierarchy_is_refused(rig_and_motion):
     del mapping["head"]
     with pytest.raises(SolveError, match="head"):
         Anchors.from_map(rig, mapping)
+
+
+def _without(rig: Rig, drop: list[str]) -> Rig:
+    """``rig`` without the bones ``drop``, their children hanging from their parents (rest matrices kept)."""
+    keep = [b for b, n in enumerate(rig.names) if n not in drop]
+
+    def parent(b):
+        p = int(rig.parents[b])
+        while p >= 0 and rig.names[p] in drop:
+            p = int(rig.parents[p])
+        return keep.index(p) if p >= 0 else -1
+
+    return Rig([rig.names[b] for b in keep], np.array([parent(b) for b in keep]), rig.rest[keep], rig.lengths[keep])
+
+
+@pytest.mark.parametrize("drop", [("spine1",), ("neck",), ("spine1", "neck")], ids=["one_spine", "no_neck", "both"])
+def test_a_rig_without_a_chest_or_neck_bone_places_them_and_is_solved_exactly(rig_and_motion, drop):
+    """A rig with one spine bone (no chest of its own) or whose head sits on its chest (no neck bone): the joint is
+    placed between its neighbours, and the bone below it turns to carry what it would have carried, twist too."""
+    rig, anchors, _, _ = rig_and_motion
+    mapping = {j: (rig.names[b], bool(t)) for j, b, t in zip(JOINTS, anchors.bone, anchors.tail)}
+    small = _without(rig, [mapping[j][0] for j in drop] + ["LeftShoulder", "RightShoulder"])  # no clavicles either
+    for j in drop:
+        del mapping[j]
+    placed = Anchors.from_map(small, mapping)
+    assert sorted(JOINTS[j] for j in placed.between) == sorted(drop)
+    rng = np.random.default_rng(0)
+    n, b = 40, len(small.names)
+    turns = rng.normal(0.0, 0.4, (n, b, 3))  # every bone at a joint turns; the ones between (clavicles) rest
+    turns[:, [x not in placed.on_bones() for x in range(b)]] = 0.0
+    rot = rotvec_to_matrix(turns)
+    loc = np.zeros((n, b, 3))
+    loc[:, 0] = rng.normal(0.0, 0.3, (n, 3))
+    targets = anchor_positions(small, placed, fk(small, loc, rot))
+    for j, (below, above, share) in placed.between.items():  # on the line between its neighbours
+        assert 0.0 < share < 1.0
+        assert np.allclose(targets[:, j], (1 - share) * targets[:, below] + share * targets[:, above])
+    held_loc, held_rot = np.repeat(loc[:1], n, 0), np.repeat(rot[:1], n, 0)
+    loc2, rot2 = solve(small, placed, targets, held_loc, held_rot)
+    got = anchor_positions(small, placed, fk(small, loc2, rot2))
+    assert np.abs(got - targets).max() < 1e-6  # every joint, the arms and the head on the one bone below too
+    with pytest.raises(SolveError, match="head"):  # the joints around a placed one are still needed
+        Anchors.from_map(small, {j: m for j, m in mapping.items() if j != "head"})
+    skeleton = joint_rig(small, mapping)  # the skeleton a control rig or a visual bake is solved on
+    assert set(skeleton.names) == set(small.names)  # every bone here carries a joint or lies between two
+    on_skeleton = Anchors.from_map(skeleton, mapping)
+    assert on_skeleton.between == placed.between
