@@ -196,7 +196,7 @@ class STRNN_PT_bone_map(_ArmatureSidebar, bpy.types.Panel):
         else:
             layout.label(text=f"{'All 21' if not placed else len(present)} joints mapped"
                               f"{f' ({props.family})' if props.family else ''}", icon="CHECKMARK")
-        for joint, (below, above, _) in placed.items():
+        for joint, (below, above, _) in placed.items() if not missing else ():
             layout.label(text=f"No {joint_label(joint)} bone: placed between {joint_label(below)} and "
                               f"{joint_label(above)}", icon="INFO")
         col = layout.column(align=True)

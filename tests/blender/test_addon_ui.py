@@ -4,7 +4,16 @@ from __future__ import annotations
 
 import bpy
 import pytest
-from scenes import action_of, addon_module, build_armature, import_bvh, key_snapshot, same_keys, walk_bvh
+from scenes import (
+    action_of,
+    addon_module,
+    build_armature,
+    fewer_torso_bones,
+    import_bvh,
+    key_snapshot,
+    same_keys,
+    walk_bvh,
+)
 
 PANELS = ("STRNN_PT_main", "STRNN_PT_extend", "STRNN_PT_fill_gap", "STRNN_PT_denoise", "STRNN_PT_foot_lock",
           "STRNN_PT_follow_curve", "STRNN_PT_transfer", "STRNN_PT_bone_map", "STRNN_PT_controls")
@@ -133,6 +142,18 @@ def test_main_panel_says_what_each_object_allows(addon, tmp_path):
                                               ("Follow Curve can start one; the others need an action", "NONE")]
     import_bvh(walk_bvh(tmp_path, frames=30))
     assert panel_labels("STRNN_PT_main", bpy.context) == [("walk: walk (frames 1-30)", "ACTION")]
+
+
+def test_bone_map_panel_says_which_joints_a_rig_with_fewer_torso_bones_has_placed(addon):
+    """A rig with one spine bone and no neck bone: the panel counts the joints mapped and says where the chest and
+    the neck are placed, rather than calling them missing; a map left empty lists what is missing instead."""
+    build_armature("Game", fewer_torso_bones(("Spine1", "Spine2", "Neck")))
+    labels = panel_labels("STRNN_PT_bone_map", bpy.context)
+    assert labels[0][1] == "ERROR" and "Spine 1" not in labels[0][0] and "Neck" not in labels[0][0] and len(labels) == 1
+    assert bpy.ops.strnn.auto_map() == {"FINISHED"}
+    assert panel_labels("STRNN_PT_bone_map", bpy.context) == [
+        ("19 joints mapped (generic)", "CHECKMARK"), ("No Spine 1 bone: placed between Spine and Head", "INFO"),
+        ("No Neck bone: placed between Spine and Head", "INFO")]
 
 
 def test_main_panel_keeps_the_reports_notes_in_view(addon, tmp_path, real_model):
