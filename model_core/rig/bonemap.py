@@ -29,7 +29,7 @@ _WORDS: dict[str, tuple[str, ...]] = {
     "knee": ("leg", "lowerleg", "shin", "calf", "knee", "leglower"),
     "foot": ("foot", "ankle"), "toe": ("toebase", "toe", "toes", "ball"),
     "arm": ("arm", "upperarm", "uparm", "armupper", "shldr", "shldrbend", "shoulder"),
-    "elbow": ("forearm", "lowerarm", "elbow", "armlower", "forearmbend"), "wrist": ("hand", "wrist"),
+    "elbow": ("forearm", "lowerarm", "elbow", "armlower", "forearmbend"), "wrist": ("hand", "wrist", "fist", "palm"),
     "fingertip": ("handmiddle4", "middle4", "handmiddle3end", "middle3", "fmiddle03", "middlefinger3"),
 }
 _SUFFIX = re.compile(r"^(?P<base>.+?)[._\-\s](?P<side>l|r|left|right)(?:[._]\d+)?$")
@@ -243,7 +243,10 @@ def auto_map(names: list[str], parents: list[int]) -> tuple[str, Mapping]:
 
 def _no_bone_of_their_own(mapping: Mapping) -> None:
     """Leave out a chest or a neck found at the same place as the joint below it (the arms of a rig with one spine
-    bone meet on it, where the spine is too): :func:`solve.placed_between` places it. In place."""
+    bone meet on it, where the spine is too): :func:`solve.placed_between` places it. A chest with no spine bone
+    between it and the hips (Roblox's R15: LowerTorso, UpperTorso, Head) is the one spine bone. In place."""
+    if "spine" not in mapping and "hips" in mapping and "spine1" in mapping and not mapping["spine1"][1]:
+        mapping["spine"] = mapping.pop("spine1")
     for joint, below in (("spine1", "spine"), ("neck", "spine1")):
         if joint in mapping and mapping.get(below) == mapping[joint]:
             del mapping[joint]

@@ -138,6 +138,26 @@ def fewer_torso_bones(drop: tuple[str, ...]) -> list[tuple]:
     return out
 
 
+R15_NAMES = {"Hips": "LowerTorso", "Spine": "UpperTorso", "UpLeg": "UpperLeg", "Leg": "LowerLeg", "ForeArm": "LowerArm",
+             "Arm": "UpperArm"}
+
+
+def roblox_r15_bones() -> list[tuple]:
+    """(name, parent, head, tail) of a Roblox R15-style skeleton: LowerTorso, UpperTorso and Head (no neck), arms
+    straight from the upper torso, no toes or fingers (the Mixamo proportions of :func:`mixamo_bones`)."""
+    extra = [f"{side}{part}" for side in ("Left", "Right") for part in
+             ("Shoulder", "ToeBase", "HandMiddle1", "HandMiddle2", "HandMiddle3", "HandMiddle4")]
+    bones = fewer_torso_bones(("Spine1", "Spine2", "Neck", *extra))
+
+    def name(n):
+        if not n:
+            return n
+        side = next((s for s in ("Left", "Right") if n.startswith(s)), "")
+        return side + R15_NAMES.get(n[len(side):], n[len(side):])
+
+    return [(name(n), name(p), h, t) for n, p, h, t in bones]
+
+
 def rigify_bones() -> list[tuple]:
     """(name, parent, head, tail) of Rigify-style deform bones (``DEF-`` names, split limbs)."""
     j = _rest_joints()

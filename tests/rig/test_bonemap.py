@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from model_core.motion.conventions import JOINTS
-from model_core.rig.bonemap import auto_map, missing, split_side
+from model_core.rig.bonemap import auto_map, missing, placed, split_side
 
 
 @pytest.mark.parametrize("name, want", [
@@ -128,3 +128,31 @@ def test_centre_markers_and_bend_twist_limbs_map_fully(tree, want):
     _, mapping = auto_map(*_tree(tree))
     assert not missing(mapping)
     assert {j: mapping[j][0] for j in want} == want
+
+
+ROBLOX_R15 = [("HumanoidRootPart", None), ("LowerTorso", "HumanoidRootPart"), ("UpperTorso", "LowerTorso"),
+              ("Head", "UpperTorso")] + _sided(
+    [("{S}UpperArm", "UpperTorso"), ("{S}LowerArm", "{S}UpperArm"), ("{S}Hand", "{S}LowerArm"),
+     ("{S}UpperLeg", "LowerTorso"), ("{S}LowerLeg", "{S}UpperLeg"), ("{S}Foot", "{S}LowerLeg")], ("Left", "Right"))
+QUATERNIUS = [("Root", None), ("Hips", "Root"), ("Abdomen", "Hips"), ("Torso", "Abdomen"), ("Neck", "Torso"),
+              ("Head", "Neck")] + _sided(
+    [("Shoulder.{S}", "Torso"), ("UpperArm.{S}", "Shoulder.{S}"), ("LowerArm.{S}", "UpperArm.{S}"),
+     ("Fist.{S}", "LowerArm.{S}"), ("UpperLeg.{S}", "Hips"), ("LowerLeg.{S}", "UpperLeg.{S}"),
+     ("Foot.{S}", "LowerLeg.{S}"), ("Toes.{S}", "Foot.{S}")], "LR")
+
+
+def test_a_rig_with_two_torso_bones_and_no_neck_maps_its_torso_as_one_spine_bone():
+    """Roblox's R15 (LowerTorso, UpperTorso, Head; no neck, no toes): the upper torso is the one spine bone from
+    the waist, the chest and the neck are placed between it and the head."""
+    family, mapping = auto_map(*_tree(ROBLOX_R15))
+    assert family == "generic" and not missing(mapping) and placed(mapping).keys() == {"spine1", "neck"}
+    assert {j: mapping[j][0] for j in ("hips", "spine", "head", "l_wrist", "r_knee")} == {
+        "hips": "LowerTorso", "spine": "UpperTorso", "head": "Head", "l_wrist": "LeftHand", "r_knee": "RightLowerLeg"}
+    assert mapping["l_toe"] == ("LeftFoot", True)
+
+
+def test_a_hand_named_fist_is_the_wrist():
+    family, mapping = auto_map(*_tree(QUATERNIUS))
+    assert not missing(mapping) and not placed(mapping)
+    assert (mapping["l_wrist"], mapping["r_fingertip"]) == (("Fist.L", False), ("Fist.R", True))
+    assert (mapping["spine"][0], mapping["spine1"][0]) == ("Abdomen", "Torso")
