@@ -35,8 +35,8 @@ _WORDS: dict[str, tuple[str, ...]] = {
 _SUFFIX = re.compile(r"^(?P<base>.+?)[._\-\s](?P<side>l|r|left|right)(?:[._]\d+)?$")
 _PREFIX = re.compile(r"^(?P<side>left|right|l|r)[._\-\s]?(?P<base>.+)$")
 _INFIX = re.compile(r"^(?P<pre>.+?)[._\-\s](?P<side>l|r|left|right)[._\-\s](?P<base>.+)$")
-# A centre marker: VRoid's ``J_Bip_C_Neck``, Auto-Rig Pro's ``neck.x``.
-_CENTRE = re.compile(r"^(?:.+?[._\-\s]c[._\-\s](?P<base>.+)|(?P<suffixed>.+?)[._]x)$")
+# A centre marker: VRoid's ``J_Bip_C_Neck``, Auto-Rig Pro's ``neck.x``, AdvancedSkeleton's (Maya) ``Neck_M``.
+_CENTRE = re.compile(r"^(?:.+?[._\-\s]c[._\-\s](?P<base>.+)|(?P<suffixed>.+?)(?:[._]x|_m))$")
 _CAMEL = re.compile(r"^(?:[^:|]*[:|])?(?P<side>[lrLR])(?=[A-Z][a-z])(?P<base>.+)$")
 _LEAVES = ("fingertip", "toe")  # joints a hand's or foot's tail can stand in for
 _STRIP = re.compile(r"^(def|org|mch|bip\d*|b|cc_base)[._\-\s]+")

@@ -156,3 +156,19 @@ def test_a_hand_named_fist_is_the_wrist():
     assert not missing(mapping) and not placed(mapping)
     assert (mapping["l_wrist"], mapping["r_fingertip"]) == (("Fist.L", False), ("Fist.R", True))
     assert (mapping["spine"][0], mapping["spine1"][0]) == ("Abdomen", "Torso")
+
+
+ADVANCED_SKELETON = [("Root_M", None), ("Spine1_M", "Root_M"), ("Spine2_M", "Spine1_M"), ("Chest_M", "Spine2_M"),
+                     ("Neck_M", "Chest_M"), ("Head_M", "Neck_M")] + _sided(
+    [("Hip_{S}", "Root_M"), ("Knee_{S}", "Hip_{S}"), ("Ankle_{S}", "Knee_{S}"), ("Toes_{S}", "Ankle_{S}"),
+     ("Scapula_{S}", "Chest_M"), ("Shoulder_{S}", "Scapula_{S}"), ("Elbow_{S}", "Shoulder_{S}"),
+     ("Wrist_{S}", "Elbow_{S}")], "LR")
+
+
+def test_a_middle_marked_with_m_maps_its_neck_and_head():
+    """Maya's AdvancedSkeleton marks the middle with ``_M`` (``Neck_M``, ``Head_M``) and calls the thigh ``Hip``."""
+    _, mapping = auto_map(*_tree(ADVANCED_SKELETON))
+    assert not missing(mapping) and not placed(mapping)
+    assert {j: mapping[j][0] for j in ("hips", "spine", "spine1", "neck", "head", "l_upleg", "r_arm")} == {
+        "hips": "Root_M", "spine": "Spine1_M", "spine1": "Chest_M", "neck": "Neck_M", "head": "Head_M",
+        "l_upleg": "Hip_L", "r_arm": "Shoulder_R"}
