@@ -327,20 +327,23 @@ class STRNN_OT_auto_map(bpy.types.Operator):
             self.report({"WARNING"}, f"Mapped {21 - len(missing)} of 21 joints; pick these by hand: "
                                      + ", ".join(missing))
             return {"FINISHED"}
+        placed = mapping.bonemap.placed(found)
+        mapped = "all 21" if not placed else str(21 - len(placed))
         try:
             found_controls = rig_of(obj)[3]
         except UserError as e:
-            self.report({"WARNING"}, f"Mapped all 21 joints ({family} rig), but: {e}")
+            self.report({"WARNING"}, f"Mapped {mapped} joints ({family} rig), but: {e}")
             return {"FINISHED"}
         keyed = f"; results are keyed on its {found_controls.name} controls" if found_controls else ""
         if found_controls is not None and found_controls.name == OWN_BONES:
             keyed = ("; results are keyed on its bones by a visual bake (bones that do not simply follow their "
                      "parents, or NLA strips under its action)")
-        placed = mapping.bonemap.placed(found)
-        if placed:
-            keyed += "; " + "; ".join(f"it has no {joint_label(j)} bone, so that joint is placed between "
-                                      f"{joint_label(a)} and {joint_label(b)}" for j, (a, b, _) in placed.items())
-        self.report({"INFO"}, f"Mapped {'all 21' if not placed else 21 - len(placed)} joints ({family} rig){keyed}")
+        if placed:  # a chest or a neck, or both (both then lie between the spine and the head)
+            below, above, _ = next(iter(placed.values()))
+            keyed += (f"; it has no {' or '.join(joint_label(j) for j in placed)} bone, so "
+                      f"{'that joint is' if len(placed) == 1 else 'those joints are'} placed between "
+                      f"{joint_label(below)} and {joint_label(above)}")
+        self.report({"INFO"}, f"Mapped {mapped} joints ({family} rig){keyed}")
         return {"FINISHED"}
 
 

@@ -133,13 +133,24 @@ PLACED = {"one_spine": {"spine1"}, "no_neck": {"neck"}, "spine_and_head": {"spin
           "roblox_r15": {"spine1", "neck"}}
 
 
+REPORTS = {"one_spine": "Mapped 20 joints (generic rig); it has no Spine 1 bone, so that joint is placed between "
+                        "Spine and Neck",
+           "no_neck": "Mapped 20 joints (generic rig); it has no Neck bone, so that joint is placed between Spine 1 "
+                      "and Head",
+           "spine_and_head": "Mapped 19 joints (generic rig); it has no Spine 1 or Neck bone, so those joints are "
+                             "placed between Spine and Head"}
+REPORTS["roblox_r15"] = REPORTS["spine_and_head"]
+
+
 @pytest.mark.parametrize("kind", sorted(FEWER_TORSO_BONES))
-def test_a_rig_with_fewer_torso_bones_maps_all_it_has_and_places_the_rest(addon, kind):
+def test_a_rig_with_fewer_torso_bones_maps_all_it_has_and_places_the_rest(addon, kind, capfd):
     """One spine bone (no chest of its own), a head on the chest (no neck bone), or both (a minimal game
     humanoid; Roblox's R15, whose upper torso is its one spine bone): every joint the rig has a bone for is mapped,
     the chest or neck left to be placed between its neighbours, and the operators take the map."""
     obj = build_armature("Game", FEWER_TORSO_BONES[kind]())
+    capfd.readouterr()
     found = auto_map(obj)
+    assert REPORTS[kind] in capfd.readouterr().out
     assert {j for j, bone in found.items() if not bone} == PLACED[kind]
     r15 = kind == "roblox_r15"
     assert (found["spine"], found["head"], found["l_arm"], found["l_toe"]) == (
