@@ -163,10 +163,11 @@ class STRNN_OT_extend_clip(_Staged, bpy.types.Operator):
                             scene_range=self.scene_range)
 
     def done(self, action) -> str:
+        stepped = stepped_note(action)
         if self.from_current:
             return (f"Continued after frame {bpy.context.scene.frame_current} with {self.frames} new frames in new "
-                    f"action {action.name!r}{range_note(action)}")
-        return f"Added {self.frames} frames in new action {action.name!r}{range_note(action)}"
+                    f"action {action.name!r}{stepped}{range_note(action)}")
+        return f"Added {self.frames} frames in new action {action.name!r}{stepped}{range_note(action)}"
 
 
 class STRNN_OT_fill_gap(_Staged, bpy.types.Operator):
@@ -192,7 +193,7 @@ class STRNN_OT_fill_gap(_Staged, bpy.types.Operator):
     def done(self, action) -> str:
         record = action.get(RECORD, {}).get("settings", {})
         return (f"Filled frames {record.get('frame_start')}-{record.get('frame_end')} in new action "
-                f"{action.name!r}")
+                f"{action.name!r}{stepped_note(action)}")
 
 
 class STRNN_OT_denoise_action(_Staged, bpy.types.Operator):
@@ -217,7 +218,7 @@ class STRNN_OT_denoise_action(_Staged, bpy.types.Operator):
                              strength=self.strength, foot_lock=self.foot_lock, only_selected=self.only_selected)
 
     def done(self, action) -> str:
-        return f"Denoised into new action {action.name!r}"
+        return f"Denoised into new action {action.name!r}{stepped_note(action)}"
 
 
 class STRNN_OT_foot_lock(_Staged, bpy.types.Operator):
@@ -241,7 +242,7 @@ class STRNN_OT_foot_lock(_Staged, bpy.types.Operator):
                                only_selected=self.only_selected)
 
     def done(self, action) -> str:
-        return f"Locked the feet into new action {action.name!r}"
+        return f"Locked the feet into new action {action.name!r}{stepped_note(action)}"
 
 
 class STRNN_OT_follow_curve(_Staged, bpy.types.Operator):
@@ -431,6 +432,12 @@ class STRNN_OT_controls_from_preset(_EditControls, bpy.types.Operator):
         self.report({"INFO"}, f"{len(preset.controls)} controls and {len(preset.switches)} switches from the "
                               f"{preset.name} preset")
         return {"FINISHED"}
+
+
+def stepped_note(action) -> str:
+    """Where an operation read and wrote an action keyed on twos (or threes, ...) at its keys, so say."""
+    step = action.get(RECORD, {}).get("key_step", 1)
+    return f" (keyed every {step} frames with Constant interpolation, as the action is)" if step > 1 else ""
 
 
 def simplified(context, action, tolerance_cm: float) -> str:

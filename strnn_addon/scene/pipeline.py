@@ -306,6 +306,47 @@ def keyed_names(clip: Clip) -> list[str]:
     return [clip.rig.names[b] for b in written_bones(clip)]
 
 
+# Keys on twos (threes, ...) held by Constant interpolation, the stepped look of hand-drawn-style animation: at least
+# STEP_KEYS keys make the pattern; Extend and Fill Gap read it over the last STEP_SECONDS before the frame they
+# continue from.
+STEP_SECONDS, STEP_KEYS = 2.0, 6
+
+
+def key_grid(clip: Clip, first: float, last: float) -> tuple[int, np.ndarray]:
+    """(step, keys): the keys ``[K]`` (frames) the keyed bones' F-curves hold with Constant interpolation in frames
+    ``first`` to ``last`` and their step (2 for keys on twos), where they all lie on one grid of whole frames every
+    ``step`` >= 2 frames; else (1, no keys): keys on ones, other interpolation, another spacing, or too few
+    (:data:`STEP_KEYS`). The operations read such an action at its keys and write their keys on its grid."""
+    names = set(keyed_names(clip))
+    constant = bpy.types.Keyframe.bl_rna.properties["interpolation"].enum_items["CONSTANT"].value
+    found = []
+    for fc in clip.channels.fcurves:
+        match = re.match(r'pose\.bones\["(.+?)"\]', fc.data_path)
+        if match is None or match[1] not in names or fc.mute or len(fc.modifiers):
+            continue
+        n = len(fc.keyframe_points)
+        co, interp = np.empty(2 * n), np.empty(n, np.int32)
+        fc.keyframe_points.foreach_get("co", co)
+        fc.keyframe_points.foreach_get("interpolation", interp)
+        near = (co[0::2] >= first - 0.5) & (co[0::2] <= last + 0.5)
+        if (interp[near] != constant).any():
+            return 1, np.empty(0)
+        found.append(co[0::2][near])
+    keys = np.unique(np.concatenate(found)) if found else np.empty(0)
+    if len(keys) < STEP_KEYS or np.abs(keys - np.round(keys)).max() > 1e-3:
+        return 1, np.empty(0)
+    keys = np.round(keys)
+    gaps = np.unique(np.diff(keys))
+    return (int(gaps[0]), keys) if len(gaps) == 1 and gaps[0] >= 2 else (1, np.empty(0))
+
+
+def key_step(clip: Clip, end: int) -> int:
+    """The step of the keys held by Constant interpolation (:func:`key_grid`) over the last :data:`STEP_SECONDS`
+    up to frame ``end``, ``end`` one of them (2: keys on twos); 1 otherwise."""
+    step, keys = key_grid(clip, end - STEP_SECONDS * clip.fps, end)
+    return step if len(keys) and keys[-1] == end else 1
+
+
 def keyed_controls(clip: Clip, bones: list[int] | None = None) -> list:
     """The controls of a control rig that drive the written ``bones`` (default: all written bones)."""
     names = {clip.rig.names[b] for b in (written_bones(clip) if bones is None else bones)}

@@ -37,21 +37,26 @@ def denoise_steps(context, obj, *, frame_start: int | None = None, frame_end: in
     bones = pipeline.only_selected(clip, pipeline.written_bones(clip), "Denoise writes") if only_selected else None
     need = pipeline.min_scene_frames(clip.fps)
     a, b = frame_range(clip, frame_start, frame_end, need, f"denoising needs at least {need} at {clip.fps:g} fps")
-    frames = np.arange(a, b + 1, dtype=np.float64)
+    step, keys = pipeline.key_grid(clip, a, b)  # keys on twos: read and cleaned at its keys, written on them
+    if len(keys) < pipeline.min_scene_frames(clip.fps / step):
+        step, keys = 1, np.arange(a, b + 1)
+    frames, fps = keys.astype(np.float64), clip.fps / step
     yield "read"
     pos = pipeline.joint_positions(context, clip, frames)
     previous = pipeline.raw_rotations(clip, a)
     yield "model"
-    clean = yield from model_steps(engine_bridge.run_denoise(prefs(context), pos, clip.fps, float(strength)))
-    found = model_call(engine_bridge.run_denoised_familiarity, prefs(context), pos, clean, clip.fps, float(strength))
-    clean = fade_edges(pos, clean, clip.fps, a > clip.first, b < clip.last)
+    clean = yield from model_steps(engine_bridge.run_denoise(prefs(context), pos, fps, float(strength)))
+    found = model_call(engine_bridge.run_denoised_familiarity, prefs(context), pos, clean, fps, float(strength))
+    clean = fade_edges(pos, clean, fps, frames[0] > clip.first, frames[-1] < clip.last)
     if foot_lock:
-        clean = lock(clean, clip.fps)
+        clean = lock(clean, fps)
     yield "solve"
     loc, rot = pipeline.solve_frames(context, clip, frames, clean)
     yield "write"
     record = made_by("Denoise Action", clip, engine_bridge.model_used(prefs(context), "denoise"), frame_start=a,
                      frame_end=b, strength=float(strength), foot_lock=foot_lock, only_selected=only_selected)
+    if step > 1:
+        record["key_step"] = step
     record.update(familiarity_record(found, denoised=True))
     record.update(pace_record(context, clip))
     return write_new(context, clip, "denoised", frames, loc, rot, previous, (a, b), record, bones=bones)

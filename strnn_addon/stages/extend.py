@@ -30,30 +30,34 @@ def extend_clip(context, obj, *, progress=noop, **options):
     return run(extend_steps(context, obj, **options), progress)
 
 
-def context_range(clip, context_frames: int, frames: int, end: int) -> np.ndarray:
-    """Scene frames ``[C]`` the model reads: the ``context_frames`` (0: just enough) up to ``end``."""
-    need = pipeline.min_scene_frames(clip.fps)
-    n_ctx = max(context_frames, need)
+def context_range(clip, context_frames: int, frames: int, end: int, step: int = 1) -> np.ndarray:
+    """Scene frames ``[C]`` the model reads: the ``context_frames`` (0: just enough) up to ``end``, every ``step``-th
+    (an action keyed on twos is read at its keys, :func:`pipeline.key_step`)."""
+    fps = clip.fps / step
+    need = pipeline.min_scene_frames(fps)
+    n_ctx = max(-(-context_frames // step), need)
     if not clip.first <= end <= clip.last:
         raise UserError(f"Frame {end} lies outside the action {clip.action.name!r} (frames {clip.first}-"
                         f"{clip.last}): move the current frame into it to continue from there")
-    span = end - clip.first + 1
+    span = (end - clip.first) // step + 1
     if n_ctx > span:
         before = f"up to frame {end}" if end < clip.last else "frames"
-        raise UserError(f"The action {clip.action.name!r} has {span} {before}; extending needs at least "
-                        f"{n_ctx} at {clip.fps:g} fps (the model reads {pipeline.MIN_MODEL_FRAMES} "
+        on = f" keys (it is keyed every {step} frames)" if step > 1 else ""
+        raise UserError(f"The action {clip.action.name!r} has {span}{on} {before}; extending needs at least "
+                        f"{n_ctx} at {fps:g} fps (the model reads {pipeline.MIN_MODEL_FRAMES} "
                         "frames at 30 fps): use a longer action, a later frame or a smaller context")
     if frames < 1:
         raise UserError("Frames to add must be at least 1")
-    return np.arange(end - n_ctx + 1, end + 1, dtype=np.float64)
+    return end - step * np.arange(n_ctx, dtype=np.float64)[::-1]
 
 
-def memory_range(clip, ctx_frames: np.ndarray, seconds: float = MEMORY_S) -> np.ndarray:
+def memory_range(clip, ctx_frames: np.ndarray, seconds: float = MEMORY_S, step: int = 1) -> np.ndarray:
     """Scene frames ``[M]`` of the clip's own motion the continuation leans on (:data:`extend.MEMORY_S` seconds
-    up to the context's last frame, or ``seconds``, within the action; at least the context's frames)."""
+    up to the context's last frame, or ``seconds``, within the action; at least the context's frames), every
+    ``step``-th back from the context's last."""
     end = int(ctx_frames[-1])
-    first = max(clip.first, end - int(round(seconds * clip.fps)) + 1)
-    return np.arange(min(first, int(ctx_frames[0])), end + 1, dtype=np.float64)
+    first = min(max(clip.first, end - int(round(seconds * clip.fps)) + 1), int(ctx_frames[0]))
+    return end - step * np.arange((end - first) // step + 1, dtype=np.float64)[::-1]
 
 
 def extend_steps(context, obj, *, frames: int = 120, context_frames: int = 0, follow_clip: bool = True,
@@ -67,36 +71,39 @@ def extend_steps(context, obj, *, frames: int = 120, context_frames: int = 0, fo
     progress or stop), returns the new action."""
     clip = pipeline.prepare(context, obj)
     end = clip.last if from_frame is None else int(from_frame)
-    ctx_frames = context_range(clip, context_frames, frames, end)
+    step = pipeline.key_step(clip, end)  # keys on twos: read at its keys, continued on twos
+    fps, count = clip.fps / step, -(-frames // step)  # the keys' rate, and how many new keys
+    ctx_frames = context_range(clip, context_frames, frames, end, step)
     yield "read"
     # following the clip, up to 20 s of it; otherwise what the floor is judged on (extend.FLOOR_S)
-    mem_frames = memory_range(clip, ctx_frames, MEMORY_S if follow_clip else FLOOR_S)
+    mem_frames = memory_range(clip, ctx_frames, MEMORY_S if follow_clip else FLOOR_S, step)
     memory = pipeline.joint_positions(context, clip, mem_frames)
     pos = memory[len(mem_frames) - len(ctx_frames):]
     held_loc, held_rot = pipeline.reference_pose(context, clip, ctx_frames[-1:])
     previous = pipeline.raw_rotations(clip, end)
     yield "model"
     followed = memory if follow_clip and len(mem_frames) > len(ctx_frames) else None
-    floor = clip_floor(memory, clip.fps)  # the ground the new feet stay out of
-    new_pos = model_call(engine_bridge.run_extend, prefs(context), pos, clip.fps, frames, followed, floor)
+    floor = clip_floor(memory, fps)  # the ground the new feet stay out of
+    new_pos = model_call(engine_bridge.run_extend, prefs(context), pos, fps, count, followed, floor)
     if foot_lock:
-        new_pos = lock(np.concatenate([pos, new_pos]), clip.fps, fixed=np.arange(len(pos) + frames) < len(pos),
+        new_pos = lock(np.concatenate([pos, new_pos]), fps, fixed=np.arange(len(pos) + count) < len(pos),
                        passes=SETTLE_PASSES)
         new_pos = new_pos[len(pos):]
     yield "solve"
-    new_frames = end + 1 + np.arange(frames, dtype=np.float64)
+    new_frames = end + step * (1 + np.arange(count, dtype=np.float64))
     targets = pipeline.to_armature(clip, new_pos, pipeline.world_at(context, clip, new_frames))
-    loc, rot = solve(clip.rig, clip.anchors, targets, np.repeat(held_loc, frames, 0), np.repeat(held_rot, frames, 0))
+    loc, rot = solve(clip.rig, clip.anchors, targets, np.repeat(held_loc, count, 0), np.repeat(held_rot, count, 0))
     yield "write"
     record = made_by("Extend Clip", clip, engine_bridge.model_used(prefs(context)), frames=frames,
                      context_frames=len(ctx_frames), follow_clip_frames=len(mem_frames) if follow_clip else 0,
                      foot_lock=foot_lock, from_frame=from_frame)
-    record.update(familiarity_record(model_call(engine_bridge.run_familiarity, prefs(context), pos, clip.fps)))
-    held = model_call(engine_bridge.run_first_window, prefs(context), pos, clip.fps, followed)
+    if step > 1:
+        record["key_step"] = step
+    record.update(familiarity_record(model_call(engine_bridge.run_familiarity, prefs(context), pos, fps)))
+    held = model_call(engine_bridge.run_first_window, prefs(context), pos, fps, followed)
     record.update(first_window_record(held))
     if followed is not None:
-        record.update(following_record(model_call(engine_bridge.run_following, prefs(context), followed, clip.fps,
-                                                  frames)))
+        record.update(following_record(model_call(engine_bridge.run_following, prefs(context), followed, fps, count)))
     record.update(pace_record(context, clip, end))
     # the written bones' keys after the end go: the old tail (from a frame), or keys past a manual frame range's end
     replace = (end + 0.5, float("inf"))

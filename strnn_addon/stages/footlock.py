@@ -22,22 +22,31 @@ def foot_lock_steps(context, obj, *, frame_start: int | None = None, frame_end: 
     legs = pipeline.leg_bones(clip)
     bones = pipeline.only_selected(clip, legs, "Foot Lock writes (the legs)") if only_selected else legs
     a, b = frame_range(clip, frame_start, frame_end, MIN_LOCK_FRAMES, f"foot lock needs at least {MIN_LOCK_FRAMES}")
-    frames = np.arange(max(a - 1, clip.first), min(b + 1, clip.last) + 1, dtype=np.float64)
-    inside = (frames >= a) & (frames <= b)  # plus one untouched frame either side to continue from
+    step, keys = pipeline.key_grid(clip, a, b)  # keys on twos: read and locked at its keys, written on them
+    if step > 1:
+        frames = np.arange(max(keys[0] - step, clip.first), min(keys[-1] + step, clip.last) + 1, step)
+        frames = frames[(frames - keys[0]) % step == 0]
+    else:
+        frames = np.arange(max(a - 1, clip.first), min(b + 1, clip.last) + 1, dtype=np.float64)
+    frames = frames.astype(np.float64)
+    inside = (frames >= a) & (frames <= b)  # plus one untouched frame (key) either side to continue from
+    fps = clip.fps / step
     yield "read"
     pos = pipeline.joint_positions(context, clip, frames)
     previous = pipeline.raw_rotations(clip, a)
     yield "model"
-    contacts = lock(pos, clip.fps, detect_only=True)
+    contacts = lock(pos, fps, detect_only=True)
     if not contacts[inside].any():
         raise UserError(f"No foot touches the ground in frames {a}-{b} of {clip.action.name!r} (feet near their "
                         "lowest height and slower than 0.6 m/s): nothing to lock")
-    locked = lock(pos, clip.fps, contacts=contacts, fixed=~inside, blend=blend, lower_body=False,
+    locked = lock(pos, fps, contacts=contacts, fixed=~inside, blend=blend, lower_body=False,
                   passes=footlock.SETTLE_PASSES)
     yield "solve"
     loc, rot = pipeline.solve_frames(context, clip, frames, locked)
     yield "write"
     record = made_by("Foot Lock", clip, frame_start=a, frame_end=b, blend=float(blend), only_selected=only_selected)
+    if step > 1:
+        record["key_step"] = step
     record.update(pace_record(context, clip))
     return write_new(context, clip, "footlocked", frames[inside], loc[inside], rot[inside], previous, (a, b),
                      record, bones=bones)

@@ -47,7 +47,9 @@ def find_gap(clip, keys: np.ndarray, frame_start: int | None, frame_end: int | N
     if len(keys) < 2:
         raise UserError(f"The mapped bones of {name!r} have keys on {len(keys)} frame(s): key a pose before and "
                         "after the gap")
-    gaps = [(int(a) + 1, int(b) - 1) for a, b in zip(keys[:-1], keys[1:]) if b - a > 1]
+    spacing = np.diff(keys)
+    usual = int(np.bincount(spacing).argmax())  # animation on twos (up to fours): the frames between keys are no gap
+    gaps = [(int(a) + 1, int(b) - 1) for a, b in zip(keys[:-1], keys[1:]) if b - a > (usual if usual <= 4 else 1)]
     if current is not None:
         around = [g for g in gaps if g[0] <= current <= g[1]]
         if around:
@@ -56,7 +58,8 @@ def find_gap(clip, keys: np.ndarray, frame_start: int | None, frame_end: int | N
         raise UserError(f"No key on the mapped bones of {name!r} after frame {keys[-1]}: key a pose after the gap "
                         "(Extend Clip continues an action past its last key)")
     if not gaps:
-        raise UserError(f"The mapped bones of {name!r} are keyed on every frame from {keys[0]} to {keys[-1]}: "
+        every = "every frame" if usual <= 1 else f"every {usual} frames"
+        raise UserError(f"The mapped bones of {name!r} are keyed on {every} from {keys[0]} to {keys[-1]}: "
                         "there is no gap to fill (delete the keys of the frames to fill, or give a Frame Range)")
     return gaps[0]
 
@@ -82,15 +85,17 @@ def frames_after(fps: float) -> int:
     return int(np.ceil(fps / 30.0)) + 1
 
 
-def take_ranges(clip, start: int, end: int, follow_take: bool) -> tuple[np.ndarray, np.ndarray]:
+def take_ranges(clip, start: int, end: int, follow_take: bool, step: int = 1) -> tuple[np.ndarray, np.ndarray]:
     """Scene frames read before and after the gap ``start..end``: what the model needs (its context, the target
     and the frame after it) or, when ``follow_take``, up to :data:`extend.MEMORY_S` seconds either side,
-    within the action."""
-    most = int(round(MEMORY_S * clip.fps)) if follow_take else 0
-    need_before = max(pipeline.min_scene_frames(clip.fps), most)
-    need_after = max(frames_after(clip.fps), most)
-    return (np.arange(max(clip.first, start - need_before), start, dtype=np.float64),
-            np.arange(end + 1, min(clip.last, end + need_after) + 1, dtype=np.float64))
+    within the action; every ``step``-th from the gap's edges (an action keyed on twos is read at its keys)."""
+    fps = clip.fps / step
+    most = int(round(MEMORY_S * fps)) if follow_take else 0
+    need_before = max(pipeline.min_scene_frames(fps), most)
+    need_after = max(frames_after(fps), most)
+    before = start - 1 - step * np.arange(need_before, dtype=np.float64)[::-1]
+    after = end + 1 + step * np.arange(need_after, dtype=np.float64)
+    return before[before >= clip.first], after[after <= clip.last]
 
 
 def inbetween_steps(context, obj, *, frame_start: int | None = None, frame_end: int | None = None,
@@ -104,31 +109,36 @@ def inbetween_steps(context, obj, *, frame_start: int | None = None, frame_end: 
     current = context.scene.frame_current if from_playhead else None
     start, end = find_gap(clip, keys, frame_start, frame_end, current)
     check_gap(clip, keys, start, end)
-    need = pipeline.min_scene_frames(clip.fps)
-    read_before, read_after = take_ranges(clip, start, end, follow_take)
-    gap = np.arange(start, end + 1, dtype=np.float64)
+    step = pipeline.key_step(clip, start - 1) if start - 1 in keys and end + 1 in keys else 1
+    step = step if (end - start + 2) % step == 0 else 1  # keys on twos either side: filled on twos
+    fps = clip.fps / step
+    need = pipeline.min_scene_frames(fps)
+    read_before, read_after = take_ranges(clip, start, end, follow_take, step)
+    gap = np.arange(start - 1 + step, end + 1, step, dtype=np.float64)
     yield "read"
     taken_before = pipeline.joint_positions(context, clip, read_before)
     taken_after = pipeline.joint_positions(context, clip, read_after)
     previous = pipeline.raw_rotations(clip, start - 1)
     yield "model"
-    new_pos = model_call(engine_bridge.run_inbetween, prefs(context), taken_before, taken_after, clip.fps, len(gap),
+    new_pos = model_call(engine_bridge.run_inbetween, prefs(context), taken_before, taken_after, fps, len(gap),
                          follow_take)
     # Foot Lock and the familiarity read the frames next to the gap only
-    before, after = read_before[-need:], read_after[:frames_after(clip.fps)]
+    before, after = read_before[-need:], read_after[:frames_after(fps)]
     pos_before, pos_after = taken_before[-need:], taken_after[:len(after)]
     if foot_lock:
         seq = np.concatenate([pos_before, new_pos, pos_after])
         fixed = np.ones(len(seq), bool)
         fixed[len(before):len(before) + len(gap)] = False
-        new_pos = lock(seq, clip.fps, fixed=fixed, passes=SETTLE_PASSES)[len(before):len(before) + len(gap)]
+        new_pos = lock(seq, fps, fixed=fixed, passes=SETTLE_PASSES)[len(before):len(before) + len(gap)]
     yield "solve"
     loc, rot = pipeline.solve_frames(context, clip, gap, new_pos)
     yield "write"
     record = made_by("Fill Gap", clip, engine_bridge.model_used(prefs(context)), frame_start=start, frame_end=end,
                      follow_take_frames=len(read_before) + len(read_after) if follow_take else 0, foot_lock=foot_lock)
+    if step > 1:
+        record["key_step"] = step
     if len(before) >= need:  # how well the model knows the motion before the gap, as Extend reports it
         record.update(familiarity_record(model_call(engine_bridge.run_familiarity, prefs(context), pos_before,
-                                                    clip.fps)))
+                                                    fps)))
     record.update(pace_record(context, clip))
     return write_new(context, clip, "filled", gap, loc, rot, previous, (start - 0.5, end + 0.5), record)

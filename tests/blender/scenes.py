@@ -367,3 +367,17 @@ def evaluated_joints(addon, obj, frames) -> np.ndarray:
     pose, world = rig_io.pose_matrices_evaluated(bpy.context, obj, clip.rig, np.asarray(frames, dtype=np.float64))
     local = solve.anchor_positions(clip.rig, clip.anchors, pose)
     return np.einsum("fij,fkj->fki", world[:, :3, :3], local) + world[:, None, :3, 3]
+
+
+def on_steps(obj, step: int, interpolation: str = "CONSTANT") -> None:
+    """Key ``obj``'s action on ``step``s: keep the keys on every ``step``-th frame from the first, with
+    ``interpolation`` (Constant: the stepped look of animation on twos)."""
+    for fc in fcurves_of(obj):
+        points = fc.keyframe_points
+        first = points[0].co[0]
+        for k in range(len(points) - 1, -1, -1):
+            if round(points[k].co[0] - first) % step:
+                points.remove(points[k])
+        for p in points:
+            p.interpolation = interpolation
+

@@ -18,6 +18,7 @@ from scenes import (
     key_snapshot,
     mixamo_walk,
     object_walk,
+    on_steps,
     same_keys,
     walk_bvh,
 )
@@ -41,6 +42,29 @@ def test_identity_model_keeps_the_motion(tmp_path, fake_model, addon):
     denoise()
     after = evaluated_joints(addon, obj, frames)
     assert np.abs(after - before).max() < 1e-4
+
+
+def test_an_action_on_twos_is_cleaned_at_its_keys_and_stays_on_twos(tmp_path, fake_model, addon, monkeypatch):
+    """Keys on twos held by Constant interpolation: the denoiser reads the keys at their rate (a step every key,
+    not a hold and a jump) and the new keys land on the same frames, Constant, so each pose is still held."""
+    seen = []
+
+    def identity(prefs, pos, fps, strength):
+        seen.append((len(pos), fps))
+        return pos
+        yield
+
+    monkeypatch.setattr(fake_model, "run_denoise", identity)
+    obj = import_bvh(walk_bvh(tmp_path, frames=61))
+    on_steps(obj, 2)  # keys on 1, 3, ..., 61
+    frames = np.arange(1, 62)
+    before = evaluated_joints(addon, obj, frames)
+    _, new = denoise()
+    assert new["strnn"]["key_step"] == 2 and seen == [(31, bpy.context.scene.render.fps / 2)]
+    assert np.abs(evaluated_joints(addon, obj, frames) - before).max() < 1e-4  # every frame, holds included
+    for fc in fcurves_of(obj):
+        assert {int(p.co[0]) % 2 for p in fc.keyframe_points} == {1}, fc.data_path
+        assert {p.interpolation for p in fc.keyframe_points} == {"CONSTANT"}, fc.data_path
 
 
 def stand_in(fn):

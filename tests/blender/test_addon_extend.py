@@ -23,6 +23,7 @@ from scenes import (
     makehuman_walk,
     mixamo_walk,
     object_walk,
+    on_steps,
     rigify_walk,
     same_keys,
     smpl_walk,
@@ -454,3 +455,55 @@ def test_an_armature_scaled_and_turned_as_an_fbx_import_makes_it_is_extended_as_
     plain, fbx = extended
     assert np.ptp(plain[..., 2]) > 1.0  # a standing body, Z up, in metres
     np.testing.assert_allclose(fbx, plain, atol=1e-4)
+
+
+def stepped_take(folder):
+    """A walk (a real take where the data is unpacked) keyed on twos with Constant interpolation, ending on a key."""
+    mocap = find_mocap()
+    take = mocap / CLIPS["bandai_namco"] if mocap is not None else None
+    obj = import_bvh(take if take is not None and take.exists() else walk_bvh(folder, frames=121),
+                     update_scene_fps=True, update_scene_duration=True)
+    on_steps(obj, 2)
+    if int(action_of(obj).frame_range[1] - action_of(obj).frame_range[0]) % 2:  # end on a key
+        for fc in fcurves_of(obj):
+            fc.keyframe_points.remove(fc.keyframe_points[-1])
+    return obj
+
+
+def test_an_action_keyed_on_twos_is_continued_on_twos(real_model, addon, tmp_path, capfd):
+    """Animation on twos (a key every second frame held by Constant interpolation) is read at its keys and
+    continued on twos: new keys every second frame, Constant, the pose held in between, moving on at the clip's
+    pace from key to key; read frame by frame (holds and jumps) and keyed on ones, the continuation stuttered."""
+    obj = stepped_take(tmp_path)
+    end = int(action_of(obj).frame_range[1])
+    capfd.readouterr()
+    assert bpy.ops.strnn.extend_clip(frames=40) == {"FINISHED"}
+    assert "keyed every 2 frames with Constant interpolation" in capfd.readouterr().out
+    new = action_of(obj)
+    assert new["strnn"]["key_step"] == 2
+    hips = obj.strnn_map.hips
+    for fc in fcurves_of(obj):
+        if not fc.data_path.startswith(f'pose.bones["{hips}"]'):
+            continue
+        later = [p for p in fc.keyframe_points if p.co[0] > end + 0.5]
+        assert [p.co[0] for p in later] == [end + 2.0 * k for k in range(1, 21)]
+        assert {p.interpolation for p in later} == {"CONSTANT"}
+    pos = evaluated_joints(addon, obj, np.arange(end - 40, end + 41))
+    moved = np.linalg.norm(np.diff(pos, axis=0), axis=-1).mean(-1)  # joints' mean move per frame
+    held, keyed = moved[0::2], moved[1::2]  # into the frame after each key: none; onto the next key: all of it
+    assert held.max() < 1e-6 * keyed.max()
+    before, after = keyed[:20], keyed[20:]
+    print(f"per key: clip {before.mean():.4f}, new {after.mean():.4f}, new min/max {after.min():.4f}/{after.max():.4f}")
+    assert 0.6 < after.mean() / before.mean() < 1.5 and after.min() > 0.3 * before.mean()
+
+
+def test_keys_on_twos_that_are_not_held_are_read_frame_by_frame(fake_model, addon, tmp_path):
+    """Keys every second frame with Bezier interpolation move on every frame: read and continued on ones."""
+    obj = mixamo_walk(61)
+    on_steps(obj, 2, "BEZIER")
+    end = int(action_of(obj).frame_range[1])
+    assert bpy.ops.strnn.extend_clip(frames=10) == {"FINISHED"}
+    assert "key_step" not in action_of(obj)["strnn"]
+    hips = obj.strnn_map.hips
+    fc = next(fc for fc in fcurves_of(obj) if fc.data_path.startswith(f'pose.bones["{hips}"]'))
+    assert [p.co[0] for p in fc.keyframe_points if p.co[0] > end + 0.5] == [end + 1.0 * k for k in range(1, 11)]

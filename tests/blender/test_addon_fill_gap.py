@@ -8,7 +8,17 @@ import shutil
 import bpy
 import numpy as np
 import pytest
-from scenes import action_of, evaluated_joints, fcurves_of, find_mocap, import_bvh, key_snapshot, same_keys, walk_bvh
+from scenes import (
+    action_of,
+    evaluated_joints,
+    fcurves_of,
+    find_mocap,
+    import_bvh,
+    key_snapshot,
+    on_steps,
+    same_keys,
+    walk_bvh,
+)
 
 
 def cut(obj, start: int, end: int) -> None:
@@ -169,3 +179,29 @@ def test_the_gaps_feet_settle_on_the_floor(addon, real_model, gapped):
         creep[lock] = fl.foot_skate_cm(pos[39:71], contacts[39:71])
     print("gap creep unlocked / locked (cm per frame):", creep)
     assert creep[True] < 0.2 * creep[False] and creep[True] < 0.1
+
+
+def test_a_gap_in_an_action_on_twos_is_found_past_its_holds_and_filled_on_twos(addon, real_model, tmp_path):
+    """Animation on twos (Constant keys every second frame): the frame between two keys is no gap, so the hole cut
+    in it is the one filled, at its keys' rate and on twos, Constant, the pose held in between, without a pop."""
+    obj = import_bvh(walk_bvh(tmp_path, frames=121))
+    on_steps(obj, 2)  # keys on frames 1, 3, ..., 121
+    cut(obj, 42, 70)  # keys on 41 and 71 around the hole
+    before = evaluated_joints(addon, obj, np.arange(1, 122))
+    bpy.context.scene.frame_set(1)
+    assert bpy.ops.strnn.inbetween() == {"FINISHED"}
+    new = action_of(obj)
+    assert new["strnn"]["settings"]["frame_start"] == 42 and new["strnn"]["settings"]["frame_end"] == 70
+    assert new["strnn"]["key_step"] == 2
+    hips = obj.strnn_map.hips
+    fc = next(fc for fc in fcurves_of(obj) if fc.data_path.startswith(f'pose.bones["{hips}"]'))
+    inside = [p for p in fc.keyframe_points if 41.5 < p.co[0] < 70.5]
+    assert [p.co[0] for p in inside] == list(range(43, 70, 2)) and {p.interpolation for p in inside} == {"CONSTANT"}
+    out = evaluated_joints(addon, obj, np.arange(1, 122))
+    np.testing.assert_allclose(out[:41], before[:41], atol=1e-4)
+    np.testing.assert_allclose(out[70:], before[70:], atol=1e-4)
+    moved = np.linalg.norm(np.diff(out, axis=0), axis=-1).mean(-1)  # moved[k]: frame k + 1 -> k + 2
+    assert moved[0::2].max() < 1e-6  # onto each even frame: the pose held
+    usual, filled = moved[1:40:2].max(), moved[41:70:2]  # onto each key before the hole, and in it (to 71)
+    print(f"per key in the hole: {filled.min():.4f} to {filled.max():.4f} against {usual:.4f} before it")
+    assert filled.max() < 2.0 * usual and filled.min() > 0.2 * usual

@@ -7,7 +7,7 @@ from __future__ import annotations
 import bpy
 import numpy as np
 import pytest
-from scenes import action_of, evaluated_joints, import_bvh, key_snapshot, same_keys
+from scenes import action_of, evaluated_joints, fcurves_of, import_bvh, key_snapshot, on_steps, same_keys
 
 from model_core.io.bvh_export import write_bvh
 from model_core.motion.conventions import JOINT_INDEX, zup_to_yup
@@ -71,6 +71,28 @@ def test_foot_lock_reduces_skate_on_a_sliding_clip(addon, tmp_path):
     for key, co in old_keys.items():
         if not any(word in key[0] for word in LEG_WORDS):
             assert np.array_equal(co, new_keys[key]), f"{key} changed"
+
+
+def test_an_action_on_twos_is_locked_at_its_keys_and_stays_on_twos(addon, tmp_path):
+    """A sliding walk keyed on twos with Constant interpolation: the feet are found and pinned on its keys (read at
+    their rate, not as holds and jumps) and the legs keyed on the same frames, Constant, so every pose is still held
+    for two frames."""
+    obj = import_sliding(tmp_path, frames=91)
+    on_steps(obj, 2)  # keys on 1, 3, ..., 91
+    frames = np.arange(1, 92)
+    before = joints(addon, obj, frames)
+    contacts = fl.detect_foot_contacts(before[::2], fps=15.0)  # on the keys, at their rate
+    _, new = lock()
+    assert new["strnn"]["key_step"] == 2
+    after = joints(addon, obj, frames)
+    assert np.abs(after[1::2] - after[0:-1:2]).max() < 1e-6  # each even frame holds the key before it
+    legs = [fc for fc in fcurves_of(obj) if any(f'"{w}' in fc.data_path or f"{w}\"" in fc.data_path
+                                                for w in ("LeftUpLeg", "RightUpLeg", "LeftLeg", "RightLeg"))]
+    assert legs and all({int(p.co[0]) % 2 for p in fc.keyframe_points} == {1} for fc in legs)
+    assert all({p.interpolation for p in fc.keyframe_points} == {"CONSTANT"} for fc in legs)
+    skate_before, skate_after = fl.foot_skate_cm(before[::2], contacts), fl.foot_skate_cm(after[::2], contacts)
+    print(f"skate per key {skate_before:.2f} -> {skate_after:.2f} cm")
+    assert skate_before > 1.5 and skate_after <= 0.1
 
 
 def test_frame_range_changes_only_its_frames(addon, tmp_path):
