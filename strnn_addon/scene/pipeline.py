@@ -340,11 +340,12 @@ def key_grid(clip: Clip, first: float, last: float) -> tuple[int, np.ndarray]:
     return (int(gaps[0]), keys) if len(gaps) == 1 and gaps[0] >= 2 else (1, np.empty(0))
 
 
-def key_step(clip: Clip, end: int) -> int:
-    """The step of the keys held by Constant interpolation (:func:`key_grid`) over the last :data:`STEP_SECONDS`
-    up to frame ``end``, ``end`` one of them (2: keys on twos); 1 otherwise."""
+def key_step(clip: Clip, end: int) -> tuple[int, int]:
+    """(step, key): the step of the keys held by Constant interpolation (:func:`key_grid`) over the last
+    :data:`STEP_SECONDS` up to frame ``end`` (2: keys on twos) and the last of them, whose pose frame ``end``
+    holds; (1, ``end``) where they are not stepped."""
     step, keys = key_grid(clip, end - STEP_SECONDS * clip.fps, end)
-    return step if len(keys) and keys[-1] == end else 1
+    return (step, int(keys[-1])) if len(keys) and end - keys[-1] < step else (1, end)
 
 
 def keyed_controls(clip: Clip, bones: list[int] | None = None) -> list:

@@ -71,9 +71,9 @@ def extend_steps(context, obj, *, frames: int = 120, context_frames: int = 0, fo
     progress or stop), returns the new action."""
     clip = pipeline.prepare(context, obj)
     end = clip.last if from_frame is None else int(from_frame)
-    step = pipeline.key_step(clip, end)  # keys on twos: read at its keys, continued on twos
-    fps, count = clip.fps / step, -(-frames // step)  # the keys' rate, and how many new keys
-    ctx_frames = context_range(clip, context_frames, frames, end, step)
+    step, key = pipeline.key_step(clip, end)  # keys on twos: read at its keys (the last one ``end`` holds), on twos
+    fps, count = clip.fps / step, -(-(end + frames - key) // step)  # the keys' rate, and the new keys up to the end
+    ctx_frames = context_range(clip, context_frames, frames, key, step)
     yield "read"
     # following the clip, up to 20 s of it; otherwise what the floor is judged on (extend.FLOOR_S)
     mem_frames = memory_range(clip, ctx_frames, MEMORY_S if follow_clip else FLOOR_S, step)
@@ -90,7 +90,7 @@ def extend_steps(context, obj, *, frames: int = 120, context_frames: int = 0, fo
                        passes=SETTLE_PASSES)
         new_pos = new_pos[len(pos):]
     yield "solve"
-    new_frames = end + step * (1 + np.arange(count, dtype=np.float64))
+    new_frames = key + step * (1 + np.arange(count, dtype=np.float64))
     targets = pipeline.to_armature(clip, new_pos, pipeline.world_at(context, clip, new_frames))
     loc, rot = solve(clip.rig, clip.anchors, targets, np.repeat(held_loc, count, 0), np.repeat(held_rot, count, 0))
     yield "write"

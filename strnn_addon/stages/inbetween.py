@@ -109,8 +109,8 @@ def inbetween_steps(context, obj, *, frame_start: int | None = None, frame_end: 
     current = context.scene.frame_current if from_playhead else None
     start, end = find_gap(clip, keys, frame_start, frame_end, current)
     check_gap(clip, keys, start, end)
-    step = pipeline.key_step(clip, start - 1) if start - 1 in keys and end + 1 in keys else 1
-    step = step if (end - start + 2) % step == 0 else 1  # keys on twos either side: filled on twos
+    step, key = pipeline.key_step(clip, start - 1) if start - 1 in keys and end + 1 in keys else (1, start - 1)
+    step = step if key == start - 1 and (end - start + 2) % step == 0 else 1  # keys on twos either side: on twos
     fps = clip.fps / step
     need = pipeline.min_scene_frames(fps)
     read_before, read_after = take_ranges(clip, start, end, follow_take, step)

@@ -507,3 +507,23 @@ def test_keys_on_twos_that_are_not_held_are_read_frame_by_frame(fake_model, addo
     hips = obj.strnn_map.hips
     fc = next(fc for fc in fcurves_of(obj) if fc.data_path.startswith(f'pose.bones["{hips}"]'))
     assert [p.co[0] for p in fc.keyframe_points if p.co[0] > end + 0.5] == [end + 1.0 * k for k in range(1, 11)]
+
+
+def test_continuing_from_a_held_frame_of_an_action_on_twos_stays_on_twos(fake_model, addon):
+    """From the playhead on a frame that holds the key before it: the frames up to it stay, and the new keys go on
+    from that key on twos (the first on the frame after the playhead), Constant."""
+    obj = mixamo_walk(61)
+    on_steps(obj, 2)  # keys on 1, 3, ..., 61
+    frames = np.arange(1, 62)
+    before = evaluated_joints(addon, obj, frames)
+    bpy.context.scene.frame_set(50)  # holds the key on 49
+    assert bpy.ops.strnn.extend_clip(frames=10, from_current=True) == {"FINISHED"}
+    new = action_of(obj)
+    assert new["strnn"]["key_step"] == 2
+    assert np.abs(evaluated_joints(addon, obj, frames[:50]) - before[:50]).max() < 1e-5
+    hips = obj.strnn_map.hips
+    for fc in fcurves_of(obj):
+        if fc.data_path.startswith(f'pose.bones["{hips}"]'):
+            later = [p for p in fc.keyframe_points if p.co[0] > 50.5]
+            assert [p.co[0] for p in later] == [51.0, 53.0, 55.0, 57.0, 59.0, 61.0]
+            assert {p.interpolation for p in later} == {"CONSTANT"}
