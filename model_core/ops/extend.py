@@ -9,8 +9,8 @@ import numpy as np
 
 from ..inference import memory as clip_memory
 from ..inference.memory import first_scale
-from ..motion.conventions import MODEL_FPS
-from ..motion.features import floor_height, positions_to_features
+from ..motion.conventions import GROUND_AXES, JOINT_INDEX, MODEL_FPS, ROOT
+from ..motion.features import floor_height, gaussian_smooth, positions_to_features
 from .familiarity import momentum_shares
 from .normalise import fit_normalisation, model_frames_available, sample_at
 from .skeleton import join_clip
@@ -40,6 +40,42 @@ HELD_NOTE = 0.75
 # (stance.ground): long enough to hold a step down even where the clip ends in a jump, short enough to be the floor
 # where the clip ends when a capture's floor drifts over a take.
 FLOOR_S = 3.0
+
+
+# A clip that walks or runs in place (its hips kept over one spot on the ground while its feet step, as game cycles
+# are made: Mixamo's "In Place"): over its last IN_PLACE_S seconds the hips' path over the ground, smoothed over a
+# step, moves slower than IN_PLACE_SPEED (m/s on the standard body) while the feet move about the hips faster than
+# STEPPING_SPEED. Its continuation is kept in place: the new frames' drift over the ground (their hips' path smoothed
+# over IN_PLACE_SMOOTH_S seconds, a Gaussian's sigma) is taken off the whole body, their sway kept. The model learnt
+# walks that travel, and without it an in-place walk crept 0.4 to 2.2 m in 20 s and a run 4.6 m
+# (models/strnn_default/HISTORY.md, "A walk in place stays in place"). 0: off.
+IN_PLACE_S, IN_PLACE_SPEED, STEPPING_SPEED, IN_PLACE_SMOOTH_S = 2.0, 0.02, 0.3, 0.5
+_GROUND = list(GROUND_AXES)
+_FEET = [JOINT_INDEX["l_foot"], JOINT_INDEX["r_foot"]]
+
+
+def in_place(clip: np.ndarray) -> bool:
+    """Whether a clip ``[T, 21, 3]`` (model units and rate) steps in place over its last :data:`IN_PLACE_S`."""
+    p = np.asarray(clip, np.float64)[-int(IN_PLACE_S * MODEL_FPS):]
+    if IN_PLACE_SPEED <= 0.0 or len(p) < MODEL_FPS:
+        return False
+    hips = p[:, ROOT][:, _GROUND]
+    path = gaussian_smooth(hips, IN_PLACE_SMOOTH_S * MODEL_FPS)
+    travel = np.linalg.norm(np.diff(path, axis=0), axis=-1).mean() * MODEL_FPS
+    feet = p[:, _FEET][:, :, _GROUND] - hips[:, None]
+    stepping = np.linalg.norm(np.diff(feet, axis=0), axis=-1).mean() * MODEL_FPS
+    return bool(travel < IN_PLACE_SPEED and stepping > STEPPING_SPEED)
+
+
+def kept_in_place(before: np.ndarray, new: np.ndarray) -> np.ndarray:
+    """Frames ``new`` ``[N, 21, 3]`` that follow ``before`` ``[T, 21, 3]`` (any units, the model's rate) without
+    their drift over the ground: the hips' path smoothed over :data:`IN_PLACE_SMOOTH_S` (across the seam), taken
+    off the whole body from where it is at ``before``'s last frame, so the body sways but does not travel."""
+    hips = np.concatenate([before[:, ROOT], new[:, ROOT]])[:, _GROUND]
+    path = gaussian_smooth(hips, IN_PLACE_SMOOTH_S * MODEL_FPS)
+    out = np.array(new, dtype=np.float64)
+    out[:, :, _GROUND] -= (path[len(before):] - path[len(before) - 1])[:, None]
+    return out
 
 
 @dataclass(frozen=True)
@@ -135,8 +171,11 @@ def extend_positions(engine, pos: np.ndarray, fps: float, frames: int, memory: n
         floor = clip_floor(pos if memory is None else memory, fps)
     kw["floor"] = (floor - norm.ground) * norm.scale  # in the model's units, as Normalisation.to_model puts it
     new = np.asarray(engine.extend(model_ctx, n_model, settle=True, **kw), dtype=np.float64)
-    # model frame 0 is the last context frame
-    return sample_at(join_clip(ctx, norm.to_user(new), momentum), MODEL_FPS, np.arange(1, frames + 1) / fps)
+    joined = join_clip(ctx, norm.to_user(new), momentum)  # model frame 0 is the last context frame
+    looked = ctx if memory is None else _at_model_rate(memory, fps)
+    if in_place(norm.to_model(looked)):  # a walk in place goes on in place
+        joined = np.concatenate([joined[:1], kept_in_place(looked, joined[1:])])
+    return sample_at(joined, MODEL_FPS, np.arange(1, frames + 1) / fps)
 
 
 def clip_floor(clip: np.ndarray, fps: float) -> float:

@@ -527,3 +527,27 @@ def test_continuing_from_a_held_frame_of_an_action_on_twos_stays_on_twos(fake_mo
             later = [p for p in fc.keyframe_points if p.co[0] > 50.5]
             assert [p.co[0] for p in later] == [51.0, 53.0, 55.0, 57.0, 59.0, 61.0]
             assert {p.interpolation for p in later} == {"CONSTANT"}
+
+
+def test_a_walk_in_place_is_extended_in_place(real_model, addon, tmp_path):
+    """A walk in place (the hips held over one spot while the feet step, as game cycles and Mixamo's In Place
+    make them) extended by 300 frames: the hips stay within 10 cm of where it leaves them, the legs stepping on."""
+    from model_core.io.bvh_export import write_bvh
+    from model_core.motion.synthetic import walking_skeleton
+    from model_core.rig.rigs import load_clip
+
+    mocap = find_mocap()
+    take = mocap / CLIPS["bandai_namco"] if mocap is not None else None
+    walk = load_clip(take) if take is not None and take.exists() else walking_skeleton(150, radius=1e6)
+    walk = np.array(walk, dtype=np.float64)
+    walk[:, :, [0, 2]] -= walk[:, :1, [0, 2]] - walk[:1, :1, [0, 2]]
+    obj = import_bvh(write_bvh(tmp_path / "in_place.bvh", walk.astype(np.float32)), update_scene_fps=True,
+                     update_scene_duration=True)
+    end = int(action_of(obj).frame_range[1])
+    assert bpy.ops.strnn.extend_clip(frames=300) == {"FINISHED"}
+    pos = evaluated_joints(addon, obj, np.arange(end - 59, end + 301))  # Blender axes: Z up
+    hips = pos[:, 0, :2]
+    drift = np.linalg.norm(hips[60:] - hips[59], axis=-1).max()
+    feet = lambda p: np.linalg.norm(np.diff(p[:, [7, 11], :2] - p[:, :1, :2], axis=0), axis=-1).mean()  # noqa: E731
+    print(f"in place: hips within {drift:.3f} m over 300 frames; feet step at {feet(pos[60:]) / feet(pos[:60]):.2f} x")
+    assert drift < 0.10 and feet(pos[60:]) > 0.5 * feet(pos[:60])

@@ -399,3 +399,35 @@ def test_denoise_judges_how_familiar_the_motion_is_on_its_result_not_on_the_nois
             found = result_familiarity(main, noisy, denoise_positions(denoiser, noisy, 30.0, strength), 30.0, strength)
             assert found.unfamiliar is not familiar, (path, strength, found.ratio)
     assert result_familiarity(main, noisy, noisy, 30.0, 0.0) is None
+
+
+def in_place_walk(pos: np.ndarray) -> np.ndarray:
+    """``pos`` with the hips held over the spot they start on (the body's travel over the ground taken off every
+    joint, the hips' bob kept): a walk in place, as game cycles are made (Mixamo's "In Place")."""
+    out = np.array(pos, dtype=np.float64)
+    out[:, :, [0, 2]] -= out[:, :1, [0, 2]] - out[:1, :1, [0, 2]]
+    return out
+
+
+@pytest.mark.parametrize("take", ["dataset-2_walk_normal_001", "dataset-2_run_normal_001"])
+def test_a_walk_in_place_is_extended_in_place(mocap_root, monkeypatch, take):
+    """A real walk or run made in place, extended by 10 s as Extend Clip makes it: the hips stay within 10 cm of
+    where the clip leaves them and the legs keep stepping; without the rule the model, which learnt walks that
+    travel, creeps forward (over half a metre in 10 s). The same take walking on travels as before."""
+    from model_core.ops import extend
+    from model_core.rig.rigs import load_clip
+
+    engine = Engine.load()
+    walk = load_clip(mocap_root / f"bandai-namco/dataset-2/{take}.bvh").astype(np.float64)
+    still = in_place_walk(walk)
+    assert extend.in_place(fit_normalisation(still[-20:]).to_model(still)) and not extend.in_place(walk)
+    drift = lambda clip: np.linalg.norm(  # noqa: E731
+        extend_positions(engine, clip[-20:], 30.0, 300, memory=clip)[:, 0, [0, 2]] - clip[-1, 0, [0, 2]], axis=-1)
+    feet = lambda p: np.linalg.norm(np.diff(p[:, [7, 11]] - p[:, :1], axis=0), axis=-1).mean()  # noqa: E731
+    kept = drift(still)
+    new = extend_positions(engine, still[-20:], 30.0, 300, memory=still)
+    print(f"{take}: in place, hips within {kept.max():.3f} m; feet step at {feet(new) / feet(still):.2f} x the clip's")
+    assert kept.max() < 0.10 and feet(new) > 0.5 * feet(still)
+    assert drift(walk)[-1] > 3.0  # walking on, it travels
+    monkeypatch.setattr(extend, "IN_PLACE_SPEED", 0.0)
+    assert drift(still)[-1] > 0.5
