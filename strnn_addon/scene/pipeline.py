@@ -313,16 +313,26 @@ STEP_SECONDS, STEP_KEYS = 2.0, 6
 
 
 def key_grid(clip: Clip, first: float, last: float) -> tuple[int, np.ndarray]:
-    """(step, keys): the keys ``[K]`` (frames) the keyed bones' F-curves hold with Constant interpolation in frames
-    ``first`` to ``last`` and their step (2 for keys on twos), where they all lie on one grid of whole frames every
-    ``step`` >= 2 frames; else (1, no keys): keys on ones, other interpolation, another spacing, or too few
-    (:data:`STEP_KEYS`). The operations read such an action at its keys and write their keys on its grid."""
+    """(step, keys): the frames ``[K]`` the keyed bones' poses are held from in frames ``first`` to ``last`` and their
+    step (2 for animation on twos), where the bones' F-curves hold them on one grid of whole frames every ``step``
+    >= 2: by keys there with Constant interpolation, or by a Stepped Interpolation modifier on every one of those
+    F-curves (its step and offset; keys anywhere). Else (1, no keys): keys on ones, other interpolation or modifiers,
+    another spacing, or too few (:data:`STEP_KEYS`). The operations read such an action at those frames and key
+    only them."""
     names = set(keyed_names(clip))
     constant = bpy.types.Keyframe.bl_rna.properties["interpolation"].enum_items["CONSTANT"].value
-    found = []
+    found, stepped = [], set()
     for fc in clip.channels.fcurves:
         match = re.match(r'pose\.bones\["(.+?)"\]', fc.data_path)
-        if match is None or match[1] not in names or fc.mute or len(fc.modifiers):
+        if match is None or match[1] not in names or fc.mute:
+            continue
+        if len(fc.modifiers):
+            mod = fc.modifiers[0]
+            if (len(fc.modifiers) > 1 or mod.type != "STEPPED" or mod.mute or not getattr(mod, "active", True)
+                    or mod.use_frame_start or mod.use_frame_end or mod.use_restricted_range
+                    or (mod.use_influence and mod.influence < 1.0)):
+                return 1, np.empty(0)
+            stepped.add((float(mod.frame_step), float(mod.frame_offset)))
             continue
         n = len(fc.keyframe_points)
         co, interp = np.empty(2 * n), np.empty(n, np.int32)
@@ -332,6 +342,17 @@ def key_grid(clip: Clip, first: float, last: float) -> tuple[int, np.ndarray]:
         if (interp[near] != constant).any():
             return 1, np.empty(0)
         found.append(co[0::2][near])
+    if stepped:  # every modified curve steps alike; plain curves (Constant) must keep to its grid
+        if len(stepped) > 1:
+            return 1, np.empty(0)
+        step, offset = stepped.pop()
+        if step < 2 or step != round(step) or offset != round(offset):
+            return 1, np.empty(0)
+        grid = np.arange(offset + np.ceil((first - offset) / step) * step, last + 0.5, step)
+        plain = np.concatenate(found) if found else np.empty(0)
+        if len(grid) < STEP_KEYS or not np.isin(np.round(plain), grid).all():
+            return 1, np.empty(0)
+        return int(step), grid
     keys = np.unique(np.concatenate(found)) if found else np.empty(0)
     if len(keys) < STEP_KEYS or np.abs(keys - np.round(keys)).max() > 1e-3:
         return 1, np.empty(0)

@@ -551,3 +551,26 @@ def test_a_walk_in_place_is_extended_in_place(real_model, addon, tmp_path):
     feet = lambda p: np.linalg.norm(np.diff(p[:, [7, 11], :2] - p[:, :1, :2], axis=0), axis=-1).mean()  # noqa: E731
     print(f"in place: hips within {drift:.3f} m over 300 frames; feet step at {feet(pos[60:]) / feet(pos[:60]):.2f} x")
     assert drift < 0.10 and feet(pos[60:]) > 0.5 * feet(pos[:60])
+
+
+def test_an_action_stepped_by_a_modifier_is_continued_on_its_steps(real_model, addon, tmp_path):
+    """Keys on ones played on twos by a Stepped Interpolation modifier on every F-curve (Graph Editor > Add
+    Modifier): read on the modifier's frames, at their rate, and keyed only there, so the modifier holds the new
+    poses two frames each as it holds the old."""
+    obj = import_bvh(walk_bvh(tmp_path, frames=121), update_scene_fps=True, update_scene_duration=True)
+    for fc in fcurves_of(obj):
+        mod = fc.modifiers.new("STEPPED")
+        mod.frame_step, mod.frame_offset = 2.0, 1.0  # held from frames 1, 3, 5, ...
+    end = int(action_of(obj).frame_range[1])
+    assert bpy.ops.strnn.extend_clip(frames=40) == {"FINISHED"}
+    new = action_of(obj)
+    assert new["strnn"]["key_step"] == 2
+    hips = obj.strnn_map.hips
+    fc = next(fc for fc in fcurves_of(obj) if fc.data_path.startswith(f'pose.bones["{hips}"]'))
+    assert [p.co[0] for p in fc.keyframe_points if p.co[0] > end + 0.5] == [end + 2.0 * k for k in range(1, 21)]
+    pos = evaluated_joints(addon, obj, np.arange(end - 40, end + 41))
+    moved = np.linalg.norm(np.diff(pos, axis=0), axis=-1).mean(-1)
+    held, keyed = moved[0::2], moved[1::2]
+    assert held.max() < 1e-6 * keyed.max()
+    print(f"per step: clip {keyed[:20].mean():.4f}, new {keyed[20:].mean():.4f}")
+    assert 0.6 < keyed[20:].mean() / keyed[:20].mean() < 1.5 and keyed[20:].min() > 0.3 * keyed[:20].mean()
