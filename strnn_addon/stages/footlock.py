@@ -24,8 +24,9 @@ def foot_lock_steps(context, obj, *, frame_start: int | None = None, frame_end: 
     a, b = frame_range(clip, frame_start, frame_end, MIN_LOCK_FRAMES, f"foot lock needs at least {MIN_LOCK_FRAMES}")
     step, keys = pipeline.key_grid(clip, a, b)  # keys on twos: read and locked at its keys, written on them
     if step > 1:
-        frames = np.arange(max(keys[0] - step, clip.first), min(keys[-1] + step, clip.last) + 1, step)
-        frames = frames[(frames - keys[0]) % step == 0]
+        before, after = keys[0] - step, keys[-1] + step  # the keys either side, where the action has them
+        frames = np.arange(before if before >= clip.first else keys[0], (after if after <= clip.last else keys[-1]) + 1,
+                           step)
     else:
         frames = np.arange(max(a - 1, clip.first), min(b + 1, clip.last) + 1, dtype=np.float64)
     frames = frames.astype(np.float64)
