@@ -110,7 +110,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--context-frames", type=int, default=opts.CONTEXT_FRAMES.default,
                    help=opts.CONTEXT_FRAMES.help())
     p.add_argument("--from-frame", type=int, default=None, metavar="FRAME",
-                   help="continue after this frame instead of the clip's last, replacing the motion after it")
+                   help="continue after this frame instead of the clip's last, replacing the motion after it (with "
+                        "--before-start: before it, replacing the motion before it)")
+    p.add_argument("--before-start", action="store_true", help=opts.BEFORE_START.help())
     p.add_argument("--no-follow-clip", dest="follow_clip", action="store_false",
                    help="the model alone: do not lean on the clip's own motion (by default the continuation does, "
                         "wherever it comes back to something the clip did)")
@@ -177,7 +179,7 @@ def operator_call(args) -> tuple[str, dict]:
     if args.command == "extend":
         return "extend_clip", {"frames": args.frames, "context_frames": args.context_frames,
                                "follow_clip": args.follow_clip, "foot_lock": args.foot_lock,
-                               "from_current": args.from_frame is not None}
+                               "from_current": args.from_frame is not None, "before_start": args.before_start}
     if args.command == "denoise":
         return "denoise_action", {"strength": args.strength, "foot_lock": args.foot_lock}
     if args.command == "footlock":

@@ -152,6 +152,7 @@ class STRNN_OT_extend_clip(_Staged, bpy.types.Operator):
     follow_clip: options.follow_clip()
     from_current: options.from_current()
     foot_lock: options.foot_lock("extend_clip")
+    before_start: options.before_start()
     scene_range: options.scene_range()
     output: options.output()
     simplify: options.simplify()
@@ -160,14 +161,17 @@ class STRNN_OT_extend_clip(_Staged, bpy.types.Operator):
         start = context.scene.frame_current if self.from_current else None
         return extend_steps(context, context.active_object, frames=self.frames, context_frames=self.context_frames,
                             follow_clip=self.follow_clip, foot_lock=self.foot_lock, from_frame=start,
-                            scene_range=self.scene_range)
+                            scene_range=self.scene_range, before_start=self.before_start)
 
     def done(self, action) -> str:
         stepped = stepped_note(action)
+        where = "before" if self.before_start else "after"
         if self.from_current:
-            return (f"Continued after frame {bpy.context.scene.frame_current} with {self.frames} new frames in new "
-                    f"action {action.name!r}{stepped}{range_note(action)}")
-        return f"Added {self.frames} frames in new action {action.name!r}{stepped}{range_note(action)}"
+            return (f"Continued {where} frame {bpy.context.scene.frame_current} with {self.frames} new frames in new "
+                    f"action {action.name!r}{stepped}{range_note(action, self.before_start)}")
+        added = " before its first frame" if self.before_start else ""
+        return (f"Added {self.frames} frames{added} in new action {action.name!r}{stepped}"
+                f"{range_note(action, self.before_start)}")
 
 
 class STRNN_OT_fill_gap(_Staged, bpy.types.Operator):
@@ -472,8 +476,16 @@ def as_nla_strip(obj, action):
     return track
 
 
-def range_note(action) -> str:
-    """What happened to the scene's range: widened to the new action's end, or left short of it."""
+def range_note(action, start: bool = False) -> str:
+    """What happened to the scene's range: widened to the new action's end, or left short of it; with ``start``,
+    to its start (frames added before it)."""
+    if start:
+        scene, first = bpy.context.scene, int(round(action.frame_range[0]))
+        if scene.frame_start == first:
+            return f"; the scene now starts at frame {first}"
+        if scene.frame_start > first:
+            return f"; the scene still starts at frame {scene.frame_start} (the new action starts at {first})"
+        return ""
     scene, last = bpy.context.scene, int(round(action.frame_range[1]))
     if scene.frame_end == last:
         return f"; the scene now ends at frame {last}"

@@ -49,13 +49,18 @@ def follow_take():
 def from_current():
     return BoolProperty(name="From Current Frame", default=False,
                         description="Continue after the current frame instead of the action's last, replacing "
-                                    "the mapped bones' keys after it")
+                                    "the mapped bones' keys after it (before it, with Before the Start)")
+
+
+def before_start():
+    return BoolProperty(**opts.BEFORE_START.blender())
 
 
 def scene_range():
     return BoolProperty(name="Extend Scene Range", default=True,
-                        description="Move the scene's end frame to the new action's end when it goes beyond it "
-                                    "(the report says so either way)")
+                        description="Move the scene's end frame to the new action's end when it goes beyond it (its "
+                                    "start frame to the new start, frames added before it); the report says so either "
+                                    "way")
 
 
 def only_selected():

@@ -107,6 +107,7 @@ class STRNN_PT_extend(_OperatorPanel, bpy.types.Panel):
         col.prop(opts, "context_frames")
         col.prop(opts, "follow_clip")
         col.prop(opts, "from_current")
+        col.prop(opts, "before_start")
         col.prop(opts, "foot_lock")
 
 

@@ -85,15 +85,19 @@ class FirstWindow:
     seconds: float
     unknown: bool = True  # the model does not know the clip's motion (momentum share over a half)
 
-    def note(self) -> str:
-        """A sentence for the operator's report; empty unless the first window was mostly held."""
+    def note(self, back: bool = False) -> str:
+        """A sentence for the operator's report; empty unless the first window was mostly held. ``back``: the
+        frames were added before the clip's start (read backwards in time)."""
         if self.motion > HELD_NOTE:
             return ""
         where = " in motion the model does not know" if self.unknown else ""
-        return (f"The clip has come to rest{where}, so its first {self.seconds:.2f} s "
-                f"stay near the last pose ({1.0 - self.motion:.0%} of the model's move held back) rather than "
-                "invent a move: if the performer was about to move, key it or extend from a frame where the "
-                "clip still moves")
+        held = f"({1.0 - self.motion:.0%} of the model's move held back) rather than invent a move"
+        if back:
+            return (f"The clip starts at rest{where}, so the {self.seconds:.2f} s before it stay near its first pose "
+                    f"{held}: if the performer had just moved, key it or extend from a frame where the clip moves")
+        return (f"The clip has come to rest{where}, so its first {self.seconds:.2f} s stay near the last pose "
+                f"{held}: if the performer was about to move, key it or extend from a frame where the clip still "
+                "moves")
 
 
 @dataclass(frozen=True)

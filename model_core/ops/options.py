@@ -29,13 +29,18 @@ class Option:
             else self.description
 
 
-EXTEND_FRAMES = Option("Frames", 120, "How many frames to add after the last frame", min=1, soft_max=2000)
+EXTEND_FRAMES = Option("Frames", 120, "How many frames to add after the last frame (before the first, with Before "
+                       "the Start)", min=1, soft_max=2000)
 CONTEXT_FRAMES = Option("Context", 0, "Frames before the end the model reads; 0: just enough (20 at 30 fps)",
                         min=0, soft_max=600)
 FOLLOW_CLIP = Option("Follow the Clip", True,
                      "Lean on the clip's own motion wherever the continuation comes back to something the clip did "
                      "(a walk keeps its gait; from the first frame where the model does not know the motion); off: "
                      "the model alone")
+BEFORE_START = Option("Before the Start", False,
+                      "Add the frames before the action's first frame (before the current frame, with From Current "
+                      "Frame) instead of after its last: a lead-in, or a simulation's pre-roll; the clip is read "
+                      "backwards in time")
 FOLLOW_TAKE = Option("Follow the Take", True,
                      "Lean on the rest of the action where it did what the gap must (a walk's other steps, a "
                      "drill's repeated kick), up to 20 s either side; off: the models alone")

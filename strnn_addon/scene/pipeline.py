@@ -361,10 +361,14 @@ def key_grid(clip: Clip, first: float, last: float) -> tuple[int, np.ndarray]:
     return (int(gaps[0]), keys) if len(gaps) == 1 and gaps[0] >= 2 else (1, np.empty(0))
 
 
-def key_step(clip: Clip, end: int) -> tuple[int, int]:
+def key_step(clip: Clip, end: int, back: bool = False) -> tuple[int, int]:
     """(step, key): the step of the keys held by Constant interpolation (:func:`key_grid`) over the last
     :data:`STEP_SECONDS` up to frame ``end`` (2: keys on twos) and the last of them, whose pose frame ``end``
-    holds; (1, ``end``) where they are not stepped."""
+    holds; (1, ``end``) where they are not stepped. ``back`` (frames to add before ``end``): over the first
+    :data:`STEP_SECONDS` from ``end``, which must be one of the keys."""
+    if back:
+        step, keys = key_grid(clip, end, end + STEP_SECONDS * clip.fps)
+        return (step, end) if len(keys) and keys[0] == end else (1, end)
     step, keys = key_grid(clip, end - STEP_SECONDS * clip.fps, end)
     return (step, int(keys[-1])) if len(keys) and end - keys[-1] < step else (1, end)
 
@@ -529,7 +533,8 @@ def raw_rotations(clip: Clip, frame: float) -> dict:
 
 def finish(context, clip: Clip, new_action, scene_range: bool = True) -> None:
     """Keep the original action (fake user) and assign the new one on the same slot; with
-    ``scene_range``, widen the scene's frame range to the new action's end."""
+    ``scene_range``, widen the scene's frame range to the new action's end (and to its start where it starts
+    before the original: frames added before it)."""
     slot = anim.slot_of(clip.obj)
     if mapping.stored_map(clip.obj) != clip.mapping:  # keep the auto-map that was used, for the panel
         mapping.store_map(clip.obj, clip.mapping, clip.obj.strnn_map.family)
@@ -538,3 +543,5 @@ def finish(context, clip: Clip, new_action, scene_range: bool = True) -> None:
     first, last = (int(round(x)) for x in new_action.frame_range)
     if scene_range and context.scene.frame_end < last:
         context.scene.frame_end = last
+    if scene_range and first < min(context.scene.frame_start, clip.action.frame_range[0]):  # added before it
+        context.scene.frame_start = max(first, 0)  # a scene starts at frame 0 at the earliest

@@ -134,15 +134,15 @@ def familiarity_record(found, denoised: bool = False) -> dict:
     return {"familiarity": entry}
 
 
-def first_window_record(found) -> dict:
-    """The record's ``first_window`` entry where Extend held its first window near the clip's last pose
-    (:class:`extend.FirstWindow`): the share of the model's motion kept, how long, and the note the operator
-    reports; empty where the first window is the model's own."""
+def first_window_record(found, back: bool = False) -> dict:
+    """The record's ``first_window`` entry where Extend held its first window near the clip's last pose (``back``:
+    its first, the frames added before it) (:class:`extend.FirstWindow`): the share of the model's motion kept, how
+    long, and the note the operator reports; empty where the first window is the model's own."""
     if found.motion >= 1.0:
         return {}
     entry = {"motion_kept": round(found.motion, 3), "seconds": round(found.seconds, 3)}
-    if found.note():
-        entry["note"] = found.note()
+    if found.note(back):
+        entry["note"] = found.note(back)
     return {"first_window": entry}
 
 

@@ -30,57 +30,69 @@ def extend_clip(context, obj, *, progress=noop, **options):
     return run(extend_steps(context, obj, **options), progress)
 
 
-def context_range(clip, context_frames: int, frames: int, end: int, step: int = 1) -> np.ndarray:
-    """Scene frames ``[C]`` the model reads: the ``context_frames`` (0: just enough) up to ``end``, every ``step``-th
-    (an action keyed on twos is read at its keys, :func:`pipeline.key_step`)."""
+def context_range(clip, context_frames: int, frames: int, end: int, step: int = 1, back: bool = False) -> np.ndarray:
+    """Scene frames ``[C]`` the model reads, in the order it reads them: the ``context_frames`` (0: just enough) up
+    to ``end``, every ``step``-th (an action keyed on twos is read at its keys, :func:`pipeline.key_step`); with
+    ``back`` (frames before the start) the frames from ``end`` on, read backwards in time from the last."""
     fps = clip.fps / step
     need = pipeline.min_scene_frames(fps)
     n_ctx = max(-(-context_frames // step), need)
     if not clip.first <= end <= clip.last:
+        where = "before it" if back else "from there"
         raise UserError(f"Frame {end} lies outside the action {clip.action.name!r} (frames {clip.first}-"
-                        f"{clip.last}): move the current frame into it to continue from there")
-    span = (end - clip.first) // step + 1
+                        f"{clip.last}): move the current frame into it to continue {where}")
+    span = ((clip.last - end) if back else (end - clip.first)) // step + 1
     if n_ctx > span:
-        before = f"up to frame {end}" if end < clip.last else "frames"
+        before = (f"from frame {end}" if end > clip.first else "frames") if back else \
+            (f"up to frame {end}" if end < clip.last else "frames")
         on = f" keys (it is keyed every {step} frames)" if step > 1 else ""
         raise UserError(f"The action {clip.action.name!r} has {span}{on} {before}; extending needs at least "
                         f"{n_ctx} at {fps:g} fps (the model reads {pipeline.MIN_MODEL_FRAMES} "
                         "frames at 30 fps): use a longer action, a later frame or a smaller context")
     if frames < 1:
         raise UserError("Frames to add must be at least 1")
-    return end - step * np.arange(n_ctx, dtype=np.float64)[::-1]
+    return end - (-1 if back else 1) * step * np.arange(n_ctx, dtype=np.float64)[::-1]
 
 
-def memory_range(clip, ctx_frames: np.ndarray, seconds: float = MEMORY_S, step: int = 1) -> np.ndarray:
+def memory_range(clip, ctx_frames: np.ndarray, seconds: float = MEMORY_S, step: int = 1,
+                 back: bool = False) -> np.ndarray:
     """Scene frames ``[M]`` of the clip's own motion the continuation leans on (:data:`extend.MEMORY_S` seconds
     up to the context's last frame, or ``seconds``, within the action; at least the context's frames), every
-    ``step``-th back from the context's last."""
-    end = int(ctx_frames[-1])
-    first = min(max(clip.first, end - int(round(seconds * clip.fps)) + 1), int(ctx_frames[0]))
-    return end - step * np.arange((end - first) // step + 1, dtype=np.float64)[::-1]
+    ``step``-th back from the context's last, in the order the model reads them (``back``: backwards in time)."""
+    end, sign = int(ctx_frames[-1]), -1 if back else 1
+    most = int(round(seconds * clip.fps)) - 1
+    far = max(clip.first, end - most) if not back else min(clip.last, end + most)
+    reach = max(abs(end - far), abs(end - int(ctx_frames[0])))
+    return end - sign * step * np.arange(reach // step + 1, dtype=np.float64)[::-1]
 
 
 def extend_steps(context, obj, *, frames: int = 120, context_frames: int = 0, follow_clip: bool = True,
-                 foot_lock: bool = False, from_frame: int | None = None, scene_range: bool = True):
+                 foot_lock: bool = False, from_frame: int | None = None, scene_range: bool = True,
+                 before_start: bool = False):
     """Continue ``obj``'s action by ``frames`` scene frames from its last ``context_frames``
     (0: just enough for the model's 20-frame context), leaning after the model's first window on the
     clip's own motion (up to :data:`extend.MEMORY_S` seconds of it) when ``follow_clip``, feet locked on the
     new frames when ``foot_lock``. ``from_frame``: continue after this frame instead of the action's last, the
-    written bones' keys after it replaced. ``scene_range``: widen the scene's range to the new
-    end. A generator: yields each stage's name before running it (so a caller can report
-    progress or stop), returns the new action."""
+    written bones' keys after it replaced. ``before_start``: add the frames before the action's first frame (or
+    before ``from_frame``, the keys before it replaced) instead, the clip read backwards in time, as a lead-in or a
+    simulation's pre-roll. ``scene_range``: widen the scene's range to the new frames. A generator: yields each
+    stage's name before running it (so a caller can report progress or stop), returns the new action."""
     clip = pipeline.prepare(context, obj)
-    end = clip.last if from_frame is None else int(from_frame)
-    step, key = pipeline.key_step(clip, end)  # keys on twos: read at its keys (the last one ``end`` holds), on twos
-    fps, count = clip.fps / step, -(-(end + frames - key) // step)  # the keys' rate, and the new keys up to the end
-    ctx_frames = context_range(clip, context_frames, frames, key, step)
+    back, sign = before_start, -1 if before_start else 1
+    edge = (clip.first if back else clip.last) if from_frame is None else int(from_frame)
+    # keys on twos: read at its keys (the one ``edge`` holds, or the first from it), continued on twos
+    step, key = pipeline.key_step(clip, edge, back)
+    fps, count = clip.fps / step, -(-(frames + sign * (edge - key)) // step)  # the keys' rate, the new keys
+    ctx_frames = context_range(clip, context_frames, frames, key, step, back)
     yield "read"
     # following the clip, up to 20 s of it; otherwise what the floor is judged on (extend.FLOOR_S)
-    mem_frames = memory_range(clip, ctx_frames, MEMORY_S if follow_clip else FLOOR_S, step)
-    memory = pipeline.joint_positions(context, clip, mem_frames)
+    mem_frames = memory_range(clip, ctx_frames, MEMORY_S if follow_clip else FLOOR_S, step, back)
+    order = np.argsort(mem_frames)  # read in time order, then as the model reads them
+    memory = np.empty((len(mem_frames), 21, 3))
+    memory[order] = pipeline.joint_positions(context, clip, mem_frames[order])
     pos = memory[len(mem_frames) - len(ctx_frames):]
     held_loc, held_rot = pipeline.reference_pose(context, clip, ctx_frames[-1:])
-    previous = pipeline.raw_rotations(clip, end)
+    previous = pipeline.raw_rotations(clip, edge)
     yield "model"
     followed = memory if follow_clip and len(mem_frames) > len(ctx_frames) else None
     floor = clip_floor(memory, fps)  # the ground the new feet stay out of
@@ -89,23 +101,25 @@ def extend_steps(context, obj, *, frames: int = 120, context_frames: int = 0, fo
         new_pos = lock(np.concatenate([pos, new_pos]), fps, fixed=np.arange(len(pos) + count) < len(pos),
                        passes=SETTLE_PASSES)
         new_pos = new_pos[len(pos):]
+    new_frames = key + sign * step * (1 + np.arange(count, dtype=np.float64))
+    if back:  # written in time order
+        new_frames, new_pos = new_frames[::-1], new_pos[::-1]
     yield "solve"
-    new_frames = key + step * (1 + np.arange(count, dtype=np.float64))
     targets = pipeline.to_armature(clip, new_pos, pipeline.world_at(context, clip, new_frames))
     loc, rot = solve(clip.rig, clip.anchors, targets, np.repeat(held_loc, count, 0), np.repeat(held_rot, count, 0))
     yield "write"
     record = made_by("Extend Clip", clip, engine_bridge.model_used(prefs(context)), frames=frames,
                      context_frames=len(ctx_frames), follow_clip_frames=len(mem_frames) if follow_clip else 0,
-                     foot_lock=foot_lock, from_frame=from_frame)
+                     foot_lock=foot_lock, from_frame=from_frame, before_start=before_start or None)
     if step > 1:
         record["key_step"] = step
     record.update(familiarity_record(model_call(engine_bridge.run_familiarity, prefs(context), pos, fps)))
     held = model_call(engine_bridge.run_first_window, prefs(context), pos, fps, followed)
-    record.update(first_window_record(held))
+    record.update(first_window_record(held, back))
     if followed is not None:
         record.update(following_record(model_call(engine_bridge.run_following, prefs(context), followed, fps, count)))
-    record.update(pace_record(context, clip, end))
-    # the written bones' keys after the end go: the old tail (from a frame), or keys past a manual frame range's end
-    replace = (end + 0.5, float("inf"))
+    record.update(pace_record(context, clip, edge if not back else None))
+    # the written bones' keys beyond the edge go: the old tail or head (from a frame), or keys past a manual range
+    replace = (-float("inf"), edge - 0.5) if back else (edge + 0.5, float("inf"))
     return write_new(context, clip, "extended", new_frames, loc, rot, previous, replace, record,
                      scene_range=scene_range)

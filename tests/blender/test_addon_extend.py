@@ -574,3 +574,85 @@ def test_an_action_stepped_by_a_modifier_is_continued_on_its_steps(real_model, a
     assert held.max() < 1e-6 * keyed.max()
     print(f"per step: clip {keyed[:20].mean():.4f}, new {keyed[20:].mean():.4f}")
     assert 0.6 < keyed[20:].mean() / keyed[:20].mean() < 1.5 and keyed[20:].min() > 0.3 * keyed[:20].mean()
+
+
+def test_frames_before_the_start_read_the_clip_backwards_in_time(fake_model, addon, tmp_path):
+    """Before the Start: the new frames come before the action's first, as the model continues the clip read
+    backwards in time (the stand-in glides the first pose back at the hips' velocity, exactly); the original frames
+    stay, the original action is kept, and the scene's start moves back to the new first frame."""
+    obj = import_bvh(walk_bvh(tmp_path, frames=90))
+    for fc in fcurves_of(obj):  # the take from frame 201, so that the frames before it are in the scene
+        for p in fc.keyframe_points:
+            p.co[0] += 200
+            p.handle_left[0] += 200
+            p.handle_right[0] += 200
+    scene = bpy.context.scene
+    scene.frame_start, scene.frame_end = 201, 290
+    frames = np.arange(201, 291)
+    before = evaluated_joints(addon, obj, frames)
+    old, snapshot = action_of(obj), key_snapshot(obj)
+    assert bpy.ops.strnn.extend_clip(frames=40, before_start=True) == {"FINISHED"}
+    new = action_of(obj)
+    assert new is not old and old.use_fake_user and same_keys(snapshot, key_snapshot(obj, old))
+    assert tuple(new.frame_range) == (161.0, 290.0) and scene.frame_start == 161 and scene.frame_end == 290
+    assert new["strnn"]["settings"]["before_start"]
+    assert np.abs(evaluated_joints(addon, obj, frames) - before).max() < 1e-5
+    got = evaluated_joints(addon, obj, np.arange(161, 201))[::-1]  # frame 200 back to 161
+    err = np.linalg.norm(got - expected_constant_velocity(before[1::-1], 40), axis=-1)
+    assert err.max() < 1e-3, err.max()
+
+
+def test_frames_before_the_current_frame_replace_the_keys_before_it(fake_model, addon):
+    """Before the Start with From Current Frame: the frames from the playhead on stay, the mapped bones' keys before
+    it are replaced by the model's (the clip from the playhead read backwards), as many frames as asked: the old
+    head (1-30) goes, as From Current Frame's old tail does going forward."""
+    obj = mixamo_walk(90)
+    frames = np.arange(1, 91)
+    before = evaluated_joints(addon, obj, frames)
+    bpy.context.scene.frame_set(31)
+    assert bpy.ops.strnn.extend_clip(frames=20, before_start=True, from_current=True) == {"FINISHED"}
+    new = action_of(obj)
+    assert tuple(new.frame_range) == (11.0, 90.0) and new["strnn"]["settings"]["from_frame"] == 31
+    after = evaluated_joints(addon, obj, frames)
+    assert np.abs(after[30:] - before[30:]).max() < 1e-5  # frames 31 on
+    err = np.linalg.norm(after[10:30][::-1] - expected_constant_velocity(before[31:29:-1], 20), axis=-1)
+    assert err.max() < 1e-3, err.max()  # frames 30 back to 11: the model's
+    hips = obj.strnn_map.hips
+    fc = next(fc for fc in fcurves_of(obj) if fc.data_path.startswith(f'pose.bones["{hips}"]'))
+    assert [p.co[0] for p in fc.keyframe_points if p.co[0] < 30.5] == [float(f) for f in range(11, 31)]
+
+
+def test_a_real_walk_gets_a_lead_in_before_its_start(real_model, addon, tmp_path, capfd):
+    """A real walk (the unseen subject's where the data is unpacked) given 2 s before its first frame: no jump into
+    the take, the lead-in walks at the take's pace, bones keep their lengths; the report says where the frames went."""
+    mocap = find_mocap()
+    take = mocap / "cmu/iclone/006_01.bvh" if mocap is not None else None
+    obj = import_bvh(take if take is not None and take.exists() else walk_bvh(tmp_path, frames=120),
+                     update_scene_fps=True, update_scene_duration=True)
+    fps = bpy.context.scene.render.fps
+    first = int(action_of(obj).frame_range[0])
+    capfd.readouterr()
+    assert bpy.ops.strnn.extend_clip(frames=2 * fps, before_start=True) == {"FINISHED"}
+    assert f"Added {2 * fps} frames before its first frame" in capfd.readouterr().out
+    span = np.arange(first - 2 * fps, first + 30)
+    pos = evaluated_joints(addon, obj, span)
+    steps = np.linalg.norm(np.diff(pos, axis=0), axis=-1).mean(-1)
+    new, seam, take_steps = steps[:2 * fps - 1], steps[2 * fps - 1], steps[2 * fps:]
+    lengths = bone_length_change(addon, obj, span)
+    print(f"lead-in: seam {seam / take_steps.max():.2f}, pace {new.mean() / take_steps.mean():.2f} x, "
+          f"bones {lengths:.5f}")
+    assert seam < 2.0 * take_steps.max() and 0.6 < new.mean() / take_steps.mean() < 1.5 and lengths < 1e-3
+
+
+def test_frames_before_the_start_of_an_action_on_twos_are_on_twos(real_model, addon, tmp_path):
+    """Before the Start on an action keyed on twos: the lead-in is keyed on twos too, Constant, ending a step before
+    the first key."""
+    obj = stepped_take(tmp_path)
+    first = int(action_of(obj).frame_range[0])
+    assert bpy.ops.strnn.extend_clip(frames=20, before_start=True) == {"FINISHED"}
+    assert action_of(obj)["strnn"]["key_step"] == 2
+    hips = obj.strnn_map.hips
+    fc = next(fc for fc in fcurves_of(obj) if fc.data_path.startswith(f'pose.bones["{hips}"]'))
+    lead = [p for p in fc.keyframe_points if p.co[0] < first - 0.5]
+    assert [p.co[0] for p in lead] == [first - 2.0 * k for k in range(10, 0, -1)]
+    assert {p.interpolation for p in lead} == {"CONSTANT"}

@@ -376,3 +376,16 @@ def test_unwritable_outputs_are_found_before_any_work(tmp_path, capsys):
     with pytest.raises(SystemExit):
         strnn_batch.main(["extend", str(take), "--out", str(tmp_path / "o"), "--report", str(blocked / "r.json")])
     assert "--report" in capsys.readouterr().err
+
+
+def test_extend_before_the_start_writes_the_lead_in_first(tmp_path, extension, capsys):
+    """``--before-start``: the new frames come first in the file, then the take's own, unchanged."""
+    walk = walking_skeleton(40)
+    clip = write_bvh(tmp_path / "walk.bvh", walk)
+    out = tmp_path / "out"
+    assert strnn_batch.main(["extend", "--frames", "10", "--before-start", str(clip), "--out", str(out),
+                             "--extension", str(extension)]) == 0
+    got = canonical_positions(read_bvh(out / "walk.extend.bvh"))
+    assert len(got) == 50
+    take = canonical_positions(read_bvh(clip))
+    assert np.abs(got[10:] - take).max() < 1e-3 * np.ptp(take[..., 1])  # the take's frames, after the lead-in
