@@ -328,9 +328,8 @@ def key_grid(clip: Clip, first: float, last: float) -> tuple[int, np.ndarray]:
             continue
         if len(fc.modifiers):
             mod = fc.modifiers[0]
-            if (len(fc.modifiers) > 1 or mod.type != "STEPPED" or mod.mute or not getattr(mod, "active", True)
-                    or mod.use_frame_start or mod.use_frame_end or mod.use_restricted_range
-                    or (mod.use_influence and mod.influence < 1.0)):
+            if (len(fc.modifiers) > 1 or mod.type != "STEPPED" or mod.mute or mod.use_frame_start
+                    or mod.use_frame_end or mod.use_restricted_range or (mod.use_influence and mod.influence < 1.0)):
                 return 1, np.empty(0)
             stepped.add((float(mod.frame_step), float(mod.frame_offset)))
             continue
@@ -415,21 +414,22 @@ def leg_bones(clip: Clip) -> list[int]:
 
 
 def write_pose(context, clip: Clip, action, frames: np.ndarray, loc: np.ndarray, rot: np.ndarray,
-               previous: dict, replace: tuple[float, float] | None, bones: list[int] | None = None) -> float:
+               previous: dict, replace: tuple[float, float] | None, bones: list[int] | None = None,
+               follows: bool = False) -> float:
     """Key the solved rotations of mapped bones (and the hips bone's location) at ``frames``; on a
     control rig, key its controls by a visual bake instead (:func:`write_controls`). Returns how far
     (armature units) a written bone ends up from the solve at worst (0 when keyed directly).
 
     ``loc`` ``[F, B, 3]``, ``rot`` ``[F, B, 3, 3]``; ``previous`` {bone: raw channel values} keeps
-    Euler angles and quaternion signs continuous with the keys before; ``bones``: only these
-    (default: all :func:`written_bones`)."""
+    Euler angles and quaternion signs continuous with the keys before (``follows``: after, frames added before
+    them); ``bones``: only these (default: all :func:`written_bones`)."""
     channels = anim.Channels(action, clip.obj.animation_data, ensure=True)
     if clip.controls is not None:
-        return write_controls(context, clip, channels, frames, loc, rot, previous, replace, bones)
+        return write_controls(context, clip, channels, frames, loc, rot, previous, replace, bones, follows)
     hips = int(clip.anchors.bone[JOINT_INDEX["hips"]])
     for b in written_bones(clip) if bones is None else bones:
         pb = clip.obj.pose.bones[clip.rig.names[b]]
-        prop, values = encode_rotation(pb.rotation_mode, rot[:, b], previous.get(pb.name))
+        prop, values = encode_rotation(pb.rotation_mode, rot[:, b], previous.get(pb.name), follows)
         _key_property(clip, channels, pb, prop, frames, values, replace)
         if b == hips:
             _key_property(clip, channels, pb, "location", frames, loc[:, b], replace)
@@ -438,7 +438,7 @@ def write_pose(context, clip: Clip, action, frames: np.ndarray, loc: np.ndarray,
 
 def write_controls(context, clip: Clip, channels: anim.Channels, frames: np.ndarray, loc: np.ndarray,
                    rot: np.ndarray, previous: dict, replace: tuple[float, float] | None,
-                   bones: list[int] | None) -> float:
+                   bones: list[int] | None, follows: bool = False) -> float:
     """Key a control rig's controls (and switches) so that its joint skeleton takes the solved pose."""
     pose = fk(clip.rig, loc, rot)
     chosen = keyed_controls(clip, bones)
@@ -454,7 +454,7 @@ def write_controls(context, clip: Clip, channels: anim.Channels, frames: np.ndar
     baked = controls.bake(context, clip.obj, clip.controls, frames, targets)
     for k, c in enumerate(chosen):
         pb = clip.obj.pose.bones[c.bone]
-        prop, values = encode_rotation(pb.rotation_mode, baked.rot[:, k], previous.get(pb.name))
+        prop, values = encode_rotation(pb.rotation_mode, baked.rot[:, k], previous.get(pb.name), follows)
         fill = None
         if played is not None and channels.find(_bone_path(c.bone, prop), 0) is None:
             at, full, loc_p, rot_p = played
@@ -507,8 +507,13 @@ def _key_property(clip: Clip, channels: anim.Channels, pb, prop: str, frames: np
         anim.write_keys(fc, frames, values[:, i], replace)
 
 
-def encode_rotation(mode: str, m: np.ndarray, previous: np.ndarray | None) -> tuple[str, np.ndarray]:
-    """(property, values ``[F, 3 or 4]``) of rotations ``m`` ``[F, 3, 3]`` in a bone's rotation mode."""
+def encode_rotation(mode: str, m: np.ndarray, previous: np.ndarray | None,
+                    follows: bool = False) -> tuple[str, np.ndarray]:
+    """(property, values ``[F, 3 or 4]``) of rotations ``m`` ``[F, 3, 3]`` in a bone's rotation mode, continuous with
+    the raw values ``previous`` of the key before them (``follows``: of the key after them, frames added before it)."""
+    if follows:
+        prop, values = encode_rotation(mode, np.asarray(m)[::-1], previous)
+        return prop, values[::-1]
     m = np.asarray(m, dtype=np.float64)
     if mode in ("QUATERNION", "AXIS_ANGLE"):
         prev_q = previous

@@ -231,12 +231,13 @@ def with_bake(record: dict, clip, error: float, frames) -> dict:
 
 
 def write_new(context, clip, suffix, frames, loc, rot, previous, replace, record: dict, bones=None,
-              scene_range: bool = True):
-    """Create the new action, key it (``bones``: only these), label it with ``record`` and assign
-    it (widening the scene's range to it with ``scene_range``); on failure remove it again."""
+              scene_range: bool = True, follows: bool = False):
+    """Create the new action, key it (``bones``: only these; ``follows``: ``previous`` is the key after the frames,
+    which come before it), label it with ``record`` and assign it (widening the scene's range to it with
+    ``scene_range``); on failure remove it again."""
     action = pipeline.new_action_from(clip, suffix)
     try:
-        error = pipeline.write_pose(context, clip, action, frames, loc, rot, previous, replace, bones)
+        error = pipeline.write_pose(context, clip, action, frames, loc, rot, previous, replace, bones, follows)
         action[RECORD] = with_bake(record, clip, error, frames)
         if action.use_frame_range:  # a manual frame range the animator set: widened to hold the written frames
             action.frame_start = min(action.frame_start, float(frames[0]))

@@ -122,4 +122,4 @@ def extend_steps(context, obj, *, frames: int = 120, context_frames: int = 0, fo
     # the written bones' keys beyond the edge go: the old tail or head (from a frame), or keys past a manual range
     replace = (-float("inf"), edge - 0.5) if back else (edge + 0.5, float("inf"))
     return write_new(context, clip, "extended", new_frames, loc, rot, previous, replace, record,
-                     scene_range=scene_range)
+                     scene_range=scene_range, follows=back)

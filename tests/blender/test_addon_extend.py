@@ -656,3 +656,20 @@ def test_frames_before_the_start_of_an_action_on_twos_are_on_twos(real_model, ad
     lead = [p for p in fc.keyframe_points if p.co[0] < first - 0.5]
     assert [p.co[0] for p in lead] == [first - 2.0 * k for k in range(10, 0, -1)]
     assert {p.interpolation for p in lead} == {"CONSTANT"}
+
+
+def test_frames_added_before_a_key_are_continuous_with_it(addon):
+    """Keys written before the action's start meet its first key without a jump in the channels: Euler angles
+    unwrapped towards the key after them (a turn of 4 rad ends at 4.0 beside a key at 4.05; unwrapped from its
+    first frame, it ended a full turn away), quaternion signs matched to it."""
+    pipeline = addon_module(addon, "strnn_addon.scene.pipeline")
+    rotations = addon_module(addon, "model_core.motion.rotations")
+    yaw = np.linspace(0.0, 4.0, 17)  # turning 230 degrees about Z, up to the key after them
+    m = rotations.euler_to_matrix(np.stack([0 * yaw, 0 * yaw, yaw], -1), "XYZ")
+    _, angles = pipeline.encode_rotation("XYZ", m, np.array([0.0, 0.0, 4.05]), follows=True)
+    assert abs(angles[-1, 2] - 4.0) < 1e-6 and np.abs(np.diff(angles[:, 2])).max() < 0.3
+    _, ahead = pipeline.encode_rotation("XYZ", m, np.array([0.0, 0.0, 4.05]))
+    assert abs(ahead[-1, 2] - 4.0) > 6.0  # anchored on the first frame: a full turn from the key
+    key = -rotations.matrix_to_quat(m[-1:])[0]  # the key after them, stored with the other sign
+    _, quats = pipeline.encode_rotation("QUATERNION", m, key, follows=True)
+    assert np.dot(quats[-1], key) > 0.99 and (np.sum(quats[1:] * quats[:-1], -1) > 0).all()
