@@ -298,7 +298,7 @@ class STRNN_OT_transfer_motion(_Staged, bpy.types.Operator):
     def done(self, action) -> str:
         record = action.get(RECORD, {}).get("settings", {})
         return (f"Moved the motion of {record.get('source')!r} onto {record.get('target')!r} in new action "
-                f"{action.name!r}{range_note(action)}")
+                f"{action.name!r}{stepped_note(action)}{range_note(action)}")
 
 
 class STRNN_OT_auto_map(bpy.types.Operator):

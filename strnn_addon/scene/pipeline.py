@@ -415,30 +415,32 @@ def leg_bones(clip: Clip) -> list[int]:
 
 def write_pose(context, clip: Clip, action, frames: np.ndarray, loc: np.ndarray, rot: np.ndarray,
                previous: dict, replace: tuple[float, float] | None, bones: list[int] | None = None,
-               follows: bool = False) -> float:
+               follows: bool = False, interpolation: str = "") -> float:
     """Key the solved rotations of mapped bones (and the hips bone's location) at ``frames``; on a
     control rig, key its controls by a visual bake instead (:func:`write_controls`). Returns how far
     (armature units) a written bone ends up from the solve at worst (0 when keyed directly).
 
     ``loc`` ``[F, B, 3]``, ``rot`` ``[F, B, 3, 3]``; ``previous`` {bone: raw channel values} keeps
     Euler angles and quaternion signs continuous with the keys before (``follows``: after, frames added before
-    them); ``bones``: only these (default: all :func:`written_bones`)."""
+    them); ``bones``: only these (default: all :func:`written_bones`); ``interpolation``: the new keys' (default: as
+    the curve's last key)."""
     channels = anim.Channels(action, clip.obj.animation_data, ensure=True)
     if clip.controls is not None:
-        return write_controls(context, clip, channels, frames, loc, rot, previous, replace, bones, follows)
+        return write_controls(context, clip, channels, frames, loc, rot, previous, replace, bones, follows,
+                              interpolation)
     hips = int(clip.anchors.bone[JOINT_INDEX["hips"]])
     for b in written_bones(clip) if bones is None else bones:
         pb = clip.obj.pose.bones[clip.rig.names[b]]
         prop, values = encode_rotation(pb.rotation_mode, rot[:, b], previous.get(pb.name), follows)
-        _key_property(clip, channels, pb, prop, frames, values, replace)
+        _key_property(clip, channels, pb, prop, frames, values, replace, interpolation=interpolation)
         if b == hips:
-            _key_property(clip, channels, pb, "location", frames, loc[:, b], replace)
+            _key_property(clip, channels, pb, "location", frames, loc[:, b], replace, interpolation=interpolation)
     return 0.0
 
 
 def write_controls(context, clip: Clip, channels: anim.Channels, frames: np.ndarray, loc: np.ndarray,
                    rot: np.ndarray, previous: dict, replace: tuple[float, float] | None,
-                   bones: list[int] | None, follows: bool = False) -> float:
+                   bones: list[int] | None, follows: bool = False, interpolation: str = "") -> float:
     """Key a control rig's controls (and switches) so that its joint skeleton takes the solved pose."""
     pose = fk(clip.rig, loc, rot)
     chosen = keyed_controls(clip, bones)
@@ -459,10 +461,10 @@ def write_controls(context, clip: Clip, channels: anim.Channels, frames: np.ndar
         if played is not None and channels.find(_bone_path(c.bone, prop), 0) is None:
             at, full, loc_p, rot_p = played
             fill = (at, encode_rotation(pb.rotation_mode, rot_p[:, full.index(c.bone)], None)[1])
-        _key_property(clip, channels, pb, prop, frames, values, replace, fill)
+        _key_property(clip, channels, pb, prop, frames, values, replace, fill, interpolation)
         if c.location:
             fill = None if played is None else (played[0], played[2][:, played[1].index(c.bone)])
-            _key_property(clip, channels, pb, "location", frames, baked.loc[:, k], replace, fill)
+            _key_property(clip, channels, pb, "location", frames, baked.loc[:, k], replace, fill, interpolation)
     edges = np.array([f for f in (frames[0] - 1, frames[-1] + 1) if clip.first <= f <= clip.last])
     controls.key_switches(channels, clip.obj, clip.controls, frames, edges)
     return baked.error
@@ -488,7 +490,8 @@ def _bone_path(bone: str, prop: str) -> str:
 
 
 def _key_property(clip: Clip, channels: anim.Channels, pb, prop: str, frames: np.ndarray, values: np.ndarray,
-                  replace: tuple[float, float] | None, fill: tuple[np.ndarray, np.ndarray] | None = None) -> None:
+                  replace: tuple[float, float] | None, fill: tuple[np.ndarray, np.ndarray] | None = None,
+                  interpolation: str = "") -> None:
     """Key ``values`` ``[F, n]`` on each array index of a pose bone property. A channel the action did
     not animate gets its static value keyed just outside ``frames`` first, so other frames keep it; or, with
     ``fill`` (frames, values ``[G, n]``: where NLA strips show through the action), those values on those frames,
@@ -504,7 +507,7 @@ def _key_property(clip: Clip, channels: anim.Channels, pb, prop: str, frames: np
                 anim.write_keys(fc, fill[0], fill[1][:, i])
             elif len(edges):
                 anim.write_keys(fc, edges, np.full(len(edges), static[i]))
-        anim.write_keys(fc, frames, values[:, i], replace)
+        anim.write_keys(fc, frames, values[:, i], replace, interpolation)
 
 
 def encode_rotation(mode: str, m: np.ndarray, previous: np.ndarray | None,

@@ -48,6 +48,9 @@ def transfer_steps(context, obj, *, source: str = "", foot_lock: bool = True, sc
     frames = np.arange(src.first, src.last + 1, dtype=np.float64)
     if len(frames) < 2:
         raise UserError(f"The action {src.action.name!r} has {len(frames)} frame: transfer needs at least 2")
+    step, keys = pipeline.key_grid(src, src.first, src.last)  # a source on twos: moved on twos, held by Constant keys
+    if step > 1:
+        frames = keys.astype(np.float64)
     yield "read"
     pos = pipeline.joint_positions(context, src, frames)
     ref_loc, ref_rot = pipeline.reference_pose(context, target, np.array([float(context.scene.frame_current)]))
@@ -55,7 +58,7 @@ def transfer_steps(context, obj, *, source: str = "", foot_lock: bool = True, sc
     yield "model"
     new_pos = retarget(pos, rest)
     if foot_lock:
-        new_pos = lock(new_pos, src.fps)
+        new_pos = lock(new_pos, src.fps / step)
     yield "solve"
     n = len(frames)
     loc, rot = solve(target.rig, target.anchors, pipeline.to_armature(target, new_pos,
@@ -63,4 +66,7 @@ def transfer_steps(context, obj, *, source: str = "", foot_lock: bool = True, sc
                      np.repeat(ref_loc, n, 0), np.repeat(ref_rot, n, 0))
     yield "write"
     record = made_by("Transfer Motion", src, source=src.obj.name, target=obj.name, foot_lock=foot_lock)
-    return write_fresh(context, target, f"{src.action.name}.transfer", frames, loc, rot, record, scene_range)
+    if step > 1:
+        record["key_step"] = step
+    return write_fresh(context, target, f"{src.action.name}.transfer", frames, loc, rot, record, scene_range,
+                       "CONSTANT" if step > 1 else "")

@@ -201,3 +201,26 @@ def test_motion_moved_onto_a_rig_with_fewer_torso_bones_follows_and_extends(addo
     seam, speed = step[29] / step[:29].max(), step[30:].mean() / step[:29].mean()
     print(kind, f"extend: seam {seam:.2f}, speed {speed:.2f}")
     assert seam < 1.5 and 0.6 < speed < 1.6
+
+
+def test_motion_on_twos_moves_onto_another_rig_on_twos(addon, tmp_path):
+    """A source keyed on twos with Constant interpolation: the target is keyed on the same frames, Constant, so it
+    holds each pose two frames as the source does (the feet locked on the keys, at their rate)."""
+    from scenes import fcurves_of, on_steps
+
+    source = import_bvh(walk_bvh(tmp_path, frames=91))
+    on_steps(source, 2)  # keys on 1, 3, ..., 91
+    source.location.x = -2.0
+    target = build_armature("Mixamo", mixamo_bones())
+    for other in bpy.context.view_layer.objects:
+        other.select_set(other in (source, target))
+    bpy.context.view_layer.objects.active = target
+    assert bpy.ops.strnn.transfer_motion() == {"FINISHED"}
+    new = action_of(target)
+    assert new["strnn"]["key_step"] == 2
+    for fc in fcurves_of(target, new):
+        assert {int(p.co[0]) % 2 for p in fc.keyframe_points} == {1}, fc.data_path
+        assert {p.interpolation for p in fc.keyframe_points} == {"CONSTANT"}, fc.data_path
+    pos = evaluated_joints(addon, target, np.arange(1, 92))
+    moved = np.linalg.norm(np.diff(pos, axis=0), axis=-1).mean(-1)
+    assert moved[0::2].max() < 1e-6 and moved[1::2].min() > 1e-3  # held onto each even frame, moving onto each key
