@@ -165,6 +165,8 @@ class STRNN_OT_extend_clip(_Staged, bpy.types.Operator):
 
     def done(self, action) -> str:
         stepped = stepped_note(action)
+        if action[RECORD].get("in_place"):
+            stepped += " (in place: the clip steps on the spot, so the new frames stay where it is)"
         where = "before" if self.before_start else "after"
         if self.from_current:
             return (f"Continued {where} frame {bpy.context.scene.frame_current} with {self.frames} new frames in new "

@@ -9,7 +9,7 @@ import numpy as np
 
 from ..inference import memory as clip_memory
 from ..inference.memory import first_scale
-from ..motion.conventions import GROUND_AXES, JOINT_INDEX, MODEL_FPS, ROOT
+from ..motion.conventions import GROUND_AXES, JOINT_INDEX, MIN_MODEL_FRAMES, MODEL_FPS, ROOT
 from ..motion.features import floor_height, gaussian_smooth, positions_to_features
 from .familiarity import momentum_shares
 from .normalise import fit_normalisation, model_frames_available, sample_at
@@ -65,6 +65,12 @@ def in_place(clip: np.ndarray) -> bool:
     feet = p[:, _FEET][:, :, _GROUND] - hips[:, None]
     stepping = np.linalg.norm(np.diff(feet, axis=0), axis=-1).mean() * MODEL_FPS
     return bool(travel < IN_PLACE_SPEED and stepping > STEPPING_SPEED)
+
+
+def clip_in_place(clip: np.ndarray, fps: float) -> bool:
+    """Whether a clip ``[F, 21, 3]`` (any units, ``fps``) steps in place (:func:`in_place`), as Extend reads it."""
+    ctx = _at_model_rate(clip, fps)
+    return in_place(fit_normalisation(ctx[-MIN_MODEL_FRAMES:]).to_model(ctx))
 
 
 def kept_in_place(before: np.ndarray, new: np.ndarray) -> np.ndarray:
@@ -176,8 +182,8 @@ def extend_positions(engine, pos: np.ndarray, fps: float, frames: int, memory: n
     kw["floor"] = (floor - norm.ground) * norm.scale  # in the model's units, as Normalisation.to_model puts it
     new = np.asarray(engine.extend(model_ctx, n_model, settle=True, **kw), dtype=np.float64)
     joined = join_clip(ctx, norm.to_user(new), momentum)  # model frame 0 is the last context frame
-    looked = ctx if memory is None else _at_model_rate(memory, fps)
-    if in_place(norm.to_model(looked)):  # a walk in place goes on in place
+    if clip_in_place(pos if memory is None else memory, fps):  # a walk in place goes on in place
+        looked = ctx if memory is None else _at_model_rate(memory, fps)
         joined = np.concatenate([joined[:1], kept_in_place(looked, joined[1:])])
     return sample_at(joined, MODEL_FPS, np.arange(1, frames + 1) / fps)
 

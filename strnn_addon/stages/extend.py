@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ...model_core.ops.extend import FLOOR_S, MEMORY_S, clip_floor
+from ...model_core.ops.extend import FLOOR_S, MEMORY_S, clip_floor, clip_in_place
 from ...model_core.ops.footlock import SETTLE_PASSES
 from ...model_core.rig.solve import solve
 from .. import engine_bridge
@@ -113,6 +113,8 @@ def extend_steps(context, obj, *, frames: int = 120, context_frames: int = 0, fo
                      foot_lock=foot_lock, from_frame=from_frame, before_start=before_start or None)
     if step > 1:
         record["key_step"] = step
+    if followed is not None and clip_in_place(followed, fps):  # the new frames kept where the clip walks in place
+        record["in_place"] = True
     record.update(familiarity_record(model_call(engine_bridge.run_familiarity, prefs(context), pos, fps)))
     held = model_call(engine_bridge.run_first_window, prefs(context), pos, fps, followed)
     record.update(first_window_record(held, back))

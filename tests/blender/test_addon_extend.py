@@ -529,7 +529,7 @@ def test_continuing_from_a_held_frame_of_an_action_on_twos_stays_on_twos(fake_mo
             assert {p.interpolation for p in later} == {"CONSTANT"}
 
 
-def test_a_walk_in_place_is_extended_in_place(real_model, addon, tmp_path):
+def test_a_walk_in_place_is_extended_in_place(real_model, addon, tmp_path, capfd):
     """A walk in place (the hips held over one spot while the feet step, as game cycles and Mixamo's In Place
     make them) extended by 300 frames: the hips stay within 10 cm of where it leaves them, the legs stepping on."""
     from model_core.io.bvh_export import write_bvh
@@ -544,7 +544,9 @@ def test_a_walk_in_place_is_extended_in_place(real_model, addon, tmp_path):
     obj = import_bvh(write_bvh(tmp_path / "in_place.bvh", walk.astype(np.float32)), update_scene_fps=True,
                      update_scene_duration=True)
     end = int(action_of(obj).frame_range[1])
+    capfd.readouterr()
     assert bpy.ops.strnn.extend_clip(frames=300) == {"FINISHED"}
+    assert "in place: the clip steps on the spot" in capfd.readouterr().out and action_of(obj)["strnn"]["in_place"]
     pos = evaluated_joints(addon, obj, np.arange(end - 59, end + 301))  # Blender axes: Z up
     hips = pos[:, 0, :2]
     drift = np.linalg.norm(hips[60:] - hips[59], axis=-1).max()
