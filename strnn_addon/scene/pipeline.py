@@ -422,8 +422,8 @@ def write_pose(context, clip: Clip, action, frames: np.ndarray, loc: np.ndarray,
 
     ``loc`` ``[F, B, 3]``, ``rot`` ``[F, B, 3, 3]``; ``previous`` {bone: raw channel values} keeps
     Euler angles and quaternion signs continuous with the keys before (``follows``: after, frames added before
-    them); ``bones``: only these (default: all :func:`written_bones`); ``interpolation``: the new keys' (default: as
-    the curve's last key)."""
+    them); ``bones``: only these (default: all :func:`written_bones`); ``interpolation``: that of the keys of the
+    channels this makes (default: Linear; a channel the action has keeps that of its last key)."""
     channels = anim.Channels(action, clip.obj.animation_data, ensure=True)
     if clip.controls is not None:
         return write_controls(context, clip, channels, frames, loc, rot, previous, replace, bones, follows,
@@ -495,19 +495,20 @@ def _key_property(clip: Clip, channels: anim.Channels, pb, prop: str, frames: np
     """Key ``values`` ``[F, n]`` on each array index of a pose bone property. A channel the action did
     not animate gets its static value keyed just outside ``frames`` first, so other frames keep it; or, with
     ``fill`` (frames, values ``[G, n]``: where NLA strips show through the action), those values on those frames,
-    so that the new channel keeps the pose the strips play there instead of hiding them."""
+    so that the new channel keeps the pose the strips play there instead of hiding them. ``interpolation``: that of
+    the keys of a channel made here (a channel the action has keeps that of its last key)."""
     path = _bone_path(pb.name, prop)
     static = np.asarray(getattr(pb, prop), dtype=np.float64)
     edges = np.array([f for f in (frames[0] - 1, frames[-1] + 1) if clip.first <= f <= clip.last])
     for i in range(values.shape[1]):
-        fc = channels.find(path, i)
+        fc, made = channels.find(path, i), ""
         if fc is None:
-            fc = channels.ensure(path, i, pb.name)
+            fc, made = channels.ensure(path, i, pb.name), interpolation
             if fill is not None and len(fill[0]):
-                anim.write_keys(fc, fill[0], fill[1][:, i])
+                anim.write_keys(fc, fill[0], fill[1][:, i], interpolation=made)
             elif len(edges):
-                anim.write_keys(fc, edges, np.full(len(edges), static[i]))
-        anim.write_keys(fc, frames, values[:, i], replace, interpolation)
+                anim.write_keys(fc, edges, np.full(len(edges), static[i]), interpolation=made)
+        anim.write_keys(fc, frames, values[:, i], replace, made)
 
 
 def encode_rotation(mode: str, m: np.ndarray, previous: np.ndarray | None,

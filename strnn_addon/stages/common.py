@@ -234,10 +234,12 @@ def write_new(context, clip, suffix, frames, loc, rot, previous, replace, record
               scene_range: bool = True, follows: bool = False):
     """Create the new action, key it (``bones``: only these; ``follows``: ``previous`` is the key after the frames,
     which come before it), label it with ``record`` and assign it (widening the scene's range to it with
-    ``scene_range``); on failure remove it again."""
+    ``scene_range``); on failure remove it again. An action on twos (``record``'s ``key_step``) gets Constant keys
+    in the channels this makes, as its own hold theirs."""
     action = pipeline.new_action_from(clip, suffix)
+    made = "CONSTANT" if record.get("key_step", 1) > 1 else ""
     try:
-        error = pipeline.write_pose(context, clip, action, frames, loc, rot, previous, replace, bones, follows)
+        error = pipeline.write_pose(context, clip, action, frames, loc, rot, previous, replace, bones, follows, made)
         action[RECORD] = with_bake(record, clip, error, frames)
         if action.use_frame_range:  # a manual frame range the animator set: widened to hold the written frames
             action.frame_start = min(action.frame_start, float(frames[0]))
@@ -251,7 +253,8 @@ def write_new(context, clip, suffix, frames, loc, rot, previous, replace, record
 
 def write_fresh(context, clip, name: str, frames, loc, rot, record: dict, scene_range: bool = True,
                 interpolation: str = ""):
-    """A new action ``name`` holding only the new frames (keys of ``interpolation``, default Linear): keyed,
+    """A new action ``name`` holding only the new frames (keys of ``interpolation``, default Linear: Constant for a
+    source on twos): keyed,
     labelled, assigned, the scene's range widened (with ``scene_range``); an action the armature had is kept (fake
     user)."""
     action = bpy.data.actions.new(name)

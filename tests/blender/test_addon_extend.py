@@ -675,3 +675,15 @@ def test_frames_added_before_a_key_are_continuous_with_it(addon):
     key = -rotations.matrix_to_quat(m[-1:])[0]  # the key after them, stored with the other sign
     _, quats = pipeline.encode_rotation("QUATERNION", m, key, follows=True)
     assert np.dot(quats[-1], key) > 0.99 and (np.sum(quats[1:] * quats[:-1], -1) > 0).all()
+
+
+def test_bones_an_action_on_twos_never_keyed_get_held_keys_too(fake_model, addon):
+    """Extend keys every mapped bone; on an action on twos the channels it has to make (bones the animator never
+    keyed: here the spine and the head) hold their poses as the others do, with Constant keys."""
+    obj = mixamo_walk(61)  # keys on the hips, legs, knees and arms only
+    on_steps(obj, 2)
+    before = {fc.data_path for fc in fcurves_of(obj)}
+    assert bpy.ops.strnn.extend_clip(frames=10) == {"FINISHED"}
+    made = [fc for fc in fcurves_of(obj) if fc.data_path not in before and fc.data_path.startswith("pose.bones")]
+    assert any("Spine" in fc.data_path for fc in made) and any("Head" in fc.data_path for fc in made)
+    assert all({p.interpolation for p in fc.keyframe_points} == {"CONSTANT"} for fc in made)
