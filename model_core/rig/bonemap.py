@@ -117,6 +117,25 @@ def _by_words(names: list[str], mapping: Mapping) -> None:
             used.add(hit)
 
 
+def _shoulder_segments(names: list[str], parents: list[int], mapping: Mapping) -> None:
+    """An arm read at the first of numbered ``shoulder`` segments whose last holds the elbow (XPS / XNALara's
+    ``arm left shoulder 1``, the clavicle, and ``arm left shoulder 2``, the upper arm) moves to that last segment:
+    the word names a clavicle as often as an upper arm, and the upper arm is what the elbow hangs from. In place."""
+    index = {n: i for i, n in enumerate(names)}
+    for side in "lr":
+        arm, elbow = mapping.get(f"{side}_arm"), mapping.get(f"{side}_elbow")
+        if arm is None or elbow is None or arm[1] or elbow[1]:
+            continue
+        above = parents[index[elbow[0]]]
+        if above < 0 or names[above] == arm[0]:
+            continue
+        (s1, b1), (s2, b2) = split_side(arm[0]), split_side(names[above])
+        w1, w2 = _numbering(re.sub(r"[^a-z0-9]", "", b1)), _numbering(re.sub(r"[^a-z0-9]", "", b2))
+        if s1 == s2 and w1[0] == w2[0] == "shoulder" and None not in (w1[1], w2[1]) and is_below(
+                parents, above, index[arm[0]]):
+            mapping[f"{side}_arm"] = (names[above], False)
+
+
 def _numbering(base: str) -> tuple[str, int | None]:
     """(base without its trailing number, the number or None): ``"upperleg02"`` -> (``"upperleg"``, 2)."""
     m = re.match(r"^(?P<word>.*?[a-z])(?P<number>\d+)$", base)
@@ -227,6 +246,7 @@ def auto_map(names: list[str], parents: list[int]) -> tuple[str, Mapping]:
         family = "generic"  # the family's names left body joints open
     if len(mapping) < len(JOINTS):
         _by_words(names, mapping)
+        _shoulder_segments(names, parents, mapping)
         _proximal_first(names, parents, mapping)
         chest_where_the_arms_meet(names, parents, mapping)  # before the spine is read off the path below it
         _by_hierarchy(names, parents, mapping)

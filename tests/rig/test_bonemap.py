@@ -172,3 +172,22 @@ def test_a_middle_marked_with_m_maps_its_neck_and_head():
     assert {j: mapping[j][0] for j in ("hips", "spine", "spine1", "neck", "head", "l_upleg", "r_arm")} == {
         "hips": "Root_M", "spine": "Spine1_M", "spine1": "Chest_M", "neck": "Neck_M", "head": "Head_M",
         "l_upleg": "Hip_L", "r_arm": "Shoulder_R"}
+
+
+XPS = [("root hips", None), ("spine lower", "root hips"), ("spine middle", "spine lower"),
+       ("spine upper", "spine middle"), ("head neck lower", "spine upper"), ("head neck upper", "head neck lower"),
+       ("head", "head neck upper")] + _sided(
+    [("arm {S} shoulder 1", "spine upper"), ("arm {S} shoulder 2", "arm {S} shoulder 1"),
+     ("arm {S} elbow", "arm {S} shoulder 2"), ("arm {S} wrist", "arm {S} elbow"), ("leg {S} thigh", "root hips"),
+     ("leg {S} knee", "leg {S} thigh"), ("leg {S} ankle", "leg {S} knee"), ("leg {S} toes", "leg {S} ankle")],
+    ("left", "right"))
+
+
+def test_numbered_shoulder_segments_map_the_arm_at_the_one_the_elbow_hangs_from():
+    """XPS / XNALara name the clavicle ``arm left shoulder 1`` and the upper arm ``arm left shoulder 2``: the arm is
+    the segment the elbow hangs from (MakeHuman's ``upperarm01`` / ``upperarm02`` stay at the first, as before)."""
+    _, mapping = auto_map(*_tree(XPS))
+    assert not missing(mapping)
+    assert (mapping["l_arm"][0], mapping["r_arm"][0]) == ("arm left shoulder 2", "arm right shoulder 2")
+    assert (mapping["l_upleg"][0], mapping["spine1"][0], mapping["neck"][0]) == (
+        "leg left thigh", "spine upper", "head neck lower")
