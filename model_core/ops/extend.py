@@ -69,8 +69,12 @@ def in_place(clip: np.ndarray) -> bool:
 
 def clip_in_place(clip: np.ndarray, fps: float) -> bool:
     """Whether a clip ``[F, 21, 3]`` (any units, ``fps``) steps in place (:func:`in_place`), as Extend reads it."""
-    ctx = _at_model_rate(clip, fps)
-    return in_place(fit_normalisation(ctx[-MIN_MODEL_FRAMES:]).to_model(ctx))
+    return _steps_in_place(_at_model_rate(clip, fps))
+
+
+def _steps_in_place(clip: np.ndarray) -> bool:
+    """:func:`in_place` of a clip ``[T, 21, 3]`` in any units at the model's rate, scaled as its last frames are."""
+    return in_place(fit_normalisation(clip[-MIN_MODEL_FRAMES:]).to_model(clip))
 
 
 def kept_in_place(before: np.ndarray, new: np.ndarray) -> np.ndarray:
@@ -170,8 +174,8 @@ def extend_positions(engine, pos: np.ndarray, fps: float, frames: int, memory: n
     """
     ctx, norm, model_ctx, momentum = _reading(engine, pos, fps, memory)
     n_model = int(math.ceil(frames * MODEL_FPS / fps)) + 1
-    kw = {} if memory is None else {"memory": norm.to_model(_at_model_rate(memory, fps)),
-                                    "first_scale": first_scale(momentum)}
+    looked = ctx if memory is None else _at_model_rate(memory, fps)  # the clip at the model's rate
+    kw = {} if memory is None else {"memory": norm.to_model(looked), "first_scale": first_scale(momentum)}
     still = first_motion(model_ctx, momentum)
     if still < 1.0:
         kw["first_motion"] = still
@@ -182,8 +186,7 @@ def extend_positions(engine, pos: np.ndarray, fps: float, frames: int, memory: n
     kw["floor"] = (floor - norm.ground) * norm.scale  # in the model's units, as Normalisation.to_model puts it
     new = np.asarray(engine.extend(model_ctx, n_model, settle=True, **kw), dtype=np.float64)
     joined = join_clip(ctx, norm.to_user(new), momentum)  # model frame 0 is the last context frame
-    if clip_in_place(pos if memory is None else memory, fps):  # a walk in place goes on in place
-        looked = ctx if memory is None else _at_model_rate(memory, fps)
+    if _steps_in_place(looked):  # a walk in place goes on in place
         joined = np.concatenate([joined[:1], kept_in_place(looked, joined[1:])])
     return sample_at(joined, MODEL_FPS, np.arange(1, frames + 1) / fps)
 

@@ -8,7 +8,7 @@ are tried first; what they leave open is filled by a generic left/right heuristi
 (``.L`` / ``_L`` / ``Left`` / ``l`` prefixes and suffixes, common bone words) and by
 the hierarchy (the chest is where the two arms meet, the hips where the legs meet).
 A rig with one spine bone has no chest of its own, one whose head sits on its chest no neck:
-those joints are left out and placed between their neighbours (:data:`solve.PLACED`).
+those joints are left out and placed between their neighbours (:func:`solve.placed`).
 """
 
 from __future__ import annotations
@@ -17,7 +17,7 @@ import re
 
 from ..motion.conventions import JOINTS, PARENT_NAMES
 from .rigs import RIG_FAMILIES, normalise_name
-from .solve import placed_between
+from .solve import placed
 
 Mapping = dict[str, tuple[str, bool]]
 
@@ -273,11 +273,7 @@ def _no_bone_of_their_own(mapping: Mapping) -> None:
 
 
 def missing(mapping: Mapping) -> list[str]:
-    """Canonical joints with no bone in ``mapping`` that cannot be placed between others (:func:`placed`)."""
-    present = {j for j in JOINTS if mapping.get(j) and mapping[j][0]}
-    return [j for j in JOINTS if j not in present and j not in placed_between(present)]
-
-
-def placed(mapping: Mapping) -> dict[str, tuple[str, str, float]]:
-    """The torso joints ``mapping`` has no bone for, placed between their neighbours (:func:`solve.placed_between`)."""
-    return placed_between({j for j in JOINTS if mapping.get(j) and mapping[j][0]})
+    """Canonical joints with no bone in ``mapping`` that cannot be placed between others (:func:`solve.placed`,
+    which this module also offers as ``placed``)."""
+    between = placed(mapping)
+    return [j for j in JOINTS if (not mapping.get(j) or not mapping[j][0]) and j not in between]

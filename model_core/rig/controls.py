@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..motion.conventions import JOINTS, PARENT_NAMES
-from .solve import Rig, SolveError, placed_between
+from .solve import Rig, SolveError, placed as placed_in
 
 
 @dataclass(frozen=True)
@@ -101,7 +101,7 @@ def joint_rig(rig: Rig, mapping: dict[str, tuple[str, bool]]) -> Rig:
     the real bones in between where that bone is a real ancestor (a clavicle between chest and upper
     arm). Raises :class:`SolveError` when a joint has no bone on ``rig``."""
     index = {n: i for i, n in enumerate(rig.names)}
-    placed = placed_between({j for j in JOINTS if mapping.get(j) and mapping[j][0]})
+    placed = placed_in(mapping)
     missing = [j for j in JOINTS if j not in placed and (j not in mapping or mapping[j][0] not in index)]
     if missing:
         raise SolveError(f"no bone mapped for: {', '.join(missing)}")

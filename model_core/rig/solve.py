@@ -65,6 +65,11 @@ def placed_between(present) -> dict[str, tuple[str, str, float]]:
     return out
 
 
+def placed(mapping: dict[str, tuple[str, bool]]) -> dict[str, tuple[str, str, float]]:
+    """:func:`placed_between` for the joints a bone map ``mapping`` (joint -> (bone, use tail)) has no bone for."""
+    return placed_between({j for j in JOINTS if mapping.get(j) and mapping[j][0]})
+
+
 class SolveError(ValueError):
     """A bone map does not fit the rig's hierarchy."""
 
@@ -116,14 +121,13 @@ class Anchors:
     def from_map(cls, rig: Rig, mapping: dict[str, tuple[str, bool]]) -> Anchors:
         """``mapping``: canonical joint -> (bone name, use tail); a joint of :data:`PLACED` it leaves out is placed
         between its neighbours (:func:`placed_between`). Raises :class:`SolveError`."""
-        present = {j for j in JOINTS if mapping.get(j) and mapping[j][0]}
-        placed = placed_between(present)
-        missing = [j for j in JOINTS if j not in placed and (j not in present or mapping[j][0] not in rig.names)]
+        named = placed(mapping)
+        missing = [j for j in JOINTS if j not in named and (not mapping.get(j) or mapping[j][0] not in rig.names)]
         if missing:
             raise SolveError(f"no bone mapped for: {', '.join(missing)}")
-        between = {JOINT_INDEX[j]: (JOINT_INDEX[a], JOINT_INDEX[b], share) for j, (a, b, share) in placed.items()}
-        bone = np.array([rig.index(mapping[placed[j][0] if j in placed else j][0]) for j in JOINTS])
-        tail = np.array([j not in placed and bool(mapping[j][1]) for j in JOINTS])
+        between = {JOINT_INDEX[j]: (JOINT_INDEX[a], JOINT_INDEX[b], share) for j, (a, b, share) in named.items()}
+        bone = np.array([rig.index(mapping[named[j][0] if j in named else j][0]) for j in JOINTS])
+        tail = np.array([j not in named and bool(mapping[j][1]) for j in JOINTS])
         out = cls(bone, tail, between)
         out.check(rig)
         return out

@@ -322,9 +322,10 @@ def key_grid(clip: Clip, first: float, last: float) -> tuple[int, np.ndarray]:
     names = set(keyed_names(clip))
     constant = bpy.types.Keyframe.bl_rna.properties["interpolation"].enum_items["CONSTANT"].value
     found, stepped = [], set()
-    for fc in clip.channels.fcurves:
-        match = re.match(r'pose\.bones\["(.+?)"\]', fc.data_path)
-        if match is None or match[1] not in names or fc.mute:
+    curves = [fc for (bone, _), by_index in rig_io.bone_channels(clip.channels.fcurves).items() if bone in names
+              for fc in by_index.values()]
+    for fc in curves:
+        if fc.mute:
             continue
         if len(fc.modifiers):
             mod = fc.modifiers[0]

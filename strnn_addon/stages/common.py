@@ -107,14 +107,17 @@ def prefs(context):
     return preferences(context)
 
 
-def made_by(operation: str, clip, model: str = "", **settings) -> dict:
+def made_by(operation: str, clip, model: str = "", key_step: int = 1, **settings) -> dict:
     """The :data:`RECORD` a new action carries: the operation and extension version that made it,
-    the action it was made from, the model folder it used (if any) and its settings."""
+    the action it was made from, the model folder it used (if any), the step of the keys it read and wrote on an
+    action on twos (``key_step``, :func:`pipeline.key_grid`) and its settings."""
     record = {"operation": operation, "version": VERSION,
               "source_action": clip.action.name if clip.action is not None else ""}
     if model:
         record["model"] = model
     record["keys_per_second"] = float(clip.fps)
+    if key_step > 1:
+        record["key_step"] = key_step
     record["settings"] = {k: v for k, v in settings.items() if v is not None}
     return record
 

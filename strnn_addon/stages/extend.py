@@ -88,8 +88,9 @@ def extend_steps(context, obj, *, frames: int = 120, context_frames: int = 0, fo
     # following the clip, up to 20 s of it; otherwise what the floor is judged on (extend.FLOOR_S)
     mem_frames = memory_range(clip, ctx_frames, MEMORY_S if follow_clip else FLOOR_S, step, back)
     order = np.argsort(mem_frames)  # read in time order, then as the model reads them
-    memory = np.empty((len(mem_frames), 21, 3))
-    memory[order] = pipeline.joint_positions(context, clip, mem_frames[order])
+    read = pipeline.joint_positions(context, clip, mem_frames[order])
+    memory = np.empty_like(read)
+    memory[order] = read
     pos = memory[len(mem_frames) - len(ctx_frames):]
     held_loc, held_rot = pipeline.reference_pose(context, clip, ctx_frames[-1:])
     previous = pipeline.raw_rotations(clip, edge)
@@ -108,11 +109,10 @@ def extend_steps(context, obj, *, frames: int = 120, context_frames: int = 0, fo
     targets = pipeline.to_armature(clip, new_pos, pipeline.world_at(context, clip, new_frames))
     loc, rot = solve(clip.rig, clip.anchors, targets, np.repeat(held_loc, count, 0), np.repeat(held_rot, count, 0))
     yield "write"
-    record = made_by("Extend Clip", clip, engine_bridge.model_used(prefs(context)), frames=frames,
-                     context_frames=len(ctx_frames), follow_clip_frames=len(mem_frames) if follow_clip else 0,
+    record = made_by("Extend Clip", clip, engine_bridge.model_used(prefs(context)), key_step=step,
+                     frames=frames, context_frames=len(ctx_frames),
+                     follow_clip_frames=len(mem_frames) if follow_clip else 0,
                      foot_lock=foot_lock, from_frame=from_frame, before_start=before_start or None)
-    if step > 1:
-        record["key_step"] = step
     if followed is not None and clip_in_place(followed, fps):  # the new frames kept where the clip walks in place
         record["in_place"] = True
     record.update(familiarity_record(model_call(engine_bridge.run_familiarity, prefs(context), pos, fps)))

@@ -133,10 +133,9 @@ def inbetween_steps(context, obj, *, frame_start: int | None = None, frame_end: 
     yield "solve"
     loc, rot = pipeline.solve_frames(context, clip, gap, new_pos)
     yield "write"
-    record = made_by("Fill Gap", clip, engine_bridge.model_used(prefs(context)), frame_start=start, frame_end=end,
+    record = made_by("Fill Gap", clip, engine_bridge.model_used(prefs(context)), key_step=step,
+                     frame_start=start, frame_end=end,
                      follow_take_frames=len(read_before) + len(read_after) if follow_take else 0, foot_lock=foot_lock)
-    if step > 1:
-        record["key_step"] = step
     if len(before) >= need:  # how well the model knows the motion before the gap, as Extend reports it
         record.update(familiarity_record(model_call(engine_bridge.run_familiarity, prefs(context), pos_before,
                                                     fps)))

@@ -65,8 +65,6 @@ def transfer_steps(context, obj, *, source: str = "", foot_lock: bool = True, sc
                                                                       pipeline.world_at(context, target, frames)),
                      np.repeat(ref_loc, n, 0), np.repeat(ref_rot, n, 0))
     yield "write"
-    record = made_by("Transfer Motion", src, source=src.obj.name, target=obj.name, foot_lock=foot_lock)
-    if step > 1:
-        record["key_step"] = step
+    record = made_by("Transfer Motion", src, key_step=step, source=src.obj.name, target=obj.name, foot_lock=foot_lock)
     return write_fresh(context, target, f"{src.action.name}.transfer", frames, loc, rot, record, scene_range,
                        "CONSTANT" if step > 1 else "")
