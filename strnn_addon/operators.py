@@ -23,9 +23,15 @@ class _Staged:
     """Runs a worker generator (see stages/common.py): all at once in ``execute`` (scripts, redo panel),
     stage by stage from a timer in ``modal`` when invoked from the UI, with progress in the status
     bar and Esc to cancel between stages, or between the steps of a stage that yields its fraction
-    done as it goes (Follow Curve's model windows). Nothing is written before the last stage."""
+    done as it goes (Follow Curve's model windows). Nothing is written before the last stage.
+
+    With ``many`` the operation runs on every selected armature, the active one first (a crowd, a cast: as
+    Blender's own operators act on the selection): each is read and computed before any is written, so an
+    error on the active armature or Esc leaves every one as it was. Another selected armature the operation
+    cannot take (no action, not a rig it can map, too few frames...) is left as it was and the report says why."""
 
     need_action = True  # the active armature must have an action (Follow Curve can start one)
+    many = False  # every selected armature, not only the active one
 
     @classmethod
     def poll(cls, context):
@@ -51,44 +57,118 @@ class _Staged:
         self.frame_start = scene.frame_preview_start if preview else scene.frame_start
         self.frame_end = scene.frame_preview_end if preview else scene.frame_end
 
-    def steps(self, context):
+    def steps(self, context, obj):
         raise NotImplementedError
 
     def done(self, action) -> str:
         raise NotImplementedError
 
-    def finished(self, context, action) -> None:
-        """Thin the keys (``simplify``), deliver the new action as asked (``output``), report what was done
+    def objects(self, context) -> tuple[list, list[str]]:
+        """The armatures to run on, the active one first (with ``many``, then the other selected armatures by
+        name), and why each selected armature left out was: one that :func:`check_message` refuses."""
+        active = context.active_object
+        if not self.many:
+            return [active], []
+        taken, left = [active], []
+        others = sorted((o for o in context.selected_objects if o.type == "ARMATURE" and o is not active),
+                        key=lambda o: o.name)
+        for obj in others:
+            problem = check_message(obj, self.need_action)
+            if problem:
+                left.append(f"{obj.name!r} ({problem})")
+            else:
+                taken.append(obj)
+        return taken, left
+
+    def work(self, context):
+        """Every armature's stages up to its writing, then each one's writing: a generator of the stages (their
+        names, or fractions done) like one armature's, which returns ``[(armature, new action)]``. While it runs,
+        ``self._at`` is the armature it is on ``(index, count, name)``; ``self._left`` says which selected
+        armatures it left as they were, and why."""
+        objs, self._left = self.objects(context)
+        ready, count = [], len(objs)
+        try:
+            for i, obj in enumerate(objs):
+                self._at = (i, count, obj.name)
+                steps = self.steps(context, obj)
+                try:
+                    stage = next(steps)
+                    while stage != "write":
+                        yield stage
+                        stage = next(steps)
+                except StopIteration as stop:  # a stage with no writing of its own: it is done
+                    ready.append((obj, None, stop.value))
+                    continue
+                except UserError as e:
+                    if i == 0:  # the armature asked for: nothing is changed
+                        raise UserError(f"{obj.name!r}: {e}" if count > 1 else str(e)) from e
+                    self._left.append(f"{obj.name!r} ({e})")
+                    continue
+                ready.append((obj, steps, None))
+            made = []
+            for i, (obj, steps, result) in enumerate(ready):
+                self._at = (i, len(ready), obj.name)
+                if steps is not None:
+                    yield "write"
+                    result = run(steps)
+                made.append((obj, result))
+            return made
+        finally:
+            for _, steps, _ in ready:
+                if steps is not None:
+                    steps.close()
+
+    def finished(self, context, made, left=()) -> None:
+        """Thin the keys (``simplify``), deliver each new action as asked (``output``), report what was done
         (a warning with a note: the take's pace suggests its keys are read at another rate than captured, or
-        its motion is unlike what the model learnt)."""
-        note = report_note(action)
-        said = self.done(action) + note
-        if getattr(self, "simplify", 0.0) > 0.0:
-            said += simplified(context, action, self.simplify)
-        if getattr(self, "output", "ACTION") == "NLA":
-            track = as_nla_strip(context.active_object, action)
-            said += f"; put on NLA track {track.name!r}, the active action unchanged"
-        self.report({"WARNING"} if note else {"INFO"}, said)
+        its motion is unlike what the model learnt; or a selected armature was ``left`` as it was)."""
+        said = []  # (warn, text)
+        for obj, action in made:
+            note = report_note(action)
+            text = self.done(action) + note
+            if getattr(self, "simplify", 0.0) > 0.0:
+                text += simplified(context, obj, action, self.simplify)
+            if getattr(self, "output", "ACTION") == "NLA":
+                track = as_nla_strip(obj, action)
+                text += f"; put on NLA track {track.name!r}, the active action unchanged"
+            said.append((bool(note), text if len(made) == 1 and not left else f"{obj.name!r}: {text}"))
+        if len(made) > 1 or left:  # each armature's line first (the Info editor keeps them), then the summary the
+            names = ", ".join(repr(obj.name) for obj, _ in made)  # status bar shows
+            summary = f"{self.bl_label} on {len(made)} armature{'s' if len(made) > 1 else ''} ({names})"
+            if left:
+                summary += f"; left as {'they were' if len(left) > 1 else 'it was'}: " + "; ".join(left)
+            said.append((bool(left) or any(w for w, _ in said), summary))
+        for warn, text in said:
+            self.report({"WARNING"} if warn else {"INFO"}, text)
+
+    def _progress(self, wm, stage) -> None:
+        """The progress bar over every armature's stages."""
+        i, count, _ = self._at
+        at = STAGES.index(stage if isinstance(stage, str) else self._stage)
+        done = 0.0 if isinstance(stage, str) else float(stage)
+        wm.progress_begin(0, len(STAGES) * count)
+        wm.progress_update(i * len(STAGES) + at + done)
 
     def execute(self, context):
         self.range_from_scene(context)
         wm = context.window_manager
-        wm.progress_begin(0, len(STAGES))
+        self._at, self._left = (0, 1, ""), []
         try:
-            action = run(self.steps(context), lambda stage: wm.progress_update(STAGES.index(stage)))
+            made = run(self.work(context), lambda stage: self._progress(wm, stage))
         except UserError as e:
             self.report({"ERROR"}, str(e))
             return {"CANCELLED"}
         finally:
             wm.progress_end()
-        self.finished(context, action)
+        self.finished(context, made, self._left)
         return {"FINISHED"}
 
     def invoke(self, context, event):
         self.range_from_scene(context)
         if context.window is None:
             return self.execute(context)
-        self._steps, self._stage = self.steps(context), "read"
+        self._at, self._left = (0, 1, ""), []
+        self._steps, self._stage = self.work(context), "read"
         return self._advance(context) or self._start(context)
 
     def _start(self, context):
@@ -112,7 +192,7 @@ class _Staged:
             stage = next(self._steps)
         except StopIteration as stop:
             self._stop(context)
-            self.finished(context, stop.value)
+            self.finished(context, stop.value, self._left)
             return {"FINISHED"}
         except UserError as e:
             self._stop(context)
@@ -122,11 +202,11 @@ class _Staged:
             self._stage, done = stage, ""
         else:  # the fraction of the current stage done so far
             done = f" {stage:.0%}"
-        wm = context.window_manager
-        wm.progress_begin(0, len(STAGES))
-        wm.progress_update(STAGES.index(self._stage) + (0.0 if isinstance(stage, str) else float(stage)))
+        self._progress(context.window_manager, stage)
         if context.workspace:
-            context.workspace.status_text_set(f"STRNN {self.bl_label}: {self._stage}{done}... (Esc to cancel)")
+            i, count, name = self._at
+            which = f"{name!r} ({i + 1} of {count}), " if count > 1 else ""
+            context.workspace.status_text_set(f"STRNN {self.bl_label}: {which}{self._stage}{done}... (Esc to cancel)")
         return None
 
     def _stop(self, context):
@@ -141,11 +221,13 @@ class _Staged:
 
 
 class STRNN_OT_extend_clip(_Staged, bpy.types.Operator):
-    """Continue the active armature's action with the motion model; writes a new action"""
+    """Continue the action of the active armature (and of every other selected one) with the motion model; writes
+    a new action"""
 
     bl_idname = "strnn.extend_clip"
     bl_label = "Extend Clip"
     bl_options = {"REGISTER", "UNDO"}
+    many = True
 
     frames: options.frames_to_add()
     context_frames: options.context_frames()
@@ -157,9 +239,9 @@ class STRNN_OT_extend_clip(_Staged, bpy.types.Operator):
     output: options.output()
     simplify: options.simplify()
 
-    def steps(self, context):
+    def steps(self, context, obj):
         start = context.scene.frame_current if self.from_current else None
-        return extend_steps(context, context.active_object, frames=self.frames, context_frames=self.context_frames,
+        return extend_steps(context, obj, frames=self.frames, context_frames=self.context_frames,
                             follow_clip=self.follow_clip, foot_lock=self.foot_lock, from_frame=start,
                             scene_range=self.scene_range, before_start=self.before_start)
 
@@ -177,11 +259,13 @@ class STRNN_OT_extend_clip(_Staged, bpy.types.Operator):
 
 
 class STRNN_OT_fill_gap(_Staged, bpy.types.Operator):
-    """Fill the frames between the keys before and after a gap with the motion model; writes a new action"""
+    """Fill the frames between the keys before and after a gap with the motion model, on the active armature (and
+    every other selected one); writes a new action"""
 
     bl_idname = "strnn.inbetween"
     bl_label = "Fill Gap"
     bl_options = {"REGISTER", "UNDO"}
+    many = True
 
     use_range: options.use_range("Fill")
     frame_start: options.range_start("Fill")
@@ -191,9 +275,9 @@ class STRNN_OT_fill_gap(_Staged, bpy.types.Operator):
     output: options.output()
     simplify: options.simplify()
 
-    def steps(self, context):
+    def steps(self, context, obj):
         start, end = (self.frame_start, self.frame_end) if self.use_range else (None, None)
-        return inbetween_steps(context, context.active_object, frame_start=start, frame_end=end,
+        return inbetween_steps(context, obj, frame_start=start, frame_end=end,
                                follow_take=self.follow_take, foot_lock=self.foot_lock)
 
     def done(self, action) -> str:
@@ -203,11 +287,13 @@ class STRNN_OT_fill_gap(_Staged, bpy.types.Operator):
 
 
 class STRNN_OT_denoise_action(_Staged, bpy.types.Operator):
-    """Clean the active armature's action with the denoising model; writes a new action"""
+    """Clean the action of the active armature (and of every other selected one) with the denoising model; writes a
+    new action"""
 
     bl_idname = "strnn.denoise_action"
     bl_label = "Denoise Action"
     bl_options = {"REGISTER", "UNDO"}
+    many = True
 
     strength: options.strength()
     use_range: options.use_range("Denoise")
@@ -218,9 +304,9 @@ class STRNN_OT_denoise_action(_Staged, bpy.types.Operator):
     output: options.output()
     simplify: options.simplify()
 
-    def steps(self, context):
+    def steps(self, context, obj):
         start, end = (self.frame_start, self.frame_end) if self.use_range else (None, None)
-        return denoise_steps(context, context.active_object, frame_start=start, frame_end=end,
+        return denoise_steps(context, obj, frame_start=start, frame_end=end,
                              strength=self.strength, foot_lock=self.foot_lock, only_selected=self.only_selected)
 
     def done(self, action) -> str:
@@ -228,11 +314,13 @@ class STRNN_OT_denoise_action(_Staged, bpy.types.Operator):
 
 
 class STRNN_OT_foot_lock(_Staged, bpy.types.Operator):
-    """Pin the active armature's feet on the ground while they touch it (leg IK); writes a new action"""
+    """Pin the feet of the active armature (and of every other selected one) on the ground while they touch it
+    (leg IK); writes a new action"""
 
     bl_idname = "strnn.foot_lock"
     bl_label = "Foot Lock"
     bl_options = {"REGISTER", "UNDO"}
+    many = True
 
     blend: options.lock_blend()
     use_range: options.use_range("Lock")
@@ -242,9 +330,9 @@ class STRNN_OT_foot_lock(_Staged, bpy.types.Operator):
     output: options.output()
     simplify: options.simplify()
 
-    def steps(self, context):
+    def steps(self, context, obj):
         start, end = (self.frame_start, self.frame_end) if self.use_range else (None, None)
-        return foot_lock_steps(context, context.active_object, frame_start=start, frame_end=end, blend=self.blend,
+        return foot_lock_steps(context, obj, frame_start=start, frame_end=end, blend=self.blend,
                                only_selected=self.only_selected)
 
     def done(self, action) -> str:
@@ -267,8 +355,8 @@ class STRNN_OT_follow_curve(_Staged, bpy.types.Operator):
     output: options.output()
     simplify: options.simplify()
 
-    def steps(self, context):
-        return follow_curve_steps(context, context.active_object, curve=self.curve, frames=self.frames,
+    def steps(self, context, obj):
+        return follow_curve_steps(context, obj, curve=self.curve, frames=self.frames,
                                   speed=self.speed, foot_lock=self.foot_lock, scene_range=self.scene_range)
 
     def done(self, action) -> str:
@@ -293,8 +381,8 @@ class STRNN_OT_transfer_motion(_Staged, bpy.types.Operator):
     output: options.output()
     simplify: options.simplify()
 
-    def steps(self, context):
-        return transfer_steps(context, context.active_object, source=self.source, foot_lock=self.foot_lock,
+    def steps(self, context, obj):
+        return transfer_steps(context, obj, source=self.source, foot_lock=self.foot_lock,
                               scene_range=self.scene_range)
 
     def done(self, action) -> str:
@@ -446,11 +534,11 @@ def stepped_note(action) -> str:
     return f" (keyed every {step} frames with Constant interpolation, as the action is)" if step > 1 else ""
 
 
-def simplified(context, action, tolerance_cm: float) -> str:
-    """Simplify the keys ``action`` got (its record's ``frames_written``) and say how it went."""
+def simplified(context, obj, action, tolerance_cm: float) -> str:
+    """Simplify the keys ``action`` got on ``obj`` (its record's ``frames_written``) and say how it went."""
     first, last = action[RECORD]["frames_written"]
     try:
-        found = simplify_keys(context, context.active_object, int(first), int(last), tolerance_cm)
+        found = simplify_keys(context, obj, int(first), int(last), tolerance_cm)
     except UserError as e:
         return f"; keys not simplified ({e})"
     if found is None:

@@ -8,6 +8,7 @@ import bpy
 
 from ..model_core.motion.conventions import JOINTS
 from ..model_core.rig.solve import placed_between
+from . import operators
 from .operators import check_message
 from .props import TAIL_JOINTS, joint_label
 from .scene import controls
@@ -41,6 +42,12 @@ class STRNN_PT_main(_Sidebar, bpy.types.Panel):
         action = obj.animation_data.action
         first, last = (int(round(f)) for f in action.frame_range)
         col.label(text=f"{obj.name}: {action.name} (frames {first}-{last})", icon="ACTION")
+        others = [o for o in context.selected_objects if o is not obj and o.type == "ARMATURE" and not check_message(o)]
+        if others:  # the operations that run on every selected armature say so before they are run
+            many = [cls.bl_label for cls in operators.classes if getattr(cls, "many", False)]
+            col.label(text=f"+ {len(others)} more selected armature{'s' if len(others) > 1 else ''} with an action",
+                      icon="OUTLINER_OB_ARMATURE")
+            col.label(text=f"{', '.join(many[:-1])} and {many[-1]} run on each")
         col.prop(obj, "strnn_keys_per_second")
         made_by_note(col, action, context)
 

@@ -5,8 +5,9 @@ Each operation (:mod:`.extend`, :mod:`.denoise`, :mod:`.footlock`, :mod:`.follow
 generator (``model_core.inference.steps``) that yields the name of each stage (read, model,
 solve, write) before running it, and may yield the fraction of a stage done as it goes (Follow
 Curve, window by window), so the operators can show progress and stop on Esc in between;
-:func:`run` drives one to the end. Every check and all the computing happen before the new
-action is created, so a failure or a cancel leaves the file unchanged.
+:func:`run` drives one to the end. Every check, read and all the computing happen before it yields
+``write``, and the new action is created after, so a failure or a cancel leaves the file unchanged, and an
+operator on several armatures can take each to its ``write`` before writing any.
 """
 
 from __future__ import annotations

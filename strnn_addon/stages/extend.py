@@ -108,7 +108,6 @@ def extend_steps(context, obj, *, frames: int = 120, context_frames: int = 0, fo
     yield "solve"
     targets = pipeline.to_armature(clip, new_pos, pipeline.world_at(context, clip, new_frames))
     loc, rot = solve(clip.rig, clip.anchors, targets, np.repeat(held_loc, count, 0), np.repeat(held_rot, count, 0))
-    yield "write"
     record = made_by("Extend Clip", clip, engine_bridge.model_used(prefs(context)), key_step=step,
                      frames=frames, context_frames=len(ctx_frames),
                      follow_clip_frames=len(mem_frames) if follow_clip else 0,
@@ -123,5 +122,6 @@ def extend_steps(context, obj, *, frames: int = 120, context_frames: int = 0, fo
     record.update(pace_record(context, clip, edge if not back else None))
     # the written bones' keys beyond the edge go: the old tail or head (from a frame), or keys past a manual range
     replace = (-float("inf"), edge - 0.5) if back else (edge + 0.5, float("inf"))
+    yield "write"  # every check and every read done: only the writing is left
     return write_new(context, clip, "extended", new_frames, loc, rot, previous, replace, record,
                      scene_range=scene_range, follows=back)

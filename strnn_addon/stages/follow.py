@@ -59,12 +59,12 @@ def follow_curve_steps(context, obj, *, curve: str = "", frames: int = 0, speed:
     new_frames = start + np.arange(n, dtype=np.float64)
     targets = pipeline.to_armature(clip, new_pos, pipeline.world_at(context, clip, new_frames))
     loc, rot = solve(clip.rig, clip.anchors, targets, np.repeat(held_loc, n, 0), np.repeat(held_rot, n, 0))
-    yield "write"
     record = made_by("Follow Curve", clip, engine_bridge.model_used(prefs(context)), curve=curve_obj.name,
                      frames=n, speed=float(speed), foot_lock=foot_lock)
     if context_pos is not None:
         record.update(familiarity_record(engine_bridge.run_familiarity(prefs(context), context_pos, clip.fps)))
         record.update(pace_record(context, clip))
+    yield "write"  # every check and every read done: only the writing is left
     if clip.action is not None:
         return write_new(context, clip, "curve", new_frames, loc, rot, previous, (clip.last + 0.5, float("inf")),
                          record, scene_range=scene_range)  # keys past a manual frame range's end go

@@ -44,9 +44,9 @@ def foot_lock_steps(context, obj, *, frame_start: int | None = None, frame_end: 
                   passes=footlock.SETTLE_PASSES)
     yield "solve"
     loc, rot = pipeline.solve_frames(context, clip, frames, locked)
-    yield "write"
     record = made_by("Foot Lock", clip, key_step=step, frame_start=a, frame_end=b, blend=float(blend),
                      only_selected=only_selected)
     record.update(pace_record(context, clip))
+    yield "write"  # every check and every read done: only the writing is left
     return write_new(context, clip, "footlocked", frames[inside], loc[inside], rot[inside], previous, (a, b),
                      record, bones=bones)

@@ -249,6 +249,7 @@ def test_an_action_shared_by_two_armatures_each_on_its_own_slot_is_extended_on_t
     frames = np.arange(1, 61)
     a_before = evaluated_joints(addon, a, frames)
     bpy.context.view_layer.objects.active = b
+    a.select_set(False)  # the second armature alone (with both selected, each is extended)
     old, new, before = extend(30)
     check_new_action(b, old, new, before, 30)
     assert b.animation_data.action_slot.identifier == slot.identifier

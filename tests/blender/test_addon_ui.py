@@ -140,8 +140,16 @@ def test_main_panel_says_what_each_object_allows(addon, tmp_path):
     build_armature("Bare", [("a", None, (0, 0, 0), (0, 0, 1))])
     assert panel_labels("STRNN_PT_main", bpy.context) == [("Bare: no action", "INFO"),
                                               ("Follow Curve can start one; the others need an action", "NONE")]
-    import_bvh(walk_bvh(tmp_path, frames=30))
+    walk = import_bvh(walk_bvh(tmp_path, frames=30))
     assert panel_labels("STRNN_PT_main", bpy.context) == [("walk: walk (frames 1-30)", "ACTION")]
+    # other selected armatures with an action: the panel says the operations run on each (the bare one has none)
+    (tmp_path / "b").mkdir()
+    for obj in (import_bvh(walk_bvh(tmp_path / "b", frames=40)), bpy.data.objects["Bare"], bpy.data.objects["Cube"]):
+        obj.select_set(True)
+    bpy.context.view_layer.objects.active = walk
+    assert panel_labels("STRNN_PT_main", bpy.context) == [
+        ("walk: walk (frames 1-30)", "ACTION"), ("+ 1 more selected armature with an action", "OUTLINER_OB_ARMATURE"),
+        ("Extend Clip, Fill Gap, Denoise Action and Foot Lock run on each", "NONE")]
 
 
 def test_bone_map_panel_says_which_joints_a_rig_with_fewer_torso_bones_has_placed(addon):
@@ -191,9 +199,9 @@ def test_a_frame_range_comes_from_the_preview_or_scene_range_unless_set(addon, t
     cls = bpy.types.STRNN_OT_denoise_action
     original = cls.steps
 
-    def spy(self, context):
+    def spy(self, context, obj):
         seen.append((self.use_range, self.frame_start, self.frame_end))
-        return original(self, context)
+        return original(self, context, obj)
 
     remembered = bpy.context.window_manager.operator_properties_last("strnn.denoise_action")
     cls.steps = spy
