@@ -1,6 +1,6 @@
 """The one place the add-on calls the model: load (cached) and run it on a clip.
 
-:func:`run_extend`, :func:`run_inbetween`, :func:`run_familiarity`, :func:`run_denoise` and
+:func:`run_extend`, :func:`run_inbetween`, :func:`run_loop`, :func:`run_familiarity`, :func:`run_denoise` and
 :func:`run_follow_curve` (one verb per layer: ``run_*`` here) are the only model calls the operators
 make, so a test can swap them for a stand-in.
 """
@@ -23,6 +23,7 @@ from ..model_core.ops.extend import extend_positions, first_window, following
 from ..model_core.ops.familiarity import clip_familiarity
 from ..model_core.ops.follow import PathFollower, follow_curve_positions_steps
 from ..model_core.ops.inbetween import inbetween_positions
+from ..model_core.ops.loop import loop_positions
 
 _CACHE: dict[tuple, object] = {}
 
@@ -236,6 +237,17 @@ def run_inbetween(prefs, before: np.ndarray, after: np.ndarray, fps: float, fram
     with threads(prefs):
         return _kept(_key("inbetween", engine, before, after, fps, frames, follow_take),
                      lambda: inbetween_positions(engine, before, after, fps, frames, follow_take))
+
+
+def run_loop(prefs, positions: np.ndarray, fps: float, blend: int, match: bool = True,
+             lead: np.ndarray | None = None):
+    """The stretch ``positions`` ``[F, 21, 3]`` (Y-up scene units at ``fps``) made into a cycle by the main model
+    (:func:`loop.loop_positions`: ``blend`` frames before its seam made again; ``match``: the seam where the pose
+    comes round again; ``lead``: the take before the stretch)."""
+    engine = generator_from_prefs(prefs)
+    with threads(prefs):
+        return _kept(_key("loop", engine, positions, fps, blend, match, lead),
+                     lambda: loop_positions(engine, positions, fps, blend, match, lead=lead))
 
 
 def run_familiarity(prefs, positions: np.ndarray, fps: float):

@@ -16,6 +16,7 @@ from .stages.extend import extend_steps
 from .stages.follow import follow_curve_steps
 from .stages.footlock import foot_lock_steps
 from .stages.inbetween import inbetween_steps
+from .stages.loop import loop_steps
 from .stages.transfer import transfer_steps
 
 
@@ -339,6 +340,42 @@ class STRNN_OT_foot_lock(_Staged, bpy.types.Operator):
         return f"Locked the feet into new action {action.name!r}{stepped_note(action)}"
 
 
+class STRNN_OT_make_loop(_Staged, bpy.types.Operator):
+    """Make a stretch of the action a cycle that repeats without a seam (a walk, a run, an idle), on the active
+    armature (and every other selected one); writes a new cyclic action"""
+
+    bl_idname = "strnn.make_loop"
+    bl_label = "Make Loop"
+    bl_options = {"REGISTER", "UNDO"}
+    many = True
+
+    use_range: options.use_range("Loop")
+    frame_start: options.range_start("Loop")
+    frame_end: options.range_end("Loop")
+    match: options.loop_match()
+    blend: options.loop_blend()
+    in_place: options.loop_in_place()
+    foot_lock: options.foot_lock("make_loop")
+    output: options.output()
+    simplify: options.simplify()
+
+    def steps(self, context, obj):
+        start, end = (self.frame_start, self.frame_end) if self.use_range else (None, None)
+        return loop_steps(context, obj, frame_start=start, frame_end=end, blend=self.blend, match=self.match,
+                          in_place=self.in_place, foot_lock=self.foot_lock)
+
+    def done(self, action) -> str:
+        cycle = action[RECORD]["cycle"]
+        first, seam = cycle["first"], cycle["seam"]
+        moves = ("in place" if action[RECORD]["settings"].get("in_place") else
+                 f"travelling {length(cycle['travel'])} a cycle")
+        made = (f"; the last {cycle['blend_keys']} keys before the seam made again to flow into the start"
+                if cycle["blend_keys"] else "")
+        return (f"Looped frames {first}-{seam} ({cycle['frames']} frames, {cycle['seconds']:.2f} s, {moves}) in new "
+                f"cyclic action {action.name!r}: frame {seam} starts the next cycle, Cycles modifiers repeat it"
+                f"{made}{stepped_note(action)}")
+
+
 class STRNN_OT_follow_curve(_Staged, bpy.types.Operator):
     """Make the active armature walk along a curve with the motion model; writes a new action"""
 
@@ -528,6 +565,14 @@ class STRNN_OT_controls_from_preset(_EditControls, bpy.types.Operator):
         return {"FINISHED"}
 
 
+def length(value: float) -> str:
+    """A distance in scene units as the scene shows lengths (its unit system and scale)."""
+    units = bpy.context.scene.unit_settings
+    if units.system == "NONE":
+        return f"{value:.2f} units"
+    return bpy.utils.units.to_string(units.system, "LENGTH", value * units.scale_length, precision=2)
+
+
 def stepped_note(action) -> str:
     """Where an operation read and wrote an action keyed on twos (or threes, ...) at its keys, so say."""
     step = action.get(RECORD, {}).get("key_step", 1)
@@ -595,5 +640,5 @@ def check_message(obj, need_action: bool = True) -> str:
 
 
 classes = (STRNN_OT_extend_clip, STRNN_OT_fill_gap, STRNN_OT_denoise_action, STRNN_OT_foot_lock,
-           STRNN_OT_follow_curve, STRNN_OT_transfer_motion, STRNN_OT_auto_map, STRNN_OT_control_add,
-           STRNN_OT_control_remove, STRNN_OT_controls_from_preset, STRNN_OT_clear_map)
+           STRNN_OT_make_loop, STRNN_OT_follow_curve, STRNN_OT_transfer_motion, STRNN_OT_auto_map,
+           STRNN_OT_control_add, STRNN_OT_control_remove, STRNN_OT_controls_from_preset, STRNN_OT_clear_map)

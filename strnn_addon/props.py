@@ -110,6 +110,18 @@ def lock_blend():
     return FloatProperty(unit="TIME_ABSOLUTE", **opts.LOCK_BLEND.blender())
 
 
+def loop_blend():
+    return FloatProperty(unit="TIME_ABSOLUTE", **opts.LOOP_BLEND.blender())
+
+
+def loop_match():
+    return BoolProperty(**opts.LOOP_MATCH.blender())
+
+
+def loop_in_place():
+    return BoolProperty(**opts.LOOP_IN_PLACE.blender())
+
+
 def curve_frames():
     return IntProperty(**opts.CURVE_FRAMES.blender())
 

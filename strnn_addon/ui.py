@@ -150,6 +150,19 @@ class STRNN_PT_foot_lock(_OperatorPanel, bpy.types.Panel):
         col.prop(opts, "only_selected")
 
 
+class STRNN_PT_loop(_OperatorPanel, bpy.types.Panel):
+    bl_label = "Make Loop"
+    bl_options = {"DEFAULT_CLOSED"}
+    operator, icon = "strnn.make_loop", "FILE_REFRESH"
+
+    def draw_options(self, col, opts, context):
+        _frame_range(col, opts)
+        col.prop(opts, "match")
+        col.prop(opts, "blend")
+        col.prop(opts, "in_place")
+        col.prop(opts, "foot_lock")
+
+
 class STRNN_PT_follow_curve(_OperatorPanel, bpy.types.Panel):
     bl_label = "Follow Curve"
     operator, icon = "strnn.follow_curve", "CURVE_PATH"
@@ -270,6 +283,7 @@ class STRNN_MT_menu(bpy.types.Menu):
         layout.operator("strnn.inbetween", icon="IPO_EASE_IN_OUT")
         layout.operator("strnn.denoise_action", icon="MOD_SMOOTH")
         layout.operator("strnn.foot_lock", icon="SNAP_ON")
+        layout.operator("strnn.make_loop", icon="FILE_REFRESH")
         layout.operator("strnn.follow_curve", icon="CURVE_PATH")
         layout.operator("strnn.transfer_motion", icon="ARMATURE_DATA")
         layout.separator()
@@ -281,13 +295,14 @@ def menu_entry(self, context):
 
 
 def key_menu_entry(self, context):
-    """Extend, Fill Gap and Foot Lock where animators key and time: the Dope Sheet's and Graph
+    """Extend, Fill Gap, Foot Lock and Make Loop where animators key and time: the Dope Sheet's and Graph
     Editor's Key menus and the NLA's strip menu."""
     layout = self.layout
     layout.separator()
     layout.operator("strnn.extend_clip", icon="TRACKING_FORWARDS")
     layout.operator("strnn.inbetween", icon="IPO_EASE_IN_OUT")
     layout.operator("strnn.foot_lock", icon="SNAP_ON")
+    layout.operator("strnn.make_loop", icon="FILE_REFRESH")
 
 
 def smoothing_menu_entry(self, context):
@@ -317,6 +332,6 @@ def unregister_menus():
 
 
 classes = (STRNN_PT_main, STRNN_PT_extend, STRNN_PT_fill_gap, STRNN_PT_denoise, STRNN_PT_foot_lock,
-           STRNN_PT_follow_curve, STRNN_PT_transfer, STRNN_PT_bone_map, STRNN_UL_controls, STRNN_PT_controls,
-           STRNN_MT_menu)
+           STRNN_PT_loop, STRNN_PT_follow_curve, STRNN_PT_transfer, STRNN_PT_bone_map, STRNN_UL_controls,
+           STRNN_PT_controls, STRNN_MT_menu)
 

@@ -52,7 +52,16 @@ CURVE_FRAMES = Option("Frames", 0, "How many frames to make; 0: until the curve 
 CURVE_SPEED = Option("Speed", 0.0, "Walking speed along the curve; 0: the motion's own speed", min=0.0,
                      soft_max=5.0)
 
+LOOP_BLEND = Option("Blend", 0.4, "Seconds before the seam made again by the model, so the cycle flows on into its "
+                    "start; 0: the seam as it is", min=0.0, max=4.0, soft_max=1.0)
+LOOP_MATCH = Option("Match the Start", True,
+                    "End the cycle where the pose comes round to the first frame's again (the best match in the "
+                    "range's second half); off: the range's last frame starts the next cycle")
+LOOP_IN_PLACE = Option("In Place", False,
+                       "Take the travel off, so the cycle repeats on the spot with its sway kept (as game engines "
+                       "take root motion apart); off: each cycle walks on from where the last ended")
+
 # Whether each operation locks the feet unless told otherwise (Foot Lock's own operator always does).
 FOOT_LOCK = {"extend_clip": False, "denoise_action": False, "inbetween": True, "follow_curve": True,
-             "transfer_motion": True}
+             "transfer_motion": True, "make_loop": True}
 FOOT_LOCK_TIP = "Then pin the feet on the ground while they touch it (leg IK against foot sliding)"

@@ -306,6 +306,19 @@ def keyed_names(clip: Clip) -> list[str]:
     return [clip.rig.names[b] for b in written_bones(clip)]
 
 
+def written_paths(clip: Clip) -> set[str]:
+    """The F-curve data paths :func:`write_pose` keys: each written bone's rotation and the hips bone's location;
+    on a control rig its controls' rotations, and the locations of those that move."""
+    if clip.controls is not None:
+        return {_bone_path(c.bone, prop) for c in keyed_controls(clip)
+                for prop in (rig_io.rotation_property(clip.obj.pose.bones[c.bone]),) + (("location",) if c.location
+                                                                                         else ())}
+    hips = int(clip.anchors.bone[JOINT_INDEX["hips"]])
+    paths = {_bone_path(clip.rig.names[b], rig_io.rotation_property(clip.obj.pose.bones[clip.rig.names[b]]))
+             for b in written_bones(clip)}
+    return paths | {_bone_path(clip.rig.names[hips], "location")}
+
+
 # Keys on twos (threes, ...) held by Constant interpolation, the stepped look of hand-drawn-style animation: at least
 # STEP_KEYS keys make the pattern; Extend and Fill Gap read it over the last STEP_SECONDS before the frame they
 # continue from.

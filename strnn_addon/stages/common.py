@@ -235,11 +235,12 @@ def with_bake(record: dict, clip, error: float, frames) -> dict:
 
 
 def write_new(context, clip, suffix, frames, loc, rot, previous, replace, record: dict, bones=None,
-              scene_range: bool = True, follows: bool = False):
+              scene_range: bool = True, follows: bool = False, shape=None):
     """Create the new action, key it (``bones``: only these; ``follows``: ``previous`` is the key after the frames,
-    which come before it), label it with ``record`` and assign it (widening the scene's range to it with
-    ``scene_range``); on failure remove it again. An action on twos (``record``'s ``key_step``) gets Constant keys
-    in the channels this makes, as its own hold theirs."""
+    which come before it), label it with ``record``, hand it to ``shape`` (a last change to the whole action, e.g.
+    making it cyclic) and assign it (widening the scene's range to it with ``scene_range``); on failure remove it
+    again. An action on twos (``record``'s ``key_step``) gets Constant keys in the channels this makes, as its own
+    hold theirs."""
     action = pipeline.new_action_from(clip, suffix)
     made = "CONSTANT" if record.get("key_step", 1) > 1 else ""
     try:
@@ -248,6 +249,8 @@ def write_new(context, clip, suffix, frames, loc, rot, previous, replace, record
         if action.use_frame_range:  # a manual frame range the animator set: widened to hold the written frames
             action.frame_start = min(action.frame_start, float(frames[0]))
             action.frame_end = max(action.frame_end, float(frames[-1]))
+        if shape is not None:
+            shape(action)
         pipeline.finish(context, clip, action, scene_range)
     except Exception:
         bpy.data.actions.remove(action)

@@ -9,7 +9,7 @@ import pytest
 from scenes import action_of, import_bvh, key_snapshot, same_keys, walk_bvh
 
 OPS = [("extend_clip", {"frames": 20}), ("foot_lock", {}), ("denoise_action", {}),
-       ("inbetween", {"use_range": True, "frame_start": 30, "frame_end": 40})]
+       ("inbetween", {"use_range": True, "frame_start": 30, "frame_end": 40}), ("make_loop", {})]
 
 
 @pytest.mark.parametrize("op, kw", OPS, ids=[o for o, _ in OPS])

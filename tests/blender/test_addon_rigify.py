@@ -311,3 +311,17 @@ def test_the_metarig_itself_is_mapped_and_extended(addon, real_model):
     pos = evaluated_joints(addon, obj, np.arange(55, 91))
     step = np.linalg.norm(np.diff(pos[:, 0], axis=0), axis=-1)
     assert np.isfinite(pos).all() and step.max() < 0.05 and step[5:].mean() > 0.003, step
+
+
+def test_make_loop_keys_the_controls_and_the_rig_repeats_without_a_jump(walking_rig, addon, real_model):
+    """The walk on the generated rig made into a cycle: the controls are keyed and repeat (Cycles modifiers), and
+    the rig's joints as Blender plays two cycles move no further at the seam than anywhere in the walk."""
+    rig = walking_rig
+    first, last = (int(round(f)) for f in action_of(rig).frame_range)
+    take = evaluated_joints(addon, rig, np.arange(first, last + 1))
+    _, new = run_on_rig(rig, "make_loop", 0)
+    cycle = new["strnn"]["cycle"]
+    assert new.use_cyclic and all(fc.modifiers and fc.modifiers[0].type == "CYCLES" for fc in fcurves_of(rig, new))
+    joints = evaluated_joints(addon, rig, np.arange(cycle["first"], cycle["first"] + 2 * cycle["frames"] + 1))
+    moves = lambda j: np.linalg.norm(np.diff(j, axis=0), axis=-1)  # noqa: E731
+    assert moves(joints).max() <= 1.1 * moves(take).max(), (moves(joints).max(), moves(take).max())

@@ -16,11 +16,11 @@ from scenes import (
 )
 
 PANELS = ("STRNN_PT_main", "STRNN_PT_extend", "STRNN_PT_fill_gap", "STRNN_PT_denoise", "STRNN_PT_foot_lock",
-          "STRNN_PT_follow_curve", "STRNN_PT_transfer", "STRNN_PT_bone_map", "STRNN_PT_controls")
+          "STRNN_PT_loop", "STRNN_PT_follow_curve", "STRNN_PT_transfer", "STRNN_PT_bone_map", "STRNN_PT_controls")
 
 
 OPERATOR_PANELS = ("STRNN_PT_extend", "STRNN_PT_fill_gap", "STRNN_PT_denoise", "STRNN_PT_foot_lock",
-                   "STRNN_PT_follow_curve", "STRNN_PT_transfer")
+                   "STRNN_PT_loop", "STRNN_PT_follow_curve", "STRNN_PT_transfer")
 
 
 class Layout:
@@ -74,7 +74,7 @@ def test_registered_in_sidebar_and_menus(addon):
     for name in PANELS:
         cls = getattr(bpy.types, name)
         assert cls.bl_space_type == "VIEW_3D" and cls.bl_region_type == "UI" and cls.bl_category == "STRNN"
-    for op in ("extend_clip", "inbetween", "denoise_action", "foot_lock", "follow_curve", "auto_map"):
+    for op in ("extend_clip", "inbetween", "denoise_action", "foot_lock", "make_loop", "follow_curve", "auto_map"):
         rna = getattr(bpy.ops.strnn, op).get_rna_type()
         assert rna.description, f"{op} has no tooltip"
     assert hasattr(bpy.types, "STRNN_MT_menu")
@@ -149,7 +149,7 @@ def test_main_panel_says_what_each_object_allows(addon, tmp_path):
     bpy.context.view_layer.objects.active = walk
     assert panel_labels("STRNN_PT_main", bpy.context) == [
         ("walk: walk (frames 1-30)", "ACTION"), ("+ 1 more selected armature with an action", "OUTLINER_OB_ARMATURE"),
-        ("Extend Clip, Fill Gap, Denoise Action and Foot Lock run on each", "NONE")]
+        ("Extend Clip, Fill Gap, Denoise Action, Foot Lock and Make Loop run on each", "NONE")]
 
 
 def test_bone_map_panel_says_which_joints_a_rig_with_fewer_torso_bones_has_placed(addon):

@@ -1,0 +1,64 @@
+"""An action made cyclic (Make Loop): every F-curve of the armature's slot repeats its keys from the cycle's first
+frame to its seam by a Cycles modifier, and the action's manual frame range, marked cyclic, is the cycle.
+
+The written curves (the solved bones, or a control rig's controls) hold the cycle already, its seam key the next
+cycle's first pose. Every other curve (bones outside the bone map such as fingers, custom properties, the object's
+own transform) is closed too: where its value at the seam differs from the first frame's, that difference is eased
+in over the frames the model made again before the seam (or, with none, the last tenth of the cycle), so that it
+repeats without a pop. Locations repeat with their offset (a walk's travel, on the hips or on the object), every
+other channel as it is.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from . import anim
+
+
+def _smoothstep(s: np.ndarray) -> np.ndarray:
+    s = np.clip(s, 0.0, 1.0)
+    return s * s * (3.0 - 2.0 * s)
+
+
+def close(fc, frames: np.ndarray, blend: int) -> bool:
+    """Make the curve ``fc`` (not one the solve wrote) end the cycle ``frames`` ``[L + 1]`` (its first frame to the
+    seam) on its first frame's value, eased in over the last ``blend`` frames, and keep only its keys in the cycle;
+    whether it had to be changed. A location keeps its value at the seam (it repeats with its offset)."""
+    values = np.array([fc.evaluate(float(f)) for f in frames])
+    gap = values[0] - values[-1]
+    if not fc.data_path.endswith("location") and abs(gap) > 1e-6 * max(1.0, float(np.abs(values).max())):
+        span = max(int(blend), max(1, (len(frames) - 1) // 10))
+        at = np.arange(len(frames)) - (len(frames) - 1 - span)
+        anim.write_keys(fc, frames, values + gap * _smoothstep(at / span), (-np.inf, np.inf))
+        return True
+    anim.write_keys(fc, frames[[0, -1]], values[[0, -1]])  # its ends pinned where they are, the keys between kept
+    anim.keep_between(fc, frames[0], frames[-1])
+    return False
+
+
+def add_cycles(fc) -> None:
+    """A Cycles modifier on ``fc`` (unless it has one) that repeats its keys before and after them; a location
+    repeats with its offset (each cycle goes on from where the last ended)."""
+    if any(m.type == "CYCLES" for m in fc.modifiers):
+        return
+    mod = fc.modifiers.new("CYCLES")
+    mod.mode_before = mod.mode_after = "REPEAT_OFFSET" if fc.data_path.endswith("location") else "REPEAT"
+
+
+def make_cyclic(clip, action, frames: np.ndarray, blend: int, written: set[str]) -> int:
+    """Make ``action`` (the new action of ``clip``'s armature, keyed on ``frames`` ``[L + 1]``: the cycle's first
+    frame to its seam) cyclic (see the module); the curves in ``written`` (data paths) hold the cycle already. Returns
+    how many other curves had to be closed."""
+    channels = anim.Channels(action, clip.obj.animation_data)
+    closed = 0
+    for fc in list(channels.fcurves):
+        if fc.data_path in written:
+            anim.keep_between(fc, frames[0], frames[-1])
+        else:
+            closed += close(fc, frames, blend)
+        add_cycles(fc)
+    action.use_frame_range = True
+    action.frame_start, action.frame_end = float(frames[0]), float(frames[-1])
+    action.use_cyclic = True
+    return closed
