@@ -10,7 +10,10 @@ line, as a Cycles modifier repeats it (it adds the travel to the location, and c
 
 The last ``blend`` frames before the seam are made again by the in-betweener (:func:`inbetween.inbetween_positions`)
 from the cycle before them to the next cycle's start, so the motion flows on into it: a pose that does not quite
-match, or a body that turned a little over the cycle, is carried back on to it without a pop.
+match, or a body that turned a little over the cycle, is carried back on to it without a pop. Where the take goes on
+before the stretch, those frames are half the in-between and half the cycle's end cross-faded into the take's own
+frames that lead into its first (moved by the travel): on held-out takes that mix came nearer the take's own
+smoothness at the seams than either alone (``runs/s61/loop_eval.py``, README "Make Loop").
 
 ``in_place``: the travel is taken off (the hips' ground path less its straight line from the first frame to the
 seam), so that the cycle repeats on the spot with its sway kept, as game engines take a cycle apart from its root
@@ -87,13 +90,21 @@ def find_seam(pos: np.ndarray, fps: float, match: bool = True) -> int:
     return int(candidates[int(np.argmin(pose_distance(pos, fps, candidates)))])
 
 
+def cross_fade(end: np.ndarray, into: np.ndarray) -> np.ndarray:
+    """The frames ``end`` ``[B, 21, 3]`` cross-faded (smoothstep) into ``into`` (as many frames), ``into``'s weight
+    rising from its first frame to 1 after its last."""
+    s = (np.arange(len(end)) + 1.0) / len(end)
+    w = (s * s * (3.0 - 2.0 * s))[:, None, None]
+    return (1.0 - w) * end + w * into
+
+
 def loop_positions(engine, pos: np.ndarray, fps: float, blend: int, match: bool = True, in_place: bool = False,
                    lead: np.ndarray | None = None, follow_take: bool = True) -> Loop:
     """The stretch ``pos`` ``[F, 21, 3]`` at ``fps`` made into a cycle (see the module). ``blend``: frames before
-    the seam made again by the in-betweener (at most half the cycle; 0: none, the seam left as it is). ``lead``
-    ``[P, 21, 3]``: the take's frames before the stretch (the in-betweener reads them with the cycle before the
-    blend; default: the cycle alone). ``follow_take``: the in-between leans on the cycle where it did what the
-    blend must, as Fill Gap's."""
+    the seam made again (at most half the cycle; 0: none, the seam left as it is). ``lead`` ``[P, 21, 3]``: the
+    take's frames before the stretch (the in-betweener reads them with the cycle before the blend, and where there
+    are ``blend`` of them, the blend is half a cross-fade into them; default: none). ``follow_take``: the
+    in-between leans on the cycle where it did what the blend must, as Fill Gap's."""
     pos = np.asarray(pos, np.float64)
     seam = find_seam(pos, fps, match)
     match_cm = float(pose_distance(pos, fps, np.array([seam]))[0])
@@ -103,9 +114,11 @@ def loop_positions(engine, pos: np.ndarray, fps: float, blend: int, match: bool 
     nxt = pos[:seam] + travel  # the next cycle, from its first frame: what the blend arrives in
     blend = int(min(max(blend, 0), seam // 2))
     kept = pos[:seam - blend]
+    lead = np.empty((0, *pos.shape[1:])) if lead is None else np.asarray(lead, np.float64)
     if blend:
-        before = kept if lead is None or not len(lead) else np.concatenate([np.asarray(lead, np.float64), kept])
-        made = inbetween_positions(engine, before, nxt, fps, blend, follow_take)
+        made = inbetween_positions(engine, np.concatenate([lead, kept]), nxt, fps, blend, follow_take)
+        if len(lead) >= blend:  # half of it the cycle's end cross-faded into the take's frames that lead into its start
+            made = 0.5 * (made + cross_fade(pos[seam - blend:seam], lead[-blend:] + travel))
         cycle = np.concatenate([kept, made, nxt[:1]])
     else:
         cycle = np.concatenate([kept, nxt[:1]])
