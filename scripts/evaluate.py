@@ -34,6 +34,7 @@ from model_core.eval.evaluation import (  # noqa: E402
 from model_core.eval.extend_evaluation import evaluate_long_extend  # noqa: E402
 from model_core.eval.feet_evaluation import evaluate_feet  # noqa: E402
 from model_core.eval.inbetween_evaluation import evaluate_inbetween  # noqa: E402
+from model_core.eval.loop_evaluation import evaluate_loops  # noqa: E402
 from model_core.inference.engine import Engine  # noqa: E402
 from model_core.io.bvh import BvhError  # noqa: E402
 from model_core.io.checkpoint import DEFAULT_MODEL, CheckpointError, default_denoiser  # noqa: E402
@@ -73,6 +74,9 @@ def parse_args(argv=None):
     p.add_argument("--inbetween", type=int, nargs="+", metavar="N",
                    help="in-betweening over gaps of N frames (e.g. 15 30 60): L2P, error at the target, foot "
                         "skate, beside linear interpolation")
+    p.add_argument("--loops", action="store_true",
+                   help="also Make Loop's seams: 2 s of each clip that moves over the ground made into a cycle and "
+                        "played 3 times, against the seam as it is, an eased offset and a cross-fade")
     p.add_argument("--feet", action="store_true",
                    help="feet of extended motion before and after Foot Lock: skate beside the real takes', sink "
                         "below the take's floor, knees left fully straight")
@@ -181,6 +185,8 @@ def print_table(result: dict, extra: dict):
             print(f"{name:<20}{value:8.2f}")
     if "inbetween" in result:
         print_inbetween(result["inbetween"])
+    if "loops" in result:
+        print_loops(result["loops"])
     if "feet" in result:
         ft = result["feet"]
         print(f"\nFeet of {ft['frames']} extended frames after each of {ft['clips']} clips' first 20, before -> after "
@@ -206,6 +212,20 @@ def print_long_extend(le: dict) -> None:
         r = le[k]
         print(f"{label}: slowed under 0.4 x {r['slowed']}, hopping {r['hopping']}, stepping {r['stepping']} of "
               f"{le['walking_takes']} walking takes")
+
+
+def print_loops(lp: dict) -> None:
+    """Make Loop's seams: per method, matched and forced seams."""
+    print(f"\nMake Loop: {lp['stretch_s']:g} s of each clip that moves over the ground as a cycle, played "
+          f"{lp['cycles']} times, blend {lp['blend_s']:g} s (foot-locked); peak joint acceleration near the seams / "
+          "the take's 99th percentile (mean, worst, cycles over 1.5 x), foot skate there (cm a frame)")
+    for case in ("matched", "forced"):
+        r = lp[case]
+        print(f"{case} seam ({r['takes']} clips)" + ("" if case == "matched" else ": the stretch's last frame"))
+        for name in ("none", "offset", "cross_fade", "model", "make_loop"):
+            m = r[name]
+            print(f"  {name:<12}{m['peak_accel_ratio_mean']:7.2f}{m['peak_accel_ratio_worst']:7.2f}"
+                  f"{m['over_1_5']:5d}{m['skate_cm']:8.2f}")
 
 
 def print_inbetween(ib: dict) -> None:
@@ -297,6 +317,8 @@ def run(args) -> dict:
         result["denoise_pops"] = pops
     if args.inbetween:
         result["inbetween"] = evaluate_inbetween(engine, clips, args.inbetween)
+    if args.loops:
+        result["loops"] = evaluate_loops(engine, clips)
     if args.feet:
         result["feet"] = evaluate_feet(engine, clips)
     if args.long_extend:
