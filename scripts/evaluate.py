@@ -221,7 +221,8 @@ def print_loops(lp: dict) -> None:
           "the take's 99th percentile (mean, worst, cycles over 1.5 x), foot skate there (cm a frame)")
     for case in ("matched", "forced"):
         r = lp[case]
-        print(f"{case} seam ({r['takes']} clips)" + ("" if case == "matched" else ": the stretch's last frame"))
+        print(f"{case} seam ({r['takes']} clips" + ("" if case == "matched" else ", the stretch's last frame")
+              + f"; its pose {r['seam_pose_cm']:.1f} cm a joint from the first's)")
         for name in ("none", "offset", "cross_fade", "model", "make_loop"):
             m = r[name]
             print(f"  {name:<12}{m['peak_accel_ratio_mean']:7.2f}{m['peak_accel_ratio_worst']:7.2f}"

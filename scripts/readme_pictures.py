@@ -46,7 +46,7 @@ from model_core.motion.conventions import JOINTS, PARENTS
 from model_core.motion.features import detect_contacts
 from model_core.ops.footlock import foot_skate_cm
 
-PICTURES = ("extend", "inbetween", "denoise", "footlock", "follow", "bonemap", "your_rig")
+PICTURES = ("extend", "inbetween", "denoise", "footlock", "loop", "follow", "bonemap", "your_rig")
 BANDAI_SCALE = 0.01  # the Bandai-Namco files are in centimetres: import them in metres
 EXTEND_CLIP = "bandai-namco/dataset-2/dataset-2_walk-turn-right_normal_004.bvh"
 DENOISE_CLIP = "bandai-namco/dataset-2/dataset-2_wave-left-hand_feminine_018.bvh"
@@ -334,6 +334,62 @@ def picture_footlock(bpy, clip: Path, out: Path, frames: int = 150) -> dict:
             "contacts_after_lock": int(contacts1.sum())}
 
 
+def picture_loop(bpy, clip: Path, out: Path, start: int = 60, end: int = 110, cycles: int = 3) -> dict:
+    """Make Loop on frames ``start``-``end`` of the take as given (Match the Start off: the range's last frame starts
+    the next cycle, though the walk is not where it started there): the cycle played ``cycles`` times as Blender
+    plays it, beside the same cycle with its seam left as it is (Blend 0), and each frame's mean joint move."""
+    obj = import_bvh(bpy, clip, BANDAI_SCALE)
+    first = action_range(obj)[0]
+    original = obj.animation_data.action
+    played, record = {}, {}
+    for label, blend in (("seam as it is (Blend 0)", 0.0), ("Make Loop", 0.4)):
+        obj.animation_data.action = original
+        bpy.ops.strnn.make_loop(use_range=True, frame_start=first + start, frame_end=first + end, blend=blend,
+                                match=False)
+        record[label] = obj.animation_data.action["strnn"]["cycle"].to_dict()
+        c = record[label]
+        poses, names = sample(bpy, obj, c["first"], c["first"] + cycles * c["frames"])
+        played[label] = joints_z_up(obj, poses, names)
+    length = record["Make Loop"]["frames"]
+    fig, (side, moves) = plt.subplots(1, 2, figsize=(14, 3.6), gridspec_kw={"width_ratios": [3, 1.3]})
+    every = 10
+    around = [f for k in range(1, cycles) for f in range(k * length - 2 * every, k * length + 2 * every, every)]
+    shown = sorted({f for f in around if 0 <= f < len(played["Make Loop"])})[:8]
+    for row, (label, colour) in enumerate((("seam as it is (Blend 0)", "#e08214"), ("Make Loop", None))):
+        flat = body_view(z_up_to_model(played[label]))[shown]
+        for slot, pose in enumerate(flat):
+            draw_pose(side, np.stack([pose[:, 0] + slot * 0.7, np.zeros(len(pose)), pose[:, 1] - 2.1 * row], -1),
+                      (0, 2), 1.0, colour)
+        side.text(-0.6, 0.9 - 2.1 * row, label, ha="right", fontsize=9)
+        side.axhline(-2.1 * row, color="k", lw=0.6)
+    side.set_aspect("equal")
+    side.axis("off")
+    side.set_title(f"every {every}th frame around the seams (frame {length} of each cycle starts the next)",
+                   fontsize=9)
+    t = np.arange(1, cycles * length + 1) / 30.0
+    for label, colour in (("seam as it is (Blend 0)", "#e08214"), ("Make Loop", NEW)):
+        step = np.linalg.norm(np.diff(z_up_to_model(played[label]), axis=0), axis=-1).mean(-1) * 100
+        moves.plot(t[:len(step)], step, color=colour, lw=1.4, label=label)
+    for k in range(1, cycles):
+        moves.axvline(k * length / 30.0, color="#9a9a9a", lw=0.8, ls="--")
+    moves.set_xlabel("time (s); dashed: where a cycle starts again")
+    moves.set_ylabel("mean joint move a frame (cm)")
+    moves.grid(alpha=0.3)
+    moves.legend(fontsize=8)
+    c = record["Make Loop"]
+    fig.suptitle(f"Make Loop, Match the Start off, on frames {start + 1}-{end + 1} of {clip.name} (a test-split "
+                 f"take): the last pose {c['match_cm']:.0f} cm a joint from the first, {cycles} cycles as played")
+    finish(fig, out / "loop.png")
+    seams = [k * length - 1 for k in range(1, cycles)]
+    jumps = {label: float(np.linalg.norm(np.diff(z_up_to_model(j), axis=0), axis=-1).mean(-1)[seams].max() * 100)
+             for label, j in played.items()}
+    take = np.linalg.norm(np.diff(z_up_to_model(played["seam as it is (Blend 0)"][:length]), axis=0),
+                          axis=-1).mean(-1).max() * 100
+    return {"clip": clip.name, "cycle_frames": c["frames"], "match_cm": c["match_cm"],
+            "seam_move_cm": jumps["Make Loop"], "seam_move_unblended_cm": jumps["seam as it is (Blend 0)"],
+            "take_largest_move_cm": float(take)}
+
+
 def picture_follow(bpy, clip: Path, out: Path) -> dict:
     import batch_worker
 
@@ -524,6 +580,7 @@ def main(argv=None) -> int:
             "inbetween": lambda: picture_inbetween(bpy, clips["follow"], args.out),
             "denoise": lambda: picture_denoise(bpy, clips["denoise"], args.out, args.seed),
             "footlock": lambda: picture_footlock(bpy, clips["extend"], args.out),
+            "loop": lambda: picture_loop(bpy, clips["follow"], args.out),
             "follow": lambda: picture_follow(bpy, clips["follow"], args.out),
             "bonemap": lambda: picture_bone_map(bpy, args.data, args.out),
             "your_rig": lambda: picture_your_rig(bpy, clips["follow"], args.out),

@@ -4,6 +4,7 @@
     python scripts/strnn_batch.py denoise  --strength 0.8 a.bvh b.bvh --jobs 4
     python scripts/strnn_batch.py inbetween --gap 40 70 take.bvh --out out/filled
     python scripts/strnn_batch.py footlock data/clips/ --out out/locked
+    python scripts/strnn_batch.py loop     --range 60 120 walk.bvh --no-travel
     python scripts/strnn_batch.py follow   --path figure_eight --frames 300 walk.bvh
     python scripts/strnn_batch.py transfer --target hero.blend data/clips/ --out out/hero
 
@@ -12,7 +13,7 @@ module, resets to factory settings, installs and enables the built extension zip
 here with scripts/build_extension.py into dist/ unless dist/ is up to date, or ``--extension``),
 imports the file with Blender's own BVH importer (a .blend is opened), runs the extension's real
 operator (strnn.extend_clip, strnn.inbetween, strnn.denoise_action, strnn.foot_lock,
-strnn.follow_curve) on the armature, and writes the result with Blender's own BVH exporter (or
+strnn.make_loop, strnn.follow_curve) on the armature, and writes the result with Blender's own BVH exporter (or
 saves a .blend) as ``OUT/NAME.<command>.bvh``. Folders are searched recursively for *.bvh and *.blend; their
 sub-folders are kept under OUT. An input is never overwritten unless ``--in-place``. ``transfer``
 opens the character .blend (--target) instead, imports each take beside its rig, runs
@@ -141,6 +142,21 @@ def build_parser() -> argparse.ArgumentParser:
                        "(strnn.foot_lock)", description="Pin the feet on the ground while they touch it (leg IK).")
     p.add_argument("--blend", type=float, default=opts.LOCK_BLEND.default, help=opts.LOCK_BLEND.help(" s"))
 
+    p = sub.add_parser("loop", parents=[common], help="make each clip a cycle that repeats without a seam "
+                       "(strnn.make_loop)", description="Make each clip (or frames START to END of it) a cycle: "
+                       "from its first frame to the frame where the pose comes round again, the frames before that "
+                       "made again so it flows into its start. A .blend keeps the cyclic action (Cycles modifiers); "
+                       "a BVH holds the cycle's frames, its last the next cycle's first.")
+    p.add_argument("--range", type=int, nargs=2, default=None, metavar=("START", "END"),
+                   help="the frames to make a cycle of (default: the whole clip)")
+    p.add_argument("--blend", type=float, default=opts.LOOP_BLEND.default, help=opts.LOOP_BLEND.help(" s"))
+    p.add_argument("--no-match", dest="match", action="store_false",
+                   help="the range's last frame starts the next cycle (by default the cycle ends where the pose comes "
+                        "round to the first frame's again)")
+    p.add_argument("--no-travel", dest="loop_in_place", action="store_true",
+                   help="take the travel off, so the cycle repeats on the spot (In Place in Blender)")
+    foot_lock_flag(p, "make_loop")
+
     p = sub.add_parser("follow", parents=[common], help="walk each character along a path (strnn.follow_curve)",
                        description="Make each character walk along a path with the motion model, from the "
                        "path's start (walking there first when the take ends elsewhere).")
@@ -190,6 +206,11 @@ def operator_call(args) -> tuple[str, dict]:
                              "follow_take": args.follow_take, "foot_lock": args.foot_lock}
     if args.command == "transfer":
         return "transfer_motion", {"foot_lock": args.foot_lock}
+    if args.command == "loop":
+        start, end = args.range or (1, 250)
+        return "make_loop", {"use_range": args.range is not None, "frame_start": start, "frame_end": end,
+                             "blend": args.blend, "match": args.match, "in_place": args.loop_in_place,
+                             "foot_lock": args.foot_lock}
     return "follow_curve", {"frames": args.frames, "speed": args.speed, "foot_lock": args.foot_lock}
 
 
@@ -206,6 +227,10 @@ def check_args(parser, args) -> None:
         parser.error("--gap START END needs at least 2 frames: END after START")
     if args.command == "footlock" and not 0.0 <= args.blend <= 2.0:
         parser.error("--blend must be between 0 and 2 seconds")
+    if args.command == "loop" and not 0.0 <= args.blend <= opts.LOOP_BLEND.max:
+        parser.error(f"--blend must be between 0 and {opts.LOOP_BLEND.max:g} seconds")
+    if args.command == "loop" and args.range and args.range[1] <= args.range[0]:
+        parser.error("--range START END: END must come after START")
     if args.command == "follow" and (args.frames < 0 or args.speed < 0):
         parser.error("--frames and --speed must not be negative")
     if args.command == "transfer" and (args.target.suffix.lower() != ".blend" or not args.target.is_file()):

@@ -37,8 +37,9 @@ def _played(cycle: np.ndarray, travel: np.ndarray, times: int = CYCLES) -> np.nd
     return np.concatenate([cycle[:-1] + k * travel for k in range(times)] + [cycle[-1:] + (times - 1) * travel])
 
 
-def _made(engine, pos: np.ndarray, start: int, span: int, blend: int, match: bool) -> tuple[dict, int, np.ndarray]:
-    """Each method's cycle of ``pos[start:start + span + 1]``, its seam and travel."""
+def _made(engine, pos: np.ndarray, start: int, span: int, blend: int, match: bool) -> tuple[dict, object]:
+    """Each method's cycle of ``pos[start:start + span + 1]``, and the in-betweener's :class:`loop.Loop` (its seam,
+    travel and how far the seam's pose was from the first's)."""
     stretch, lead = pos[start:start + span + 1], pos[max(0, start - 20):start]
     alone = loop_positions(engine, stretch, MODEL_FPS, blend, match)
     shipped = loop_positions(engine, stretch, MODEL_FPS, blend, match, lead=lead)
@@ -56,19 +57,19 @@ def _made(engine, pos: np.ndarray, start: int, span: int, blend: int, match: boo
     for name, cycle in (("offset", offset), ("cross_fade", fade), ("model", alone.positions),
                         ("make_loop", shipped.positions)):
         made[name] = foot_lock(cycle, MODEL_FPS, fixed=fixed, settings=settings)
-    return made, seam, travel
+    return made, alone
 
 
 def evaluate_loops(engine, clips: list, blend_s: float = BLEND_S) -> dict:
     """The seams of cycles made from ``clips`` (``dataset.Clip`` or positions ``[F, 21, 3]``: metres, Y-up, 30
     fps) by each of :data:`METHODS`, matched and forced (see the module): per method the mean and worst peak
     acceleration near the seams against the take's own, how many cycles go over 1.5 x it, and the mean foot skate
-    there."""
+    there; per case how far the seam's pose is from the first's on average (``seam_pose_cm``, cm a joint)."""
     blend, span = int(round(blend_s * MODEL_FPS)), int(round(STRETCH_S * MODEL_FPS))
     ground = list(GROUND_AXES)
     out = {"blend_s": blend_s, "stretch_s": STRETCH_S, "cycles": CYCLES}
     for case, match in (("matched", True), ("forced", False)):
-        rows, takes = {m: [] for m in METHODS}, 0
+        rows, takes, seam_cm = {m: [] for m in METHODS}, 0, []
         for clip in clips:
             pos = np.asarray(getattr(clip, "positions", clip), np.float64)
             start = (len(pos) - span) // 2
@@ -79,8 +80,10 @@ def evaluate_loops(engine, clips: list, blend_s: float = BLEND_S) -> dict:
                 continue
             stretch = pos[start:start + span + 1]
             own = np.percentile(np.linalg.norm(np.diff(stretch, 2, axis=0), axis=-1).max(1), 99)
-            made, seam, travel = _made(engine, pos, start, span, blend, match)
+            made, loop = _made(engine, pos, start, span, blend, match)
+            seam, travel = loop.seam, loop.travel
             takes += 1
+            seam_cm.append(loop.match_cm)
             near = np.concatenate([np.arange(k * seam - blend - 3, k * seam + 3) for k in range(1, CYCLES)])
             for name, cycle in made.items():
                 p = _played(cycle, travel)
@@ -88,7 +91,7 @@ def evaluate_loops(engine, clips: list, blend_s: float = BLEND_S) -> dict:
                 lo, hi = seam - blend, (CYCLES - 1) * seam + 1
                 skate = foot_skate_cm(p[lo:hi], detect_foot_contacts(p[lo:hi], MODEL_FPS))
                 rows[name].append((acc[near].max() / own, skate))
-        out[case] = {"takes": takes, **{name: {
+        out[case] = {"takes": takes, "seam_pose_cm": float(np.mean(seam_cm)) if takes else float("nan"), **{name: {
             "peak_accel_ratio_mean": float(np.mean([r[0] for r in rows[name]])) if takes else float("nan"),
             "peak_accel_ratio_worst": float(np.max([r[0] for r in rows[name]])) if takes else float("nan"),
             "over_1_5": int(sum(r[0] > 1.5 for r in rows[name])),

@@ -56,10 +56,10 @@ def test_help_documents_every_command(capsys):
         strnn_batch.main(["--help"])
     assert e.value.code == 0
     text = capsys.readouterr().out
-    for word in ("extend", "inbetween", "denoise", "footlock", "follow", "--in-place", "--jobs", "Exit status"):
+    for word in ("extend", "inbetween", "denoise", "footlock", "loop", "follow", "--in-place", "--jobs", "Exit status"):
         assert word in text
     for command, option in [("extend", "--frames"), ("denoise", "--strength"), ("follow", "--path"),
-                            ("footlock", "--blend"), ("inbetween", "--gap")]:
+                            ("footlock", "--blend"), ("inbetween", "--gap"), ("loop", "--no-travel")]:
         with pytest.raises(SystemExit):
             strnn_batch.main([command, "--help"])
         text = capsys.readouterr().out
@@ -218,6 +218,27 @@ def test_inbetween_refills_a_gap(tmp_path, extension, capsys):
     with pytest.raises(SystemExit):
         strnn_batch.main(["inbetween", "--gap", "50", "50", str(clip)])
     assert "at least 2 frames" in capsys.readouterr().err
+
+
+def test_loop_writes_the_cycle(tmp_path, extension, capsys):
+    """loop --range 11 70: the BVH holds the cycle (where the walk comes round, one stride on), its last frame the
+    next cycle's first, the first moved by the travel; --no-travel: the first itself."""
+    pos = walking_skeleton(80)
+    clip = write_bvh(tmp_path / "walk.bvh", pos)
+    for flags, travels in (([], True), (["--no-travel"], False)):
+        out = tmp_path / ("out" + "".join(flags))
+        code = strnn_batch.main(["loop", "--range", "11", "70", *flags, str(clip), "--out", str(out),
+                                 "--extension", str(extension)])
+        assert code == 0, capsys.readouterr().err
+        made = canonical_positions(read_bvh(out / "walk.loop.bvh"))
+        assert len(made) in (34, 35), len(made)  # 0.9 strides a second at 30 fps: a cycle of 33 or 34 frames
+        assert np.abs(made[0] - pos[10]).max() < 2e-3  # the cycle starts on the range's first frame
+        moved = (made[-1] - made[0]).mean(0)
+        assert np.abs(made[-1] - made[0] - moved).max() < 0.01 and abs(moved[1]) < 1e-3  # the first pose, moved
+        assert (np.linalg.norm(moved) > 1.0) == travels, moved
+    with pytest.raises(SystemExit):
+        strnn_batch.main(["loop", "--range", "70", "11", str(clip)])
+    assert "END must come after START" in capsys.readouterr().err
 
 
 def test_timeout_kills_the_worker_and_writes_nothing(tmp_path, extension, capsys):
