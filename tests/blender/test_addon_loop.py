@@ -13,6 +13,7 @@ from scenes import (
     import_bvh,
     key_snapshot,
     mixamo_walk,
+    object_walk,
     on_steps,
     same_keys,
     walk_bvh,
@@ -132,3 +133,25 @@ def test_a_range_shorter_than_a_cycle_is_refused(tmp_path, real_model, addon):
     with pytest.raises(RuntimeError, match="a loop needs at least 20 at 30 fps: widen the range"):
         bpy.ops.strnn.make_loop(use_range=True, frame_start=10, frame_end=20)
     assert action_of(obj) is old and not bpy.data.actions.get(f"{old.name}.loop")
+
+
+@pytest.mark.parametrize("in_place", [False, True], ids=["travelling", "in_place"])
+def test_a_walk_whose_travel_is_keyed_on_the_object_loops_with_it(real_model, addon, in_place):
+    """Root motion on the armature object (its location keyed, the hips walking in place): the object's keys repeat
+    with their offset, so the walk goes on travelling; In Place keeps the body over one spot while the object's
+    keys still travel (the hips' keys take it back)."""
+    obj = object_walk(70)
+    take = evaluated_joints(addon, obj, np.arange(1, 71))
+    assert bpy.ops.strnn.make_loop(in_place=in_place) == {"FINISHED"}
+    cycle, joints = played(addon, obj)
+    placed = next(fc for fc in fcurves_of(obj) if fc.data_path == "location" and fc.array_index == 1)
+    assert placed.modifiers[0].mode_after == "REPEAT_OFFSET"
+    about_hips = lambda j: steps(j - j[:, :1])  # noqa: E731  (in place the body no longer travels as the take did)
+    assert about_hips(joints).max() <= 1.1 * about_hips(take).max()
+    assert steps(joints[:, :1]).max() <= 1.1 * steps(take[:, :1]).max()
+    hips = joints[::cycle["frames"], 0]
+    moved = np.linalg.norm(hips[1:] - hips[:-1], axis=-1)
+    if in_place:
+        assert moved.max() < 1e-3, moved
+    else:
+        assert np.allclose(moved, moved[0], atol=1e-4) and moved[0] > 0.4, moved
