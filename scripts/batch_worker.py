@@ -151,16 +151,22 @@ def add_path_curve(bpy, name: str):
     return obj
 
 
-def pick_armature(bpy):
+def pick_armature(bpy, any_animated: bool = False):
+    """The armature to process: the active one, else the only one (or the only one with an action); with
+    ``any_animated`` (``--every-armature``: all of them run) else the first by name with an action whose bones the
+    extension maps (a character rather than a prop), or with an action at all."""
     active = bpy.context.view_layer.objects.active
     if active is not None and active.type == "ARMATURE":
         return active
     arms = [o for o in bpy.context.scene.objects if o.type == "ARMATURE"]
-    animated = [o for o in arms if o.animation_data and o.animation_data.action]
+    animated = sorted((o for o in arms if o.animation_data and o.animation_data.action), key=lambda o: o.name)
     if len(arms) == 1:
         return arms[0]
     if len(animated) == 1:
         return animated[0]
+    if any_animated and animated:
+        mapping = importlib.import_module(f"{ADDON}.strnn_addon.scene.mapping")
+        return next((o for o in animated if not mapping.bonemap.missing(mapping.effective_map(o))), animated[0])
     if not arms:
         raise BatchError("the file has no armature")
     raise BatchError(f"{len(arms)} armatures and none active; make the one to process active and save")
@@ -217,7 +223,7 @@ def run_file(bpy, job: dict) -> list[str]:
             bpy.ops.wm.open_mainfile(filepath=str(src), load_ui=False)
         except RuntimeError as e:
             raise BatchError(f"Blender could not open it: {blender_error(e)}") from None
-    obj = pick_armature(bpy)
+    obj = pick_armature(bpy, bool(job.get("every_armature")) and target is None)
     view_layer = bpy.context.view_layer
     for other in view_layer.objects:
         other.select_set(False)
@@ -227,6 +233,8 @@ def run_file(bpy, job: dict) -> list[str]:
         source.select_set(True)
     view_layer.objects.active = obj
     obj.select_set(True)
+    crowd = every_armature(bpy, obj) if job.get("every_armature") and target is None else []
+    before = {o.name: o.animation_data.action for o in crowd}
     if job.get("keys_per_second"):  # the take's own pace where its file says another rate (--keys-per-second)
         (obj if source is None else source).strnn_keys_per_second = job["keys_per_second"]
     kwargs = dict(job["kwargs"])
@@ -251,7 +259,10 @@ def run_file(bpy, job: dict) -> list[str]:
     action = obj.animation_data.action if obj.animation_data else None
     if action is None:
         raise BatchError(f"strnn.{job['operator']} left the armature without an action")
-    notes = batch_notes(importlib.import_module(f"{ADDON}.strnn_addon.stages.common"), action)
+    common = importlib.import_module(f"{ADDON}.strnn_addon.stages.common")
+    notes = batch_notes(common, action)
+    if crowd:
+        notes = [f"{obj.name}: {n}" for n in notes] + crowd_notes(common, crowd, before)
     if axes[1] != "Y":
         notes.append(f"the take stands along its file's {axes[1]} axis, not Y: read with Up {axes[1]} so that it "
                      "stands, and written back in the file's own axes")
@@ -273,6 +284,30 @@ def run_file(bpy, job: dict) -> list[str]:
         tmp.unlink(missing_ok=True)
         raise BatchError(f"Blender could not write {dst.name}: {blender_error(e)}") from None
     os.replace(tmp, dst)
+    return notes
+
+
+def every_armature(bpy, obj) -> list:
+    """The armatures with an action in the file's view layer other than ``obj``, selected with it so that the
+    operator runs on each (``--every-armature``)."""
+    crowd = [o for o in bpy.context.view_layer.objects if o.type == "ARMATURE" and o is not obj
+             and o.animation_data and o.animation_data.action]
+    for o in crowd:
+        o.select_set(True)
+    return crowd
+
+
+def crowd_notes(common, crowd: list, before: dict) -> list[str]:
+    """Each of ``crowd``'s notes (its name first), and which of them the operator left as they were (their action
+    the one they had, ``before``: it could not take them)."""
+    notes = []
+    for o in crowd:
+        action = o.animation_data.action if o.animation_data else None
+        if action is None or action is before[o.name]:
+            notes.append(f"{o.name}: left as it was (the operator could not take it; run it on that armature alone "
+                         "to see why)")
+        else:
+            notes += [f"{o.name}: {n}" for n in batch_notes(common, action)]
     return notes
 
 

@@ -75,6 +75,10 @@ def build_parser() -> argparse.ArgumentParser:
     io.add_argument("--in-place", action="store_true",
                     help="overwrite each input with its result instead of writing to --out "
                          "(the output format is then the input's)")
+    io.add_argument("--every-armature", action="store_true",
+                    help="in a .blend, run on every armature that has an action (a crowd, a cast), as the sidebar "
+                         "does with them all selected, instead of the active one alone; the result is a .blend "
+                         "(extend, inbetween, denoise, footlock, loop)")
     motion = common.add_argument_group("motion")
     motion.add_argument("--keys-per-second", type=float, default=None, metavar="FPS",
                         help="how many of each take's frames make one second of its motion, where its file says "
@@ -237,6 +241,10 @@ def check_args(parser, args) -> None:
         parser.error(f"--target {args.target}: not a .blend file")
     if args.command == "transfer" and args.in_place:
         parser.error("--in-place is not for transfer: the results go beside the takes in --out")
+    if args.every_armature and args.command in ("transfer", "follow"):
+        parser.error(f"--every-armature is not for {args.command}: it moves one character at a time")
+    if args.every_armature and args.format == "bvh":
+        parser.error("--every-armature writes .blend results (a BVH file holds one armature): drop --format bvh")
     if args.keys_per_second is not None and not 0.0 < args.keys_per_second <= 1000.0:
         parser.error("--keys-per-second must be over 0 (frames a second, e.g. 60)")
     if args.extension is not None and not args.extension.is_file():
@@ -538,7 +546,7 @@ def main(argv: list[str] | None = None) -> int:
                      "rig": getattr(args, "rig", ""),
                      "model": str(args.model.resolve()) if args.model else "",
                      "denoise_model": str(args.denoise_model.resolve()) if getattr(args, "denoise_model", None)
-                     else "", "verbose": args.verbose})
+                     else "", "verbose": args.verbose, "every_armature": args.every_armature})
     total = len(jobs) + len(results)
     if not total:
         parser.error("no input files")

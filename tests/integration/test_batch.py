@@ -265,6 +265,53 @@ def run_bpy(code: str) -> dict:
     return json.loads(done.stdout.strip().splitlines()[-1])
 
 
+def test_every_armature_of_a_blend_file_is_extended(tmp_path, extension, capsys):
+    """--every-armature: a .blend with two walking characters and a prop's armature, none of them active: both
+    walkers get their new action, the prop is left and named in the notes; without it the file is refused as
+    before (which one?)."""
+    clips = [write_bvh(tmp_path / f"walk{i}.bvh", walking_skeleton(60 + 10 * i)) for i in range(2)]
+    scene = tmp_path / "crowd.blend"
+    run_bpy(f"""
+bpy.ops.wm.read_factory_settings(use_empty=True)
+for i, clip in enumerate({[str(c) for c in clips]!r}):
+    bpy.ops.import_anim.bvh(filepath=clip)
+    bpy.context.active_object.location.x = 2.0 * i
+arm = bpy.data.armatures.new("Sword")
+sword = bpy.data.objects.new("Sword", arm)
+bpy.context.scene.collection.objects.link(sword)
+bpy.context.view_layer.objects.active = sword
+bpy.ops.object.mode_set(mode="EDIT")
+bone = arm.edit_bones.new("blade")
+bone.head, bone.tail = (0, 0, 0), (0, 0, 1)
+bpy.ops.object.mode_set(mode="OBJECT")
+for f in (1, 30):
+    sword.pose.bones["blade"].location = (0, 0, 0.01 * f)
+    sword.pose.bones["blade"].keyframe_insert("location", frame=f)
+bpy.context.view_layer.objects.active = None
+bpy.ops.wm.save_as_mainfile(filepath={str(scene)!r})
+print(json.dumps(0))
+""")
+    out = tmp_path / "out"
+    report = tmp_path / "report.json"
+    code = strnn_batch.main(["extend", "--frames", "20", str(scene), "--out", str(out), "--extension", str(extension)])
+    assert code == 1 and "3 armatures and none active" in capsys.readouterr().err
+    code = strnn_batch.main(["extend", "--frames", "20", "--every-armature", str(scene), "--out", str(out),
+                             "--report", str(report), "--extension", str(extension)])
+    assert code == 0, capsys.readouterr().err
+    notes = json.loads(report.read_text())["files"][0]["notes"]
+    assert any(n.startswith("Sword: left as it was") for n in notes), notes
+    got = run_bpy(f"""
+bpy.ops.wm.open_mainfile(filepath={str(out / "crowd.extend.blend")!r})
+print(json.dumps({{o.name: [o.animation_data.action.name, o.animation_data.action.frame_range[1]]
+                  for o in bpy.data.objects if o.type == "ARMATURE"}}))
+""")
+    assert got["walk0"] == ["walk0.extended", 80] and got["walk1"] == ["walk1.extended", 90], got
+    assert not got["Sword"][0].endswith(".extended"), got
+    with pytest.raises(SystemExit):
+        strnn_batch.main(["follow", "--every-armature", str(scene)])
+    assert "not for follow" in capsys.readouterr().err
+
+
 def test_follow_a_curve_in_a_blend_file_and_blend_to_bvh(tmp_path, extension, capsys):
     clip = write_bvh(tmp_path / "walk.bvh", walking_skeleton(60))
     scene = tmp_path / "scene.blend"
