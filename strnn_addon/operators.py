@@ -405,12 +405,21 @@ class STRNN_OT_follow_curve(_Staged, bpy.types.Operator):
 
 class STRNN_OT_transfer_motion(_Staged, bpy.types.Operator):
     """Move the motion of the other selected armature onto the active one (its proportions, feet on the floor);
-    writes a new action"""
+    with Source named, onto every selected armature but the source; writes a new action"""
 
     bl_idname = "strnn.transfer_motion"
     need_action = False
     bl_label = "Transfer Motion"
     bl_options = {"REGISTER", "UNDO"}
+    many = True  # with Source named: a cast given one take
+
+    def objects(self, context) -> tuple[list, list[str]]:
+        """With Source named, the active armature and every other selected one but the source, each given its
+        motion; else the active one alone (the other selected armature is the source)."""
+        if not self.source:
+            return [context.active_object], []
+        taken, left = super().objects(context)
+        return [taken[0]] + [o for o in taken[1:] if o.name != self.source], left
 
     source: options.source_name()
     foot_lock: options.foot_lock("transfer_motion")

@@ -44,7 +44,7 @@ class STRNN_PT_main(_Sidebar, bpy.types.Panel):
         col.label(text=f"{obj.name}: {action.name} (frames {first}-{last})", icon="ACTION")
         others = [o for o in context.selected_objects if o is not obj and o.type == "ARMATURE" and not check_message(o)]
         if others:  # the operations that run on every selected armature say so before they are run
-            many = [cls.bl_label for cls in operators.classes if getattr(cls, "many", False)]
+            many = [cls.bl_label for cls in operators.classes if getattr(cls, "many", False) and cls.need_action]
             col.label(text=f"+ {len(others)} more selected armature{'s' if len(others) > 1 else ''} with an action",
                       icon="OUTLINER_OB_ARMATURE")
             col.label(text=f"{', '.join(many[:-1])} and {many[-1]} run on each")
@@ -183,6 +183,8 @@ class STRNN_PT_transfer(_OperatorPanel, bpy.types.Panel):
         col.prop(opts, "source", icon="OUTLINER_OB_ARMATURE")
         if not opts.source:
             col.label(text="Or select the source, then the target", icon="INFO")
+        elif sum(o.type == "ARMATURE" and o.name != opts.source for o in context.selected_objects) > 1:
+            col.label(text="Onto each selected armature but the source", icon="INFO")
         col.prop(opts, "foot_lock")
 
 

@@ -19,6 +19,7 @@ from scenes import (
     import_bvh,
     key_snapshot,
     makehuman_walk,
+    mixamo_bones,
     mixamo_walk,
     same_keys,
     walk_bvh,
@@ -194,3 +195,29 @@ def test_in_pose_mode_every_armature_in_it_runs(tmp_path, fake_model, addon):
     assert bpy.context.mode == "POSE"
     for obj, last in zip(objs, (60, 80)):
         assert action_of(obj) is not before[obj.name][0] and action_of(obj).frame_range[1] == last + 12
+
+
+def test_transfer_with_a_source_named_puts_its_motion_on_every_selected_armature(tmp_path, fake_model, addon):
+    """One take moved onto a cast: with Source named, each selected armature but the source gets the take's motion
+    on its own proportions, from where it stands (here a Mixamo rig and a MakeHuman rig with no action yet, and the
+    source itself selected too); without Source, three selected armatures do not say which is the source."""
+    source = import_bvh(walk_bvh(tmp_path, frames=50))
+    mixamo = build_armature("Mixamo", mixamo_bones())
+    human = makehuman_walk(20)
+    mixamo.location, human.location = (3.0, 0.0, 0.0), (-3.0, 0.0, 0.0)
+    for obj in (source, mixamo, human):
+        obj.select_set(True)
+    bpy.context.view_layer.objects.active = mixamo
+    with pytest.raises(RuntimeError, match="Select the armature to take the motion from"):
+        bpy.ops.strnn.transfer_motion()
+    played = evaluated_joints(addon, source, np.arange(1, 51))
+    assert bpy.ops.strnn.transfer_motion(source=source.name, foot_lock=False) == {"FINISHED"}
+    for obj, x in ((mixamo, 3.0), (human, -3.0)):
+        new = action_of(obj)
+        assert new[RECORD]["operation"] == "Transfer Motion" and new[RECORD]["settings"]["source"] == source.name
+        joints = evaluated_joints(addon, obj, np.arange(1, 51))
+        travel = joints[-1, 0] - joints[0, 0]
+        want = played[-1, 0] - played[0, 0]
+        assert np.linalg.norm(travel - want) < 0.25 * np.linalg.norm(want), (obj.name, travel, want)
+        assert abs(joints[0, 0, 0] - x) < 0.3  # from where it stands
+    assert action_of(source).name == "walk" and not action_of(source).get(RECORD)

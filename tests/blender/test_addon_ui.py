@@ -271,3 +271,22 @@ def test_the_batch_cli_and_the_operators_share_each_options_default(addon, tmp_p
             if name in ("use_range", "frame_start", "frame_end", "from_current"):
                 continue  # the batch decides these from --gap / --from-frame
             assert rna[name].default == pytest.approx(value), f"{command} --{name}: {value} != {rna[name].default}"
+
+
+def test_transfer_panel_says_a_named_source_goes_onto_each_selected_armature(addon, tmp_path):
+    source = import_bvh(walk_bvh(tmp_path, frames=30))
+    targets = [build_armature(name, [("a", None, (0, 0, 0), (0, 0, 1))]) for name in ("A", "B")]
+    opts = bpy.context.window_manager.operator_properties_last("strnn.transfer_motion")
+    opts.source = ""
+    for obj in (source, *targets):
+        obj.select_set(True)
+    assert ("Or select the source, then the target", "INFO") in panel_labels("STRNN_PT_transfer", bpy.context)
+    opts.source = source.name
+    try:
+        assert ("Onto each selected armature but the source", "INFO") in panel_labels("STRNN_PT_transfer",
+                                                                                       bpy.context)
+        targets[1].select_set(False)
+        assert ("Onto each selected armature but the source", "INFO") not in panel_labels("STRNN_PT_transfer",
+                                                                                           bpy.context)
+    finally:
+        opts.source = ""
