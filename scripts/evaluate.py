@@ -218,15 +218,18 @@ def print_loops(lp: dict) -> None:
     """Make Loop's seams: per method, matched and forced seams."""
     print(f"\nMake Loop: {lp['stretch_s']:g} s of each clip that moves over the ground as a cycle, played "
           f"{lp['cycles']} times, blend {lp['blend_s']:g} s (foot-locked); peak joint acceleration near the seams / "
-          "the take's 99th percentile (mean, worst, cycles over 1.5 x), foot skate there (cm a frame)")
+          "the take's 99th percentile (mean, worst, cycles over 1.5 x), foot skate there (cm a frame), the body's "
+          "fastest turn there / the take's 99th percentile (mean, cycles over 1.5 x), foot skate over the cycle")
     for case in ("matched", "forced"):
         r = lp[case]
         print(f"{case} seam ({r['takes']} clips" + ("" if case == "matched" else ", the stretch's last frame")
-              + f"; its pose {r['seam_pose_cm']:.1f} cm a joint from the first's)")
+              + f"; its pose {r['seam_pose_cm']:.1f} cm a joint from the first's; the takes' skate "
+              f"{r['take_skate_cm']:.2f} cm a frame)")
         for name in ("none", "offset", "cross_fade", "model", "make_loop"):
             m = r[name]
             print(f"  {name:<12}{m['peak_accel_ratio_mean']:7.2f}{m['peak_accel_ratio_worst']:7.2f}"
-                  f"{m['over_1_5']:5d}{m['skate_cm']:8.2f}")
+                  f"{m['over_1_5']:5d}{m['skate_cm']:8.2f}{m['turn_rate_ratio_mean']:7.2f}{m['turn_rate_over_1_5']:5d}"
+                  f"{m['skate_cycle_cm']:8.2f}")
 
 
 def print_inbetween(ib: dict) -> None:

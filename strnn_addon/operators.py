@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import bpy
 
+from ..model_core.ops.loop import UNWOUND_LOCK_DEG
 from . import props as options
 from .props import joint_label
 from .scene import anim, controls, mapping
@@ -371,6 +372,11 @@ class STRNN_OT_make_loop(_Staged, bpy.types.Operator):
                  f"travelling {length(cycle['travel'])} a cycle")
         made = (f"; the last {cycle['blend_keys']} keys before the seam made again to flow into the start"
                 if cycle["blend_keys"] else "")
+        turn = cycle.get("turn_deg", 0.0)
+        if abs(turn) > UNWOUND_LOCK_DEG:
+            locked = ", its feet locked over it" if action[RECORD]["settings"].get("foot_lock") else ""
+            made += (f"; the take turns {abs(turn):.0f} degrees {'left' if turn > 0 else 'right'} over the cycle, "
+                     f"unwound so that it repeats in a straight line{locked}")
         return (f"Looped frames {first}-{seam} ({cycle['frames']} frames, {cycle['seconds']:.2f} s, {moves}) in new "
                 f"cyclic action {action.name!r}: frame {seam} starts the next cycle, Cycles modifiers repeat it"
                 f"{made}{stepped_note(action)}")

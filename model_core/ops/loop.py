@@ -6,7 +6,10 @@ cycle. With ``match`` the seam is the frame of the stretch's second half whose p
 its joints' velocities, is nearest the first frame's (:func:`find_seam`); otherwise the stretch's last frame, as
 given. The next cycle starts where the seam frame stands: the first pose moved over the ground by the cycle's travel
 (the hips' ground path from the first frame to the seam) and not turned, so that the cycle repeats along a straight
-line, as a Cycles modifier repeats it (it adds the travel to the location, and cannot turn it).
+line, as a Cycles modifier repeats it (it adds the travel to the location, and cannot turn it). A stretch that turns
+(a walk that curves, a walk-turn) is unwound first (:func:`unwound`): each frame turned back about the vertical by its
+share of the cycle's net turn, its path with it, so that the seam faces as the first frame does and the blend need
+not turn the body back (left in, a 100 degree turn came back within the 0.4 s blend at up to 350 degrees a second).
 
 The last ``blend`` frames before the seam are made again by the in-betweener (:func:`inbetween.inbetween_positions`)
 from the cycle before them to the next cycle's start, so the motion flows on into it: a pose that does not quite
@@ -29,12 +32,16 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..motion.conventions import GROUND_AXES, ROOT
-from ..motion.features import root_and_local
+from ..motion.conventions import GROUND_AXES, ROOT, UP_AXIS
+from ..motion.features import heading, root_and_local, yaw_matrix
 from .inbetween import inbetween_positions
 from .normalise import fit_normalisation
 
 MIN_CYCLE_S = 0.5  # the shortest cycle made (a run's stride is about 0.7 s)
+# A cycle unwound by more than this many degrees has its feet locked over the whole cycle, not only the blend: the
+# unwinding turns each frame about the hips, which slides a planted foot (a 45 degree turn over 1.2 s: 0.2 -> 0.6 cm
+# a frame), and the lock plants it again.
+UNWOUND_LOCK_DEG = 5.0
 BLEND_S = 0.4  # seconds before the seam made again by default
 VELOCITY_WEIGHT_S = 0.1  # the pose match weighs the joints' velocities (m/s) by this, beside their places (m)
 
@@ -48,6 +55,18 @@ class Loop:
     travel: np.ndarray  # [3] the ground travel of one cycle (zero in place)
     match_cm: float  # how far the seam's pose was from the first's before the blend (cm a joint, standard body)
     blend: int  # frames before the seam made again
+    turn: float = 0.0  # the stretch's net turn from the first frame to the seam, unwound (radians about the up axis)
+
+    def fixed(self) -> np.ndarray:
+        """bool ``[L + 1]``: the cycle's frames a foot lock leaves as they are: all but the blend's; where the stretch
+        was unwound by more than :data:`UNWOUND_LOCK_DEG`, only the first and the seam (kept, so that the cycle
+        still repeats without a seam)."""
+        fixed = np.ones(self.seam + 1, bool)
+        if abs(math.degrees(self.turn)) > UNWOUND_LOCK_DEG:
+            fixed[1:-1] = False
+        else:
+            fixed[self.seam - self.blend:self.seam] = False
+        return fixed
 
     def on_the_spot(self, positions: np.ndarray | None = None) -> Loop:
         """The cycle (or ``positions`` ``[L + 1, 21, 3]`` in its place: the cycle with its feet locked) with its
@@ -90,6 +109,26 @@ def find_seam(pos: np.ndarray, fps: float, match: bool = True) -> int:
     return int(candidates[int(np.argmin(pose_distance(pos, fps, candidates)))])
 
 
+def unwound(pos: np.ndarray, seam: int) -> tuple[np.ndarray, float]:
+    """The stretch ``pos`` ``[F, 21, 3]`` with its net turn from the first frame to the ``seam`` taken off, and that
+    turn (radians about the up axis): frame t turned back about the vertical through its hips by t / seam of it, the
+    hips' ground path turned step by step with it (the first frame as it is), so that the body walks the same steps
+    along a path that no longer turns overall."""
+    yaw = heading(pos)
+    turn = float(yaw[seam] - yaw[0])
+    if abs(turn) < 1e-6:
+        return pos, 0.0
+    ground = list(GROUND_AXES)
+    root = np.zeros((len(pos), 3))
+    root[:, ground] = pos[:, ROOT][:, ground]
+    back = yaw_matrix(-turn * np.arange(len(pos)) / seam)  # [F, 3, 3]
+    path = np.concatenate([root[:1], root[0] + np.cumsum(np.einsum("fij,fj->fi", back[:-1], np.diff(root, axis=0)),
+                                                         axis=0)])
+    out = np.einsum("fij,fkj->fki", back, pos - root[:, None]) + path[:, None]
+    out[..., UP_AXIS] = pos[..., UP_AXIS]
+    return out, turn
+
+
 def cross_fade(end: np.ndarray, into: np.ndarray) -> np.ndarray:
     """The frames ``end`` ``[B, 21, 3]`` cross-faded (smoothstep) into ``into`` (as many frames), ``into``'s weight
     rising from its first frame to 1 after its last."""
@@ -108,6 +147,7 @@ def loop_positions(engine, pos: np.ndarray, fps: float, blend: int, match: bool 
     pos = np.asarray(pos, np.float64)
     seam = find_seam(pos, fps, match)
     match_cm = float(pose_distance(pos, fps, np.array([seam]))[0])
+    pos, turn = unwound(pos, seam)
     ground = list(GROUND_AXES)
     travel = np.zeros(3)
     travel[ground] = pos[seam, ROOT, ground] - pos[0, ROOT, ground]
@@ -122,5 +162,5 @@ def loop_positions(engine, pos: np.ndarray, fps: float, blend: int, match: bool 
         cycle = np.concatenate([kept, made, nxt[:1]])
     else:
         cycle = np.concatenate([kept, nxt[:1]])
-    loop = Loop(cycle, seam, travel, match_cm, blend)
+    loop = Loop(cycle, seam, travel, match_cm, blend, turn)
     return loop.on_the_spot() if in_place else loop

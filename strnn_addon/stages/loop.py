@@ -43,10 +43,8 @@ def loop_steps(context, obj, *, frame_start: int | None = None, frame_end: int |
     blend_keys = int(round(max(float(blend), 0.0) * fps))
     loop = model_call(engine_bridge.run_loop, prefs(context), pos, fps, blend_keys, match, before)
     cycle = loop.positions
-    if foot_lock and loop.blend:  # the frames made again, locked against the cycle's own either side
-        fixed = np.ones(len(cycle), bool)
-        fixed[loop.seam - loop.blend:loop.seam] = False
-        cycle = lock(cycle, fps, fixed=fixed, passes=SETTLE_PASSES)
+    if foot_lock and not loop.fixed().all():  # the frames made again (a stretch unwound: all), locked
+        cycle = lock(cycle, fps, fixed=loop.fixed(), passes=SETTLE_PASSES)
     if in_place:
         loop = loop.on_the_spot(cycle)
         cycle = loop.positions
@@ -59,7 +57,7 @@ def loop_steps(context, obj, *, frame_start: int | None = None, frame_end: int |
     record["cycle"] = {"first": int(written[0]), "seam": int(written[-1]), "frames": int(written[-1] - written[0]),
                        "seconds": round(float(written[-1] - written[0]) / clip.fps, 3),
                        "travel": round(float(np.linalg.norm(loop.travel)), 4), "match_cm": round(loop.match_cm, 2),
-                       "blend_keys": loop.blend}
+                       "blend_keys": loop.blend, "turn_deg": round(float(np.degrees(loop.turn)), 1)}
     record.update(pace_record(context, clip, b))
     yield "write"  # every check and every read done: only the writing is left
     made = pipeline.written_paths(clip)

@@ -9,8 +9,9 @@ import pytest
 from model_core.inference.engine import Engine
 from model_core.io.bvh import read_bvh
 from model_core.motion.conventions import GROUND_AXES, ROOT
+from model_core.motion.features import heading, root_and_local
 from model_core.motion.synthetic import walking_skeleton
-from model_core.ops.loop import MIN_CYCLE_S, find_seam, loop_positions, pose_distance
+from model_core.ops.loop import MIN_CYCLE_S, find_seam, loop_positions, pose_distance, unwound
 from model_core.rig.rigs import canonical_clip
 
 GROUND = list(GROUND_AXES)
@@ -62,7 +63,9 @@ def test_a_real_walk_loops_where_it_comes_round_and_repeats_without_a_pop(mocap_
     assert 0.9 * 30 <= loop.seam <= 1.3 * 30, loop.seam  # one stride of a walk (two steps)
     assert loop.match_cm < 6.0
     assert loop.positions.shape == (loop.seam + 1, 21, 3)
-    assert np.array_equal(loop.positions[:loop.seam - 12], stretch[:loop.seam - 12])  # before the blend: the take's
+    kept = loop.seam - 12  # before the blend: the take's own frames (unwound by its small turn)
+    assert np.allclose(loop.positions[:kept], unwound(stretch, loop.seam)[0][:kept])
+    assert np.abs(root_and_local(loop.positions[:kept])[2] - root_and_local(stretch[:kept])[2]).max() < 1e-5
     assert np.allclose(loop.positions[-1], stretch[0] + loop.travel)  # the next cycle starts as the first frame
     assert loop.travel[1] == 0 and 1.0 < np.linalg.norm(loop.travel) < 1.6  # a stride's travel (m), over the ground
     played = steps(repeated(loop))
@@ -95,3 +98,33 @@ def test_in_place_the_cycle_repeats_on_the_spot_with_its_sway(engine):
     assert np.linalg.norm(np.diff(feet, axis=0), axis=-1).mean() * 30 > 0.5  # the feet still step (m/s about the hips)
     sway = loop.positions[:, ROOT, 1]
     assert np.ptp(sway) > 0.02  # the hips' bob kept
+
+
+def test_a_stretch_that_turns_is_unwound_so_the_cycle_repeats_straight(engine):
+    """The procedural walk goes round a 6 m circle (14 degrees a stride, to the left): the cycle is unwound, its
+    seam facing as its first frame does, so that it repeats in a straight line without the blend turning the body
+    back; every frame keeps its pose in the body's own frame; a foot lock then covers the whole cycle."""
+    walk = walking_skeleton(46).astype(np.float64)
+    loop = loop_positions(engine, walk, 30.0, blend=10)
+    assert 12 < np.degrees(loop.turn) < 16, np.degrees(loop.turn)
+    yaw = heading(loop.positions)
+    assert abs(np.degrees(yaw[-1] - yaw[0])) < 1.0
+    _, _, before = root_and_local(walk[:loop.seam - 10])
+    _, _, after = root_and_local(loop.positions[:loop.seam - 10])
+    assert np.abs(after - before).max() < 1e-6  # the same steps, in the body's own frame
+    rate = np.abs(np.diff(heading(np.concatenate([loop.positions[:-1], loop.positions + loop.travel]))))
+    assert rate.max() < 1.5 * np.abs(np.diff(heading(walk))).max() + 1e-3
+    assert not loop.fixed()[1:-1].any() and loop.fixed()[[0, -1]].all()
+
+
+def test_a_real_walk_turn_loops_without_turning_back_at_the_seam(mocap_root, engine):
+    """A walk-turn-left of the held-out style (45 degrees over the cycle): the body turns no faster around the seams
+    than the take does (left as it was, the blend turned it back at over twice the take's fastest)."""
+    path = mocap_root / "bandai-namco/dataset-2/dataset-2_walk-turn-left_exhausted_001.bvh"
+    pos = canonical_clip(read_bvh(path), 30.0)
+    a = (len(pos) - 60) // 2
+    loop = loop_positions(engine, pos[a:a + 61], 30.0, blend=12, lead=pos[a - 20:a])
+    assert 35 < np.degrees(loop.turn) < 55
+    played = repeated(loop)
+    rate = np.abs(np.diff(heading(played)))[loop.seam - 14:loop.seam + 3]
+    assert rate.max() <= np.percentile(np.abs(np.diff(heading(pos[a:a + 61]))), 99) + 1e-3
