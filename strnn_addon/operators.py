@@ -251,6 +251,11 @@ class STRNN_OT_extend_clip(_Staged, bpy.types.Operator):
         stepped = stepped_note(action)
         if action[RECORD].get("in_place"):
             stepped += " (in place: the clip steps on the spot, so the new frames stay where it is)"
+        if "cycles_baked" in action[RECORD].to_dict():
+            span = action[RECORD]["cycles_baked"]
+            played = f"has the cycles it played over frames {span[0]}-{span[1]} as keys and " if len(span) else ""
+            stepped += (f"; the action repeated by Cycles modifiers: the new one {played}repeats no more, so the new "
+                        "frames follow")
         where = "before" if self.before_start else "after"
         if self.from_current:
             return (f"Continued {where} frame {bpy.context.scene.frame_current} with {self.frames} new frames in new "

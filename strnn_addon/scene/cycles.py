@@ -1,5 +1,8 @@
-"""An action made cyclic (Make Loop): every F-curve of the armature's slot repeats its keys from the cycle's first
-frame to its seam by a Cycles modifier, and the action's manual frame range, marked cyclic, is the cycle.
+"""Actions that repeat. An action made cyclic (Make Loop): every F-curve of the armature's slot repeats its keys
+from the cycle's first frame to its seam by a Cycles modifier, and the action's manual frame range, marked cyclic, is
+the cycle. An action that repeats already (a walk cycle keyed with Cycles modifiers) and is extended: the cycles it
+plays up to where the new frames start are baked into keys and the modifiers removed (:func:`bake_cycles`), so the new
+frames follow what played, once.
 
 The written curves (the solved bones, or a control rig's controls) hold the cycle already, its seam key the next
 cycle's first pose. Every other curve (bones outside the bone map such as fingers, custom properties, the object's
@@ -13,7 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import anim
+from . import anim, pipeline, rig_io
 
 
 def _smoothstep(s: np.ndarray) -> np.ndarray:
@@ -38,12 +41,11 @@ def close(fc, frames: np.ndarray, blend: int) -> bool:
 
 
 def add_cycles(fc) -> None:
-    """A Cycles modifier on ``fc`` (unless it has one) that repeats its keys before and after them; a location
-    repeats with its offset (each cycle goes on from where the last ended)."""
-    if any(m.type == "CYCLES" for m in fc.modifiers):
-        return
-    mod = fc.modifiers.new("CYCLES")
+    """A Cycles modifier on ``fc`` (its own, where it has one) that repeats its keys before and after them; a
+    location repeats with its offset (each cycle goes on from where the last ended)."""
+    mod = next((m for m in fc.modifiers if m.type == "CYCLES"), None) or fc.modifiers.new("CYCLES")
     mod.mode_before = mod.mode_after = "REPEAT_OFFSET" if fc.data_path.endswith("location") else "REPEAT"
+    mod.mute = False
 
 
 def make_cyclic(clip, action, frames: np.ndarray, blend: int, written: set[str]) -> int:
@@ -62,3 +64,33 @@ def make_cyclic(clip, action, frames: np.ndarray, blend: int, written: set[str])
     action.frame_start, action.frame_end = float(frames[0]), float(frames[-1])
     action.use_cyclic = True
     return closed
+
+
+def repeats(clip, back: bool = False) -> bool:
+    """Whether a curve of a bone the operations key (:func:`pipeline.keyed_names`) repeats beyond its keys by a
+    Cycles modifier: after the last (``back``: before the first), where the action plays on without keys."""
+    names = set(pipeline.keyed_names(clip))
+    for (bone, _prop), by_index in rig_io.bone_channels(clip.channels.fcurves).items():
+        if bone in names and any(m.type == "CYCLES" and not m.mute and (m.mode_before if back else m.mode_after)
+                                 != "NONE" for fc in by_index.values() for m in fc.modifiers):
+            return True
+    return False
+
+
+def bake_cycles(channels, frames: np.ndarray) -> int:
+    """Key every curve of ``channels`` that a Cycles modifier repeats with the values it plays on ``frames`` (whole
+    frames beyond its keys; none: nothing to key) and remove the modifier, so that it plays those and no more;
+    how many curves."""
+    frames = np.asarray(frames, np.float64)
+    baked = 0
+    for fc in list(channels.fcurves):
+        mods = [m for m in fc.modifiers if m.type == "CYCLES"]
+        if not mods:
+            continue
+        values = np.array([fc.evaluate(float(f)) for f in frames])
+        for m in mods:
+            fc.modifiers.remove(m)
+        if len(frames):
+            anim.write_keys(fc, frames, values)
+        baked += 1
+    return baked

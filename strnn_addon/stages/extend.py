@@ -8,7 +8,7 @@ from ...model_core.ops.extend import FLOOR_S, MEMORY_S, clip_floor, clip_in_plac
 from ...model_core.ops.footlock import SETTLE_PASSES
 from ...model_core.rig.solve import solve
 from .. import engine_bridge
-from ..scene import pipeline
+from ..scene import anim, cycles, pipeline
 from ..scene.pipeline import UserError
 from .common import (
     familiarity_record,
@@ -80,6 +80,13 @@ def extend_steps(context, obj, *, frames: int = 120, context_frames: int = 0, fo
     clip = pipeline.prepare(context, obj)
     back, sign = before_start, -1 if before_start else 1
     edge = (clip.first if back else clip.last) if from_frame is None else int(from_frame)
+    # a walk cycle keyed with Cycles modifiers plays on beyond its keys: the clip is what plays, up to the edge, and
+    # the new action has those cycles as keys (and no more repeats), so that the new frames follow them
+    cycled = cycles.repeats(clip, back)
+    keys_end = clip.first if back else clip.last
+    baked = np.arange(edge, keys_end) if back else np.arange(keys_end + 1, edge + 1)
+    if cycled:
+        clip.first, clip.last = min(clip.first, edge), max(clip.last, edge)
     # keys on twos: read at its keys (the one ``edge`` holds, or the first from it), continued on twos
     step, key = pipeline.key_step(clip, edge, back)
     fps, count = clip.fps / step, -(-(frames + sign * (edge - key)) // step)  # the keys' rate, the new keys
@@ -114,6 +121,8 @@ def extend_steps(context, obj, *, frames: int = 120, context_frames: int = 0, fo
                      foot_lock=foot_lock, from_frame=from_frame, before_start=before_start or None)
     if followed is not None and clip_in_place(followed, fps):  # the new frames kept where the clip walks in place
         record["in_place"] = True
+    if cycled:
+        record["cycles_baked"] = [int(baked[0]), int(baked[-1])] if len(baked) else []
     record.update(familiarity_record(model_call(engine_bridge.run_familiarity, prefs(context), pos, fps)))
     held = model_call(engine_bridge.run_first_window, prefs(context), pos, fps, followed)
     record.update(first_window_record(held, back))
@@ -123,5 +132,7 @@ def extend_steps(context, obj, *, frames: int = 120, context_frames: int = 0, fo
     # the written bones' keys beyond the edge go: the old tail or head (from a frame), or keys past a manual range
     replace = (-float("inf"), edge - 0.5) if back else (edge + 0.5, float("inf"))
     yield "write"  # every check and every read done: only the writing is left
+    unrepeat = (lambda action: cycles.bake_cycles(anim.Channels(action, clip.obj.animation_data), baked)) \
+        if cycled else None
     return write_new(context, clip, "extended", new_frames, loc, rot, previous, replace, record,
-                     scene_range=scene_range, follows=back)
+                     scene_range=scene_range, follows=back, first=unrepeat)

@@ -14,7 +14,7 @@ import numpy as np
 from ...model_core.motion.conventions import zup_to_yup
 from ...model_core.rig.solve import solve
 from .. import engine_bridge
-from ..scene import curves, pipeline
+from ..scene import anim, curves, cycles, pipeline
 from ..scene.pipeline import UserError
 from .common import familiarity_record, lock, made_by, model_steps, pace_record, prefs, write_fresh, write_new
 
@@ -66,8 +66,12 @@ def follow_curve_steps(context, obj, *, curve: str = "", frames: int = 0, speed:
         record.update(pace_record(context, clip))
     yield "write"  # every check and every read done: only the writing is left
     if clip.action is not None:
+        # a walk cycle keyed with Cycles modifiers: the new action plays it once and repeats no more, the walk
+        # along the curve following it
+        unrepeat = (lambda action: cycles.bake_cycles(anim.Channels(action, clip.obj.animation_data), [])) \
+            if cycles.repeats(clip) else None
         return write_new(context, clip, "curve", new_frames, loc, rot, previous, (clip.last + 0.5, float("inf")),
-                         record, scene_range=scene_range)  # keys past a manual frame range's end go
+                         record, scene_range=scene_range, first=unrepeat)  # keys past a manual range's end go
     return write_fresh(context, clip, f"{clip.obj.name}.curve", new_frames, loc, rot, record, scene_range)
 
 

@@ -260,3 +260,21 @@ def test_a_run_that_ends_heading_away_from_the_curve_turns_onto_it_without_a_pop
     peak = lambda j: np.linalg.norm(np.diff(j, 2, axis=0), axis=-1).max()  # noqa: E731
     assert peak(joints) < 1.25 * peak(take)  # the straight lead-in: 6 x
     assert ground_distance(joints[-30:, 0], points).mean() < 0.15, "on the path by the end"
+
+
+def test_a_walk_cycle_repeated_by_cycles_modifiers_walks_the_curve_after_one_cycle(addon, real_model, tmp_path):
+    """An action keyed as a cycle (Cycles modifiers): the walk along the curve follows its keys once; the new
+    action repeats no more (with its modifiers, the whole new range would have repeated, the body snapping back)."""
+    from scenes import fcurves_of
+
+    obj = import_bvh(write_bvh(tmp_path / "walk.bvh", walking_skeleton(40)), update_scene_fps=True)
+    for fc in fcurves_of(obj):
+        fc.modifiers.new("CYCLES")
+    last = int(action_of(obj).frame_range[1])
+    curve = add_curve("poly", points=[(0, 0, 0), (0, -6, 0)])
+    bpy.context.view_layer.objects.active = obj
+    assert bpy.ops.strnn.follow_curve(curve=curve.name, frames=60) == {"FINISHED"}
+    assert not any(len(fc.modifiers) for fc in fcurves_of(obj))
+    joints = evaluated_joints(addon, obj, np.arange(last - 5, last + 70))
+    step = np.linalg.norm(np.diff(joints[:, 0], axis=0), axis=-1)
+    assert step[-8:].max() < 1e-6  # after the walk it stands: no snap back to the cycle's first pose

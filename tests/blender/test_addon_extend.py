@@ -688,3 +688,43 @@ def test_bones_an_action_on_twos_never_keyed_get_held_keys_too(fake_model, addon
     made = [fc for fc in fcurves_of(obj) if fc.data_path not in before and fc.data_path.startswith("pose.bones")]
     assert any("Spine" in fc.data_path for fc in made) and any("Head" in fc.data_path for fc in made)
     assert all({p.interpolation for p in fc.keyframe_points} == {"CONSTANT"} for fc in made)
+
+
+def cycled(obj) -> None:
+    """Make ``obj``'s action a walk cycle as animators key one: a Cycles modifier on every F-curve, the locations
+    repeating with their offset (each cycle walks on from where the last ended)."""
+    for fc in fcurves_of(obj):
+        mod = fc.modifiers.new("CYCLES")
+        if fc.data_path.endswith("location"):
+            mod.mode_before = mod.mode_after = "REPEAT_OFFSET"
+
+
+@pytest.mark.parametrize("from_frame", [None, 60], ids=["after_the_keys", "from_the_playhead"])
+def test_a_walk_cycle_repeated_by_cycles_modifiers_is_extended_after_what_it_plays(tmp_path, real_model, addon,
+                                                                                  capfd, from_frame):
+    """A 34-frame walk keyed as a cycle (Cycles modifiers) plays on forever. Extended, its new keys went into the
+    cycled curves, whose modifiers then repeated the whole new range: at its end the body snapped back to the first
+    pose (70 cm in a frame), and From Current Frame past the keys was refused although the walk plays there. Now the
+    new action has the cycles that played up to where the new frames start as keys and repeats no more: every frame
+    up to there plays as it did, and the new frames go on from it without a jump."""
+    obj = import_bvh(walk_bvh(tmp_path, frames=34), update_scene_fps=True)
+    cycled(obj)
+    old = action_of(obj)
+    edge = 34 if from_frame is None else from_frame
+    played = evaluated_joints(addon, obj, np.arange(1, edge + 1))
+    kw = {"frames": 30}
+    if from_frame is not None:
+        bpy.context.scene.frame_set(from_frame)
+        kw["from_current"] = True
+    assert bpy.ops.strnn.extend_clip(**kw) == {"FINISHED"}
+    new = action_of(obj)
+    assert new is not old and all(len(fc.modifiers) for fc in fcurves_of(obj, old))  # the cycle kept as it was
+    assert not any(len(fc.modifiers) for fc in fcurves_of(obj))
+    assert new.frame_range[1] == edge + 30
+    assert list(new["strnn"]["cycles_baked"]) == ([] if from_frame is None else [35, 60])
+    joints = evaluated_joints(addon, obj, np.arange(1, edge + 41))
+    assert np.abs(joints[:edge] - played).max() < 1e-4  # what played up to the edge plays as it did
+    step = np.linalg.norm(np.diff(joints, axis=0), axis=-1).mean(-1)
+    assert step[edge - 1] < 1.5 * step[:edge - 1].max() and step[edge:edge + 29].min() > 0.2 * step[:edge - 1].mean()
+    assert step[edge + 30:].max() < 1e-6  # after the new frames it holds: no snap back to the first pose
+    assert "the action repeated by Cycles modifiers" in capfd.readouterr().out
