@@ -236,7 +236,8 @@ def run_file(bpy, job: dict) -> list[str]:
     crowd = every_armature(bpy, obj) if job.get("every_armature") and target is None else []
     before = {o.name: o.animation_data.action for o in crowd}
     if job.get("keys_per_second"):  # the take's own pace where its file says another rate (--keys-per-second)
-        (obj if source is None else source).strnn_keys_per_second = job["keys_per_second"]
+        for each in [obj if source is None else source, *crowd]:
+            each.strnn_keys_per_second = job["keys_per_second"]
     kwargs = dict(job["kwargs"])
     if job["operator"] == "inbetween" and kwargs.get("use_range"):
         clear_keys(obj, kwargs["frame_start"], kwargs["frame_end"])

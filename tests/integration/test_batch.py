@@ -295,17 +295,18 @@ print(json.dumps(0))
     report = tmp_path / "report.json"
     code = strnn_batch.main(["extend", "--frames", "20", str(scene), "--out", str(out), "--extension", str(extension)])
     assert code == 1 and "3 armatures and none active" in capsys.readouterr().err
-    code = strnn_batch.main(["extend", "--frames", "20", "--every-armature", str(scene), "--out", str(out),
-                             "--report", str(report), "--extension", str(extension)])
+    code = strnn_batch.main(["extend", "--frames", "20", "--every-armature", "--keys-per-second", "30", str(scene),
+                             "--out", str(out), "--report", str(report), "--extension", str(extension)])
     assert code == 0, capsys.readouterr().err
     notes = json.loads(report.read_text())["files"][0]["notes"]
     assert any(n.startswith("Sword: left as it was") for n in notes), notes
     got = run_bpy(f"""
 bpy.ops.wm.open_mainfile(filepath={str(out / "crowd.extend.blend")!r})
-print(json.dumps({{o.name: [o.animation_data.action.name, o.animation_data.action.frame_range[1]]
+print(json.dumps({{o.name: [o.animation_data.action.name, o.animation_data.action.frame_range[1],
+                           o.animation_data.action.get("strnn", {{}}).get("keys_per_second")]
                   for o in bpy.data.objects if o.type == "ARMATURE"}}))
 """)
-    assert got["walk0"] == ["walk0.extended", 80] and got["walk1"] == ["walk1.extended", 90], got
+    assert got["walk0"] == ["walk0.extended", 80, 30] and got["walk1"] == ["walk1.extended", 90, 30], got
     assert not got["Sword"][0].endswith(".extended"), got
     with pytest.raises(SystemExit):
         strnn_batch.main(["follow", "--every-armature", str(scene)])
