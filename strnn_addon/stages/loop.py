@@ -21,9 +21,10 @@ def loop_steps(context, obj, *, frame_start: int | None = None, frame_end: int |
                match: bool = True, in_place: bool = False, foot_lock: bool = True):
     """Make frames ``frame_start..frame_end`` of ``obj``'s action (default: the whole action) into a cycle: from
     the first frame to the seam (with ``match`` the frame of the range's second half where the pose comes round to
-    the first's again, else the range's last frame), the last ``blend`` seconds before the seam made again by the
-    model so the motion flows on into the next cycle's start, the feet locked there when ``foot_lock``, the travel
-    taken off when ``in_place``. The new action holds the cycle, every F-curve repeating it (Cycles modifiers;
+    the first's again, else the range's last frame; a range that turns unwound so that it repeats straight), the
+    last ``blend`` seconds before the seam made again by the model so the motion flows on into the next cycle's
+    start, the feet locked there (over the whole cycle where it was unwound) when ``foot_lock``, the travel taken
+    off when ``in_place``. The new action holds the cycle, every F-curve repeating it (Cycles modifiers;
     locations with their offset, so a walk walks on), its manual frame range the cycle and marked cyclic. A
     generator like :func:`.extend.extend_steps`."""
     clip = pipeline.prepare(context, obj)
