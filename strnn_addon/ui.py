@@ -11,7 +11,7 @@ from ..model_core.rig.solve import placed_between
 from . import operators
 from .operators import check_message
 from .props import TAIL_JOINTS, joint_label
-from .scene import controls
+from .scene import anim, controls
 from .stages.common import RECORD, record_notes
 
 
@@ -42,6 +42,9 @@ class STRNN_PT_main(_Sidebar, bpy.types.Panel):
         action = obj.animation_data.action
         first, last = (int(round(f)) for f in action.frame_range)
         col.label(text=f"{obj.name}: {action.name} (frames {first}-{last})", icon="ACTION")
+        if any(m.type == "CYCLES" and not m.mute for fc in anim.Channels(action, obj.animation_data).fcurves
+               for m in fc.modifiers):  # it plays on past its keys: Extend goes on after what plays
+            col.label(text="Repeats (Cycles modifiers) past its keys", icon="FILE_REFRESH")
         others = [o for o in context.selected_objects if o is not obj and o.type == "ARMATURE" and not check_message(o)]
         if others:  # the operations that run on every selected armature say so before they are run
             many = [cls.bl_label for cls in operators.classes if getattr(cls, "many", False) and cls.need_action]

@@ -8,6 +8,7 @@ from scenes import (
     action_of,
     addon_module,
     build_armature,
+    fcurves_of,
     fewer_torso_bones,
     import_bvh,
     key_snapshot,
@@ -142,6 +143,11 @@ def test_main_panel_says_what_each_object_allows(addon, tmp_path):
                                               ("Follow Curve can start one; the others need an action", "NONE")]
     walk = import_bvh(walk_bvh(tmp_path, frames=30))
     assert panel_labels("STRNN_PT_main", bpy.context) == [("walk: walk (frames 1-30)", "ACTION")]
+    cycles = [fc.modifiers.new("CYCLES") for fc in fcurves_of(walk)]  # a walk cycle keyed as animators key one
+    assert panel_labels("STRNN_PT_main", bpy.context) == [
+        ("walk: walk (frames 1-30)", "ACTION"), ("Repeats (Cycles modifiers) past its keys", "FILE_REFRESH")]
+    for fc, mod in zip(fcurves_of(walk), cycles):
+        fc.modifiers.remove(mod)
     # other selected armatures with an action: the panel says the operations run on each (the bare one has none)
     (tmp_path / "b").mkdir()
     for obj in (import_bvh(walk_bvh(tmp_path / "b", frames=40)), bpy.data.objects["Bare"], bpy.data.objects["Cube"]):
