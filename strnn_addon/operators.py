@@ -20,6 +20,8 @@ from .stages.inbetween import inbetween_steps
 from .stages.loop import loop_steps
 from .stages.transfer import transfer_steps
 
+POOR_MATCH_CM = 15.0  # Make Loop's report says the seam was not found where the pose comes round (cm a joint)
+
 
 class _Staged:
     """Runs a worker generator (see stages/common.py): all at once in ``execute`` (scripts, redo panel),
@@ -377,6 +379,11 @@ class STRNN_OT_make_loop(_Staged, bpy.types.Operator):
                  f"travelling {length(cycle['travel'])} a cycle")
         made = (f"; the last {cycle['blend_keys']} keys before the seam made again to flow into the start"
                 if cycle["blend_keys"] else "")
+        settings = action[RECORD]["settings"]
+        if settings.get("match") and cycle["match_cm"] > POOR_MATCH_CM:
+            made += (f"; no frame of the range's second half comes round to the first frame's pose (the nearest "
+                     f"{cycle['match_cm']:.0f} cm a joint off), so the blend carries it there: a range of a whole "
+                     "stride or two loops more cleanly")
         turn = cycle.get("turn_deg", 0.0)
         if abs(turn) > UNWOUND_LOCK_DEG:
             locked = ", its feet locked over it" if action[RECORD]["settings"].get("foot_lock") else ""

@@ -158,3 +158,16 @@ def test_a_walk_whose_travel_is_keyed_on_the_object_loops_with_it(real_model, ad
         assert moved.max() < 1e-3, moved
     else:
         assert np.allclose(moved, moved[0], atol=1e-4) and moved[0] > 0.4, moved
+
+
+def test_a_range_without_a_whole_stride_says_the_blend_carried_the_seam(tmp_path, real_model, addon, capfd):
+    """Frames 1-24 of the procedural walk (a stride is 33): no frame comes round to the first pose, and the report
+    says the blend carried it and that a range of a stride or two loops more cleanly."""
+    obj = import_bvh(walk_bvh(tmp_path, frames=60), update_scene_fps=True)
+    take = action_of(obj)
+    assert bpy.ops.strnn.make_loop(use_range=True, frame_start=1, frame_end=24, foot_lock=False) == {"FINISHED"}
+    out = capfd.readouterr().out
+    assert "no frame of the range's second half comes round to the first frame's pose" in out, out
+    obj.animation_data.action = take
+    assert bpy.ops.strnn.make_loop(use_range=True, frame_start=1, frame_end=50, foot_lock=False) == {"FINISHED"}
+    assert "comes round to the first frame's pose" not in capfd.readouterr().out
