@@ -7,8 +7,8 @@ frames follow what played, once.
 The written curves (the solved bones, or a control rig's controls) hold the cycle already, its seam key the next
 cycle's first pose. Every other curve (bones outside the bone map such as fingers, custom properties, the object's
 own transform) is closed too: where its value at the seam differs from the first frame's, that difference is eased
-in over the frames the model made again before the seam (or, with none, the last tenth of the cycle), so that it
-repeats without a pop. Locations repeat with their offset (a walk's travel, on the hips or on the object), every
+in over the frames the model made again before the seam (at least the last tenth of the cycle), so that it repeats
+without a pop. Locations repeat with their offset (a walk's travel, on the hips or on the object), every
 other channel as it is.
 """
 
@@ -26,7 +26,8 @@ def _smoothstep(s: np.ndarray) -> np.ndarray:
 
 def close(fc, frames: np.ndarray, blend: int) -> bool:
     """Make the curve ``fc`` (not one the solve wrote) end the cycle ``frames`` ``[L + 1]`` (its first frame to the
-    seam) on its first frame's value, eased in over the last ``blend`` frames, and keep only its keys in the cycle;
+    seam) on its first frame's value, eased in over the last ``blend`` frames (at least a tenth of the cycle), and
+    keep only its keys in the cycle;
     whether it had to be changed. A location keeps its value at the seam (it repeats with its offset)."""
     values = np.array([fc.evaluate(float(f)) for f in frames])
     gap = values[0] - values[-1]

@@ -728,3 +728,27 @@ def test_a_walk_cycle_repeated_by_cycles_modifiers_is_extended_after_what_it_pla
     assert step[edge - 1] < 1.5 * step[:edge - 1].max() and step[edge:edge + 29].min() > 0.2 * step[:edge - 1].mean()
     assert step[edge + 30:].max() < 1e-6  # after the new frames it holds: no snap back to the first pose
     assert "the action repeated by Cycles modifiers" in capfd.readouterr().out
+
+
+def test_a_walk_cycle_repeated_by_cycles_modifiers_gets_a_lead_in_before_what_it_plays(tmp_path, real_model, addon):
+    """Before the Start on a walk cycle keyed with Cycles modifiers (which repeat before its first key too, from
+    frame 40 of a 34-frame cycle that starts at 30): the repeats from the playhead to the first key become keys, the
+    lead-in goes before the playhead, and the new action repeats no more."""
+    obj = import_bvh(walk_bvh(tmp_path, frames=34), update_scene_fps=True)
+    for fc in fcurves_of(obj):  # the cycle keyed from frame 30 on
+        for key in fc.keyframe_points:
+            key.co[0] += 29
+            key.handle_left[0] += 29
+            key.handle_right[0] += 29
+    cycled(obj)
+    bpy.context.scene.frame_start = 1
+    played = evaluated_joints(addon, obj, np.arange(10, 64))
+    bpy.context.scene.frame_set(10)
+    assert bpy.ops.strnn.extend_clip(frames=8, before_start=True, from_current=True) == {"FINISHED"}
+    new = action_of(obj)
+    assert not any(len(fc.modifiers) for fc in fcurves_of(obj))
+    assert list(new["strnn"]["cycles_baked"]) == [10, 29] and new.frame_range[0] == 2
+    assert np.abs(evaluated_joints(addon, obj, np.arange(10, 64)) - played).max() < 1e-4
+    joints = evaluated_joints(addon, obj, np.arange(2, 12))
+    step = np.linalg.norm(np.diff(joints, axis=0), axis=-1).mean(-1)
+    assert step.min() > 0.2 * step.max()  # the lead-in moves into the repeats without a hold or a jump
