@@ -11,17 +11,18 @@ as a clavicle). The solved pose is then written on the controls by a visual bake
 Blender side, ``strnn_addon/scene/controls.py``): each :class:`Control` is turned until the
 bone it drives sits where the solve put it.
 
-:data:`PRESETS` holds the control sets that ship (Rigify's FK controls); any other rig gets
-its controls from the Bone Map panel.
+:data:`PRESETS` holds the control sets that ship (Rigify's FK controls, the Mixamo Rig add-on's FK controls);
+any other rig gets its controls from the Bone Map panel.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from ..motion.conventions import JOINTS, PARENT_NAMES
+from .rigs import normalise_name
 from .solve import Rig, SolveError, placed as placed_in
 
 
@@ -54,8 +55,29 @@ class ControlSet:
 
     def missing(self, names: set[str]) -> list[str]:
         """Bones this set names that the rig lacks."""
-        wanted = [c.bone for c in self.controls] + [c.drives for c in self.controls] + [s.bone for s in self.switches]
-        return sorted({b for b in wanted if b not in names})
+        return sorted({b for b in self._bones() if b not in names})
+
+    def _bones(self) -> list[str]:
+        return [c.bone for c in self.controls] + [c.drives for c in self.controls] + [s.bone for s in self.switches]
+
+    def on(self, names: list[str] | set[str]) -> ControlSet | None:
+        """This set with each bone it names spelt as the rig spells it: the name itself, else the rig's one bone of
+        that name in another namespace (``mixamorig1:Hips`` or ``Hips`` for ``mixamorig:Hips``); None if a bone is
+        missing."""
+        names = set(names)
+        by_base: dict[str, list[str]] = {}
+        for n in names:
+            by_base.setdefault(normalise_name(n), []).append(n)
+        spelt = {}
+        for b in self._bones():
+            if b in names:
+                spelt[b] = b
+            elif len(by_base.get(normalise_name(b), [])) == 1:
+                spelt[b] = by_base[normalise_name(b)][0]
+            else:
+                return None
+        return ControlSet(self.name, [replace(c, bone=spelt[c.bone], drives=spelt[c.drives]) for c in self.controls],
+                          [replace(s, bone=spelt[s.bone]) for s in self.switches])
 
 
 def _sides(pairs: list[tuple], *more: tuple) -> list[tuple]:
@@ -72,18 +94,37 @@ _RIGIFY_CONTROLS = _sides(
      ("foot_fk.{S}", "ORG-foot.{S}", False), ("toe_fk.{S}", "ORG-toe.{S}", False)],
     ("torso", "ORG-spine", True), ("chest", "ORG-spine.003", True), ("neck", "ORG-spine.004", False),
     ("head", "ORG-spine.006", False))
+# Artell's Mixamo Rig add-on (a control rig built into a Mixamo character's armature): each ``mixamorig:`` bone
+# copies its ``Ctrl_`` control (the hips through Ctrl_Hips_Free's helper, the foot through a bone below
+# Ctrl_Foot_FK); the limbs follow the FK chain where the ``ik_fk_switch`` on their IK control is 1 (FK), the IK
+# chain where it is 0; Ctrl_Hips carries the body. Its FK legs and arms are not copies of the deform bones (their
+# rolls differ), which the visual bake does not mind.
+_MIXAMO_RIG_CONTROLS = [
+    ("Ctrl_Hips", "mixamorig:Hips", True), ("Ctrl_Spine", "mixamorig:Spine", False),
+    ("Ctrl_Spine1", "mixamorig:Spine1", False), ("Ctrl_Spine2", "mixamorig:Spine2", False),
+    ("Ctrl_Neck", "mixamorig:Neck", False), ("Ctrl_Head", "mixamorig:Head", False)] + [
+    (c.format(S=side), d.format(S=side), False) for side in ("Left", "Right") for c, d in (
+        ("Ctrl_Shoulder_{S}", "mixamorig:{S}Shoulder"), ("Ctrl_Arm_FK_{S}", "mixamorig:{S}Arm"),
+        ("Ctrl_ForeArm_FK_{S}", "mixamorig:{S}ForeArm"), ("Ctrl_Hand_FK_{S}", "mixamorig:{S}Hand"),
+        ("Ctrl_UpLeg_FK_{S}", "mixamorig:{S}UpLeg"), ("Ctrl_Leg_FK_{S}", "mixamorig:{S}Leg"),
+        ("Ctrl_Foot_FK_{S}", "mixamorig:{S}Foot"), ("Ctrl_Toe_FK_{S}", "mixamorig:{S}ToeBase"))]
 PRESETS: dict[str, ControlSet] = {
     "rigify": ControlSet(
         "rigify",
         [Control(*c) for c in _RIGIFY_CONTROLS],
         [Switch(*s) for s in _sides([("thigh_parent.{S}", "IK_FK", 1.0), ("upper_arm_parent.{S}", "IK_FK", 1.0)])]),
+    "mixamo_rig": ControlSet(
+        "mixamo_rig",
+        [Control(*c) for c in _MIXAMO_RIG_CONTROLS],
+        [Switch(f"Ctrl_{limb}_IK_{side}", "ik_fk_switch", 1.0)
+         for side in ("Left", "Right") for limb in ("Foot", "Hand")]),
 }
 
 
 def preset_for(names: list[str] | set[str]) -> ControlSet | None:
-    """The shipped control set whose every bone the rig has (None if none fits)."""
-    names = set(names)
-    return next((p for p in PRESETS.values() if not p.missing(names)), None)
+    """The shipped control set whose every bone the rig has, spelt as the rig spells them (:meth:`ControlSet.on`:
+    a Mixamo character's bones may be ``mixamorig1:Hips`` or ``Hips``); None if none fits."""
+    return next((found for p in PRESETS.values() if (found := p.on(names)) is not None), None)
 
 
 def _ancestors(rig: Rig, b: int) -> list[int]:

@@ -1,0 +1,181 @@
+"""A Mixamo character with the control rig Artell's Mixamo Rig add-on builds into its armature, made here bone for
+bone as that add-on makes it (its names, parents and constraints): each ``mixamorig:`` bone copies a ``Ctrl_``
+control (the hips through ``Hips_Free_Helper`` below ``Ctrl_Hips_Free``, the foot through ``Foot_FK_<side>`` below
+``Ctrl_Foot_FK_<side>``), the limbs follow an IK chain, and their FK chain where the ``ik_fk_switch`` on
+``Ctrl_Foot_IK_<side>`` / ``Ctrl_Hand_IK_<side>`` drives the FK constraints' influence to 1. The FK legs and arms
+have rolls of their own, as the add-on's do. The shipped ``mixamo_rig`` preset fits it with no set-up: Extend keys
+the FK controls and the switches, whatever namespace the character's bones have."""
+
+from __future__ import annotations
+
+import bpy
+import numpy as np
+import pytest
+from mathutils import Vector
+from scenes import action_of, build_armature, evaluated_joints, fcurves_of, key_snapshot, mixamo_bones, same_keys
+
+SIDES = ("Left", "Right")
+
+
+def _switch_driver(obj, con, switch_bone: str) -> None:
+    fc = con.driver_add("influence")
+    var = fc.driver.variables.new()
+    var.type = "SINGLE_PROP"
+    var.targets[0].id = obj
+    var.targets[0].data_path = f'pose.bones["{switch_bone}"]["ik_fk_switch"]'
+    fc.driver.expression = "var"
+
+
+def _copy(obj, bone: str, kind: str, target: str, name: str, switch: str = "") -> None:
+    con = obj.pose.bones[bone].constraints.new(kind)
+    con.name, con.target, con.subtarget = name, obj, target
+    if switch:
+        _switch_driver(obj, con, switch)
+
+
+def mixamo_rig(prefix: str = "mixamorig:", frames: int = 60):
+    """The Mixamo Rig add-on's control rig on :func:`scenes.mixamo_bones`, legs in IK (switch 0) and arms in FK
+    (switch 1), a walk keyed on Ctrl_Hips, the IK feet and the FK arms."""
+    deform = [(prefix + n.split(":")[1], p and prefix + p.split(":")[1], h, t) for n, p, h, t in mixamo_bones()]
+    rest = {n.split(":")[-1]: (np.asarray(h, float), np.asarray(t, float)) for n, _, h, t in deform}
+    bones = list(deform)
+
+    def copy_of(name, deform_name, parent):
+        bones.append((name, parent, *rest[deform_name]))
+
+    bones.append(("Ctrl_Master", None, np.zeros(3), np.array([0.0, -0.4, 0.0])))
+    copy_of("Ctrl_Hips", "Hips", "Ctrl_Master")
+    bones.append(("Ctrl_Hips_Free", "Ctrl_Hips", rest["Hips"][1], rest["Hips"][0]))  # pivots at the hips' tail
+    copy_of("Hips_Free_Helper", "Hips", "Ctrl_Hips_Free")
+    for name, parent in (("Spine", "Hips"), ("Spine1", "Spine"), ("Spine2", "Spine1"), ("Neck", "Spine2"),
+                         ("Head", "Neck")):
+        copy_of(f"Ctrl_{name}", name, f"Ctrl_{parent}")
+    for side in SIDES:
+        copy_of(f"Ctrl_Shoulder_{side}", f"{side}Shoulder", "Ctrl_Spine2")
+        copy_of(f"Ctrl_Arm_FK_{side}", f"{side}Arm", "Ctrl_Spine2")
+        copy_of(f"Ctrl_ForeArm_FK_{side}", f"{side}ForeArm", f"Ctrl_Arm_FK_{side}")
+        copy_of(f"Ctrl_Hand_FK_{side}", f"{side}Hand", f"Ctrl_ForeArm_FK_{side}")
+        copy_of(f"Ctrl_Hand_IK_{side}", f"{side}Hand", "Ctrl_Master")
+        copy_of(f"Arm_IK_{side}", f"{side}Arm", f"Ctrl_Shoulder_{side}")
+        copy_of(f"ForeArm_IK_{side}", f"{side}ForeArm", f"Arm_IK_{side}")
+        copy_of(f"Ctrl_UpLeg_FK_{side}", f"{side}UpLeg", "Ctrl_Hips_Free")
+        copy_of(f"Ctrl_Leg_FK_{side}", f"{side}Leg", f"Ctrl_UpLeg_FK_{side}")
+        ankle, toe = rest[f"{side}Foot"]
+        flat = np.array([toe[0], toe[1], ankle[2]])  # the add-on's foot controls lie flat, Z up
+        bones.append((f"Ctrl_Foot_FK_{side}", f"Ctrl_Leg_FK_{side}", ankle, flat))
+        copy_of(f"Foot_FK_{side}", f"{side}Foot", f"Ctrl_Foot_FK_{side}")
+        copy_of(f"Ctrl_Toe_FK_{side}", f"{side}ToeBase", f"Foot_FK_{side}")
+        bones.append((f"Ctrl_Foot_IK_{side}", "Ctrl_Master", ankle, flat))
+        copy_of(f"UpLeg_IK_{side}", f"{side}UpLeg", "Ctrl_Hips_Free")
+        copy_of(f"Leg_IK_{side}", f"{side}Leg", f"UpLeg_IK_{side}")
+        copy_of(f"Foot_IK_{side}", f"{side}Foot", f"Leg_IK_{side}")
+        copy_of(f"Ctrl_Toe_IK_{side}", f"{side}ToeBase", f"Foot_IK_{side}")
+    obj = build_armature("MixamoRig", bones, rotation_mode="XYZ")
+    bpy.ops.object.mode_set(mode="EDIT")
+    for side in SIDES:  # the FK limbs' rolls are the add-on's own, not the deform bones'
+        for name in (f"Ctrl_Arm_FK_{side}", f"Ctrl_ForeArm_FK_{side}", f"Ctrl_UpLeg_FK_{side}", f"Ctrl_Leg_FK_{side}"):
+            obj.data.edit_bones[name].roll += np.pi / 2 if side == "Left" else -np.pi / 2
+    bpy.ops.object.mode_set(mode="OBJECT")
+    for pb in obj.pose.bones:
+        if pb.name.startswith(prefix) or not pb.name.startswith("Ctrl_"):
+            pb.rotation_mode = "QUATERNION"
+    d = prefix
+    _copy(obj, d + "Hips", "COPY_TRANSFORMS", "Hips_Free_Helper", "Copy Transforms")
+    for name in ("Spine", "Spine1", "Spine2", "Neck", "Head"):
+        _copy(obj, d + name, "COPY_TRANSFORMS", f"Ctrl_{name}", "Copy Transforms")
+    for side in SIDES:
+        obj.pose.bones[f"Ctrl_Foot_IK_{side}"]["ik_fk_switch"] = 0.0
+        obj.pose.bones[f"Ctrl_Hand_IK_{side}"]["ik_fk_switch"] = 1.0
+        legs, hand = f"Ctrl_Foot_IK_{side}", f"Ctrl_Hand_IK_{side}"
+        _copy(obj, d + f"{side}Shoulder", "COPY_TRANSFORMS", f"Ctrl_Shoulder_{side}", "Copy Transforms")
+        arm_at = obj.pose.bones[f"Ctrl_Arm_FK_{side}"].constraints.new("COPY_LOCATION")
+        arm_at.target, arm_at.subtarget, arm_at.head_tail = obj, f"Ctrl_Shoulder_{side}", 1.0
+        ik = obj.pose.bones[f"ForeArm_IK_{side}"].constraints.new("IK")
+        ik.target, ik.subtarget, ik.chain_count = obj, hand, 2
+        ik = obj.pose.bones[f"Leg_IK_{side}"].constraints.new("IK")
+        ik.target, ik.subtarget, ik.chain_count = obj, legs, 2
+        _copy(obj, f"Foot_IK_{side}", "COPY_ROTATION", legs, "Copy Rotation")
+        for bone, ik_bone, fk_bone in ((f"{side}UpLeg", f"UpLeg_IK_{side}", f"Ctrl_UpLeg_FK_{side}"),
+                                       (f"{side}Leg", f"Leg_IK_{side}", f"Ctrl_Leg_FK_{side}"),
+                                       (f"{side}Foot", f"Foot_IK_{side}", f"Foot_FK_{side}")):
+            _copy(obj, d + bone, "COPY_TRANSFORMS", ik_bone, "IK_follow")
+            _copy(obj, d + bone, "COPY_TRANSFORMS", fk_bone, "FK_follow", switch=legs)
+        _copy(obj, d + f"{side}ToeBase", "COPY_ROTATION", f"Ctrl_Toe_IK_{side}", "IK_Rot_follow")
+        _copy(obj, d + f"{side}ToeBase", "COPY_ROTATION", f"Ctrl_Toe_FK_{side}", "FK_Rot_follow", switch=legs)
+        for bone, ik_bone, fk_bone in ((f"{side}Arm", f"Arm_IK_{side}", f"Ctrl_Arm_FK_{side}"),
+                                       (f"{side}ForeArm", f"ForeArm_IK_{side}", f"Ctrl_ForeArm_FK_{side}")):
+            _copy(obj, d + bone, "COPY_TRANSFORMS", ik_bone, "IK_follow")
+            _copy(obj, d + bone, "COPY_TRANSFORMS", fk_bone, "FK_Follow", switch=hand)
+        _copy(obj, d + f"{side}Hand", "COPY_ROTATION", hand, "IK_follow")
+        _copy(obj, d + f"{side}Hand", "COPY_ROTATION", f"Ctrl_Hand_FK_{side}", "FK_Follow", switch=hand)
+    _key_walk(obj, frames)
+    return obj
+
+
+def _local(obj, bone: str, world: np.ndarray) -> Vector:
+    """A location in ``bone``'s rest space that moves it by ``world`` (armature space)."""
+    return Vector((np.array(obj.data.bones[bone].matrix_local)[:3, :3].T @ world).tolist())
+
+
+def _key_walk(obj, frames: int) -> None:
+    """Ctrl_Hips forward (-Y) at 1.2 m/s with a bob; each IK foot planted under the hips' mid-stance for 60 % of
+    its second-long stride, then carried 1.2 m forward; the FK arms swing. The legs follow their IK chains, the arms
+    their FK controls."""
+    step = 0.04  # metres a frame (30 fps)
+    for f in range(1, frames + 1):
+        phase = 2 * np.pi * f / 30.0
+        hips = obj.pose.bones["Ctrl_Hips"]
+        hips.location = _local(obj, "Ctrl_Hips", np.array([0.0, -step * f, 0.02 * np.sin(2 * phase)]))
+        hips.keyframe_insert("location", frame=f)
+        for k, side in enumerate(SIDES):
+            t = (f / 30.0 + 0.5 * k) % 1.0  # this foot's share of its stride cycle: planted for the first 60 %
+            cycle = np.floor(f / 30.0 + 0.5 * k)
+            along = cycle + (0.0 if t < 0.6 else (t - 0.6) / 0.4)
+            lift = 0.0 if t < 0.6 else 0.06 * np.sin(np.pi * (t - 0.6) / 0.4)
+            foot = obj.pose.bones[f"Ctrl_Foot_IK_{side}"]
+            foot.location = _local(obj, foot.name, np.array([0.0, -1.2 * along + 0.6 * k - 0.36, lift]))
+            foot.keyframe_insert("location", frame=f)
+            arm = obj.pose.bones[f"Ctrl_Arm_FK_{side}"]
+            arm.rotation_euler = (0.0, 0.0, 0.4 * np.sin(phase + np.pi * k))
+            arm.keyframe_insert("rotation_euler", frame=f)
+
+
+def _switch_keys(obj, action, bone: str) -> dict[int, float]:
+    path = f'pose.bones["{bone}"]["ik_fk_switch"]'
+    fc = next(fc for fc in fcurves_of(obj, action) if fc.data_path == path)
+    return {round(k.co[0]): k.co[1] for k in fc.keyframe_points}
+
+
+@pytest.mark.parametrize("prefix", ["mixamorig:", "mixamorig1:", ""])
+def test_extend_keys_the_mixamo_rig_fk_controls_with_the_legs_switched_to_fk(addon, fake_model, prefix):
+    obj = mixamo_rig(prefix)
+    original = evaluated_joints(addon, obj, np.arange(1, 61))
+    assert np.ptp(original[:, 0, 1]) > 2.0  # the body walks 2.4 m
+    old = action_of(obj)
+    before = key_snapshot(obj)
+    assert bpy.ops.strnn.extend_clip(frames=30) == {"FINISHED"}
+    new = action_of(obj)
+    assert new is not old and same_keys(before, key_snapshot(obj, old))
+    assert new["strnn"]["controls"]["set"] == "mixamo_rig"
+    assert new["strnn"]["controls"]["max_error_cm"] < 0.5
+    np.testing.assert_allclose(evaluated_joints(addon, obj, np.arange(1, 61)), original, atol=1e-5)
+    keyed = {fc.data_path.split('"')[1] for fc in fcurves_of(obj, new) if fc.data_path.startswith("pose.bones")}
+    assert all(b.startswith("Ctrl_") for b in keyed), sorted(keyed)
+    assert {"Ctrl_Hips", "Ctrl_UpLeg_FK_Left", "Ctrl_Leg_FK_Right", "Ctrl_Foot_FK_Left", "Ctrl_Arm_FK_Right"} <= keyed
+    legs = _switch_keys(obj, new, "Ctrl_Foot_IK_Left")
+    assert legs[60] == 0.0 and all(legs[f] == 1.0 for f in range(61, 91))  # IK up to the clip's end, FK after
+    assert all(v == 1.0 for v in _switch_keys(obj, new, "Ctrl_Hand_IK_Right").values())
+    # The fake model carries the clip's last pose on at its last velocity: the deform bones, now on the FK
+    # chain, do just that.
+    pos = evaluated_joints(addon, obj, np.arange(59, 91))
+    want = pos[1] + (pos[1, 0] - pos[0, 0]) * np.arange(1, 31)[:, None, None]
+    assert np.linalg.norm(pos[2:] - want, axis=-1).max() < 0.01
+
+
+def test_controls_from_preset_fills_the_mixamo_rig_controls(addon):
+    obj = mixamo_rig("mixamorig1:", frames=10)
+    assert bpy.ops.strnn.controls_from_preset() == {"FINISHED"}
+    listed = {c.bone: c.drives for c in obj.strnn_controls}
+    assert listed["Ctrl_Hips"] == "mixamorig1:Hips" and listed["Ctrl_Toe_FK_Right"] == "mixamorig1:RightToeBase"
+    assert len(listed) == 22 and {s.bone for s in obj.strnn_switches} == {
+        f"Ctrl_{limb}_IK_{side}" for limb in ("Foot", "Hand") for side in SIDES}
