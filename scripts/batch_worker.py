@@ -251,6 +251,8 @@ def run_file(bpy, job: dict) -> list[str]:
         else:
             kwargs["curve"] = add_path_curve(bpy, job["path"]).name
         view_layer.objects.active = obj
+    if kwargs.get("ground") and bpy.data.objects.get(kwargs["ground"]) is None:
+        raise BatchError(f"no object named {kwargs['ground']!r} in the file for --ground")
     try:
         getattr(bpy.ops.strnn, job["operator"])(**kwargs)
     except RuntimeError as e:

@@ -145,6 +145,9 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("footlock", parents=[common], help="pin the feet while they touch the ground "
                        "(strnn.foot_lock)", description="Pin the feet on the ground while they touch it (leg IK).")
     p.add_argument("--blend", type=float, default=opts.LOCK_BLEND.default, help=opts.LOCK_BLEND.help(" s"))
+    p.add_argument("--ground", default="", metavar="MESH",
+                   help="for .blend inputs: name of a mesh object in the file the feet stand on (stairs, a slope, "
+                        "terrain); each heel and toe is pinned on its surface (default: one flat floor, the take's)")
 
     p = sub.add_parser("loop", parents=[common], help="make each clip a cycle that repeats without a seam "
                        "(strnn.make_loop)", description="Make each clip (or frames START to END of it) a cycle: "
@@ -203,7 +206,7 @@ def operator_call(args) -> tuple[str, dict]:
     if args.command == "denoise":
         return "denoise_action", {"strength": args.strength, "foot_lock": args.foot_lock}
     if args.command == "footlock":
-        return "foot_lock", {"blend": args.blend}
+        return "foot_lock", {"blend": args.blend, "ground": args.ground}
     if args.command == "inbetween":
         start, end = args.gap or (1, 250)
         return "inbetween", {"use_range": args.gap is not None, "frame_start": start, "frame_end": end,

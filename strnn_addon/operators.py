@@ -336,16 +336,18 @@ class STRNN_OT_foot_lock(_Staged, bpy.types.Operator):
     frame_start: options.range_start("Lock")
     frame_end: options.range_end("Lock")
     only_selected: options.only_selected()
+    ground: options.ground_name()
     output: options.output()
     simplify: options.simplify()
 
     def steps(self, context, obj):
         start, end = (self.frame_start, self.frame_end) if self.use_range else (None, None)
         return foot_lock_steps(context, obj, frame_start=start, frame_end=end, blend=self.blend,
-                               only_selected=self.only_selected)
+                               only_selected=self.only_selected, ground=self.ground)
 
     def done(self, action) -> str:
-        return f"Locked the feet into new action {action.name!r}{stepped_note(action)}"
+        on = f" on {self.ground!r}" if self.ground else ""
+        return f"Locked the feet{on} into new action {action.name!r}{stepped_note(action)}"
 
 
 class STRNN_OT_make_loop(_Staged, bpy.types.Operator):

@@ -147,6 +147,13 @@ def curve_name():
                                       "empty: the selected curve")
 
 
+def ground_name():
+    return StringProperty(name="Ground", default="", search=_objects_of("MESH"),
+                          description="A mesh the feet stand on (stairs, a slope, terrain): each heel and toe is "
+                                      "pinned on its surface under the foot, as it stands at the current frame; "
+                                      "empty: one flat floor, the take's own")
+
+
 def source_name():
     return StringProperty(name="Source", default="", search=_objects_of("ARMATURE", exclude_active=True),
                           description="The armature to take the motion from; empty: the other selected armature")

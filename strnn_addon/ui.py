@@ -151,6 +151,7 @@ class STRNN_PT_foot_lock(_OperatorPanel, bpy.types.Panel):
         col.prop(opts, "blend")
         _frame_range(col, opts)
         col.prop(opts, "only_selected")
+        col.prop(opts, "ground", icon="OUTLINER_OB_MESH")
 
 
 class STRNN_PT_loop(_OperatorPanel, bpy.types.Panel):

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .conventions import JOINTS, MODEL_FPS, PARENTS
+from .conventions import CONTACT_JOINTS, JOINTS, MODEL_FPS, PARENTS
 from .features import yaw_matrix
 
 # Rest offsets from the parent joint, metres; the body faces +Z, its left is +X, arms hang down.
@@ -76,3 +76,16 @@ def walking_skeleton(frames: int = 120, fps: float = MODEL_FPS, speed: float = 1
             grot[:, j] = grot[:, p] @ rot
             gpos[:, j] = gpos[:, p] + np.einsum("fij,j->fi", grot[:, p], rest_offset(name))
     return gpos.astype(np.float32)
+
+
+def up_a_slope(pos: np.ndarray, slope: float = 0.15) -> tuple[np.ndarray, np.ndarray]:
+    """Motion ``pos`` ``[F, 21, 3]`` (Y-up) walked up a slope that rises ``slope`` per unit along its way (from the
+    hips' first to their last place), each joint raised by the slope's height under it, and that height under each
+    heel (at the ankle) and toe ``[F, 4]``: a take on uneven ground whose feet stand on it where the take's stood on
+    the floor (Foot Lock's ground)."""
+    way = (pos[-1, 0] - pos[0, 0]) * np.array([1.0, 0.0, 1.0])
+    way = way / np.linalg.norm(way)
+    height = slope * (pos - pos[0, 0]) @ way  # [F, 21]
+    climbed = np.array(pos, np.float64)
+    climbed[..., 1] += height
+    return climbed.astype(np.float32), height[:, CONTACT_JOINTS]

@@ -16,10 +16,13 @@ after ``fixed`` frames, the whole body up and down); every bone keeps its length
   contact joint is at the height it has in contact on the take's floor (the ``fixed`` frames when
   there are some, the whole clip otherwise), faded in and out like the horizontal pull, so
   generated feet neither sink into the floor nor hover above it; and no heel or toe goes below
-  that height at any frame. After ``fixed`` frames, a body whose feet hover where they should
-  stand comes down as a whole first (the legs alone could only reach by straightening). Next to
-  ``fixed`` frames these height corrections ease in over ``blend_s``, so a foot that stands
-  higher or lower there than on the rest of the floor moves off it without a step.
+  that height at any frame. With ``ground`` (the height of the surface under each heel and toe on
+  each frame: stairs, a slope, terrain) every height is measured from that surface instead of from
+  one flat floor: contacts are found, and pinned, on whatever step the foot stands. After ``fixed``
+  frames, a body whose feet hover where they should stand comes down as a whole first (the legs
+  alone could only reach by straightening). Next to ``fixed`` frames these height corrections ease
+  in over ``blend_s``, so a foot that stands higher or lower there than on the rest of the floor
+  moves off it without a step.
 - Settling (``passes`` > 1): the result is locked again, along the ground only, on the contacts it has
   (the first pass's and any detected on the result), until its feet rest.
 - Two-bone IK from the (unmoved) hip: the knee stays in its own plane (the plane of hip,
@@ -84,12 +87,27 @@ def contacts_from_features(feats: np.ndarray) -> np.ndarray:
     return np.round(np.clip(np.asarray(feats)[:, LAYOUT.contacts], 0.0, 1.0)).astype(np.float32)
 
 
-def detect_foot_contacts(pos: np.ndarray, fps: float = MODEL_FPS, scale: float | None = None) -> np.ndarray:
+def detect_foot_contacts(pos: np.ndarray, fps: float = MODEL_FPS, scale: float | None = None,
+                         ground: np.ndarray | None = None) -> np.ndarray:
     """Contacts ``float32 [F, 4]`` of positions ``[F, 21, 3]`` in any unit: ``scale`` (metres per
-    unit; default: legs scaled to the standard length) makes the metre thresholds apply."""
-
-    metres = np.asarray(pos, np.float64) * scale if scale else fit_normalisation(pos).to_model(pos)
+    unit; default: legs scaled to the standard length) makes the metre thresholds apply. ``ground`` ``[F, 4]``:
+    heights are measured from the surface under each heel and toe (:func:`foot_lock`), not the take's lowest."""
+    pos = np.asarray(pos, np.float64)
+    if scale is None and ground is not None:
+        scale = STANDARD_LEG_LENGTH / max(leg_length(pos), 1e-9)
+    metres = above(pos, ground) * scale if scale else fit_normalisation(pos).to_model(pos)
     return detect_contacts(metres, fps)
+
+
+def above(pos: np.ndarray, ground: np.ndarray | None) -> np.ndarray:
+    """``pos`` ``[F, 21, 3]`` with each contact joint's height taken from the ``ground`` ``[F, 4]`` under it (the
+    heel's from under the heel, the toe's from under the toe); ``pos`` itself without ground."""
+    if ground is None:
+        return pos
+    out = np.array(pos, np.float64)
+    for k, joint in enumerate(CONTACT_JOINTS):
+        out[:, joint, UP_AXIS] -= ground[:, k]
+    return out
 
 
 def fill_gaps(mask: np.ndarray, frames: int) -> np.ndarray:
@@ -235,7 +253,7 @@ def _height_pull(ankle: np.ndarray, foot: np.ndarray, mask: np.ndarray, blend: f
 
 def _needs(ankle: np.ndarray, foot: np.ndarray, rest: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """How far up ``[F, 2]`` each heel (at the ankle) and each toe is from its rest height."""
-    return rest[_HEEL_CHANNELS] - ankle[..., UP_AXIS], rest[_TOE_CHANNELS] - (ankle + foot)[..., UP_AXIS]
+    return rest[..., _HEEL_CHANNELS] - ankle[..., UP_AXIS], rest[..., _TOE_CHANNELS] - (ankle + foot)[..., UP_AXIS]
 
 
 def span_lift(ankle: np.ndarray, foot: np.ndarray, mask: np.ndarray, blend: float, fixed: np.ndarray | None,
@@ -377,23 +395,33 @@ def body_forward(pos: np.ndarray) -> np.ndarray:
 
 
 def foot_lock(pos: np.ndarray, fps: float = MODEL_FPS, contacts: np.ndarray | None = None,
-              settings: FootLockSettings | None = None, fixed: np.ndarray | None = None) -> np.ndarray:
+              settings: FootLockSettings | None = None, fixed: np.ndarray | None = None,
+              ground: np.ndarray | None = None) -> np.ndarray:
     """Foot-locked copy ``float32 [F, 21, 3]`` of positions ``pos`` ``[F, 21, 3]`` (Y-up, any unit) at ``fps``.
 
     ``contacts`` ``[F, 4]`` (0/1, :data:`conventions.CONTACTS` order; default: detected).
     ``fixed`` bool ``[F]``: frames left exactly as they are (say, the part of a clip already in
     the scene); locks next to them continue from where their feet are, without a jump.
+    ``ground`` ``[F, 4]``: the height of the surface under each contact joint (heel at the ankle, toe) on each
+    frame, in ``pos``'s units (:func:`ground_heights`); default: one flat floor, the take's own.
     ``settings.passes`` > 1 locks the result again, on its contacts and those detected on it, until no joint
     moves or the passes are spent: a settled lock (:data:`SETTLE_PASSES`)."""
     cfg = settings or FootLockSettings()
     pos = np.asarray(pos, np.float64)
     if pos.ndim != 3 or pos.shape[1:] != (len(JOINT_INDEX), 3):
         raise ValueError(f"foot lock needs positions [frames, {len(JOINT_INDEX)}, 3], got {pos.shape}")
-    contacts = _check_contacts(pos, fps, contacts)
+    if ground is not None:
+        ground = np.asarray(ground, np.float64)
+        if ground.shape != (len(pos), len(CONTACTS)) or not np.isfinite(ground).all():
+            raise ValueError(f"ground must be finite heights [{len(pos)}, {len(CONTACTS)}], got {ground.shape}")
+    contacts = _check_contacts(pos, fps, contacts, ground)
     fixed = np.zeros(len(pos), bool) if fixed is None else np.asarray(fixed, bool)
     if len(pos) < 2 or fixed.all():
         return pos.astype(np.float32)
-    rest = rest_heights(pos, fill_gaps(contacts > 0.5, _min_gap(cfg, fps)), fixed if fixed.any() else None)
+    rest = rest_heights(above(pos, ground), fill_gaps(contacts > 0.5, _min_gap(cfg, fps)),
+                        fixed if fixed.any() else None)
+    if rest is not None and ground is not None:
+        rest = ground + rest  # each contact joint's height standing on the surface under it, frame by frame
     out = _lock(pos, fps, contacts, cfg, fixed, rest)
     # Settling: each pass locks the last one's result on the contacts it has now, along the ground only (the
     # heights came right in the first pass; pulled again, a foot that cannot quite reach would be pulled
@@ -402,7 +430,7 @@ def foot_lock(pos: np.ndarray, fps: float = MODEL_FPS, contacts: np.ndarray | No
     reach = np.linalg.norm(pos[:, _ANKLE] - pos[:, _HIP], axis=-1)
     again, still = replace(cfg, lower_body=False), _SETTLED * leg_length(pos)
     for _ in range(cfg.passes - 1):
-        contacts = np.maximum(contacts, detect_foot_contacts(out, fps))
+        contacts = np.maximum(contacts, detect_foot_contacts(out, fps, ground=ground))
         settled = _lock(out, fps, contacts, again, fixed, rest, reach)
         moved = np.abs(settled - out).max()
         out = settled
@@ -436,7 +464,7 @@ def _lock(pos: np.ndarray, fps: float, contacts: np.ndarray, cfg: FootLockSettin
     foot = pos[:, _TOE] - pos[:, _ANKLE]
     aimed = _unit(toe - target)[0] * np.linalg.norm(foot, axis=-1, keepdims=True)
     if rest is not None:
-        low = (ankle + aimed)[..., UP_AXIS] < rest[_TOE_CHANNELS] - tolerance
+        low = (ankle + aimed)[..., UP_AXIS] < rest[..., _TOE_CHANNELS] - tolerance
         aimed = np.where(low[..., None], face_along(foot, toe - target), aimed)
     out[:, _TOE] = ankle + aimed
     out[:, _KNEE], out[:, _ANKLE] = knee, ankle
@@ -444,10 +472,11 @@ def _lock(pos: np.ndarray, fps: float, contacts: np.ndarray, cfg: FootLockSettin
     return out
 
 
-def _check_contacts(pos: np.ndarray, fps: float, contacts: np.ndarray | None) -> np.ndarray:
-    """Given contacts checked against ``pos`` ``[F, 21, 3]``, or detected ones: ``[F, 4]``."""
+def _check_contacts(pos: np.ndarray, fps: float, contacts: np.ndarray | None,
+                    ground: np.ndarray | None = None) -> np.ndarray:
+    """Given contacts checked against ``pos`` ``[F, 21, 3]``, or detected ones (on ``ground``): ``[F, 4]``."""
     if contacts is None:
-        return detect_foot_contacts(pos, fps) if len(pos) > 1 else np.zeros((len(pos), len(CONTACTS)))
+        return detect_foot_contacts(pos, fps, ground=ground) if len(pos) > 1 else np.zeros((len(pos), len(CONTACTS)))
     contacts = np.asarray(contacts)
     if contacts.shape != (len(pos), len(CONTACTS)):
         raise ValueError(f"contacts must be [{len(pos)}, {len(CONTACTS)}], got {contacts.shape}")

@@ -98,7 +98,7 @@ def lock(pos, fps, *, blend: float | None = None, detect_only: bool = False, low
         settings.blend_s = max(float(blend), 0.0)
     try:
         if detect_only:
-            return footlock.detect_foot_contacts(pos, fps)
+            return footlock.detect_foot_contacts(pos, fps, ground=kw.get("ground"))
         return footlock.foot_lock(pos, fps, settings=settings, **kw)
     except ValueError as e:
         raise UserError(f"Foot lock could not run on this clip: {e}") from e
@@ -211,11 +211,11 @@ def stance_record(pos) -> dict:
 
 
 def record_notes(action) -> list[str]:
-    """The notes of a new action's record (its stance, pace, familiarity, held first window and what Follow the
-    Clip had to follow), in that order."""
+    """The notes of a new action's record (its stance, pace, familiarity, held first window, what Follow the
+    Clip had to follow and where Foot Lock's ground was under no foot), in that order."""
     record = action.get(RECORD, {})
     notes = [record.get(key, {}).get("note", "") for key in ("stance", "pace", "familiarity", "first_window",
-                                                            "follow_clip")]
+                                                            "follow_clip", "ground")]
     return [str(note) for note in notes if note]
 
 

@@ -6,6 +6,7 @@ import numpy as np
 
 from ...model_core.ops import footlock
 from ..scene import pipeline
+from ..scene.ground import find_ground, ground_heights
 from ..scene.pipeline import UserError
 from .common import frame_range, lock, made_by, pace_record, write_new
 
@@ -13,11 +14,13 @@ MIN_LOCK_FRAMES = 3
 
 
 def foot_lock_steps(context, obj, *, frame_start: int | None = None, frame_end: int | None = None,
-                    blend: float = footlock.FootLockSettings.blend_s, only_selected: bool = False):
+                    blend: float = footlock.FootLockSettings.blend_s, only_selected: bool = False, ground: str = ""):
     """Pin the feet of ``obj``'s action on the ground while they touch it, over [frame_start,
     frame_end] (default: the whole action), fading locks in and out over ``blend`` seconds.
-    Only the leg bones get new keys (with ``only_selected``, only the selected ones). A generator
-    like :func:`.extend.extend_steps`."""
+    Only the leg bones get new keys (with ``only_selected``, only the selected ones). ``ground``: the name of a
+    mesh the feet stand on (stairs, a slope), whose surface under each heel and toe is the floor there; empty: one
+    flat floor, the take's own. A generator like :func:`.extend.extend_steps`."""
+    surface = find_ground(ground) if ground else None
     clip = pipeline.prepare(context, obj)
     legs = pipeline.leg_bones(clip)
     bones = pipeline.only_selected(clip, legs, "Foot Lock writes (the legs)") if only_selected else legs
@@ -35,17 +38,25 @@ def foot_lock_steps(context, obj, *, frame_start: int | None = None, frame_end: 
     yield "read"
     pos = pipeline.joint_positions(context, clip, frames)
     previous = pipeline.raw_rotations(clip, a)
+    heights, bare = ground_heights(context, surface, pos) if surface is not None else (None, 0)
     yield "model"
-    contacts = lock(pos, fps, detect_only=True)
+    contacts = lock(pos, fps, detect_only=True, ground=heights)
     if not contacts[inside].any():
-        raise UserError(f"No foot touches the ground in frames {a}-{b} of {clip.action.name!r} (feet near their "
-                        "lowest height and slower than 0.6 m/s): nothing to lock")
+        where = (f"near the surface of {surface.name!r} under them" if surface is not None else
+                 "near their lowest height")
+        raise UserError(f"No foot touches the ground in frames {a}-{b} of {clip.action.name!r} (feet {where} and "
+                        "slower than 0.6 m/s): nothing to lock")
     locked = lock(pos, fps, contacts=contacts, fixed=~inside, blend=blend, lower_body=False,
-                  passes=footlock.SETTLE_PASSES)
+                  passes=footlock.SETTLE_PASSES, ground=heights)
     yield "solve"
     loc, rot = pipeline.solve_frames(context, clip, frames, locked)
     record = made_by("Foot Lock", clip, key_step=step, frame_start=a, frame_end=b, blend=float(blend),
                      only_selected=only_selected)
+    if surface is not None:
+        record["ground"] = {"object": surface.name, "frames_without": bare}
+        if bare:
+            record["ground"]["note"] = (f"The ground {surface.name!r} is under no foot on {bare} of {len(frames)} "
+                                        "frames: there the feet stand as high as on the nearest frames over it")
     record.update(pace_record(context, clip))
     yield "write"  # every check and every read done: only the writing is left
     return write_new(context, clip, "footlocked", frames[inside], loc[inside], rot[inside], previous, (a, b),

@@ -10,9 +10,10 @@ import pytest
 from scenes import action_of, evaluated_joints, fcurves_of, import_bvh, key_snapshot, on_steps, same_keys
 
 from model_core.io.bvh_export import write_bvh
-from model_core.motion.conventions import JOINT_INDEX, zup_to_yup
-from model_core.motion.synthetic import walking_skeleton
+from model_core.motion.conventions import CONTACT_JOINTS, JOINT_INDEX, yup_to_zup, zup_to_yup
+from model_core.motion.synthetic import up_a_slope, walking_skeleton
 from model_core.ops import footlock as fl
+from model_core.rig.rigs import leg_length
 
 LEG_WORDS = ("UpLeg", "Leg", "Foot", "Toe")  # Mixamo names of the leg bones a BVH import has
 LEG_JOINTS = [JOINT_INDEX[f"{s}_{j}"] for s in "lr" for j in ("knee", "foot", "toe")]
@@ -182,3 +183,73 @@ def test_only_selected_bones_lock_only_those_legs(addon, tmp_path):
     old_keys, new_keys = key_snapshot(obj, old), key_snapshot(obj, new)
     changed = {key[0].split('"')[1] for key, co in old_keys.items() if not np.array_equal(co, new_keys[key])}
     assert changed and changed <= left
+
+
+
+SLOPE = 0.15  # rise per unit along the way
+
+
+def climbing(addon, tmp_path, frames: int = 120):
+    """A sliding walk up a ramp that rises :data:`SLOPE` along its way (:func:`synthetic.up_a_slope`), imported,
+    with the ramp as a mesh under it (``Ramp``): the armature, the contacts the sliding walk has on the flat and the
+    ramp's height under points ``[..., 3]`` (Y-up, scene units)."""
+    clean, slid = walking_skeleton(frames), sliding_walk(frames)
+    climbed, _ = up_a_slope(clean, SLOPE)
+    obj = import_bvh(write_bvh(tmp_path / "climb.bvh", climbed + (slid - clean)))
+    scale = leg_length(joints(addon, obj, np.arange(1, frames + 1))) / leg_length(clean)
+    way = (clean[-1, 0] - clean[0, 0]) * np.array([1.0, 0.0, 1.0])  # as up_a_slope lays the slope
+    way /= np.linalg.norm(way)
+    side = np.cross(way, [0.0, 1.0, 0.0])
+    start = clean[0, 0] * np.array([1.0, 0.0, 1.0]) * scale
+
+    def height(p):
+        return SLOPE * ((np.asarray(p) - start) @ way)
+
+    corners = np.array([start + (a * 20.0 * way + b * 5.0 * side) * scale for a, b in ((-1, -1), (1, -1), (1, 1),
+                                                                                        (-1, 1))])
+    corners[:, 1] = height(corners)
+    mesh = bpy.data.meshes.new("Ramp")
+    mesh.from_pydata([tuple(c) for c in yup_to_zup(corners)], [], [(0, 1, 2, 3)])
+    bpy.context.scene.collection.objects.link(bpy.data.objects.new("Ramp", mesh))
+    bpy.context.view_layer.objects.active = obj
+    return obj, fl.detect_foot_contacts(slid), height
+
+
+def test_feet_are_pinned_on_the_ground_mesh_under_them(addon, tmp_path):
+    """Foot Lock with Ground set to a ramp the take walks up: every step is found and pinned on the ramp, each
+    contact as high over it as the take's contacts stand (the take's median, within 4 cm: its heel rises in a
+    contact, and its BVH, written with the bones' lengths, stands the steps 1.6 to 3.6 cm from it). On one flat
+    floor, the take's own, the steps up the ramp are too high to count as contacts: they keep sliding."""
+    obj, contacts, height = climbing(addon, tmp_path)
+    frames = np.arange(1, 121)
+    on = contacts > 0.5
+
+    def over_ramp(p):
+        return p[:, CONTACT_JOINTS, 1] - height(p[:, CONTACT_JOINTS])
+
+    before = joints(addon, obj, frames)
+    stands = np.array([np.median(over_ramp(before)[on[:, k], k]) for k in range(4)])
+    old, new = lock(ground="Ramp")
+    after = joints(addon, obj, frames)
+    skate_before, skate_after = fl.foot_skate_cm(before, contacts), fl.foot_skate_cm(after, contacts)
+    print(f"on the ramp: skate {skate_before:.2f} -> {skate_after:.2f} cm/frame")
+    assert skate_before > 0.8 and skate_after <= 0.06
+    assert np.abs(over_ramp(after) - stands)[on].max() < 0.04
+    np.testing.assert_allclose(leg_lengths(after), leg_lengths(before), atol=1e-4)
+    assert new["strnn"]["ground"]["object"] == "Ramp" and new["strnn"]["ground"]["frames_without"] == 0
+    obj.animation_data.action = old
+    _, flat = lock()
+    assert "ground" not in flat["strnn"]
+    flat_skate = fl.foot_skate_cm(joints(addon, obj, frames), contacts)
+    print(f"on one flat floor: skate {skate_before:.2f} -> {flat_skate:.2f} cm/frame")
+    assert flat_skate > 10 * skate_after
+
+
+def test_a_ground_that_is_no_mesh_or_under_no_foot_is_refused(addon, tmp_path):
+    obj = import_sliding(tmp_path)
+    refused("No object named 'Nowhere'", ground="Nowhere")
+    refused(f"'{obj.name}' is an armature, not a mesh", ground=obj.name)
+    mesh = bpy.data.meshes.new("Far")
+    mesh.from_pydata([(100, 100, 0), (101, 100, 0), (101, 101, 0), (100, 101, 0)], [], [(0, 1, 2, 3)])
+    bpy.context.scene.collection.objects.link(bpy.data.objects.new("Far", mesh))
+    refused("The ground 'Far' is under neither foot", ground="Far")

@@ -458,3 +458,33 @@ def test_extend_before_the_start_writes_the_lead_in_first(tmp_path, extension, c
     assert len(got) == 50
     take = canonical_positions(read_bvh(clip))
     assert np.abs(got[10:] - take).max() < 1e-3 * np.ptp(take[..., 1])  # the take's frames, after the lead-in
+
+
+def test_foot_lock_on_a_ground_mesh_in_a_blend_file(tmp_path, extension, capsys):
+    """``footlock --ground MESH`` pins the feet on a mesh of the .blend (here a floor under the walk); a name the
+    file lacks fails that file with what to fix, and its output is not written."""
+    clip = write_bvh(tmp_path / "walk.bvh", walking_skeleton(60))
+    scene = tmp_path / "scene.blend"
+    run_bpy(f"""
+bpy.ops.wm.read_factory_settings(use_empty=True)
+bpy.ops.import_anim.bvh(filepath={str(clip)!r})
+mesh = bpy.data.meshes.new("Floor")
+mesh.from_pydata([(-20, -20, 0), (20, -20, 0), (20, 20, 0), (-20, 20, 0)], [], [(0, 1, 2, 3)])
+bpy.context.scene.collection.objects.link(bpy.data.objects.new("Floor", mesh))
+bpy.ops.wm.save_as_mainfile(filepath={str(scene)!r})
+print(json.dumps(0))
+""")
+    out = tmp_path / "out"
+    code = strnn_batch.main(["footlock", "--ground", "Nowhere", str(scene), "--out", str(out),
+                             "--extension", str(extension)])
+    assert code == 1 and "no object named 'Nowhere' in the file for --ground" in capsys.readouterr().out
+    assert not (out / "scene.footlock.blend").exists()
+    code = strnn_batch.main(["footlock", "--ground", "Floor", str(scene), "--out", str(out),
+                             "--extension", str(extension)])
+    assert code == 0, capsys.readouterr().err
+    got = run_bpy(f"""
+bpy.ops.wm.open_mainfile(filepath={str(out / "scene.footlock.blend")!r})
+arm = next(o for o in bpy.data.objects if o.type == "ARMATURE")
+print(json.dumps(arm.animation_data.action["strnn"]["ground"].to_dict()))
+""")
+    assert got == {"object": "Floor", "frames_without": 0}

@@ -8,7 +8,7 @@ import pytest
 from model_core.eval.metrics import bone_lengths_of as bone_lengths
 from model_core.motion.conventions import CONTACT_JOINTS, MODEL_FPS
 from model_core.motion.features import positions_to_features
-from model_core.motion.synthetic import walking_skeleton
+from model_core.motion.synthetic import up_a_slope, walking_skeleton
 from model_core.ops import footlock as fl
 
 
@@ -298,3 +298,34 @@ def test_settling_keeps_the_contacts_it_was_given():
     one = fl.foot_skate_cm(fl.foot_lock(slid, MODEL_FPS, contacts), contacts)
     settled = fl.foot_lock(slid, MODEL_FPS, contacts, settings=fl.FootLockSettings(passes=fl.SETTLE_PASSES))
     assert fl.foot_skate_cm(settled, contacts) <= min(one + 0.01, 0.5)
+
+
+def test_feet_are_found_and_pinned_on_the_ground_under_them():
+    """A walk up a slope (0.9 m over its 6 m): measured from one flat floor, only its first steps touch it.
+    Measured from the ground under each heel and toe, it has the contacts of the same walk on the flat, and the
+    sliding copy is locked with each contact on the slope where the walk put it (on one floor, the middle step's
+    height, the first steps were lifted over 30 cm off it)."""
+    clean = walking_skeleton(150)
+    climbed, ground = up_a_slope(clean)
+    truth = fl.detect_foot_contacts(clean)
+    flat = fl.detect_foot_contacts(climbed)
+    on_ground = fl.detect_foot_contacts(climbed, ground=ground)
+    assert flat[75:].sum() < 0.1 * truth[75:].sum()  # the second half's steps are too high to count
+    assert (on_ground == truth).mean() > 0.97
+    slid = sliding(climbed)
+    locked = fl.foot_lock(slid, MODEL_FPS, truth, ground=ground)
+    assert fl.foot_skate_cm(slid, truth) > 0.8 and fl.foot_skate_cm(locked, truth) <= 0.5
+    assert np.abs(bone_lengths(locked) - bone_lengths(slid)).max() < 1e-5
+    on = truth > 0.5
+    want = clean[:, CONTACT_JOINTS, 1]  # each contact's height over the slope, as the walk had it
+    assert np.abs((locked[:, CONTACT_JOINTS, 1] - ground) - want)[on].max() < 0.02
+    flat = fl.foot_lock(slid, MODEL_FPS, truth)  # one flat floor, the steps' median: the first lifted off the slope
+    assert np.abs((flat[:, CONTACT_JOINTS, 1] - ground) - want)[on].max() > 0.3
+
+
+def test_ground_of_the_wrong_shape_or_with_holes_is_refused():
+    pos = walking_skeleton(20)
+    with pytest.raises(ValueError, match="ground"):
+        fl.foot_lock(pos, ground=np.zeros((20, 2)))
+    with pytest.raises(ValueError, match="ground"):
+        fl.foot_lock(pos, ground=np.full((20, 4), np.nan))
