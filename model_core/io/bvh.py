@@ -188,16 +188,8 @@ def read_bvh(path: str | Path, fps: float | None = None) -> Bvh:
     bvh.offsets = np.array(offsets, dtype=np.float64)
     bvh.is_end = np.array(is_end, dtype=bool)
     bvh.motion = motion
-    bvh.frame_time = 1.0 / fps if fps else written_rate(frame_time)
+    bvh.frame_time = 1.0 / fps if fps else frame_time
     return bvh
-
-
-def written_rate(frame_time: float) -> float:
-    """The Frame Time a header means: ``1 / R`` where it is a whole rate R written to a few decimals (``0.008333``
-    for 120 fps reads as 120.005 fps, which drifts a frame in 20,000 and makes a resampled take one frame short),
-    else the header's own (29.97 fps's ``0.033367`` stays)."""
-    rate = round(1.0 / frame_time)
-    return 1.0 / rate if rate > 0 and abs(frame_time * rate - 1.0) < 1e-4 else frame_time
 
 
 # seconds: the capture rates a header can mean (optical systems record up to 360 frames a second and more; video 10)

@@ -131,22 +131,6 @@ def test_resample_24_to_30_is_exact_on_linear_motion():
     np.testing.assert_allclose(y[:, 0], np.stack([t30, 2 * t30, -t30], axis=-1), atol=1e-12)
 
 
-@pytest.mark.parametrize(("written", "rate"), [("0.008333", 120.0), ("0.0166667", 60.0), ("0.041667", 24.0),
-                                               ("0.004167", 240.0), ("0.033367", 1 / 0.033367)])
-def test_a_frame_time_rounded_to_a_few_decimals_means_its_whole_rate(write_text, written, rate):
-    """A 120 fps take written ``0.008333`` keeps its last frame when resampled to 30 fps (120.005 fps dropped it);
-    29.97 fps (``0.033367``) is no whole rate and stays as written."""
-    frames = 1201
-    motion = "\n".join(" ".join(["0"] * 12) for _ in range(frames))
-    text = TWO_BONES.replace("Frames: 3", f"Frames: {frames}").replace("0.0083333333", written)
-    text = text[:text.index(f"Frame Time: {written}")] + f"Frame Time: {written}\n{motion}\n"
-    bvh = read_bvh(write_text("rounded.bvh", text))
-    assert bvh.fps == pytest.approx(rate, rel=1e-12)
-    if rate == 120.0:
-        x = np.arange(frames, dtype=np.float64)[:, None]
-        np.testing.assert_array_equal(resample(x, bvh.fps, 30.0)[:, 0], np.arange(0, frames, 4))
-
-
 def test_resample_same_rate_is_identity():
     x = np.random.default_rng(0).normal(size=(10, 21, 3))
     assert resample(x, 30.0, 30.0) is x
