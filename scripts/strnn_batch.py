@@ -175,6 +175,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--frames", type=int, default=opts.CURVE_FRAMES.default, help=opts.CURVE_FRAMES.help())
     p.add_argument("--speed", type=float, default=opts.CURVE_SPEED.default, help=opts.CURVE_SPEED.help(" m/s"))
     foot_lock_flag(p, "follow_curve")
+    p.add_argument("--ground", default="", metavar="MESH",
+                   help="for .blend inputs: name of a mesh object in the file to walk over (a slope, terrain): the "
+                        "walk goes up and down with it, feet locked on it (default: one flat floor)")
     p = sub.add_parser("transfer", parents=[common], help="move each take onto a character "
                        "(strnn.transfer_motion)", description="Move the motion of each BVH take onto the rig of "
                        "a character .blend (its proportions, feet on the floor), one new action per take, saved "
@@ -218,7 +221,8 @@ def operator_call(args) -> tuple[str, dict]:
         return "make_loop", {"use_range": args.range is not None, "frame_start": start, "frame_end": end,
                              "blend": args.blend, "match": args.match, "in_place": args.loop_in_place,
                              "foot_lock": args.foot_lock}
-    return "follow_curve", {"frames": args.frames, "speed": args.speed, "foot_lock": args.foot_lock}
+    return "follow_curve", {"frames": args.frames, "speed": args.speed, "foot_lock": args.foot_lock,
+                            "ground": args.ground}
 
 
 def check_args(parser, args) -> None:

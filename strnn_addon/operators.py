@@ -408,19 +408,21 @@ class STRNN_OT_follow_curve(_Staged, bpy.types.Operator):
     frames: options.curve_frames()
     speed: options.curve_speed()
     foot_lock: options.foot_lock("follow_curve")
+    ground: options.ground_name(walk=True)
     scene_range: options.scene_range()
     output: options.output()
     simplify: options.simplify()
 
     def steps(self, context, obj):
-        return follow_curve_steps(context, obj, curve=self.curve, frames=self.frames,
-                                  speed=self.speed, foot_lock=self.foot_lock, scene_range=self.scene_range)
+        return follow_curve_steps(context, obj, curve=self.curve, frames=self.frames, speed=self.speed,
+                                  foot_lock=self.foot_lock, scene_range=self.scene_range, ground=self.ground)
 
     def done(self, action) -> str:
         curve = find_curve(bpy.context, self.curve)
         others = len(curve.data.splines) - 1
         note = f" (it followed the first of the curve's {others + 1} splines)" if others else ""
-        return f"Walked the curve {curve.name!r} into new action {action.name!r}{note}{range_note(action)}"
+        over = f" over {self.ground!r}" if self.ground else ""
+        return f"Walked the curve {curve.name!r}{over} into new action {action.name!r}{note}{range_note(action)}"
 
 
 class STRNN_OT_transfer_motion(_Staged, bpy.types.Operator):

@@ -147,11 +147,12 @@ def curve_name():
                                       "empty: the selected curve")
 
 
-def ground_name():
+def ground_name(walk: bool = False):
+    what = ("the walk goes up and down with its surface under the hips, and Foot Lock pins each heel and toe on it"
+            if walk else "each heel and toe is pinned on its surface under the foot")
     return StringProperty(name="Ground", default="", search=_objects_of("MESH"),
-                          description="A mesh the feet stand on (stairs, a slope, terrain): each heel and toe is "
-                                      "pinned on its surface under the foot, as it stands at the current frame; "
-                                      "empty: one flat floor, the take's own")
+                          description=f"A mesh the feet stand on (stairs, a slope, terrain): {what}, as the mesh "
+                                      "stands at the current frame; empty: one flat floor, the take's own")
 
 
 def source_name():

@@ -176,6 +176,7 @@ class STRNN_PT_follow_curve(_OperatorPanel, bpy.types.Panel):
         col.prop(opts, "frames")
         col.prop(opts, "speed")
         col.prop(opts, "foot_lock")
+        col.prop(opts, "ground", icon="OUTLINER_OB_MESH")
 
 
 class STRNN_PT_transfer(_OperatorPanel, bpy.types.Panel):

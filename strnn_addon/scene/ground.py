@@ -1,4 +1,5 @@
-"""The ground a character stands on, from a mesh in the scene: stairs, a slope, terrain (Foot Lock's Ground).
+"""The ground a character stands on, from a mesh in the scene: stairs, a slope, terrain (the Ground of Foot Lock
+and of Follow Curve).
 
 Heights are found by casting a ray straight down (the world's -Z) onto the mesh as it stands at the current
 frame, from half a leg above each heel and toe, so a foot that sinks a little into a step still finds that
@@ -11,7 +12,8 @@ import numpy as np
 from mathutils import Vector
 from mathutils.bvhtree import BVHTree
 
-from ...model_core.motion.conventions import CONTACT_JOINTS, yup_to_zup
+from ...model_core.motion.conventions import CONTACT_JOINTS, JOINT_INDEX, yup_to_zup
+from ...model_core.motion.features import gaussian_smooth
 from ...model_core.rig.rigs import leg_length
 from .pipeline import UserError
 
@@ -31,33 +33,77 @@ def find_ground(name: str):
     return obj
 
 
+def surface_under(context, obj, points: np.ndarray, lift: float) -> np.ndarray:
+    """Height ``[N]`` (Y-up, scene units) of ``obj``'s surface under world-space points ``[N, 3]`` (Y-up), cast
+    down from ``lift`` above each; NaN where the mesh is under none."""
+    depsgraph = context.evaluated_depsgraph_get()
+    evaluated = obj.evaluated_get(depsgraph)
+    tree = BVHTree.FromObject(evaluated, depsgraph)
+    world = evaluated.matrix_world
+    to_local = world.inverted()
+    down = (to_local.to_3x3() @ Vector((0.0, 0.0, -1.0))).normalized()
+    out = np.full(len(points), np.nan)
+    for i, (x, y, z) in enumerate(yup_to_zup(np.asarray(points, np.float64))):
+        hit, *_ = tree.ray_cast(to_local @ Vector((x, y, z + lift)), down)
+        if hit is not None:
+            out[i] = (world @ hit).z  # Blender's Z is the model's up
+    return out
+
+
+def _no_ground(obj) -> UserError:
+    return UserError(f"The ground {obj.name!r} is under neither foot on any frame: move it under the character "
+                     "(seen from above), or leave Ground empty for one flat floor")
+
+
 def ground_heights(context, obj, pos: np.ndarray) -> tuple[np.ndarray, int]:
     """Height ``[F, 4]`` (Y-up, scene units, as ``pos``) of ``obj``'s surface under each heel (at the ankle) and
     toe of world-space canonical joints ``pos`` ``[F, 21, 3]`` (Y-up), and how many frames had no surface under a
     heel or toe (there the height is carried over from the nearest frames that had one). Raises
     :class:`UserError` where the mesh is under no foot on any frame."""
-    depsgraph = context.evaluated_depsgraph_get()
-    evaluated = obj.evaluated_get(depsgraph)
-    tree = BVHTree.FromObject(evaluated, depsgraph)
-    to_local = evaluated.matrix_world.inverted()
-    down = (to_local.to_3x3() @ Vector((0.0, 0.0, -1.0))).normalized()
-    feet = yup_to_zup(np.asarray(pos, np.float64)[:, CONTACT_JOINTS])  # [F, 4, 3], Blender axes
-    lift = 0.5 * leg_length(pos)
-    heights = np.full(feet.shape[:2], np.nan)
-    for f in range(feet.shape[0]):
-        for k in range(feet.shape[1]):
-            x, y, z = feet[f, k]
-            hit, *_ = tree.ray_cast(to_local @ Vector((x, y, z + lift)), down)
-            if hit is not None:
-                heights[f, k] = (evaluated.matrix_world @ hit).z
+    pos = np.asarray(pos, np.float64)
+    feet = pos[:, CONTACT_JOINTS]
+    heights = surface_under(context, obj, feet.reshape(-1, 3), 0.5 * leg_length(pos)).reshape(feet.shape[:2])
     found = np.isfinite(heights)
     if not found.any():
-        raise UserError(f"The ground {obj.name!r} is under neither foot on any frame: move it under the character "
-                        "(seen from above), or leave Ground empty for one flat floor")
+        raise _no_ground(obj)
     frames = np.arange(len(heights))
     either = np.where(found, heights, 0.0).sum(axis=1) / np.maximum(found.sum(axis=1), 1)  # a frame's heights' mean
-    for k in range(heights.shape[1]):  # Blender's Z is the model's up
+    for k in range(heights.shape[1]):
         have = found[:, k] if found[:, k].any() else found.any(axis=1)
         source = heights[:, k] if found[:, k].any() else either
         heights[:, k] = np.interp(frames, frames[have], source[have])
     return heights, int((~found).any(axis=1).sum())
+
+
+def body_lift(context, obj, pos: np.ndarray, known: int, fps: float, rest: np.ndarray | None = None) -> np.ndarray:
+    """How far up ``[F]`` to carry the frames of ``pos`` ``[F, 21, 3]`` (world, Y-up) from ``known`` on, so a walk
+    made on a flat floor goes up and down with ``obj``'s surface under its hips: the surface's height there,
+    smoothed over a quarter second (steps become a slope the hips ride), less its height under the hips where the
+    walk starts (the last of the ``known`` frames, else the ``rest`` pose ``[21, 3]`` the walk starts from); 0 on
+    the known frames."""
+    hips = pos[:, JOINT_INDEX["hips"]]
+    under = surface_under(context, obj, hips, 0.5 * leg_length(pos))
+    found = np.isfinite(under)
+    if not found.any():
+        raise _no_ground(obj)
+    frames = np.arange(len(under))
+    smooth = gaussian_smooth(np.interp(frames, frames[found], under[found]), 0.25 * fps)
+    if known:
+        start = smooth[known - 1]
+    else:
+        start = surface_under(context, obj, np.asarray(rest, np.float64)[None, JOINT_INDEX["hips"]],
+                              0.5 * leg_length(np.asarray(rest)[None]))[0] if rest is not None else np.nan
+        start = smooth[0] if not np.isfinite(start) else start
+    lift = smooth - start
+    lift[:known] = 0.0
+    return lift
+
+
+def ground_record(obj, bare: int, frames: int) -> dict:
+    """The new action's record of the ground (``ground``: the mesh, how many frames had no surface under a heel or
+    toe and, where some had none, a note saying so)."""
+    record = {"object": obj.name, "frames_without": bare}
+    if bare:
+        record["note"] = (f"The ground {obj.name!r} is under no foot on {bare} of {frames} frames: there the feet "
+                          "stand as high as on the nearest frames over it")
+    return {"ground": record}

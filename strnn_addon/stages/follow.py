@@ -11,21 +11,24 @@ from __future__ import annotations
 
 import numpy as np
 
-from ...model_core.motion.conventions import zup_to_yup
+from ...model_core.motion.conventions import UP_AXIS, zup_to_yup
 from ...model_core.rig.solve import solve
 from .. import engine_bridge
 from ..scene import anim, curves, cycles, pipeline
+from ..scene.ground import body_lift, find_ground, ground_heights, ground_record
 from ..scene.pipeline import UserError
 from .common import familiarity_record, lock, made_by, model_steps, pace_record, prefs, write_fresh, write_new
 
 
 def follow_curve_steps(context, obj, *, curve: str = "", frames: int = 0, speed: float = 0.0, foot_lock: bool = True,
-                       scene_range: bool = True):
+                       scene_range: bool = True, ground: str = ""):
     """Walk ``obj`` along a curve object (``curve``: its name; '' = the selected curve) for ``frames``
     scene frames (0: until the curve ends) at ``speed`` scene units per second (0: the motion's
-    own), feet locked when ``foot_lock``.
+    own), feet locked when ``foot_lock``; over the mesh named ``ground`` (stairs, a slope, terrain), the body
+    carried up and down with its surface and the feet locked on it, where one is named.
     A generator: yields each stage's name before running it, and the fraction of the model
     stage done after each model window; returns the new action."""
+    surface = find_ground(ground) if ground else None
     clip = pipeline.prepare_any(context, obj)
     curve_obj = curves.find_curve(context, curve)
     points, cyclic = curves.curve_points(context, curve_obj)
@@ -49,10 +52,16 @@ def follow_curve_steps(context, obj, *, curve: str = "", frames: int = 0, speed:
     yield "model"
     new_pos = yield from model_steps(engine_bridge.run_follow_curve(
         prefs(context), points, cyclic, clip.fps, frames or None, speed or None, context_pos, rest))
+    known = 0 if context_pos is None else len(context_pos)
+    joined = new_pos if context_pos is None else np.concatenate([context_pos, new_pos])
+    heights, bare = None, 0
+    if surface is not None:  # the walk, made on a flat floor, carried over the ground
+        joined = joined.copy()
+        joined[..., UP_AXIS] += body_lift(context, surface, joined, known, clip.fps, rest)[:, None]
+        heights, bare = ground_heights(context, surface, joined)
     if foot_lock:
-        known = 0 if context_pos is None else len(context_pos)
-        joined = new_pos if context_pos is None else np.concatenate([context_pos, new_pos])
-        new_pos = lock(joined, clip.fps, fixed=np.arange(len(joined)) < known)[known:]
+        joined = lock(joined, clip.fps, fixed=np.arange(len(joined)) < known, ground=heights)
+    new_pos = joined[known:]
     yield "solve"
     n = len(new_pos)
     start = clip.last + 1 if clip.action is not None else context.scene.frame_start
@@ -61,6 +70,8 @@ def follow_curve_steps(context, obj, *, curve: str = "", frames: int = 0, speed:
     loc, rot = solve(clip.rig, clip.anchors, targets, np.repeat(held_loc, n, 0), np.repeat(held_rot, n, 0))
     record = made_by("Follow Curve", clip, engine_bridge.model_used(prefs(context)), curve=curve_obj.name,
                      frames=n, speed=float(speed), foot_lock=foot_lock)
+    if surface is not None:
+        record.update(ground_record(surface, bare, len(joined)))
     if context_pos is not None:
         record.update(familiarity_record(engine_bridge.run_familiarity(prefs(context), context_pos, clip.fps)))
         record.update(pace_record(context, clip))

@@ -6,7 +6,7 @@ import numpy as np
 
 from ...model_core.ops import footlock
 from ..scene import pipeline
-from ..scene.ground import find_ground, ground_heights
+from ..scene.ground import find_ground, ground_heights, ground_record
 from ..scene.pipeline import UserError
 from .common import frame_range, lock, made_by, pace_record, write_new
 
@@ -53,10 +53,7 @@ def foot_lock_steps(context, obj, *, frame_start: int | None = None, frame_end: 
     record = made_by("Foot Lock", clip, key_step=step, frame_start=a, frame_end=b, blend=float(blend),
                      only_selected=only_selected)
     if surface is not None:
-        record["ground"] = {"object": surface.name, "frames_without": bare}
-        if bare:
-            record["ground"]["note"] = (f"The ground {surface.name!r} is under no foot on {bare} of {len(frames)} "
-                                        "frames: there the feet stand as high as on the nearest frames over it")
+        record.update(ground_record(surface, bare, len(frames)))
     record.update(pace_record(context, clip))
     yield "write"  # every check and every read done: only the writing is left
     return write_new(context, clip, "footlocked", frames[inside], loc[inside], rot[inside], previous, (a, b),

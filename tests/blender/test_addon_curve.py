@@ -278,3 +278,58 @@ def test_a_walk_cycle_repeated_by_cycles_modifiers_walks_the_curve_after_one_cyc
     joints = evaluated_joints(addon, obj, np.arange(last - 5, last + 70))
     step = np.linalg.norm(np.diff(joints[:, 0], axis=0), axis=-1)
     assert step[-8:].max() < 1e-6  # after the walk it stands: no snap back to the cycle's first pose
+
+
+def test_a_walk_along_a_curve_over_a_ramp_goes_up_it_feet_on_it(addon, real_model):
+    """Follow Curve with Ground set to a ramp rising 15 cm a metre along the path: the model's walk, made on a flat
+    floor, is carried up the ramp (its hips as high over it all the way as the same walk's over the floor), its feet
+    locked on the ramp: the lowest foot is as near it every second as the walk's over the floor. Without Ground the walk
+    stays level and ends 40 cm and more lower over the ramp."""
+    from scenes import build_armature
+
+    from model_core.motion.conventions import CONTACT_JOINTS, zup_to_yup
+
+    build_armature("Mixamo", mixamo_bones())
+    obj = bpy.context.active_object
+    mesh = bpy.data.meshes.new("Ramp")
+    mesh.from_pydata([(-10, -10, -1.5), (10, -10, 1.5), (10, 10, 1.5), (-10, 10, -1.5)], [], [(0, 1, 2, 3)])
+    bpy.context.scene.collection.objects.link(bpy.data.objects.new("Ramp", mesh))
+
+    def ramp(p):  # the ramp's height under Blender points [..., 3]
+        return 0.15 * p[..., 0]
+
+    path = add_curve("nurbs_path", location=(1.0, 2.0, 0.0))  # 4 m along +X
+    bpy.context.view_layer.objects.active = obj
+    results = {}
+    for ground in ("Ramp", ""):
+        if obj.animation_data:  # each from the armature standing in its rest pose where it is
+            obj.animation_data.action = None
+        for pb in obj.pose.bones:
+            pb.matrix_basis.identity()
+        _, new = follow(curve=path.name, ground=ground)
+        first, last = (int(f) for f in new.frame_range)
+        joints = evaluated_joints(addon, obj, np.arange(first, last + 1))
+        results[ground] = joints
+        assert ("ground" in new["strnn"]) == bool(ground)
+    joints, level = results["Ramp"], results[""]
+    assert joints[-1, 0, 0] > joints[0, 0, 0] + 2.0
+    over = joints[:, 0, 2] - ramp(joints[:, 0])
+    print(f"the end: the ramp {ramp(joints[-1, 0]):.2f} m up, the hips {over[-1]:.2f} m over it, the level walk's "
+          f"{level[-1, 0, 2]:.2f} m over the floor and {level[-1, 0, 2] - ramp(level[-1, 0]):.2f} over the ramp")
+    assert ramp(joints[-1, 0]) > 0.4
+    assert np.abs(over - level[:, 0, 2]).max() < 0.05  # as high over it as the level walk over the floor
+    assert level[-1, 0, 2] - ramp(level[-1, 0]) < over[-1] - 0.4
+    fps = bpy.context.scene.render.fps
+
+    def lowest_each_second(height):  # the lowest heel or toe [F, 4] each second
+        low = height.min(axis=1)
+        return np.array([low[s:s + fps].min() for s in range(0, len(low) - fps + 1, fps)])
+
+    feet, floor = joints[:, CONTACT_JOINTS], level[:, CONTACT_JOINTS, 2]
+    above = feet[..., 2] - ramp(feet)
+    on_ramp, on_floor = lowest_each_second(above), lowest_each_second(floor)
+    print(f"lowest foot each second, over the ramp: {np.round(on_ramp, 3).tolist()} m, the level walk over the "
+          f"floor: {np.round(on_floor, 3).tolist()}")
+    # within 4 cm: a foot keeps its pitch, so on a slope its toe, 15 cm ahead of the heel, is 2.3 cm nearer the ramp
+    assert np.abs(on_ramp - on_floor).max() < 0.04 and above.min() > floor.min() - 0.04
+    assert np.isfinite(zup_to_yup(joints)).all()
