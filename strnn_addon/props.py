@@ -130,13 +130,18 @@ def curve_speed():
     return FloatProperty(unit="VELOCITY", **opts.CURVE_SPEED.blender())
 
 
-def _objects_of(kind: str, exclude_active: bool = False):
-    """A search list of the scene's objects of ``kind`` (for a name option's drop-down)."""
+def _objects_of(kind: str, exclude_active: bool = False, exclude_body: bool = False):
+    """A search list of the scene's objects of ``kind`` (for a name option's drop-down); ``exclude_body``: not the
+    meshes the active armature deforms (its own body)."""
 
     def search(self, context, edit_text):
+        from .scene.ground import deforms
+
         active = context.active_object if exclude_active else None
+        body = context.active_object if exclude_body else None
         return [o.name for o in context.scene.objects
-                if o.type == kind and o is not active and edit_text.lower() in o.name.lower()]
+                if o.type == kind and o is not active and edit_text.lower() in o.name.lower()
+                and not (body is not None and deforms(body, o))]
 
     return search
 
@@ -150,7 +155,7 @@ def curve_name():
 def ground_name(walk: bool = False):
     what = ("the walk goes up and down with its surface under the hips, and Foot Lock pins each heel and toe on it"
             if walk else "each heel and toe is pinned on its surface under the foot")
-    return StringProperty(name="Ground", default="", search=_objects_of("MESH"),
+    return StringProperty(name="Ground", default="", search=_objects_of("MESH", exclude_body=True),
                           description=f"A mesh the feet stand on (stairs, a slope, terrain): {what}, as the mesh "
                                       "stands at the current frame; empty: one flat floor, the take's own")
 

@@ -18,18 +18,28 @@ from ...model_core.rig.rigs import leg_length
 from .pipeline import UserError
 
 
-def find_ground(name: str):
-    """The mesh object named ``name``; raises :class:`UserError` when there is none or it is no mesh."""
+def deforms(armature, obj) -> bool:
+    """Whether ``armature`` deforms mesh ``obj`` (an Armature modifier on it names the armature): the character's
+    own body, which is no ground to stand on."""
+    return any(m.type == "ARMATURE" and m.object == armature for m in getattr(obj, "modifiers", ()))
+
+
+def find_ground(name: str, armature=None):
+    """The mesh object named ``name``; raises :class:`UserError` when there is none, it is no mesh or ``armature``
+    deforms it."""
     import bpy
 
     obj = bpy.data.objects.get(name)
     if obj is None:
-        raise UserError(f"No object named {name!r} to stand on: pick the ground mesh (stairs, a slope) in Foot "
-                        "Lock > Ground, or leave it empty for one flat floor")
+        raise UserError(f"No object named {name!r} to stand on: pick the ground mesh (stairs, a slope) as Ground, "
+                        "or leave it empty for one flat floor")
     if obj.type != "MESH":
         kind = obj.type.lower()
         article = "an" if kind[0] in "aeiou" else "a"
         raise UserError(f"{name!r} is {article} {kind}, not a mesh: pick the mesh the feet stand on as Ground")
+    if armature is not None and deforms(armature, obj):
+        raise UserError(f"{name!r} is the character's own body ({armature.name!r} deforms it): pick the mesh the "
+                        "feet stand on as Ground")
     return obj
 
 

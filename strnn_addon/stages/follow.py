@@ -28,7 +28,7 @@ def follow_curve_steps(context, obj, *, curve: str = "", frames: int = 0, speed:
     carried up and down with its surface and the feet locked on it, where one is named.
     A generator: yields each stage's name before running it, and the fraction of the model
     stage done after each model window; returns the new action."""
-    surface = find_ground(ground) if ground else None
+    surface = find_ground(ground, obj) if ground else None
     clip = pipeline.prepare_any(context, obj)
     curve_obj = curves.find_curve(context, curve)
     points, cyclic = curves.curve_points(context, curve_obj)

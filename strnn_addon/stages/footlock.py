@@ -20,7 +20,7 @@ def foot_lock_steps(context, obj, *, frame_start: int | None = None, frame_end: 
     Only the leg bones get new keys (with ``only_selected``, only the selected ones). ``ground``: the name of a
     mesh the feet stand on (stairs, a slope), whose surface under each heel and toe is the floor there; empty: one
     flat floor, the take's own. A generator like :func:`.extend.extend_steps`."""
-    surface = find_ground(ground) if ground else None
+    surface = find_ground(ground, obj) if ground else None
     clip = pipeline.prepare(context, obj)
     legs = pipeline.leg_bones(clip)
     bones = pipeline.only_selected(clip, legs, "Foot Lock writes (the legs)") if only_selected else legs

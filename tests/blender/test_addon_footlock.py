@@ -7,7 +7,16 @@ from __future__ import annotations
 import bpy
 import numpy as np
 import pytest
-from scenes import action_of, evaluated_joints, fcurves_of, import_bvh, key_snapshot, on_steps, same_keys
+from scenes import (
+    action_of,
+    addon_module,
+    evaluated_joints,
+    fcurves_of,
+    import_bvh,
+    key_snapshot,
+    on_steps,
+    same_keys,
+)
 
 from model_core.io.bvh_export import write_bvh
 from model_core.motion.conventions import CONTACT_JOINTS, JOINT_INDEX, yup_to_zup, zup_to_yup
@@ -253,3 +262,9 @@ def test_a_ground_that_is_no_mesh_or_under_no_foot_is_refused(addon, tmp_path):
     mesh.from_pydata([(100, 100, 0), (101, 100, 0), (101, 101, 0), (100, 101, 0)], [], [(0, 1, 2, 3)])
     bpy.context.scene.collection.objects.link(bpy.data.objects.new("Far", mesh))
     refused("The ground 'Far' is under neither foot", ground="Far")
+    body = bpy.data.objects.new("Body", bpy.data.meshes.new("Body"))  # the character's own skin is no ground
+    bpy.context.scene.collection.objects.link(body)
+    body.modifiers.new("Armature", "ARMATURE").object = obj
+    refused(f"'Body' is the character's own body \\('{obj.name}' deforms it\\)", ground="Body")
+    listed = addon_module(addon, "strnn_addon.props")._objects_of("MESH", exclude_body=True)(None, bpy.context, "")
+    assert "Far" in listed and "Body" not in listed  # Ground's drop-down leaves the body out
