@@ -18,7 +18,8 @@ after ``fixed`` frames, the whole body up and down); every bone keeps its length
   generated feet neither sink into the floor nor hover above it; and no heel or toe goes below
   that height at any frame. With ``ground`` (the height of the surface under each heel and toe on
   each frame: stairs, a slope, terrain) every height is measured from that surface instead of from
-  one flat floor: contacts are found, and pinned, on whatever step the foot stands. After ``fixed``
+  one flat floor: contacts are found, and pinned, on whatever step the foot stands, and a toe down is
+  brought to its own height over the ground, so a planted foot pitches with a slope. After ``fixed``
   frames, a body whose feet hover where they should stand comes down as a whole first (the legs
   alone could only reach by straightening). Next to ``fixed`` frames these height corrections ease
   in over ``blend_s``, so a foot that stands higher or lower there than on the rest of the floor
@@ -214,7 +215,7 @@ def lock_offsets(x: np.ndarray, mask: np.ndarray, blend: float, fixed: np.ndarra
 
 def ankle_targets(pos: np.ndarray, contacts: np.ndarray, blend: float, fixed: np.ndarray | None = None,
                   limit: float = np.inf, rest: np.ndarray | None = None,
-                  tolerance: float = 0.0, spans: bool = True) -> tuple[np.ndarray, np.ndarray]:
+                  tolerance: float = 0.0, spans: bool = True, pitch: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """Where each ankle and each toe should be, ``[F, 2, 3]`` each (left, right). Heels first: each heel span pins the
     ankle. Then toes, on the heel-locked foot (kept at its orientation): each toe span pins the
     toe, moving the ankle with it, so a heel lifting off rolls the foot about a planted toe; where
@@ -222,7 +223,8 @@ def ankle_targets(pos: np.ndarray, contacts: np.ndarray, blend: float, fixed: np
     (the toe target is returned beside the ankle's), so a flat foot slides at neither end.
     ``rest`` ``[4]``: the height of each contact joint (l_heel, l_toe, r_heel, r_toe) standing on
     the floor; contacts further than ``tolerance`` from it are brought to it (``spans`` False: not) and no
-    heel or toe goes further than that below it (None: heights unchanged)."""
+    heel or toe goes further than that below it (None: heights unchanged). ``pitch``: each toe span also brings its
+    toe to its own rest height, so a foot flat on a slope (``rest`` frame by frame on a ground) pitches with it."""
     mask = np.asarray(contacts) > 0.5
     ankle = pos[:, _ANKLE]
     foot = pos[:, _TOE] - ankle  # [F, 2, 3] ankle-to-toe, kept
@@ -232,23 +234,38 @@ def ankle_targets(pos: np.ndarray, contacts: np.ndarray, blend: float, fixed: np
     toe = ankle + foot + pull  # where the toe is pinned
     ankle = ankle + (1.0 - held)[..., None] * pull  # a held heel stays where it is
     if rest is not None:
-        lift = _height_pull(ankle, foot, mask, blend, fixed, rest, tolerance, spans)
-        ankle, toe = ankle + lift, toe + lift
+        lift, tilt = _height_pull(ankle, foot, mask, blend, fixed, rest, tolerance, spans, pitch)
+        ankle, toe = ankle + lift, toe + lift + tilt
     return ankle, toe
 
 
+def _toe_pitch(need: np.ndarray, mask: np.ndarray, blend: float, fixed: np.ndarray | None) -> np.ndarray:
+    """How far up ``[F, 2]`` each toe goes beyond its foot's lift: each toe span's mean of how far the toe still
+    is from its rest height (``need`` ``[F, 2]``), faded like the horizontal pull (all of it: short of it by the
+    floor's tolerance, the toe would count as below the floor and the foot would not turn)."""
+    on = mask[:, _TOE_CHANNELS].copy()
+    if fixed is not None:
+        on &= ~fixed[:, None]
+    span, level = span_targets(need[..., None], on)
+    per_frame = np.where(on[..., None], level[span] if len(level) else 0.0, 0.0)
+    return _faded(per_frame, on, blend)[0][..., 0]
+
+
 def _height_pull(ankle: np.ndarray, foot: np.ndarray, mask: np.ndarray, blend: float, fixed: np.ndarray | None,
-                 rest: np.ndarray, tolerance: float, spans: bool = True) -> np.ndarray:
+                 rest: np.ndarray, tolerance: float, spans: bool = True,
+                 pitch: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """Vertical move of each ankle ``[F, 2, 3]``: :func:`span_lift`, then, at every frame, up by what
-    the heel or toe would still be below its rest height; nothing on ``fixed`` frames, eased in from them
-    over ``blend`` frames (:func:`from_fixed`)."""
+    the heel or toe would still be below its rest height; and the toe's own further move (``pitch``, on toe
+    spans: :func:`_toe_pitch`; else zero), which the foot turns to follow; nothing on ``fixed`` frames, eased in
+    from them over ``blend`` frames (:func:`from_fixed`)."""
     heel_need, toe_need = _needs(ankle, foot, rest)
     lift = span_lift(ankle, foot, mask, blend, fixed, rest, tolerance) if spans else np.zeros(heel_need.shape)
-    lift = lift + np.maximum(np.maximum(heel_need - lift, toe_need - lift) - tolerance, 0.0)
-    lift = lift * from_fixed(fixed, len(ankle), blend)[:, None]  # eased in from the frames kept: no step
-    out = np.zeros(ankle.shape)
-    out[..., UP_AXIS] = lift
-    return out
+    tilt = _toe_pitch(toe_need - lift, mask, blend, fixed) if pitch and spans else np.zeros(lift.shape)
+    lift = lift + np.maximum(np.maximum(heel_need - lift, toe_need - lift - tilt) - tolerance, 0.0)
+    ease = from_fixed(fixed, len(ankle), blend)[:, None]  # eased in from the frames kept: no step
+    out = np.zeros((2, *ankle.shape))
+    out[..., UP_AXIS] = lift * ease, tilt * ease
+    return out[0], out[1]
 
 
 def _needs(ankle: np.ndarray, foot: np.ndarray, rest: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -396,14 +413,16 @@ def body_forward(pos: np.ndarray) -> np.ndarray:
 
 def foot_lock(pos: np.ndarray, fps: float = MODEL_FPS, contacts: np.ndarray | None = None,
               settings: FootLockSettings | None = None, fixed: np.ndarray | None = None,
-              ground: np.ndarray | None = None) -> np.ndarray:
+              ground: np.ndarray | None = None, standing: np.ndarray | None = None) -> np.ndarray:
     """Foot-locked copy ``float32 [F, 21, 3]`` of positions ``pos`` ``[F, 21, 3]`` (Y-up, any unit) at ``fps``.
 
     ``contacts`` ``[F, 4]`` (0/1, :data:`conventions.CONTACTS` order; default: detected).
     ``fixed`` bool ``[F]``: frames left exactly as they are (say, the part of a clip already in
     the scene); locks next to them continue from where their feet are, without a jump.
     ``ground`` ``[F, 4]``: the height of the surface under each contact joint (heel at the ankle, toe) on each
-    frame, in ``pos``'s units (:func:`ground_heights`); default: one flat floor, the take's own.
+    frame, in ``pos``'s units; default: one flat floor, the take's own. ``standing`` ``[4]``: how high each contact
+    joint stands over the ground (default: measured on ``pos``; motion made on a flat floor and carried over a
+    slope knows it better from its flat floor, where the foot's pitch did not hide it).
     ``settings.passes`` > 1 locks the result again, on its contacts and those detected on it, until no joint
     moves or the passes are spent: a settled lock (:data:`SETTLE_PASSES`)."""
     cfg = settings or FootLockSettings()
@@ -418,11 +437,11 @@ def foot_lock(pos: np.ndarray, fps: float = MODEL_FPS, contacts: np.ndarray | No
     fixed = np.zeros(len(pos), bool) if fixed is None else np.asarray(fixed, bool)
     if len(pos) < 2 or fixed.all():
         return pos.astype(np.float32)
-    rest = rest_heights(above(pos, ground), fill_gaps(contacts > 0.5, _min_gap(cfg, fps)),
-                        fixed if fixed.any() else None)
+    rest = standing if standing is not None else rest_heights(
+        above(pos, ground), fill_gaps(contacts > 0.5, _min_gap(cfg, fps)), fixed if fixed.any() else None)
     if rest is not None and ground is not None:
         rest = ground + rest  # each contact joint's height standing on the surface under it, frame by frame
-    out = _lock(pos, fps, contacts, cfg, fixed, rest)
+    out = _lock(pos, fps, contacts, cfg, fixed, rest, pitch=ground is not None)  # on a ground, feet take its slope
     # Settling: each pass locks the last one's result on the contacts it has now, along the ground only (the
     # heights came right in the first pass; pulled again, a foot that cannot quite reach would be pulled
     # further each time and snap back; no heel or toe goes below the floor still), no leg stretching further
@@ -444,7 +463,7 @@ def _min_gap(cfg: FootLockSettings, fps: float) -> int:
 
 
 def _lock(pos: np.ndarray, fps: float, contacts: np.ndarray, cfg: FootLockSettings, fixed: np.ndarray,
-          rest: np.ndarray | None, reach: np.ndarray | None = None) -> np.ndarray:
+          rest: np.ndarray | None, reach: np.ndarray | None = None, pitch: bool = False) -> np.ndarray:
     """One pass of :func:`foot_lock` (float64 out); ``rest``: :func:`rest_heights`. With ``reach`` ``[F, 2]``
     (:func:`two_bone_ik`'s ``rest``), a settling pass: contact spans are not brought to the floor again."""
     mask = fill_gaps(contacts > 0.5, _min_gap(cfg, fps))
@@ -455,7 +474,7 @@ def _lock(pos: np.ndarray, fps: float, contacts: np.ndarray, cfg: FootLockSettin
         drop = body_drop(pos, mask, cfg.blend_s * fps, fixed if fixed.any() else None, rest, tolerance)
         pos[..., UP_AXIS] += drop[:, None]
     target, toe = ankle_targets(pos, mask, cfg.blend_s * fps, fixed if fixed.any() else None, limit, rest,
-                                tolerance, spans=reach is None)
+                                tolerance, spans=reach is None, pitch=pitch)
     fwd = body_forward(pos)[:, None].repeat(2, 1)
     knee, ankle = two_bone_ik(pos[:, _HIP], pos[:, _KNEE], pos[:, _ANKLE], target, cfg.softness, fwd, reach)
     out = pos.copy()
@@ -464,7 +483,10 @@ def _lock(pos: np.ndarray, fps: float, contacts: np.ndarray, cfg: FootLockSettin
     foot = pos[:, _TOE] - pos[:, _ANKLE]
     aimed = _unit(toe - target)[0] * np.linalg.norm(foot, axis=-1, keepdims=True)
     if rest is not None:
-        low = (ankle + aimed)[..., UP_AXIS] < rest[..., _TOE_CHANNELS] - tolerance
+        floor = rest[..., _TOE_CHANNELS] - tolerance
+        low = (ankle + aimed)[..., UP_AXIS] < floor
+        if pitch:  # a toe aimed at a target on a slope: turned back to its own pitch only where the target is low
+            low &= toe[..., UP_AXIS] < floor - 1e-9
         aimed = np.where(low[..., None], face_along(foot, toe - target), aimed)
     out[:, _TOE] = ankle + aimed
     out[:, _KNEE], out[:, _ANKLE] = knee, ankle

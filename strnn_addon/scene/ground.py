@@ -85,12 +85,14 @@ def ground_heights(context, obj, pos: np.ndarray) -> tuple[np.ndarray, int]:
     return heights, int((~found).any(axis=1).sum())
 
 
-def body_lift(context, obj, pos: np.ndarray, known: int, fps: float, rest: np.ndarray | None = None) -> np.ndarray:
+def body_lift(context, obj, pos: np.ndarray, known: int, fps: float,
+              rest: np.ndarray | None = None) -> tuple[np.ndarray, float]:
     """How far up ``[F]`` to carry the frames of ``pos`` ``[F, 21, 3]`` (world, Y-up) from ``known`` on, so a walk
     made on a flat floor goes up and down with ``obj``'s surface under its hips: the surface's height there,
     smoothed over a quarter second (steps become a slope the hips ride), less its height under the hips where the
     walk starts (the last of the ``known`` frames, else the ``rest`` pose ``[21, 3]`` the walk starts from); 0 on
-    the known frames."""
+    the known frames. Also that starting height: the flat floor's, over which the walk stands as high as it will
+    over the surface."""
     hips = pos[:, JOINT_INDEX["hips"]]
     under = surface_under(context, obj, hips, 0.5 * leg_length(pos))
     found = np.isfinite(under)
@@ -106,7 +108,7 @@ def body_lift(context, obj, pos: np.ndarray, known: int, fps: float, rest: np.nd
         start = smooth[0] if not np.isfinite(start) else start
     lift = smooth - start
     lift[:known] = 0.0
-    return lift
+    return lift, float(start)
 
 
 def ground_record(obj, bare: int, frames: int) -> dict:

@@ -283,7 +283,8 @@ def test_a_walk_cycle_repeated_by_cycles_modifiers_walks_the_curve_after_one_cyc
 def test_a_walk_along_a_curve_over_a_ramp_goes_up_it_feet_on_it(addon, real_model):
     """Follow Curve with Ground set to a ramp rising 15 cm a metre along the path: the model's walk, made on a flat
     floor, is carried up the ramp (its hips as high over it all the way as the same walk's over the floor), its feet
-    locked on the ramp: the lowest foot is as near it every second as the walk's over the floor. Without Ground the walk
+    locked on the ramp and pitched with it: the lowest foot is as near it every second as the walk's to the floor.
+    Without Ground the walk
     stays level and ends 40 cm and more lower over the ramp."""
     from scenes import build_armature
 
@@ -330,6 +331,7 @@ def test_a_walk_along_a_curve_over_a_ramp_goes_up_it_feet_on_it(addon, real_mode
     on_ramp, on_floor = lowest_each_second(above), lowest_each_second(floor)
     print(f"lowest foot each second, over the ramp: {np.round(on_ramp, 3).tolist()} m, the level walk over the "
           f"floor: {np.round(on_floor, 3).tolist()}")
-    # within 4 cm: a foot keeps its pitch, so on a slope its toe, 15 cm ahead of the heel, is 2.3 cm nearer the ramp
-    assert np.abs(on_ramp - on_floor).max() < 0.04 and above.min() > floor.min() - 0.04
+    # within 1 cm (3 cm, the toe 15 cm ahead of the heel 2.3 cm nearer the ramp, before feet took the slope's pitch)
+    assert np.abs(on_ramp - on_floor).max() < 0.01
+    assert above.min() > floor.min() - 0.015  # Foot Lock leaves a toe up to 1 cm under its height where it lands
     assert np.isfinite(zup_to_yup(joints)).all()

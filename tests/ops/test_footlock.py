@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from model_core.eval.metrics import bone_lengths_of as bone_lengths
-from model_core.motion.conventions import CONTACT_JOINTS, MODEL_FPS
+from model_core.motion.conventions import CONTACT_JOINTS, JOINT_INDEX, MODEL_FPS
 from model_core.motion.features import positions_to_features
 from model_core.motion.synthetic import up_a_slope, walking_skeleton
 from model_core.ops import footlock as fl
@@ -329,3 +329,28 @@ def test_ground_of_the_wrong_shape_or_with_holes_is_refused():
         fl.foot_lock(pos, ground=np.zeros((20, 2)))
     with pytest.raises(ValueError, match="ground"):
         fl.foot_lock(pos, ground=np.full((20, 4), np.nan))
+
+
+def test_a_foot_planted_on_a_slope_pitches_with_it():
+    """A left foot planted flat for a second, on a ground rising 20 % along it: told how high heel and toe stand
+    over a floor (``standing``: the pose's own on the flat), the lock keeps the heel there and turns the foot about
+    it until the toe stands as high over the slope too (the flat foot's toe was 2.7 cm in it); the foot keeps its
+    length. Measured on the pose over the slope instead, the toe's sunk height is taken for its own."""
+    still = np.repeat(walking_skeleton(30)[:1], 30, 0)
+    heel, toe = JOINT_INDEX["l_foot"], JOINT_INDEX["l_toe"]
+    contacts = np.zeros((30, 4), np.float32)
+    contacts[:, :2] = 1.0  # the left heel and toe down
+    along = (still[0, toe] - still[0, heel]) * np.array([1.0, 0.0, 1.0])
+    along /= np.linalg.norm(along)
+
+    def slope(p):
+        return 0.2 * ((p - still[0, heel]) @ along)
+
+    ground = slope(still[:, CONTACT_JOINTS])
+    standing = still[0, CONTACT_JOINTS, 1]
+    length = np.linalg.norm(still[0, toe] - still[0, heel])
+    for given, toe_off in ((standing, 0.005), (None, -0.02)):
+        out = fl.foot_lock(still, contacts=contacts, ground=ground, standing=given)
+        over = out[15, [heel, toe], 1] - slope(out[15, [heel, toe]]) - standing[:2]
+        assert abs(over[0]) < 1e-6 and np.linalg.norm(out[15, toe] - out[15, heel]) == pytest.approx(length, abs=1e-5)
+        assert (abs(over[1]) < toe_off) if given is not None else (over[1] < toe_off)
