@@ -14,6 +14,7 @@ draws them (matplotlib) into --out:
   and by Fill Gap, beside the true motion;
 - footlock.png: a foot's ground speed and path before and after the lock;
 - follow.png: a walk along a figure-eight curve, from above and from the side;
+- ground.png: a walk along a straight line over a hill, the hill as Follow Curve's Ground;
 - bonemap.png: what Auto-Map Bones finds on BVH imports of three rig families.
 
 The clips come from the project's own test split (``--data``, default data/mocap, unpacked
@@ -46,7 +47,7 @@ from model_core.motion.conventions import JOINTS, PARENTS
 from model_core.motion.features import detect_contacts
 from model_core.ops.footlock import foot_skate_cm
 
-PICTURES = ("extend", "inbetween", "denoise", "footlock", "loop", "follow", "bonemap", "your_rig")
+PICTURES = ("extend", "inbetween", "denoise", "footlock", "loop", "follow", "ground", "bonemap", "your_rig")
 BANDAI_SCALE = 0.01  # the Bandai-Namco files are in centimetres: import them in metres
 EXTEND_CLIP = "bandai-namco/dataset-2/dataset-2_walk-turn-right_normal_004.bvh"
 DENOISE_CLIP = "bandai-namco/dataset-2/dataset-2_wave-left-hand_feminine_018.bvh"
@@ -390,19 +391,26 @@ def picture_loop(bpy, clip: Path, out: Path, start: int = 60, end: int = 110, cy
             "take_largest_move_cm": float(take)}
 
 
-def picture_follow(bpy, clip: Path, out: Path) -> dict:
+def path_from_the_take(bpy, clip: Path, path: str):
+    """``clip`` imported, and a built-in ground ``path`` (batch_worker.add_path_curve) drawn from where the take
+    ends, heading the way it walks: (armature, its action's last frame, curve)."""
     import batch_worker
 
     obj = import_bvh(bpy, clip, BANDAI_SCALE)
-    start, end = action_range(obj)
+    _, end = action_range(obj)
     poses, names = sample(bpy, obj, end - 10, end)
     bpy.ops.strnn.auto_map()
     hips = joints_z_up(obj, poses, names)[:, 0]
     heading = np.arctan2(*(hips[-1, :2] - hips[0, :2])[::-1])
-    curve = batch_worker.add_path_curve(bpy, "figure_eight")  # starts at the origin heading -Y
+    curve = batch_worker.add_path_curve(bpy, path)  # starts at the origin heading -Y
     curve.location = (hips[-1, 0], hips[-1, 1], 0.0)  # drawn from where the character stands, as it walks
     curve.rotation_euler.z = heading + np.pi / 2
     bpy.context.view_layer.objects.active = obj
+    return obj, end, curve
+
+
+def picture_follow(bpy, clip: Path, out: Path) -> dict:
+    obj, end, curve = path_from_the_take(bpy, clip, "figure_eight")
     bpy.ops.strnn.follow_curve(curve=curve.name)
     s, e = action_range(obj)
     poses, names = sample(bpy, obj, end + 1, e)
@@ -428,6 +436,60 @@ def picture_follow(bpy, clip: Path, out: Path) -> dict:
     fig.suptitle(f"Follow Curve: {clip.name} walks a figure-eight curve (two 2 m loops), foot-locked")
     finish(fig, out / "follow.png")
     return {"clip": clip.name, "frames": len(joints)}
+
+
+def picture_ground(bpy, clip: Path, out: Path) -> dict:
+    """Follow Curve along a straight line over a hill (a mesh: up 15 % for 3 m, a 2 m top, down again), with the
+    hill as Ground: the side view along the way, every 6th frame, and the lowest foot's height over the hill."""
+    obj, end, curve = path_from_the_take(bpy, clip, "line")  # 10 m
+    way = np.array([-20.0, -1.0, 1.0, 3.0, 5.0, 6.0, 9.0, 30.0])  # metres along the line
+    rise = np.array([0.0, 0.0, 0.0, 0.3, 0.3, 0.3, 0.0, 0.0])  # up 15 % from 1 m, a top from 3 to 6 m, down by 9
+    verts = [(side, -d, z) for d, z in zip(way, rise) for side in (-4.0, 4.0)]
+    faces = [(2 * i, 2 * i + 1, 2 * i + 3, 2 * i + 2) for i in range(len(way) - 1)]
+    mesh = bpy.data.meshes.new("Hill")
+    mesh.from_pydata(verts, [], faces)
+    hill = bpy.data.objects.new("Hill", mesh)
+    hill.location, hill.rotation_euler = curve.location, curve.rotation_euler
+    bpy.context.scene.collection.objects.link(hill)
+    bpy.context.view_layer.objects.active = obj
+    bpy.ops.strnn.follow_curve(curve=curve.name, ground=hill.name, frames=300)
+    s, e = action_range(obj)
+    poses, names = sample(bpy, obj, end + 1, e)
+    joints = joints_z_up(obj, poses, names)
+    bpy.context.view_layer.update()
+    to_path = np.array(curve.matrix_world.inverted())
+    local = joints @ to_path[:3, :3].T + to_path[:3, 3]  # the line's frame: -Y along the way
+    along = np.stack([-local[..., 1], local[..., 0], joints[..., 2]], -1)  # (along, side, height)
+
+    def hill_under(d):
+        return np.interp(d, way, rise)
+
+    feet = [JOINTS.index(j) for j in ("l_foot", "l_toe", "r_foot", "r_toe")]
+    over = along[:, feet, 2] - hill_under(along[:, feet, 0])
+    lowest = over.min(axis=1)
+    fps = bpy.context.scene.render.fps
+    each_second = [float(lowest[i:i + fps].min()) for i in range(0, len(lowest) - fps + 1, fps)]
+    hips_over = along[:, 0, 2] - hill_under(along[:, 0, 0])
+    fig, (side, low) = plt.subplots(2, 1, figsize=(14, 5.2), gridspec_kw={"height_ratios": [2.2, 1]}, sharex=True)
+    d = np.linspace(along[:, 0, 0].min() - 0.5, along[:, 0, 0].max() + 0.5, 200)
+    side.fill_between(d, hill_under(d), -0.1, color="0.85", lw=0)
+    side.plot(d, hill_under(d), color="k", lw=1, label="the Ground mesh (a hill)")
+    ghosts(side, along, 6, (0, 2), alpha=(0.9, 0.9))
+    side.set_aspect("equal")
+    side.set_ylim(-0.1, 2.2)
+    side.legend(fontsize=8, loc="upper right")
+    side.set_title(f"{len(joints)} new frames along the line, every 6th drawn, seen from the side (m)", fontsize=9)
+    low.plot(along[:, 0, 0], lowest * 100, color=NEW, lw=1.2, label="lowest heel or toe over the hill")
+    low.axhline(0, color="k", lw=0.6)
+    low.set_ylabel("cm", fontsize=8)
+    low.set_xlabel("along the line (m)", fontsize=8)
+    low.legend(fontsize=8, loc="upper right")
+    low.grid(alpha=0.3)
+    fig.suptitle(f"Follow Curve with Ground: {clip.name} walks a straight line over a hill, feet locked on it")
+    finish(fig, out / "ground.png")
+    return {"clip": clip.name, "frames": len(joints), "hips_over_hill_m": [float(hips_over.min()),
+                                                                              float(hips_over.max())],
+            "lowest_foot_each_second_cm": [round(100 * x, 1) for x in each_second]}
 
 
 def label_column(ax, items: list[tuple[float, float, str, str]], x: float, gap: float, align: str):
@@ -582,6 +644,7 @@ def main(argv=None) -> int:
             "footlock": lambda: picture_footlock(bpy, clips["extend"], args.out),
             "loop": lambda: picture_loop(bpy, clips["follow"], args.out),
             "follow": lambda: picture_follow(bpy, clips["follow"], args.out),
+            "ground": lambda: picture_ground(bpy, clips["follow"], args.out),
             "bonemap": lambda: picture_bone_map(bpy, args.data, args.out),
             "your_rig": lambda: picture_your_rig(bpy, clips["follow"], args.out),
         }
