@@ -18,15 +18,19 @@ REPO = Path(__file__).resolve().parents[2]
 def test_pictures_of_each_operator(mocap_root, tmp_path):
     pytest.importorskip("bpy")
     done = subprocess.run([sys.executable, str(REPO / "scripts" / "readme_pictures.py"), "--data", str(mocap_root),
-                           "--out", str(tmp_path), "--only", "extend", "denoise", "footlock", "follow", "bonemap"],
+                           "--out", str(tmp_path), "--only", "extend", "denoise", "footlock", "follow", "ground",
+                           "bonemap"],
                           capture_output=True, text=True, timeout=600, cwd=REPO)
     assert done.returncode == 0, done.stderr[-2000:]
-    for name in ("extend", "denoise", "footlock", "follow", "bonemap"):
+    for name in ("extend", "denoise", "footlock", "follow", "ground", "bonemap"):
         assert (tmp_path / f"{name}.png").read_bytes().startswith(b"\x89PNG")
     figures = json.loads(next(line for line in done.stdout.splitlines() if line.startswith("figures: "))[9:])
     assert figures["denoise"]["denoised_cm"] < 0.5 * figures["denoise"]["noisy_cm"]  # the jitter is more than halved
     assert figures["footlock"]["skate_after_cm"] < 0.5 * figures["footlock"]["skate_before_cm"]
     assert figures["follow"]["frames"] > 300  # one lap of the figure-eight
+    low, high = figures["ground"]["hips_over_hill_m"]
+    assert 0.7 < low and high < 1.0  # the hips ride over the hill, 30 cm high
+    assert all(0.0 < cm < 6.0 for cm in figures["ground"]["lowest_foot_each_second_cm"])  # a foot down on it
     assert set(figures["bonemap"].values()) == {21}  # every joint found on each of the three rigs
 
 
