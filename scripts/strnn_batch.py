@@ -122,6 +122,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="the model alone: do not lean on the clip's own motion (by default the continuation does, "
                         "wherever it comes back to something the clip did)")
     foot_lock_flag(p, "extend_clip")
+    ground_flag(p, "the new frames go up and down with it, their feet locked on it with --foot-lock")
 
     p = sub.add_parser("denoise", parents=[common], help="clean each clip (strnn.denoise_action)",
                        description="Clean each clip with the motion model.")
@@ -145,9 +146,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("footlock", parents=[common], help="pin the feet while they touch the ground "
                        "(strnn.foot_lock)", description="Pin the feet on the ground while they touch it (leg IK).")
     p.add_argument("--blend", type=float, default=opts.LOCK_BLEND.default, help=opts.LOCK_BLEND.help(" s"))
-    p.add_argument("--ground", default="", metavar="MESH",
-                   help="for .blend inputs: name of a mesh object in the file the feet stand on (stairs, a slope, "
-                        "terrain); each heel and toe is pinned on its surface (default: one flat floor, the take's)")
+    ground_flag(p, "each heel and toe is pinned on its surface")
 
     p = sub.add_parser("loop", parents=[common], help="make each clip a cycle that repeats without a seam "
                        "(strnn.make_loop)", description="Make each clip (or frames START to END of it) a cycle: "
@@ -175,9 +174,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--frames", type=int, default=opts.CURVE_FRAMES.default, help=opts.CURVE_FRAMES.help())
     p.add_argument("--speed", type=float, default=opts.CURVE_SPEED.default, help=opts.CURVE_SPEED.help(" m/s"))
     foot_lock_flag(p, "follow_curve")
-    p.add_argument("--ground", default="", metavar="MESH",
-                   help="for .blend inputs: name of a mesh object in the file to walk over (a slope, terrain): the "
-                        "walk goes up and down with it, feet locked on it (default: one flat floor)")
+    ground_flag(p, "the walk goes up and down with it, feet locked on it")
     p = sub.add_parser("transfer", parents=[common], help="move each take onto a character "
                        "(strnn.transfer_motion)", description="Move the motion of each BVH take onto the rig of "
                        "a character .blend (its proportions, feet on the floor), one new action per take, saved "
@@ -189,6 +186,13 @@ def build_parser() -> argparse.ArgumentParser:
                         "or its only one)")
     foot_lock_flag(p, "transfer_motion")
     return parser
+
+
+def ground_flag(p, what: str) -> None:
+    """``--ground MESH``: a mesh of a .blend input the feet stand on (the operator's Ground)."""
+    p.add_argument("--ground", default="", metavar="MESH",
+                   help=f"for .blend inputs: name of a mesh object in the file the feet stand on (stairs, a slope, "
+                        f"terrain): {what} (default: one flat floor, the take's own)")
 
 
 def foot_lock_flag(p, operator: str) -> None:
@@ -205,7 +209,8 @@ def operator_call(args) -> tuple[str, dict]:
     if args.command == "extend":
         return "extend_clip", {"frames": args.frames, "context_frames": args.context_frames,
                                "follow_clip": args.follow_clip, "foot_lock": args.foot_lock,
-                               "from_current": args.from_frame is not None, "before_start": args.before_start}
+                               "from_current": args.from_frame is not None, "before_start": args.before_start,
+                               "ground": args.ground}
     if args.command == "denoise":
         return "denoise_action", {"strength": args.strength, "foot_lock": args.foot_lock}
     if args.command == "footlock":

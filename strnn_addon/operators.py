@@ -238,6 +238,7 @@ class STRNN_OT_extend_clip(_Staged, bpy.types.Operator):
     follow_clip: options.follow_clip()
     from_current: options.from_current()
     foot_lock: options.foot_lock("extend_clip")
+    ground: options.ground_name(walk=True)
     before_start: options.before_start()
     scene_range: options.scene_range()
     output: options.output()
@@ -247,7 +248,7 @@ class STRNN_OT_extend_clip(_Staged, bpy.types.Operator):
         start = context.scene.frame_current if self.from_current else None
         return extend_steps(context, obj, frames=self.frames, context_frames=self.context_frames,
                             follow_clip=self.follow_clip, foot_lock=self.foot_lock, from_frame=start,
-                            scene_range=self.scene_range, before_start=self.before_start)
+                            scene_range=self.scene_range, before_start=self.before_start, ground=self.ground)
 
     def done(self, action) -> str:
         stepped = stepped_note(action)

@@ -119,6 +119,7 @@ class STRNN_PT_extend(_OperatorPanel, bpy.types.Panel):
         col.prop(opts, "from_current")
         col.prop(opts, "before_start")
         col.prop(opts, "foot_lock")
+        col.prop(opts, "ground", icon="OUTLINER_OB_MESH")
 
 
 class STRNN_PT_fill_gap(_OperatorPanel, bpy.types.Panel):

@@ -85,6 +85,27 @@ def ground_heights(context, obj, pos: np.ndarray) -> tuple[np.ndarray, int]:
     return heights, int((~found).any(axis=1).sum())
 
 
+def _smoothed_under_hips(context, obj, pos: np.ndarray, fps: float) -> np.ndarray:
+    """``obj``'s surface height ``[F]`` under the hips of ``pos`` ``[F, 21, 3]`` (world, Y-up), carried over frames
+    with none under them and smoothed over a quarter second; raises :class:`UserError` where there is none at all."""
+    under = surface_under(context, obj, pos[:, JOINT_INDEX["hips"]], 0.5 * leg_length(pos))
+    found = np.isfinite(under)
+    if not found.any():
+        raise _no_ground(obj)
+    frames = np.arange(len(under))
+    return gaussian_smooth(np.interp(frames, frames[found], under[found]), 0.25 * fps)
+
+
+def flattened(context, obj, pos: np.ndarray, fps: float) -> np.ndarray:
+    """``pos`` ``[F, 21, 3]`` (world, Y-up) as if walked on a flat floor at the height of its last frame: each frame
+    lowered by how much higher ``obj``'s surface under its hips is there (smoothed over a quarter second) than
+    under the last frame's, so a model that learnt flat floors reads a walk up a slope as a walk."""
+    smooth = _smoothed_under_hips(context, obj, pos, fps)
+    out = np.array(pos, np.float64)
+    out[..., 1] -= (smooth - smooth[-1])[:, None]  # Y is up
+    return out
+
+
 def body_lift(context, obj, pos: np.ndarray, known: int, fps: float,
               rest: np.ndarray | None = None) -> tuple[np.ndarray, float]:
     """How far up ``[F]`` to carry the frames of ``pos`` ``[F, 21, 3]`` (world, Y-up) from ``known`` on, so a walk
@@ -93,13 +114,7 @@ def body_lift(context, obj, pos: np.ndarray, known: int, fps: float,
     walk starts (the last of the ``known`` frames, else the ``rest`` pose ``[21, 3]`` the walk starts from); 0 on
     the known frames. Also that starting height: the flat floor's, over which the walk stands as high as it will
     over the surface."""
-    hips = pos[:, JOINT_INDEX["hips"]]
-    under = surface_under(context, obj, hips, 0.5 * leg_length(pos))
-    found = np.isfinite(under)
-    if not found.any():
-        raise _no_ground(obj)
-    frames = np.arange(len(under))
-    smooth = gaussian_smooth(np.interp(frames, frames[found], under[found]), 0.25 * fps)
+    smooth = _smoothed_under_hips(context, obj, pos, fps)
     if known:
         start = smooth[known - 1]
     else:

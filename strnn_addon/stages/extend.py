@@ -4,11 +4,13 @@ from __future__ import annotations
 
 import numpy as np
 
+from ...model_core.motion.conventions import UP_AXIS
 from ...model_core.ops.extend import FLOOR_S, MEMORY_S, clip_floor, clip_in_place
 from ...model_core.ops.footlock import SETTLE_PASSES
 from ...model_core.rig.solve import solve
 from .. import engine_bridge
 from ..scene import anim, cycles, pipeline
+from ..scene.ground import body_lift, find_ground, flattened, ground_heights, ground_record
 from ..scene.pipeline import UserError
 from .common import (
     familiarity_record,
@@ -68,15 +70,18 @@ def memory_range(clip, ctx_frames: np.ndarray, seconds: float = MEMORY_S, step: 
 
 def extend_steps(context, obj, *, frames: int = 120, context_frames: int = 0, follow_clip: bool = True,
                  foot_lock: bool = False, from_frame: int | None = None, scene_range: bool = True,
-                 before_start: bool = False):
+                 before_start: bool = False, ground: str = ""):
     """Continue ``obj``'s action by ``frames`` scene frames from its last ``context_frames``
     (0: just enough for the model's 20-frame context), leaning after the model's first window on the
     clip's own motion (up to :data:`extend.MEMORY_S` seconds of it) when ``follow_clip``, feet locked on the
     new frames when ``foot_lock``. ``from_frame``: continue after this frame instead of the action's last, the
     written bones' keys after it replaced. ``before_start``: add the frames before the action's first frame (or
     before ``from_frame``, the keys before it replaced) instead, the clip read backwards in time, as a lead-in or a
-    simulation's pre-roll. ``scene_range``: widen the scene's range to the new frames. A generator: yields each
-    stage's name before running it (so a caller can report progress or stop), returns the new action."""
+    simulation's pre-roll. ``scene_range``: widen the scene's range to the new frames. ``ground``: a mesh the clip
+    walks on (a slope, terrain): the new frames go up and down with its surface under the hips, their feet locked
+    on it. A generator: yields each stage's name before running it (so a caller can report progress or stop),
+    returns the new action."""
+    surface = find_ground(ground, obj) if ground else None
     clip = pipeline.prepare(context, obj)
     back, sign = before_start, -1 if before_start else 1
     edge = (clip.first if back else clip.last) if from_frame is None else int(from_frame)
@@ -98,6 +103,9 @@ def extend_steps(context, obj, *, frames: int = 120, context_frames: int = 0, fo
     read = pipeline.joint_positions(context, clip, mem_frames[order])
     memory = np.empty_like(read)
     memory[order] = read
+    seen = memory[len(mem_frames) - len(ctx_frames):]  # the context as it is
+    if surface is not None:  # read as walked on a flat floor at the edge's height, as the model learnt walks
+        memory = flattened(context, surface, memory, fps)
     pos = memory[len(mem_frames) - len(ctx_frames):]
     held_loc, held_rot = pipeline.reference_pose(context, clip, ctx_frames[-1:])
     previous = pipeline.raw_rotations(clip, edge)
@@ -105,10 +113,14 @@ def extend_steps(context, obj, *, frames: int = 120, context_frames: int = 0, fo
     followed = memory if follow_clip and len(mem_frames) > len(ctx_frames) else None
     floor = clip_floor(memory, fps)  # the ground the new feet stay out of
     new_pos = model_call(engine_bridge.run_extend, prefs(context), pos, fps, count, followed, floor)
+    joined, heights, bare = np.concatenate([seen, new_pos]), None, 0
+    if surface is not None:  # the new frames, made on the flat floor, carried over the ground
+        joined[len(pos):, :, UP_AXIS] += body_lift(context, surface, joined, len(pos), fps)[0][len(pos):, None]
+        heights, bare = ground_heights(context, surface, joined)
     if foot_lock:
-        new_pos = lock(np.concatenate([pos, new_pos]), fps, fixed=np.arange(len(pos) + count) < len(pos),
-                       passes=SETTLE_PASSES)
-        new_pos = new_pos[len(pos):]
+        joined = lock(joined, fps, fixed=np.arange(len(pos) + count) < len(pos), passes=SETTLE_PASSES,
+                      ground=heights)
+    new_pos = joined[len(pos):]
     new_frames = key + sign * step * (1 + np.arange(count, dtype=np.float64))
     if back:  # written in time order
         new_frames, new_pos = new_frames[::-1], new_pos[::-1]
@@ -119,6 +131,8 @@ def extend_steps(context, obj, *, frames: int = 120, context_frames: int = 0, fo
                      frames=frames, context_frames=len(ctx_frames),
                      follow_clip_frames=len(mem_frames) if follow_clip else 0,
                      foot_lock=foot_lock, from_frame=from_frame, before_start=before_start or None)
+    if surface is not None:
+        record.update(ground_record(surface, bare, len(joined)))
     if followed is not None and clip_in_place(followed, fps):  # the new frames kept where the clip walks in place
         record["in_place"] = True
     if cycled:

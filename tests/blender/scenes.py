@@ -381,3 +381,24 @@ def on_steps(obj, step: int, interpolation: str = "CONSTANT") -> None:
         for p in points:
             p.interpolation = interpolation
 
+
+
+def ramp(name: str, start: np.ndarray, way: np.ndarray, slope: float, size: float = 20.0):
+    """A square mesh ``name`` ``2 size`` across that rises ``slope`` per unit along ``way`` from ``start`` (both
+    Y-up, model axes: the ground point where it is at height 0 and a horizontal direction), and the function that
+    gives its height under Y-up points ``[..., 3]``."""
+    from model_core.motion.conventions import yup_to_zup
+
+    way = np.asarray(way, np.float64) / np.linalg.norm(way)
+    side = np.cross(way, [0.0, 1.0, 0.0])
+    start = np.asarray(start, np.float64) * np.array([1.0, 0.0, 1.0])
+
+    def height(p):
+        return slope * ((np.asarray(p) - start) @ way)
+
+    corners = np.array([start + size * (a * way + b * side) for a, b in ((-1, -1), (1, -1), (1, 1), (-1, 1))])
+    corners[:, 1] = height(corners)
+    mesh = bpy.data.meshes.new(name)
+    mesh.from_pydata([tuple(c) for c in yup_to_zup(corners)], [], [(0, 1, 2, 3)])
+    bpy.context.scene.collection.objects.link(bpy.data.objects.new(name, mesh))
+    return height

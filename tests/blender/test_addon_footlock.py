@@ -15,11 +15,12 @@ from scenes import (
     import_bvh,
     key_snapshot,
     on_steps,
+    ramp,
     same_keys,
 )
 
 from model_core.io.bvh_export import write_bvh
-from model_core.motion.conventions import CONTACT_JOINTS, JOINT_INDEX, yup_to_zup, zup_to_yup
+from model_core.motion.conventions import CONTACT_JOINTS, JOINT_INDEX, zup_to_yup
 from model_core.motion.synthetic import up_a_slope, walking_skeleton
 from model_core.ops import footlock as fl
 from model_core.rig.rigs import leg_length
@@ -206,20 +207,7 @@ def climbing(addon, tmp_path, frames: int = 120):
     climbed, _ = up_a_slope(clean, SLOPE)
     obj = import_bvh(write_bvh(tmp_path / "climb.bvh", climbed + (slid - clean)))
     scale = leg_length(joints(addon, obj, np.arange(1, frames + 1))) / leg_length(clean)
-    way = (clean[-1, 0] - clean[0, 0]) * np.array([1.0, 0.0, 1.0])  # as up_a_slope lays the slope
-    way /= np.linalg.norm(way)
-    side = np.cross(way, [0.0, 1.0, 0.0])
-    start = clean[0, 0] * np.array([1.0, 0.0, 1.0]) * scale
-
-    def height(p):
-        return SLOPE * ((np.asarray(p) - start) @ way)
-
-    corners = np.array([start + (a * 20.0 * way + b * 5.0 * side) * scale for a, b in ((-1, -1), (1, -1), (1, 1),
-                                                                                        (-1, 1))])
-    corners[:, 1] = height(corners)
-    mesh = bpy.data.meshes.new("Ramp")
-    mesh.from_pydata([tuple(c) for c in yup_to_zup(corners)], [], [(0, 1, 2, 3)])
-    bpy.context.scene.collection.objects.link(bpy.data.objects.new("Ramp", mesh))
+    height = ramp("Ramp", clean[0, 0] * scale, clean[-1, 0] - clean[0, 0], SLOPE)  # as up_a_slope lays the slope
     bpy.context.view_layer.objects.active = obj
     return obj, fl.detect_foot_contacts(slid), height
 
