@@ -9,8 +9,18 @@ import numpy as np
 
 from ..inference import memory as clip_memory
 from ..inference.memory import first_scale
-from ..motion.conventions import GROUND_AXES, JOINT_INDEX, MIN_MODEL_FRAMES, MODEL_FPS, ROOT
+from ..motion.conventions import (
+    CONTACT_JOINTS,
+    GROUND_AXES,
+    JOINT_INDEX,
+    MIN_MODEL_FRAMES,
+    MODEL_FPS,
+    ROOT,
+    STANDARD_LEG_LENGTH,
+    UP_AXIS,
+)
 from ..motion.features import floor_height, gaussian_smooth, positions_to_features
+from ..rig.rigs import leg_length
 from .familiarity import momentum_shares
 from .normalise import fit_normalisation, model_frames_available, sample_at
 from .skeleton import join_clip
@@ -36,6 +46,15 @@ STILL_SPEED, STILL_POWER, STILL_FRAMES = 0.01, 2.0, 4
 STILL_KNOWN_SPEED = 0.003
 # The report says the first window was held near the last pose when it kept at most this share of its motion.
 HELD_NOTE = 0.75
+# A clip whose own floor (its lowest heel or toe, the lowest over FLOOR_RISE_S seconds about each frame) rises or
+# falls by more than FLOOR_RISE_M metres (for a standard body) over what Extend reads walks up or down something:
+# the model, which learnt flat floors, reads it with that rise taken out (floor_rise). 0.3 m: over the project's
+# own takes (runs of up to 20 s ending every 2 s, runs/s62/floor_max.py), the Bandai actions read at most 0.015 m,
+# salsa, martial arts, Indian dance and the cgspeed takes 0.07 to 0.12, the CMU playground's climbs up to 1.55.
+FLOOR_RISE_S, FLOOR_RISE_M = 1.0, 0.30
+FLOOR_STILL = 0.3  # metres a second (standard body): a heel or toe slower than this for FLOOR_STAND_S seconds
+FLOOR_STAND_S = 0.15  # stands on the floor (a foot that only passes that slowly, as a body rises, does not)
+
 # Seconds of the clip before its end whose floor (features.floor_height) the new frames' feet are kept out of
 # (stance.ground): long enough to hold a step down even where the clip ends in a jump, short enough to be the floor
 # where the clip ends when a capture's floor drifts over a take.
@@ -189,6 +208,45 @@ def extend_positions(engine, pos: np.ndarray, fps: float, frames: int, memory: n
     if _steps_in_place(looked):  # a walk in place goes on in place
         joined = np.concatenate([joined[:1], kept_in_place(looked, joined[1:])])
     return sample_at(joined, MODEL_FPS, np.arange(1, frames + 1) / fps)
+
+
+def floor_rise(clip: np.ndarray, fps: float) -> np.ndarray | None:
+    """How much higher ``[F]`` than at its last frame the floor under a clip ``[F, 21, 3]`` (Y-up, any units, ``fps``)
+    is at each frame, where it rises or falls by more than :data:`FLOOR_RISE_M` (a walk up stairs or a slope, read
+    from the clip alone); None where the floor is flat, or where the feet seldom stand still (a body that rises or
+    falls as a whole, a flight, is no floor that does). The floor: the lowest heel or toe standing still (slower
+    than :data:`FLOOR_STILL` in any direction for :data:`FLOOR_STAND_S` or more), its lowest over
+    :data:`FLOOR_RISE_S` about each frame, smoothed over a quarter second."""
+    clip = np.asarray(clip, np.float64)
+    unit = leg_length(clip) / STANDARD_LEG_LENGTH
+    feet = clip[:, CONTACT_JOINTS]  # [F, 4, 3]
+    speed = np.zeros(feet.shape[:2])
+    if len(clip) > 1:
+        step = np.linalg.norm(np.diff(feet, axis=0), axis=-1) * fps / unit
+        speed[1:], speed[0] = step, step[0]
+    standing = _long_runs(speed < FLOOR_STILL, max(2, int(np.ceil(FLOOR_STAND_S * fps))))
+    still = np.where(standing, feet[..., UP_AXIS], np.inf).min(axis=1)
+    found = np.isfinite(still)
+    if found.mean() < 0.25:
+        return None
+    frames = np.arange(len(clip))
+    low = np.interp(frames, frames[found], still[found])
+    half = max(1, int(round(FLOOR_RISE_S * fps / 2)))
+    running = np.lib.stride_tricks.sliding_window_view(np.pad(low, half, mode="edge"), 2 * half + 1).min(-1)
+    profile = gaussian_smooth(running, 0.25 * fps)
+    rise = profile - profile[-1]
+    return rise if np.abs(rise).max() > FLOOR_RISE_M * unit else None
+
+
+def _long_runs(mask: np.ndarray, frames: int) -> np.ndarray:
+    """``mask`` ``[F, K]`` with each column's runs of on-frames shorter than ``frames`` switched off."""
+    out = np.zeros(mask.shape, bool)
+    for k in range(mask.shape[1]):
+        edges = np.flatnonzero(np.diff(np.r_[0, mask[:, k].astype(np.int8), 0]))
+        for start, stop in zip(edges[::2], edges[1::2]):
+            if stop - start >= frames:
+                out[start:stop, k] = True
+    return out
 
 
 def clip_floor(clip: np.ndarray, fps: float) -> float:

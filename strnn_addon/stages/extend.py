@@ -4,9 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from ...model_core.motion.conventions import UP_AXIS
-from ...model_core.ops.extend import FLOOR_S, MEMORY_S, clip_floor, clip_in_place
+from ...model_core.motion.conventions import STANDARD_LEG_LENGTH, UP_AXIS
+from ...model_core.ops.extend import FLOOR_S, MEMORY_S, clip_floor, clip_in_place, floor_rise
 from ...model_core.ops.footlock import SETTLE_PASSES
+from ...model_core.rig.rigs import leg_length
 from ...model_core.rig.solve import solve
 from .. import engine_bridge
 from ..scene import anim, cycles, pipeline
@@ -104,8 +105,13 @@ def extend_steps(context, obj, *, frames: int = 120, context_frames: int = 0, fo
     memory = np.empty_like(read)
     memory[order] = read
     seen = memory[len(mem_frames) - len(ctx_frames):]  # the context as it is
+    rise = None
     if surface is not None:  # read as walked on a flat floor at the edge's height, as the model learnt walks
         memory = flattened(context, surface, memory, fps)
+    elif (rise := floor_rise(memory, fps)) is not None:  # up or down something no mesh stands for: on at the edge
+        memory = memory.copy()
+        memory[..., UP_AXIS] -= rise[:, None]
+        seen = memory[len(mem_frames) - len(ctx_frames):]  # the new frames' feet level with the edge's
     pos = memory[len(mem_frames) - len(ctx_frames):]
     held_loc, held_rot = pipeline.reference_pose(context, clip, ctx_frames[-1:])
     previous = pipeline.raw_rotations(clip, edge)
@@ -133,6 +139,12 @@ def extend_steps(context, obj, *, frames: int = 120, context_frames: int = 0, fo
                      foot_lock=foot_lock, from_frame=from_frame, before_start=before_start or None)
     if surface is not None:
         record.update(ground_record(surface, bare, len(joined)))
+    if rise is not None:  # in cm for a body of the standard leg length, as the rule judges it
+        cm = 100 * float(np.ptp(rise)) * STANDARD_LEG_LENGTH / leg_length(seen)
+        record["floor_rise"] = {"cm": round(cm, 1), "note": (
+            f"The clip's floor rises or falls {cm:.0f} cm (for a standard body) over what Extend read (stairs, a "
+            "slope?): the new frames go on level at its height where the clip ends; to carry them over the ground, "
+            "name its mesh as Ground")}
     if followed is not None and clip_in_place(followed, fps):  # the new frames kept where the clip walks in place
         record["in_place"] = True
     if cycled:

@@ -431,3 +431,21 @@ def test_a_walk_in_place_is_extended_in_place(mocap_root, monkeypatch, take):
     assert drift(walk)[-1] > 3.0  # walking on, it travels
     monkeypatch.setattr(extend, "IN_PLACE_SPEED", 0.0)
     assert drift(still)[-1] > 0.5
+
+
+def test_a_floor_that_rises_under_a_walk_is_read_from_its_standing_feet():
+    """:func:`extend.floor_rise`: a walk up a 15 % slope (its feet planted, 60 cm up in 3 s) rises by the slope's
+    height under it; the same walk on the flat has no rise, and neither has the flat walk lifted as a whole at
+    0.6 m/s (a body in flight: no foot stands still)."""
+    from model_core.motion.synthetic import up_a_slope
+    from model_core.ops.extend import floor_rise
+    from model_core.ops.footlock import SETTLE_PASSES, FootLockSettings, foot_lock
+
+    flat = foot_lock(walking_skeleton(90), settings=FootLockSettings(passes=SETTLE_PASSES))
+    climbed, under = up_a_slope(flat, 0.15)
+    rise = floor_rise(climbed, 30.0)
+    assert rise is not None and rise[-1] == 0.0
+    assert np.abs(rise - (under.min(axis=1) - under[-1].min()))[15:-15].max() < 0.06  # the slope, a stride behind
+    assert floor_rise(flat, 30.0) is None
+    lifted = flat + np.arange(90)[:, None, None] * np.array([0.0, 0.02, 0.0])
+    assert floor_rise(lifted, 30.0) is None
