@@ -1,5 +1,5 @@
-"""The ground a character stands on, from a mesh in the scene: stairs, a slope, terrain (the Ground of Foot Lock
-and of Follow Curve).
+"""The ground a character stands on, from a mesh in the scene: stairs, a slope, terrain (the Ground of Foot Lock,
+Extend Clip and Follow Curve).
 
 Heights are found by casting a ray straight down (the world's -Z) onto the mesh as it stands at the current
 frame, from half a leg above each heel and toe, so a foot that sinks a little into a step still finds that
@@ -12,7 +12,7 @@ import numpy as np
 from mathutils import Vector
 from mathutils.bvhtree import BVHTree
 
-from ...model_core.motion.conventions import CONTACT_JOINTS, JOINT_INDEX, yup_to_zup
+from ...model_core.motion.conventions import CONTACT_JOINTS, JOINT_INDEX, UP_AXIS, yup_to_zup
 from ...model_core.motion.features import gaussian_smooth
 from ...model_core.rig.rigs import leg_length
 from .pipeline import UserError
@@ -102,7 +102,7 @@ def flattened(context, obj, pos: np.ndarray, fps: float) -> np.ndarray:
     under the last frame's, so a model that learnt flat floors reads a walk up a slope as a walk."""
     smooth = _smoothed_under_hips(context, obj, pos, fps)
     out = np.array(pos, np.float64)
-    out[..., 1] -= (smooth - smooth[-1])[:, None]  # Y is up
+    out[..., UP_AXIS] -= (smooth - smooth[-1])[:, None]
     return out
 
 
