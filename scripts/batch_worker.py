@@ -251,8 +251,9 @@ def run_file(bpy, job: dict) -> list[str]:
         else:
             kwargs["curve"] = add_path_curve(bpy, job["path"]).name
         view_layer.objects.active = obj
-    if kwargs.get("ground") and bpy.data.objects.get(kwargs["ground"]) is None:
-        raise BatchError(f"no object named {kwargs['ground']!r} in the file for --ground")
+    if kwargs.get("ground") and bpy.data.objects.get(kwargs["ground"]) is None \
+            and bpy.data.collections.get(kwargs["ground"]) is None:
+        raise BatchError(f"no object or collection named {kwargs['ground']!r} in the file for --ground")
     try:
         getattr(bpy.ops.strnn, job["operator"])(**kwargs)
     except RuntimeError as e:

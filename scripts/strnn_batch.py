@@ -189,10 +189,11 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def ground_flag(p, what: str) -> None:
-    """``--ground MESH``: a mesh of a .blend input the feet stand on (the operator's Ground)."""
+    """``--ground MESH``: a mesh (or a collection of meshes) of a .blend input the feet stand on (the operator's
+    Ground)."""
     p.add_argument("--ground", default="", metavar="MESH",
-                   help=f"for .blend inputs: name of a mesh object in the file the feet stand on (stairs, a slope, "
-                        f"terrain): {what} (default: one flat floor, the take's own)")
+                   help=f"for .blend inputs: name of a mesh, or of a collection of meshes, in the file the feet "
+                        f"stand on (stairs, a slope, terrain): {what} (default: one flat floor, the take's own)")
 
 
 def foot_lock_flag(p, operator: str) -> None:

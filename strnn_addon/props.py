@@ -139,9 +139,13 @@ def _objects_of(kind: str, exclude_active: bool = False, exclude_body: bool = Fa
 
         active = context.active_object if exclude_active else None
         body = context.active_object if exclude_body else None
-        return [o.name for o in context.scene.objects
-                if o.type == kind and o is not active and edit_text.lower() in o.name.lower()
-                and not (body is not None and deforms(body, o))]
+        found = [o.name for o in context.scene.objects
+                 if o.type == kind and o is not active and edit_text.lower() in o.name.lower()
+                 and not (body is not None and deforms(body, o))]
+        if exclude_body:  # the ground: a collection of meshes as well (a floor and the stairs on it)
+            found += [c.name for c in bpy.data.collections if edit_text.lower() in c.name.lower()
+                      and any(o.type == kind and not deforms(body, o) for o in c.all_objects)]
+        return found
 
     return search
 
@@ -156,8 +160,9 @@ def ground_name(walk: bool = False):
     what = ("the new frames go up and down with its surface under the hips, and Foot Lock pins each heel and toe "
             "on it" if walk else "each heel and toe is pinned on its surface under the foot")
     return StringProperty(name="Ground", default="", search=_objects_of("MESH", exclude_body=True),
-                          description=f"A mesh the feet stand on (stairs, a slope, terrain): {what}, as the mesh "
-                                      "stands at the current frame; empty: one flat floor, the take's own")
+                          description=f"A mesh the feet stand on (stairs, a slope, terrain), or a collection of "
+                                      f"meshes: {what}, as they stand at the current frame; empty: one flat floor, "
+                                      "the take's own")
 
 
 def source_name():

@@ -21,61 +21,80 @@ from .pipeline import UserError
 def deforms(armature, obj) -> bool:
     """Whether ``armature`` deforms mesh ``obj`` (an Armature modifier on it names the armature): the character's
     own body, which is no ground to stand on."""
-    return any(m.type == "ARMATURE" and m.object == armature for m in getattr(obj, "modifiers", ()))
+    return armature is not None and any(m.type == "ARMATURE" and m.object == armature
+                                        for m in getattr(obj, "modifiers", ()))
 
 
-def find_ground(name: str, armature=None):
-    """The mesh object named ``name``; raises :class:`UserError` when there is none, it is no mesh or ``armature``
-    deforms it."""
+class Ground:
+    """The meshes a character stands on: one mesh, or every mesh of a collection (a floor and the stairs on it),
+    as they stand at the current frame. ``name``: what the user named."""
+
+    def __init__(self, name: str, meshes: list):
+        self.name, self.meshes = name, meshes
+
+    def under(self, context, points: np.ndarray, lift: float) -> np.ndarray:
+        """Height ``[N]`` (Y-up, scene units) of the highest surface under world-space points ``[N, 3]`` (Y-up) that
+        a ray cast down from ``lift`` above each meets; NaN where no mesh is under a point."""
+        depsgraph = context.evaluated_depsgraph_get()
+        from_above = yup_to_zup(np.asarray(points, np.float64)) + np.array([0.0, 0.0, lift])
+        out = np.full(len(from_above), np.nan)
+        for obj in self.meshes:
+            evaluated = obj.evaluated_get(depsgraph)
+            tree = BVHTree.FromObject(evaluated, depsgraph)
+            world = evaluated.matrix_world
+            to_local = world.inverted()
+            down = (to_local.to_3x3() @ Vector((0.0, 0.0, -1.0))).normalized()
+            for i, p in enumerate(from_above):
+                hit, *_ = tree.ray_cast(to_local @ Vector(p.tolist()), down)
+                if hit is not None:
+                    z = (world @ hit).z  # Blender's Z is the model's up
+                    out[i] = z if not np.isfinite(out[i]) else max(out[i], z)
+        return out
+
+
+def find_ground(name: str, armature=None) -> Ground:
+    """The mesh named ``name``, else the meshes of the collection named ``name`` (and of those inside it) that
+    ``armature`` does not deform; raises :class:`UserError` when there is neither, the object is no mesh, the
+    collection holds no mesh, or ``armature`` deforms the mesh (the character's own body)."""
     import bpy
 
     obj = bpy.data.objects.get(name)
     if obj is None:
-        raise UserError(f"No object named {name!r} to stand on: pick the ground mesh (stairs, a slope) as Ground, "
-                        "or leave it empty for one flat floor")
+        collection = bpy.data.collections.get(name)
+        if collection is None:
+            raise UserError(f"No object or collection named {name!r} to stand on: pick the ground mesh (stairs, a "
+                            "slope) or the collection of them as Ground, or leave it empty for one flat floor")
+        meshes = [o for o in collection.all_objects if o.type == "MESH" and not deforms(armature, o)]
+        if not meshes:
+            raise UserError(f"The collection {name!r} holds no mesh to stand on (but the character's own): pick "
+                            "the collection of the ground's meshes as Ground")
+        return Ground(name, meshes)
     if obj.type != "MESH":
         kind = obj.type.lower()
         article = "an" if kind[0] in "aeiou" else "a"
         raise UserError(f"{name!r} is {article} {kind}, not a mesh: pick the mesh the feet stand on as Ground")
-    if armature is not None and deforms(armature, obj):
+    if deforms(armature, obj):
         raise UserError(f"{name!r} is the character's own body ({armature.name!r} deforms it): pick the mesh the "
                         "feet stand on as Ground")
-    return obj
+    return Ground(name, [obj])
 
 
-def surface_under(context, obj, points: np.ndarray, lift: float) -> np.ndarray:
-    """Height ``[N]`` (Y-up, scene units) of ``obj``'s surface under world-space points ``[N, 3]`` (Y-up), cast
-    down from ``lift`` above each; NaN where the mesh is under none."""
-    depsgraph = context.evaluated_depsgraph_get()
-    evaluated = obj.evaluated_get(depsgraph)
-    tree = BVHTree.FromObject(evaluated, depsgraph)
-    world = evaluated.matrix_world
-    to_local = world.inverted()
-    down = (to_local.to_3x3() @ Vector((0.0, 0.0, -1.0))).normalized()
-    out = np.full(len(points), np.nan)
-    for i, (x, y, z) in enumerate(yup_to_zup(np.asarray(points, np.float64))):
-        hit, *_ = tree.ray_cast(to_local @ Vector((x, y, z + lift)), down)
-        if hit is not None:
-            out[i] = (world @ hit).z  # Blender's Z is the model's up
-    return out
-
-
-def _no_ground(obj) -> UserError:
-    return UserError(f"The ground {obj.name!r} is under neither foot on any frame: move it under the character "
+def _no_ground(ground) -> UserError:
+    return UserError(f"The ground {ground.name!r} is under neither foot on any frame: move it under the character "
                      "(seen from above), or leave Ground empty for one flat floor")
 
 
-def ground_heights(context, obj, pos: np.ndarray) -> tuple[np.ndarray, int]:
-    """Height ``[F, 4]`` (Y-up, scene units, as ``pos``) of ``obj``'s surface under each heel (at the ankle) and
-    toe of world-space canonical joints ``pos`` ``[F, 21, 3]`` (Y-up), and how many frames had no surface under a
-    heel or toe (there the height is carried over from the nearest frames that had one). Raises
-    :class:`UserError` where the mesh is under no foot on any frame."""
+def ground_heights(context, ground, pos: np.ndarray) -> tuple[np.ndarray, int]:
+    """Height ``[F, 4]`` (Y-up, scene units, as ``pos``) of the surface of ``ground`` (:class:`Ground`) under each
+    heel (at the ankle) and toe of world-space canonical joints ``pos`` ``[F, 21, 3]`` (Y-up), and how many frames
+    had no surface under a heel or toe (there the height is carried over from the nearest frames that had one).
+    Raises :class:`UserError` where the mesh is under no foot on any frame."""
     pos = np.asarray(pos, np.float64)
     feet = pos[:, CONTACT_JOINTS]
-    heights = surface_under(context, obj, feet.reshape(-1, 3), 0.5 * leg_length(pos)).reshape(feet.shape[:2])
+    heights = ground.under(context, feet.reshape(-1, 3), 0.5 * leg_length(pos)).reshape(feet.shape[:2])
     found = np.isfinite(heights)
     if not found.any():
-        raise _no_ground(obj)
+        raise _no_ground(ground)
     frames = np.arange(len(heights))
     either = np.where(found, heights, 0.0).sum(axis=1) / np.maximum(found.sum(axis=1), 1)  # a frame's heights' mean
     for k in range(heights.shape[1]):
@@ -85,52 +104,53 @@ def ground_heights(context, obj, pos: np.ndarray) -> tuple[np.ndarray, int]:
     return heights, int((~found).any(axis=1).sum())
 
 
-def _smoothed_under_hips(context, obj, pos: np.ndarray, fps: float) -> np.ndarray:
-    """``obj``'s surface height ``[F]`` under the hips of ``pos`` ``[F, 21, 3]`` (world, Y-up), carried over frames
-    with none under them and smoothed over a quarter second; raises :class:`UserError` where there is none at all."""
-    under = surface_under(context, obj, pos[:, JOINT_INDEX["hips"]], 0.5 * leg_length(pos))
+def _smoothed_under_hips(context, ground, pos: np.ndarray, fps: float) -> np.ndarray:
+    """The height ``[F]`` of the surface of ``ground`` under the hips of ``pos`` ``[F, 21, 3]`` (world, Y-up),
+    carried over frames with none under them and smoothed over a quarter second; raises :class:`UserError` where
+    there is none at all."""
+    under = ground.under(context, pos[:, JOINT_INDEX["hips"]], 0.5 * leg_length(pos))
     found = np.isfinite(under)
     if not found.any():
-        raise _no_ground(obj)
+        raise _no_ground(ground)
     frames = np.arange(len(under))
     return gaussian_smooth(np.interp(frames, frames[found], under[found]), 0.25 * fps)
 
 
-def flattened(context, obj, pos: np.ndarray, fps: float) -> np.ndarray:
+def flattened(context, ground, pos: np.ndarray, fps: float) -> np.ndarray:
     """``pos`` ``[F, 21, 3]`` (world, Y-up) as if walked on a flat floor at the height of its last frame: each frame
-    lowered by how much higher ``obj``'s surface under its hips is there (smoothed over a quarter second) than
-    under the last frame's, so a model that learnt flat floors reads a walk up a slope as a walk."""
-    smooth = _smoothed_under_hips(context, obj, pos, fps)
+    lowered by how much higher the surface of ``ground`` under its hips is there (smoothed over a quarter second)
+    than under the last frame's, so a model that learnt flat floors reads a walk up a slope as a walk."""
+    smooth = _smoothed_under_hips(context, ground, pos, fps)
     out = np.array(pos, np.float64)
     out[..., UP_AXIS] -= (smooth - smooth[-1])[:, None]
     return out
 
 
-def body_lift(context, obj, pos: np.ndarray, known: int, fps: float,
+def body_lift(context, ground, pos: np.ndarray, known: int, fps: float,
               rest: np.ndarray | None = None) -> tuple[np.ndarray, float]:
     """How far up ``[F]`` to carry the frames of ``pos`` ``[F, 21, 3]`` (world, Y-up) from ``known`` on, so a walk
-    made on a flat floor goes up and down with ``obj``'s surface under its hips: the surface's height there,
+    made on a flat floor goes up and down with the surface of ``ground`` under its hips: the surface's height there,
     smoothed over a quarter second (steps become a slope the hips ride), less its height under the hips where the
     walk starts (the last of the ``known`` frames, else the ``rest`` pose ``[21, 3]`` the walk starts from); 0 on
     the known frames. Also that starting height: the flat floor's, over which the walk stands as high as it will
     over the surface."""
-    smooth = _smoothed_under_hips(context, obj, pos, fps)
+    smooth = _smoothed_under_hips(context, ground, pos, fps)
     if known:
         start = smooth[known - 1]
     else:
-        start = surface_under(context, obj, np.asarray(rest, np.float64)[None, JOINT_INDEX["hips"]],
-                              0.5 * leg_length(np.asarray(rest)[None]))[0] if rest is not None else np.nan
+        start = ground.under(context, np.asarray(rest, np.float64)[None, JOINT_INDEX["hips"]],
+                             0.5 * leg_length(np.asarray(rest)[None]))[0] if rest is not None else np.nan
         start = smooth[0] if not np.isfinite(start) else start
     lift = smooth - start
     lift[:known] = 0.0
     return lift, float(start)
 
 
-def ground_record(obj, bare: int, frames: int) -> dict:
-    """The new action's record of the ground (``ground``: the mesh, how many frames had no surface under a heel or
-    toe and, where some had none, a note saying so)."""
-    record = {"object": obj.name, "frames_without": bare}
+def ground_record(ground, bare: int, frames: int) -> dict:
+    """The new action's record of the ground (``ground``: the mesh's or the collection's name, how many frames had no
+    surface under a heel or toe and, where some had none, a note saying so)."""
+    record = {"object": ground.name, "frames_without": bare}
     if bare:
-        record["note"] = (f"The ground {obj.name!r} is under no foot on {bare} of {frames} frames: there the feet "
+        record["note"] = (f"The ground {ground.name!r} is under no foot on {bare} of {frames} frames: there the feet "
                           "stand as high as on the nearest frames over it")
     return {"ground": record}

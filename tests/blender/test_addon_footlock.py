@@ -242,9 +242,40 @@ def test_feet_are_pinned_on_the_ground_mesh_under_them(addon, tmp_path):
     assert flat_skate > 10 * skate_after
 
 
+def test_a_collection_of_meshes_is_a_ground_its_highest_surface_under_each_foot(addon, tmp_path):
+    """Ground names a collection: the ramp split in two meshes (its lower and upper halves, as a floor and the
+    stairs on it are two), with the character's own body in it too, a level sheet at the ramp's height half way up
+    the walk that the armature deforms. The feet are pinned on the ramp as with the ramp alone: the body is no
+    ground (taken for one, it would be the floor of the walk's first half), and each half is found where it is."""
+    obj, contacts, height = climbing(addon, tmp_path)
+    frames = np.arange(1, 121)
+    ramp_obj = bpy.data.objects["Ramp"]
+    terrain = bpy.data.collections.new("Terrain")
+    bpy.context.scene.collection.children.link(terrain)
+    verts = [v.co.copy() for v in ramp_obj.data.vertices]  # corners 0-3, the way from 0-3 (-) to 1-2 (+)
+    halves = (([verts[0], (verts[0] + verts[1]) / 2, (verts[3] + verts[2]) / 2, verts[3]]),
+              ([(verts[0] + verts[1]) / 2, verts[1], verts[2], (verts[3] + verts[2]) / 2]))
+    for k, corners in enumerate(halves):
+        mesh = bpy.data.meshes.new(f"Half{k}")
+        mesh.from_pydata([tuple(c) for c in corners], [], [(0, 1, 2, 3)])
+        terrain.objects.link(bpy.data.objects.new(f"Half{k}", mesh))
+    middle = float(height(joints(addon, obj, frames[60:61])[0, 0]))  # the ramp's height half way up the walk
+    sheet = bpy.data.meshes.new("Body")
+    sheet.from_pydata([(v.x, v.y, middle) for v in verts], [], [(0, 1, 2, 3)])
+    body = bpy.data.objects.new("Body", sheet)
+    terrain.objects.link(body)
+    body.modifiers.new("Armature", "ARMATURE").object = obj
+    old, alone = lock(ground="Ramp")
+    on_ramp = joints(addon, obj, frames)
+    obj.animation_data.action = old
+    _, split = lock(ground="Terrain")
+    assert split["strnn"]["ground"]["object"] == "Terrain" and split["strnn"]["ground"]["frames_without"] == 0
+    assert np.abs(joints(addon, obj, frames) - on_ramp).max() < 1e-4
+
+
 def test_a_ground_that_is_no_mesh_or_under_no_foot_is_refused(addon, tmp_path):
     obj = import_sliding(tmp_path)
-    refused("No object named 'Nowhere'", ground="Nowhere")
+    refused("No object or collection named 'Nowhere'", ground="Nowhere")
     refused(f"'{obj.name}' is an armature, not a mesh", ground=obj.name)
     mesh = bpy.data.meshes.new("Far")
     mesh.from_pydata([(100, 100, 0), (101, 100, 0), (101, 101, 0), (100, 101, 0)], [], [(0, 1, 2, 3)])
@@ -254,5 +285,9 @@ def test_a_ground_that_is_no_mesh_or_under_no_foot_is_refused(addon, tmp_path):
     bpy.context.scene.collection.objects.link(body)
     body.modifiers.new("Armature", "ARMATURE").object = obj
     refused(f"'Body' is the character's own body \\('{obj.name}' deforms it\\)", ground="Body")
+    skin = bpy.data.collections.new("Skin")  # a collection with no mesh but the body
+    bpy.context.scene.collection.children.link(skin)
+    skin.objects.link(body)
+    refused("The collection 'Skin' holds no mesh to stand on", ground="Skin")
     listed = addon_module(addon, "strnn_addon.props")._objects_of("MESH", exclude_body=True)(None, bpy.context, "")
-    assert "Far" in listed and "Body" not in listed  # Ground's drop-down leaves the body out
+    assert "Far" in listed and "Body" not in listed and "Skin" not in listed  # Ground's drop-down leaves the body out

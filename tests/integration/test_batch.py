@@ -477,7 +477,7 @@ print(json.dumps(0))
     out = tmp_path / "out"
     code = strnn_batch.main(["footlock", "--ground", "Nowhere", str(scene), "--out", str(out),
                              "--extension", str(extension)])
-    assert code == 1 and "no object named 'Nowhere' in the file for --ground" in capsys.readouterr().out
+    assert code == 1 and "no object or collection named 'Nowhere' in the file for --ground" in capsys.readouterr().out
     assert not (out / "scene.footlock.blend").exists()
     code = strnn_batch.main(["footlock", "--ground", "Floor", str(scene), "--out", str(out),
                              "--extension", str(extension)])
