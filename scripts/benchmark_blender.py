@@ -13,6 +13,7 @@ the peak of the process's resident memory during the run above what it held befo
     python scripts/benchmark_blender.py --operator denoise   # with the bundled denoising model
     python scripts/benchmark_blender.py --operator inbetween --gap 30   # Fill Gap of 30 frames
     python scripts/benchmark_blender.py --operator footlock --frames 30000 --repeat 1   # a long take
+    python scripts/benchmark_blender.py --operator footlock --ground   # on a ground mesh, beside the flat floor
     python scripts/benchmark_blender.py --model runs/default/release --frames 1000 --repeat 3
     python scripts/benchmark_blender.py --untrained   # timing only: a randomly initialised model
 """
@@ -150,6 +151,15 @@ def build_scene(frames: int):
     return obj
 
 
+def add_ground_plane() -> str:
+    """A 10 km square plane at the world's origin, for Foot Lock's Ground; its name."""
+    mesh = bpy.data.meshes.new("BenchGround")
+    mesh.from_pydata([(-5e3, -5e3, 0.0), (5e3, -5e3, 0.0), (5e3, 5e3, 0.0), (-5e3, 5e3, 0.0)], [], [(0, 1, 2, 3)])
+    obj = bpy.data.objects.new("BenchGround", mesh)
+    bpy.context.scene.collection.objects.link(obj)
+    return obj.name
+
+
 def fcurve_new(obj, action, path: str, index: int, group: str):
     """A new F-curve on the legacy (4.2) or layered (4.4+) action API."""
     if not hasattr(action, "slots"):
@@ -279,7 +289,12 @@ def main(argv: list[str] | None = None) -> dict:
                         help="Extend Clip (default), Denoise Action (the extension's denoising model), Foot Lock "
                              "or Fill Gap")
     parser.add_argument("--gap", type=int, default=30, help="Fill Gap: frames cut out of the clip's middle (30)")
+    parser.add_argument("--ground", action="store_true",
+                        help="Foot Lock: on a ground mesh (a plane under the rig, its surface found by ray casts), "
+                             "beside the same lock on the flat floor in the same run")
     args = parser.parse_args(argv)
+    if args.ground and args.operator != "footlock":
+        parser.error("--ground is for --operator footlock")
     work = Path(tempfile.mkdtemp(prefix="strnn_bench_blender_"))
     try:
         return measure(args, work)
@@ -311,8 +326,12 @@ def measure(args, work: Path) -> dict:
             timings = stage_times(inbetween.fill_gap, bpy.context, obj, frame_start=start,
                                   frame_end=start + args.gap - 1)
         elif args.operator == "footlock":
-            timings = stage_times(lambda context, o, progress: common.run(footlock.foot_lock_steps(context, o),
-                                                                           progress), bpy.context, obj)
+            def lock(context, o, progress, ground=""):
+                return common.run(footlock.foot_lock_steps(context, o, ground=ground), progress)
+
+            timings = stage_times(lock, bpy.context, obj, ground=add_ground_plane() if args.ground else "")
+            if args.ground:  # the same lock on the flat floor: the baseline of the ray casts' cost
+                timings["flat_total"] = stage_times(lock, bpy.context, obj)["total"]
         else:
             timings = stage_times(denoise.denoise_action, bpy.context, obj)
         timings.update(floor_read=read_floor, floor_write=write_floor, floor_mb=copy_mb)
@@ -326,6 +345,9 @@ def measure(args, work: Path) -> dict:
     for stage in ("read", "model", "solve", "write"):
         print(f"  {stage:6s} {best[stage]:7.3f} s   peak {best['mb'].get(stage, 0.0):5.0f} MB")
     print(f"  total  {best['total']:7.3f} s")
+    if "flat_total" in best:
+        print(f"  on the flat floor (no ground) in the same run: {best['flat_total']:.3f} s; with the ground "
+              f"{best['total'] / best['flat_total']:.2f} x")
     print(f"  floor: read keys {best['floor_read']:.3f} s, write keys {best['floor_write']:.3f} s")
     print(f"  memory beyond the scene's own: {best['extra_mb']:.0f} MB at the peak, of which a copy of the action "
           f"(the new action's own size) {best['floor_mb']:.0f} MB; the operation's working memory "
