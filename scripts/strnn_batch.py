@@ -185,15 +185,18 @@ def build_parser() -> argparse.ArgumentParser:
                    help="the armature object in --target to put the motion on (default: its active armature, "
                         "or its only one)")
     foot_lock_flag(p, "transfer_motion")
+    ground_flag(p, "each take is carried up and down with it from where the character stands, feet locked on it",
+                "name of a mesh, or of a collection of meshes, in --target's .blend")
     return parser
 
 
-def ground_flag(p, what: str) -> None:
-    """``--ground MESH``: a mesh (or a collection of meshes) of a .blend input the feet stand on (the operator's
+def ground_flag(p, what: str, where: str = "for .blend inputs: name of a mesh, or of a collection of meshes, in "
+                                            "the file") -> None:
+    """``--ground MESH``: a mesh (or a collection of meshes) of a .blend the feet stand on (the operator's
     Ground)."""
     p.add_argument("--ground", default="", metavar="MESH",
-                   help=f"for .blend inputs: name of a mesh, or of a collection of meshes, in the file the feet "
-                        f"stand on (stairs, a slope, terrain): {what} (default: one flat floor, the take's own)")
+                   help=f"{where} the feet stand on (stairs, a slope, terrain): {what} (default: one flat floor, "
+                        "the take's own)")
 
 
 def foot_lock_flag(p, operator: str) -> None:
@@ -221,7 +224,7 @@ def operator_call(args) -> tuple[str, dict]:
         return "inbetween", {"use_range": args.gap is not None, "frame_start": start, "frame_end": end,
                              "follow_take": args.follow_take, "foot_lock": args.foot_lock}
     if args.command == "transfer":
-        return "transfer_motion", {"foot_lock": args.foot_lock}
+        return "transfer_motion", {"foot_lock": args.foot_lock, "ground": args.ground}
     if args.command == "loop":
         start, end = args.range or (1, 250)
         return "make_loop", {"use_range": args.range is not None, "frame_start": start, "frame_end": end,

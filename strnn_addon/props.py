@@ -157,7 +157,7 @@ def curve_name():
 
 
 def ground_name(walk: bool = False):
-    what = ("the new frames go up and down with its surface under the hips, and Foot Lock pins each heel and toe "
+    what = ("the motion goes up and down with its surface under the hips, and Foot Lock pins each heel and toe "
             "on it" if walk else "each heel and toe is pinned on its surface under the foot")
     return StringProperty(name="Ground", default="", search=_objects_of("MESH", exclude_body=True),
                           description=f"A mesh the feet stand on (stairs, a slope, terrain), or a collection of "

@@ -192,6 +192,7 @@ class STRNN_PT_transfer(_OperatorPanel, bpy.types.Panel):
         elif sum(o.type == "ARMATURE" and o.name != opts.source for o in context.selected_objects) > 1:
             col.label(text="Onto each selected armature but the source", icon="INFO")
         col.prop(opts, "foot_lock")
+        col.prop(opts, "ground", icon="OUTLINER_OB_MESH")
 
 
 class _ArmatureSidebar(_Sidebar):

@@ -14,6 +14,7 @@ from mathutils.bvhtree import BVHTree
 
 from ...model_core.motion.conventions import CONTACT_JOINTS, JOINT_INDEX, UP_AXIS, yup_to_zup
 from ...model_core.motion.features import gaussian_smooth
+from ...model_core.ops import footlock
 from ...model_core.rig.rigs import leg_length
 from .pipeline import UserError
 
@@ -144,6 +145,22 @@ def body_lift(context, ground, pos: np.ndarray, known: int, fps: float,
     lift = smooth - start
     lift[:known] = 0.0
     return lift, float(start)
+
+
+def carried(context, ground, pos: np.ndarray, known: int, fps: float,
+            rest: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray | None, int]:
+    """Motion ``pos`` ``[F, 21, 3]`` (world, Y-up, ``fps``) made on a flat floor from ``known`` on, carried over
+    ``ground`` (:func:`body_lift`; ``rest``: the pose a walk with nothing known starts from), with what Foot Lock
+    needs to lock it there: (the carried motion, the surface's height under each heel and toe ``[F, 4]``
+    (:func:`ground_heights`), how high each stood over the flat floor ``[4]`` (None: no contacts), frames with no
+    surface under a foot)."""
+    lift, floor = body_lift(context, ground, pos, known, fps, rest)
+    contacts = footlock.detect_foot_contacts(pos, fps)
+    standing = footlock.rest_heights(pos, contacts, np.arange(len(pos)) < known if known else None)
+    out = np.array(pos, np.float64)
+    out[..., UP_AXIS] += lift[:, None]
+    heights, bare = ground_heights(context, ground, out)
+    return out, heights, None if standing is None else standing - floor, bare
 
 
 def ground_record(ground, bare: int, frames: int) -> dict:

@@ -11,7 +11,7 @@ from ...model_core.rig.rigs import leg_length
 from ...model_core.rig.solve import solve
 from .. import engine_bridge
 from ..scene import anim, cycles, pipeline
-from ..scene.ground import body_lift, find_ground, flattened, ground_heights, ground_record
+from ..scene.ground import carried, find_ground, flattened, ground_record
 from ..scene.pipeline import UserError
 from .common import (
     familiarity_record,
@@ -120,9 +120,8 @@ def extend_steps(context, obj, *, frames: int = 120, context_frames: int = 0, fo
     floor = clip_floor(memory, fps)  # the ground the new feet stay out of
     new_pos = model_call(engine_bridge.run_extend, prefs(context), pos, fps, count, followed, floor)
     joined, heights, bare = np.concatenate([seen, new_pos]), None, 0
-    if surface is not None:  # the new frames, made on the flat floor, carried over the ground
-        joined[len(pos):, :, UP_AXIS] += body_lift(context, surface, joined, len(pos), fps)[0][len(pos):, None]
-        heights, bare = ground_heights(context, surface, joined)
+    if surface is not None:  # the new frames, made on the flat floor, carried over the ground; the feet stand as
+        joined, heights, _, bare = carried(context, surface, joined, len(pos), fps)  # high as the clip's over it
     if foot_lock:
         joined = lock(joined, fps, fixed=np.arange(len(pos) + count) < len(pos), passes=SETTLE_PASSES,
                       ground=heights)

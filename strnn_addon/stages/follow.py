@@ -11,12 +11,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from ...model_core.motion.conventions import UP_AXIS, zup_to_yup
-from ...model_core.ops import footlock
+from ...model_core.motion.conventions import zup_to_yup
 from ...model_core.rig.solve import solve
 from .. import engine_bridge
 from ..scene import anim, curves, cycles, pipeline
-from ..scene.ground import body_lift, find_ground, ground_heights, ground_record
+from ..scene.ground import carried, find_ground, ground_record
 from ..scene.pipeline import UserError
 from .common import familiarity_record, lock, made_by, model_steps, pace_record, prefs, write_fresh, write_new
 
@@ -57,13 +56,7 @@ def follow_curve_steps(context, obj, *, curve: str = "", frames: int = 0, speed:
     joined = new_pos if context_pos is None else np.concatenate([context_pos, new_pos])
     heights, standing, bare = None, None, 0
     if surface is not None:  # the walk, made on a flat floor, carried over the ground
-        lift, floor = body_lift(context, surface, joined, known, clip.fps, rest)
-        contacts = lock(joined, clip.fps, detect_only=True)
-        standing = footlock.rest_heights(joined, contacts, np.arange(len(joined)) < known if known else None)
-        standing = None if standing is None else standing - floor  # how high heel and toe stand on the flat floor
-        joined = joined.copy()
-        joined[..., UP_AXIS] += lift[:, None]
-        heights, bare = ground_heights(context, surface, joined)
+        joined, heights, standing, bare = carried(context, surface, joined, known, clip.fps, rest)
     if foot_lock:
         joined = lock(joined, clip.fps, fixed=np.arange(len(joined)) < known, ground=heights, standing=standing)
     new_pos = joined[known:]

@@ -7,6 +7,7 @@ import numpy as np
 from ...model_core.ops.transfer import retarget
 from ...model_core.rig.solve import solve
 from ..scene import pipeline
+from ..scene.ground import carried, find_ground, ground_record
 from ..scene.pipeline import UserError
 from .common import lock, made_by, noop, run, write_fresh
 
@@ -36,11 +37,14 @@ def find_source(context, target, name: str = ""):
     return obj
 
 
-def transfer_steps(context, obj, *, source: str = "", foot_lock: bool = True, scene_range: bool = True):
+def transfer_steps(context, obj, *, source: str = "", foot_lock: bool = True, scene_range: bool = True,
+                   ground: str = ""):
     """Put the motion of ``source`` (default: the other selected armature) on armature ``obj`` over the
     source action's frames: the target's proportions, the source's root path scaled from where the target
     stands, feet on the floor (locked during contacts with ``foot_lock``), into a new action on ``obj``
-    (its own action, if any, is kept). A generator like :func:`.extend.extend_steps`."""
+    (its own action, if any, is kept); over the mesh (or collection) named ``ground``, carried up and down with its
+    surface from where the target stands, the feet locked on it. A generator like :func:`.extend.extend_steps`."""
+    surface = find_ground(ground, obj) if ground else None
     target = pipeline.prepare_any(context, obj)
     src = pipeline.prepare(context, find_source(context, obj, source))
     if abs(src.fps - target.fps) > 1e-6:  # one scene: never
@@ -57,8 +61,11 @@ def transfer_steps(context, obj, *, source: str = "", foot_lock: bool = True, sc
     rest = pipeline.pose_joints(target, ref_loc, ref_rot)
     yield "model"
     new_pos = retarget(pos, rest)
+    heights, standing, bare = None, None, 0
+    if surface is not None:  # the take, on a flat floor, carried over the ground from where the target stands
+        new_pos, heights, standing, bare = carried(context, surface, new_pos, 0, src.fps / step, rest[0])
     if foot_lock:
-        new_pos = lock(new_pos, src.fps / step)
+        new_pos = lock(new_pos, src.fps / step, ground=heights, standing=standing)
     yield "solve"
     n = len(frames)
     loc, rot = solve(target.rig, target.anchors, pipeline.to_armature(target, new_pos,
@@ -66,5 +73,7 @@ def transfer_steps(context, obj, *, source: str = "", foot_lock: bool = True, sc
                      np.repeat(ref_loc, n, 0), np.repeat(ref_rot, n, 0))
     yield "write"
     record = made_by("Transfer Motion", src, key_step=step, source=src.obj.name, target=obj.name, foot_lock=foot_lock)
+    if surface is not None:
+        record.update(ground_record(surface, bare, n))
     return write_fresh(context, target, f"{src.action.name}.transfer", frames, loc, rot, record, scene_range,
                        "CONSTANT" if step > 1 else "")

@@ -15,6 +15,7 @@ from scenes import (
     import_bvh,
     makehuman_bones,
     mixamo_bones,
+    ramp,
     rigify_bones,
     roblox_r15_bones,
     smpl_bones,
@@ -224,3 +225,45 @@ def test_motion_on_twos_moves_onto_another_rig_on_twos(addon, tmp_path):
     pos = evaluated_joints(addon, target, np.arange(1, 92))
     moved = np.linalg.norm(np.diff(pos, axis=0), axis=-1).mean(-1)
     assert moved[0::2].max() < 1e-6 and moved[1::2].min() > 1e-3  # held onto each even frame, moving onto each key
+
+
+def test_motion_moved_onto_a_rig_over_a_ramp_goes_up_it(addon, tmp_path):
+    """Transfer Motion with Ground: a walk moved onto a rig standing at the foot of a ramp (rising 15 cm a metre
+    the way the walk goes) is carried up it, the hips as high over the ramp all the way as the same transfer's over
+    the floor (within 5 cm), the lowest foot each second as near it (within 2 cm), the feet locked on it."""
+    from model_core.motion.conventions import CONTACT_JOINTS, zup_to_yup
+
+    target = build_armature("Mixamo", mixamo_bones())
+    source = import_bvh(walk_bvh(tmp_path, frames=120), update_scene_fps=True, update_scene_duration=True)
+    source.location.x = -2.0
+    for other in bpy.context.view_layer.objects:
+        other.select_set(other in (source, target))
+    bpy.context.view_layer.objects.active = target
+    got = {}
+    for ground in ("", "Ramp"):
+        if target.animation_data:
+            target.animation_data.action = None
+        for pb in target.pose.bones:
+            pb.matrix_basis.identity()
+        assert bpy.ops.strnn.transfer_motion(ground=ground) == {"FINISHED"}
+        frames = np.arange(int(action_of(target).frame_range[0]), int(action_of(target).frame_range[1]) + 1)
+        got[ground] = zup_to_yup(evaluated_joints(addon, target, frames))
+        if not ground:
+            flat = got[""]
+            height = ramp("Ramp", flat[0, 0], flat[-1, 0] - flat[0, 0], 0.15)
+    flat, over = got[""], got["Ramp"]
+    fps = bpy.context.scene.render.fps
+
+    def lowest_each_second(feet):
+        low = feet.min(axis=1)
+        return np.array([low[s:s + fps].min() for s in range(0, len(low) - fps + 1, fps)])
+
+    hips = over[:, 0, 1] - height(over[:, 0])
+    on_ramp = lowest_each_second(over[:, CONTACT_JOINTS, 1] - height(over[:, CONTACT_JOINTS]))
+    on_floor = lowest_each_second(flat[:, CONTACT_JOINTS, 1])
+    print(f"the ramp {height(over[-1, 0]):.2f} m up at the end; hips over it {hips.min():.2f} to {hips.max():.2f}, "
+          f"over the floor {flat[:, 0, 1].min():.2f} to {flat[:, 0, 1].max():.2f}; lowest foot each second over the "
+          f"ramp {np.round(on_ramp, 3).tolist()}, over the floor {np.round(on_floor, 3).tolist()}")
+    assert height(over[-1, 0]) > 0.3 and action_of(target)["strnn"]["ground"]["object"] == "Ramp"
+    assert np.abs(hips - flat[:, 0, 1]).max() < 0.05
+    assert np.abs(on_ramp - on_floor).max() < 0.02
