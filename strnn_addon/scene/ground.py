@@ -59,6 +59,11 @@ def find_ground(name: str, armature=None) -> Ground:
     collection holds no mesh, or ``armature`` deforms the mesh (the character's own body)."""
     import bpy
 
+    layer = bpy.context.view_layer
+
+    def shown(o) -> bool:  # Blender evaluates it: in the view layer and not disabled in viewports
+        return o.name in layer.objects and not o.hide_viewport
+
     obj = bpy.data.objects.get(name)
     if obj is None:
         collection = bpy.data.collections.get(name)
@@ -69,7 +74,11 @@ def find_ground(name: str, armature=None) -> Ground:
         if not meshes:
             raise UserError(f"The collection {name!r} holds no mesh to stand on (but the character's own): pick "
                             "the collection of the ground's meshes as Ground")
-        return Ground(name, meshes)
+        if not any(shown(o) for o in meshes):
+            raise UserError(f"No mesh of the collection {name!r} is in the scene's view layer and enabled in "
+                            "viewports: Ground is read as Blender shows it; include the collection in the view "
+                            "layer and enable its meshes in viewports")
+        return Ground(name, [o for o in meshes if shown(o)])
     if obj.type != "MESH":
         kind = obj.type.lower()
         article = "an" if kind[0] in "aeiou" else "a"
@@ -77,6 +86,9 @@ def find_ground(name: str, armature=None) -> Ground:
     if deforms(armature, obj):
         raise UserError(f"{name!r} is the character's own body ({armature.name!r} deforms it): pick the mesh the "
                         "feet stand on as Ground")
+    if not shown(obj):
+        raise UserError(f"The mesh {name!r} is not in the scene's view layer, or is disabled in viewports: Ground "
+                        "is read as Blender shows it; link it to the scene and enable it in viewports")
     return Ground(name, [obj])
 
 

@@ -281,6 +281,13 @@ def test_a_ground_that_is_no_mesh_or_under_no_foot_is_refused(addon, tmp_path):
     mesh.from_pydata([(100, 100, 0), (101, 100, 0), (101, 101, 0), (100, 101, 0)], [], [(0, 1, 2, 3)])
     bpy.context.scene.collection.objects.link(bpy.data.objects.new("Far", mesh))
     refused("The ground 'Far' is under neither foot", ground="Far")
+    for name, shown in (("Away", False), ("Off", True)):  # not in the scene; in it, disabled in viewports
+        flat = bpy.data.objects.new(name, bpy.data.meshes.new(name))
+        flat.data.from_pydata([(-50, -50, 0), (50, -50, 0), (50, 50, 0), (-50, 50, 0)], [], [(0, 1, 2, 3)])
+        if shown:
+            bpy.context.scene.collection.objects.link(flat)
+            flat.hide_viewport = True
+        refused(f"The mesh '{name}' is not in the scene's view layer, or is disabled in viewports", ground=name)
     body = bpy.data.objects.new("Body", bpy.data.meshes.new("Body"))  # the character's own skin is no ground
     bpy.context.scene.collection.objects.link(body)
     body.modifiers.new("Armature", "ARMATURE").object = obj
