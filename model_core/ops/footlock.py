@@ -94,8 +94,8 @@ def detect_foot_contacts(pos: np.ndarray, fps: float = MODEL_FPS, scale: float |
     unit; default: legs scaled to the standard length) makes the metre thresholds apply. ``ground`` ``[F, 4]``:
     heights are measured from the surface under each heel and toe (:func:`foot_lock`), not the take's lowest."""
     pos = np.asarray(pos, np.float64)
-    if scale is None and ground is not None:
-        scale = STANDARD_LEG_LENGTH / max(leg_length(pos), 1e-9)
+    if scale is None and ground is not None:  # the legs' scale, read before the heights are moved
+        scale = fit_normalisation(pos).scale
     metres = above(pos, ground) * scale if scale else fit_normalisation(pos).to_model(pos)
     return detect_contacts(metres, fps)
 
@@ -243,10 +243,16 @@ def _toe_pitch(need: np.ndarray, mask: np.ndarray, blend: float, fixed: np.ndarr
     """How far up ``[F, 2]`` each toe goes beyond its foot's lift: each toe span's mean of how far the toe still
     is from its rest height (``need`` ``[F, 2]``), faded like the horizontal pull (all of it: short of it by the
     floor's tolerance, the toe would count as below the floor and the foot would not turn)."""
-    on = mask[:, _TOE_CHANNELS].copy()
-    if fixed is not None:
-        on &= ~fixed[:, None]
+    return _span_means(need, mask[:, _TOE_CHANNELS], blend, fixed)
+
+
+def _span_means(need: np.ndarray, on: np.ndarray, blend: float, fixed: np.ndarray | None,
+                tolerance: float = 0.0) -> np.ndarray:
+    """``need`` ``[F, 2]`` replaced by its mean over each span of ``on`` ``[F, 2]`` (outside ``fixed`` frames), less
+    ``tolerance`` (the take's own variation stays), faded in and out like the horizontal pull."""
+    on = on & ~fixed[:, None] if fixed is not None else on
     span, level = span_targets(need[..., None], on)
+    level = np.sign(level) * np.maximum(np.abs(level) - tolerance, 0.0)
     per_frame = np.where(on[..., None], level[span] if len(level) else 0.0, 0.0)
     return _faded(per_frame, on, blend)[0][..., 0]
 
@@ -280,14 +286,7 @@ def span_lift(ankle: np.ndarray, foot: np.ndarray, mask: np.ndarray, blend: floa
     ``tolerance``, faded like the horizontal pull, so the foot keeps its own roll within the span."""
     heel, toe = mask[:, _HEEL_CHANNELS], mask[:, _TOE_CHANNELS]
     heel_need, toe_need = _needs(ankle, foot, rest)
-    need = np.where(heel, heel_need, toe_need)
-    on = heel | toe
-    if fixed is not None:
-        on &= ~fixed[:, None]
-    span, level = span_targets(need[..., None], on)
-    level = np.sign(level) * np.maximum(np.abs(level) - tolerance, 0.0)  # the take's own variation stays
-    per_frame = np.where(on[..., None], level[span] if len(level) else 0.0, 0.0)
-    return _faded(per_frame, on, blend)[0][..., 0]
+    return _span_means(np.where(heel, heel_need, toe_need), heel | toe, blend, fixed, tolerance)
 
 
 def body_drop(pos: np.ndarray, mask: np.ndarray, blend: float, fixed: np.ndarray | None,

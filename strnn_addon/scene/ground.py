@@ -32,17 +32,21 @@ class Ground:
 
     def __init__(self, name: str, meshes: list):
         self.name, self.meshes = name, meshes
+        self._trees: list | None = None  # each mesh's (BVH tree, world matrix), built on first use
+
+    def _surfaces(self, context) -> list:
+        if self._trees is None:  # an operation reads the ground two or three times: the trees are built once
+            depsgraph = context.evaluated_depsgraph_get()
+            evaluated = [obj.evaluated_get(depsgraph) for obj in self.meshes]
+            self._trees = [(BVHTree.FromObject(e, depsgraph), e.matrix_world.copy()) for e in evaluated]
+        return self._trees
 
     def under(self, context, points: np.ndarray, lift: float) -> np.ndarray:
         """Height ``[N]`` (Y-up, scene units) of the highest surface under world-space points ``[N, 3]`` (Y-up) that
         a ray cast down from ``lift`` above each meets; NaN where no mesh is under a point."""
-        depsgraph = context.evaluated_depsgraph_get()
         from_above = yup_to_zup(np.asarray(points, np.float64)) + np.array([0.0, 0.0, lift])
         out = np.full(len(from_above), np.nan)
-        for obj in self.meshes:
-            evaluated = obj.evaluated_get(depsgraph)
-            tree = BVHTree.FromObject(evaluated, depsgraph)
-            world = evaluated.matrix_world
+        for tree, world in self._surfaces(context):
             to_local = world.inverted()
             down = (to_local.to_3x3() @ Vector((0.0, 0.0, -1.0))).normalized()
             for i, p in enumerate(from_above):
