@@ -68,7 +68,7 @@ def split_side(name: str) -> tuple[str | None, str]:
 
 
 # Families read only where they find every body joint (their names mean other joints in other rigs).
-WHOLE_ONLY = {"rigify_metarig"}
+WHOLE_ONLY = {"rigify_metarig", "auto_rig_pro"}
 
 
 def _family_map(names: list[str]) -> tuple[str, Mapping]:

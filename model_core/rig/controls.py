@@ -11,7 +11,7 @@ as a clavicle). The solved pose is then written on the controls by a visual bake
 Blender side, ``strnn_addon/scene/controls.py``): each :class:`Control` is turned until the
 bone it drives sits where the solve put it.
 
-:data:`PRESETS` holds the control sets that ship (Rigify's FK controls, the Mixamo Rig add-on's FK controls);
+:data:`PRESETS` holds the control sets that ship (Rigify's FK controls, the Mixamo Rig add-on's, Auto-Rig Pro's);
 any other rig gets its controls from the Bone Map panel.
 """
 
@@ -29,11 +29,13 @@ from .solve import Rig, SolveError, placed as placed_in
 @dataclass(frozen=True)
 class Control:
     """A control bone and the mapped (or bridge) bone it drives; ``location``: it also moves
-    (the body's root control), otherwise it only turns."""
+    (the body's root control), otherwise it only turns; ``optional``: a preset fits a rig without it (a spine
+    bone some rigs of the family have and others not)."""
 
     bone: str
     drives: str
     location: bool = False
+    optional: bool = False
 
 
 @dataclass(frozen=True)
@@ -62,22 +64,31 @@ class ControlSet:
 
     def on(self, names: list[str] | set[str]) -> ControlSet | None:
         """This set with each bone it names spelt as the rig spells it: the name itself, else the rig's one bone of
-        that name in another namespace (``mixamorig1:Hips`` or ``Hips`` for ``mixamorig:Hips``); None if a bone is
-        missing."""
+        that name in another namespace (``mixamorig1:Hips`` or ``Hips`` for ``mixamorig:Hips``); an optional control
+        the rig lacks left out; None if any other bone is missing."""
         names = set(names)
         by_base: dict[str, list[str]] = {}
         for n in names:
             by_base.setdefault(normalise_name(n), []).append(n)
-        spelt = {}
-        for b in self._bones():
+
+        def spell(b: str) -> str | None:
             if b in names:
-                spelt[b] = b
-            elif len(by_base.get(normalise_name(b), [])) == 1:
-                spelt[b] = by_base[normalise_name(b)][0]
-            else:
+                return b
+            found = by_base.get(normalise_name(b), [])
+            return found[0] if len(found) == 1 else None
+
+        controls = []
+        for c in self.controls:
+            bone, drives = spell(c.bone), spell(c.drives)
+            if bone is None or drives is None:
+                if c.optional:
+                    continue
                 return None
-        return ControlSet(self.name, [replace(c, bone=spelt[c.bone], drives=spelt[c.drives]) for c in self.controls],
-                          [replace(s, bone=spelt[s.bone]) for s in self.switches])
+            controls.append(replace(c, bone=bone, drives=drives))
+        switches = [replace(s, bone=spell(s.bone)) for s in self.switches]
+        if any(s.bone is None for s in switches):
+            return None
+        return ControlSet(self.name, controls, switches)
 
 
 def _sides(pairs: list[tuple], *more: tuple) -> list[tuple]:
@@ -108,6 +119,19 @@ _MIXAMO_RIG_CONTROLS = [
         ("Ctrl_ForeArm_FK_{S}", "mixamorig:{S}ForeArm"), ("Ctrl_Hand_FK_{S}", "mixamorig:{S}Hand"),
         ("Ctrl_UpLeg_FK_{S}", "mixamorig:{S}UpLeg"), ("Ctrl_Leg_FK_{S}", "mixamorig:{S}Leg"),
         ("Ctrl_Foot_FK_{S}", "mixamorig:{S}Foot"), ("Ctrl_Toe_FK_{S}", "mixamorig:{S}ToeBase"))]
+# Auto-Rig Pro's human rig (Artell; Blender's most used commercial rig): the body's root control c_root_master.x
+# carries everything (c_root.x, which only turns the hips about the waist, is left as it is); each deform or
+# blending bone follows its ``c_`` FK control where the ``ik_fk_switch`` on c_foot_ik / c_hand_ik is 1 (FK), the IK
+# chain where it is 0. The controls' rest orientations are not all the bones' (c_foot_fk lies along the ground),
+# which the visual bake does not mind. A rig built with two spine bones has no spine_03.
+_AUTO_RIG_PRO_CONTROLS = [
+    Control("c_root_master.x", "c_root_master.x", True), Control("c_spine_01.x", "spine_01.x"),
+    Control("c_spine_02.x", "spine_02.x"), Control("c_spine_03.x", "spine_03.x", optional=True),
+    Control("c_neck.x", "neck.x"), Control("c_head.x", "head.x")] + [
+    Control(c.format(S=side), d.format(S=side)) for side in "lr" for c, d in (
+        ("c_shoulder.{S}", "shoulder.{S}"), ("c_arm_fk.{S}", "arm.{S}"), ("c_forearm_fk.{S}", "forearm.{S}"),
+        ("c_hand_fk.{S}", "hand.{S}"), ("c_thigh_fk.{S}", "thigh.{S}"), ("c_leg_fk.{S}", "leg.{S}"),
+        ("c_foot_fk.{S}", "foot.{S}"), ("c_toes_fk.{S}", "toes_01.{S}"))]
 PRESETS: dict[str, ControlSet] = {
     "rigify": ControlSet(
         "rigify",
@@ -118,6 +142,9 @@ PRESETS: dict[str, ControlSet] = {
         [Control(*c) for c in _MIXAMO_RIG_CONTROLS],
         [Switch(f"Ctrl_{limb}_IK_{side}", "ik_fk_switch", 1.0)
          for side in ("Left", "Right") for limb in ("Foot", "Hand")]),
+    "auto_rig_pro": ControlSet(
+        "auto_rig_pro", _AUTO_RIG_PRO_CONTROLS,
+        [Switch(f"c_{limb}_ik.{side}", "ik_fk_switch", 1.0) for side in "lr" for limb in ("foot", "hand")]),
 }
 
 

@@ -75,6 +75,17 @@ RIG_FAMILIES: dict[str, dict[str, list[str]]] = {
         "{s}_wrist": ["{S}Hand"],
         "{s}_fingertip": ["{S}HandMiddle4", "{S}HandMiddle3_end", "{S}HandMiddle3"],
     }, ("Left", ""), ("Right", "")),
+    # Auto-Rig Pro's human rig: the body's root control ``c_root_master.x`` has its head at the pelvis (the deform
+    # ``root.x`` points the other way, its head at the waist); the limbs' joints sit on the bones that blend the FK and
+    # IK chains (``thigh.l``, ``leg.l``, ``arm.l``, ``forearm.l``), which follow the controls whole, where the twist
+    # and stretch bones that deform each split a segment in two.
+    "auto_rig_pro": _sided({
+        "hips": ["c_root_master.x"], "spine": ["spine_01.x"], "spine1": ["spine_03.x", "spine_02.x"],
+        "neck": ["neck.x"], "head": ["head.x"],
+        "{s}_upleg": ["thigh.{S}"], "{s}_knee": ["leg.{S}"], "{s}_foot": ["foot.{S}"],
+        "{s}_toe": ["toes_01.{S}"], "{s}_arm": ["arm.{S}"], "{s}_elbow": ["forearm.{S}"], "{s}_wrist": ["hand.{S}"],
+        "{s}_fingertip": [],
+    }, ("l", ""), ("r", "")),
     # A generated Rigify rig: its ORG bones follow the controls rigidly (model_core/rig/controls.py).
     "rigify": _sided({
         "hips": ["ORG-spine"], "spine": ["ORG-spine.001"], "spine1": ["ORG-spine.003"],

@@ -402,3 +402,51 @@ def ramp(name: str, start: np.ndarray, way: np.ndarray, slope: float, size: floa
     mesh.from_pydata([tuple(c) for c in yup_to_zup(corners)], [], [(0, 1, 2, 3)])
     bpy.context.scene.collection.objects.link(bpy.data.objects.new(name, mesh))
     return height
+
+
+def switch_driver(obj, con, switch_bone: str, prop: str = "ik_fk_switch") -> None:
+    """Constraint ``con``'s influence driven by the custom property ``prop`` of ``switch_bone`` (an IK/FK switch)."""
+    fc = con.driver_add("influence")
+    var = fc.driver.variables.new()
+    var.type = "SINGLE_PROP"
+    var.targets[0].id = obj
+    var.targets[0].data_path = f'pose.bones["{switch_bone}"]["{prop}"]'
+    fc.driver.expression = "var"
+
+
+def switch_keys(obj, action, bone: str, prop: str = "ik_fk_switch") -> dict[int, float]:
+    """{frame: value} of the keys ``action`` has on ``bone``'s custom property ``prop``."""
+    path = f'pose.bones["{bone}"]["{prop}"]'
+    fc = next(fc for fc in fcurves_of(obj, action) if fc.data_path == path)
+    return {round(k.co[0]): k.co[1] for k in fc.keyframe_points}
+
+
+def _local(obj, bone: str, world: np.ndarray):
+    """A location in ``bone``'s rest space that moves it by ``world`` (armature space)."""
+    from mathutils import Vector
+
+    return Vector((np.array(obj.data.bones[bone].matrix_local)[:3, :3].T @ world).tolist())
+
+
+def key_ik_walk(obj, frames: int, root: str, feet: tuple[str, str], arms: tuple[str, str], speed: float = 1.2,
+                drop: float = 0.0) -> None:
+    """Key a walk on a control rig: ``root`` forward (-Y) at ``speed`` m/s with a bob, ``drop`` metres low; each IK
+    foot control of ``feet`` (left, right) planted under the hips' mid-stance for 60 % of its second-long stride,
+    then carried a stride forward; the FK arm controls of ``arms`` swing (Euler)."""
+    stride = speed  # metres a second-long stride
+    for f in range(1, frames + 1):
+        phase = 2 * np.pi * f / 30.0
+        pb = obj.pose.bones[root]
+        bob = 0.02 * speed / 1.2 * np.sin(2 * phase)
+        pb.location = _local(obj, root, np.array([0.0, -speed * f / 30.0, bob - drop]))
+        pb.keyframe_insert("location", frame=f)
+        for k in range(2):
+            t = (f / 30.0 + 0.5 * k) % 1.0  # this foot's share of its stride cycle: planted for the first 60 %
+            along = np.floor(f / 30.0 + 0.5 * k) + (0.0 if t < 0.6 else (t - 0.6) / 0.4)
+            lift = 0.0 if t < 0.6 else 0.06 * np.sin(np.pi * (t - 0.6) / 0.4)
+            foot = obj.pose.bones[feet[k]]
+            foot.location = _local(obj, foot.name, np.array([0.0, stride * (0.5 * k - 0.3 - along), lift]))
+            foot.keyframe_insert("location", frame=f)
+            arm = obj.pose.bones[arms[k]]
+            arm.rotation_euler = (0.0, 0.0, 0.4 * np.sin(phase + np.pi * k))
+            arm.keyframe_insert("rotation_euler", frame=f)

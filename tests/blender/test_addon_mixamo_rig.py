@@ -11,26 +11,27 @@ from __future__ import annotations
 import bpy
 import numpy as np
 import pytest
-from mathutils import Vector
-from scenes import action_of, build_armature, evaluated_joints, fcurves_of, key_snapshot, mixamo_bones, same_keys
+from scenes import (
+    action_of,
+    build_armature,
+    evaluated_joints,
+    fcurves_of,
+    key_ik_walk,
+    key_snapshot,
+    mixamo_bones,
+    same_keys,
+    switch_driver,
+    switch_keys,
+)
 
 SIDES = ("Left", "Right")
-
-
-def _switch_driver(obj, con, switch_bone: str) -> None:
-    fc = con.driver_add("influence")
-    var = fc.driver.variables.new()
-    var.type = "SINGLE_PROP"
-    var.targets[0].id = obj
-    var.targets[0].data_path = f'pose.bones["{switch_bone}"]["ik_fk_switch"]'
-    fc.driver.expression = "var"
 
 
 def _copy(obj, bone: str, kind: str, target: str, name: str, switch: str = "") -> None:
     con = obj.pose.bones[bone].constraints.new(kind)
     con.name, con.target, con.subtarget = name, obj, target
     if switch:
-        _switch_driver(obj, con, switch)
+        switch_driver(obj, con, switch)
 
 
 def mixamo_rig(prefix: str = "mixamorig:", frames: int = 60):
@@ -108,42 +109,9 @@ def mixamo_rig(prefix: str = "mixamorig:", frames: int = 60):
             _copy(obj, d + bone, "COPY_TRANSFORMS", fk_bone, "FK_Follow", switch=hand)
         _copy(obj, d + f"{side}Hand", "COPY_ROTATION", hand, "IK_follow")
         _copy(obj, d + f"{side}Hand", "COPY_ROTATION", f"Ctrl_Hand_FK_{side}", "FK_Follow", switch=hand)
-    _key_walk(obj, frames)
+    key_ik_walk(obj, frames, "Ctrl_Hips", ("Ctrl_Foot_IK_Left", "Ctrl_Foot_IK_Right"),
+                ("Ctrl_Arm_FK_Left", "Ctrl_Arm_FK_Right"))
     return obj
-
-
-def _local(obj, bone: str, world: np.ndarray) -> Vector:
-    """A location in ``bone``'s rest space that moves it by ``world`` (armature space)."""
-    return Vector((np.array(obj.data.bones[bone].matrix_local)[:3, :3].T @ world).tolist())
-
-
-def _key_walk(obj, frames: int) -> None:
-    """Ctrl_Hips forward (-Y) at 1.2 m/s with a bob; each IK foot planted under the hips' mid-stance for 60 % of
-    its second-long stride, then carried 1.2 m forward; the FK arms swing. The legs follow their IK chains, the arms
-    their FK controls."""
-    step = 0.04  # metres a frame (30 fps)
-    for f in range(1, frames + 1):
-        phase = 2 * np.pi * f / 30.0
-        hips = obj.pose.bones["Ctrl_Hips"]
-        hips.location = _local(obj, "Ctrl_Hips", np.array([0.0, -step * f, 0.02 * np.sin(2 * phase)]))
-        hips.keyframe_insert("location", frame=f)
-        for k, side in enumerate(SIDES):
-            t = (f / 30.0 + 0.5 * k) % 1.0  # this foot's share of its stride cycle: planted for the first 60 %
-            cycle = np.floor(f / 30.0 + 0.5 * k)
-            along = cycle + (0.0 if t < 0.6 else (t - 0.6) / 0.4)
-            lift = 0.0 if t < 0.6 else 0.06 * np.sin(np.pi * (t - 0.6) / 0.4)
-            foot = obj.pose.bones[f"Ctrl_Foot_IK_{side}"]
-            foot.location = _local(obj, foot.name, np.array([0.0, -1.2 * along + 0.6 * k - 0.36, lift]))
-            foot.keyframe_insert("location", frame=f)
-            arm = obj.pose.bones[f"Ctrl_Arm_FK_{side}"]
-            arm.rotation_euler = (0.0, 0.0, 0.4 * np.sin(phase + np.pi * k))
-            arm.keyframe_insert("rotation_euler", frame=f)
-
-
-def _switch_keys(obj, action, bone: str) -> dict[int, float]:
-    path = f'pose.bones["{bone}"]["ik_fk_switch"]'
-    fc = next(fc for fc in fcurves_of(obj, action) if fc.data_path == path)
-    return {round(k.co[0]): k.co[1] for k in fc.keyframe_points}
 
 
 @pytest.mark.parametrize("prefix", ["mixamorig:", "mixamorig1:", ""])
@@ -162,9 +130,9 @@ def test_extend_keys_the_mixamo_rig_fk_controls_with_the_legs_switched_to_fk(add
     keyed = {fc.data_path.split('"')[1] for fc in fcurves_of(obj, new) if fc.data_path.startswith("pose.bones")}
     assert all(b.startswith("Ctrl_") for b in keyed), sorted(keyed)
     assert {"Ctrl_Hips", "Ctrl_UpLeg_FK_Left", "Ctrl_Leg_FK_Right", "Ctrl_Foot_FK_Left", "Ctrl_Arm_FK_Right"} <= keyed
-    legs = _switch_keys(obj, new, "Ctrl_Foot_IK_Left")
+    legs = switch_keys(obj, new, "Ctrl_Foot_IK_Left")
     assert legs[60] == 0.0 and all(legs[f] == 1.0 for f in range(61, 91))  # IK up to the clip's end, FK after
-    assert all(v == 1.0 for v in _switch_keys(obj, new, "Ctrl_Hand_IK_Right").values())
+    assert all(v == 1.0 for v in switch_keys(obj, new, "Ctrl_Hand_IK_Right").values())
     # The fake model carries the clip's last pose on at its last velocity: the deform bones, now on the FK
     # chain, do just that.
     pos = evaluated_joints(addon, obj, np.arange(59, 91))

@@ -191,3 +191,55 @@ def test_numbered_shoulder_segments_map_the_arm_at_the_one_the_elbow_hangs_from(
     assert (mapping["l_arm"][0], mapping["r_arm"][0]) == ("arm left shoulder 2", "arm right shoulder 2")
     assert (mapping["l_upleg"][0], mapping["spine1"][0], mapping["neck"][0]) == (
         "leg left thigh", "spine upper", "head neck lower")
+
+
+def _auto_rig_pro(spines: int = 3) -> tuple[list[str], list[int]]:
+    """Auto-Rig Pro's human rig as its bones hang (controls, the bones that blend FK and IK, twist and stretch
+    bones that deform), parents by name."""
+    tree = [("c_pos", None), ("c_traj", "c_pos"), ("c_root_master.x", "c_traj"), ("c_root.x", "c_root_master.x"),
+            ("root.x", "c_traj")]
+    top = ("c_root_master.x", "root.x")
+    for k in range(1, spines + 1):
+        tree += [(f"c_spine_0{k}.x", top[0]), (f"spine_0{k}.x", top[1])]
+        top = (f"c_spine_0{k}.x", f"spine_0{k}.x")
+    tree += [("c_neck.x", top[0]), ("neck.x", top[1]), ("c_head.x", "c_neck.x"), ("head.x", "neck.x")]
+    for s in "lr":
+        tree += [(n.format(S="." + s), p and p.format(S="." + s)) for n, p in [
+            ("c_shoulder{S}", top[0]), ("shoulder{S}", top[1]), ("c_arm_fk{S}", "c_shoulder{S}"),
+            ("c_forearm_fk{S}", "c_arm_fk{S}"), ("c_hand_fk{S}", "c_forearm_fk{S}"), ("c_hand_ik{S}", "c_traj"),
+            ("arm{S}", "shoulder{S}"), ("forearm{S}", "arm{S}"), ("hand{S}", "forearm{S}"),
+            ("arm_stretch{S}", "arm{S}"), ("forearm_stretch{S}", "forearm{S}"), ("forearm_twist{S}", "forearm{S}"),
+            ("c_thigh_b{S}", "c_root.x"), ("c_thigh_fk{S}", "c_thigh_b{S}"), ("c_leg_fk{S}", "c_thigh_fk{S}"),
+            ("c_foot_fk{S}", "c_leg_fk{S}"), ("c_toes_fk{S}", "c_foot_fk{S}"), ("c_foot_ik{S}", "c_traj"),
+            ("thigh{S}", "root.x"), ("leg{S}", "thigh{S}"), ("foot{S}", "leg{S}"), ("toes_01{S}", "foot{S}"),
+            ("thigh_twist{S}", "thigh{S}"), ("thigh_stretch{S}", "thigh{S}"), ("leg_stretch{S}", "leg{S}"),
+            ("leg_twist{S}", "leg{S}")]]
+    names = [n for n, _ in tree]
+    return names, [names.index(p) if p else -1 for _, p in tree]
+
+
+@pytest.mark.parametrize("spines, chest", [(3, "spine_03.x"), (2, "spine_02.x")])
+def test_auto_rig_pro_maps_its_pelvis_control_and_the_bones_that_blend_fk_and_ik(spines, chest):
+    """The body's root control has its head at the pelvis (the deform root.x points from the waist down); each
+    limb's joint is the head of the bone that follows its FK and IK chains whole, not a twist or stretch bone that
+    holds half a segment."""
+    family, mapping = auto_map(*_auto_rig_pro(spines))
+    assert family == "auto_rig_pro" and not missing(mapping)
+    got = {j: b for j, (b, _) in mapping.items()}
+    assert got["hips"] == "c_root_master.x" and got["spine"] == "spine_01.x" and got["spine1"] == chest
+    assert (got["l_upleg"], got["r_knee"], got["l_foot"], got["r_toe"]) == ("thigh.l", "leg.r", "foot.l", "toes_01.r")
+    assert (got["l_arm"], got["r_elbow"], got["l_wrist"]) == ("arm.l", "forearm.r", "hand.l")
+
+
+def test_a_rig_with_some_auto_rig_pro_names_is_not_read_as_one():
+    """thigh.L, leg.L and foot.L are common words: a rig that has them but not Auto-Rig Pro's whole body is mapped
+    by its own words and hierarchy."""
+    names, parents = chain("root", "hips", "spine", "chest", "neck", "head")
+    for s in "LR":
+        for n, p in (("thigh", "hips"), ("leg", "thigh"), ("foot", "leg"), ("toe", "foot"), ("shoulder", "chest"),
+                     ("arm", "shoulder"), ("forearm", "arm"), ("hand", "forearm")):
+            names.append(f"{n}.{s}")
+            parents.append(names.index(f"{p}.{s}" if f"{p}.{s}" in names else p))
+    family, mapping = auto_map(names, parents)
+    assert family != "auto_rig_pro" and not missing(mapping)
+    assert mapping["hips"][0] == "hips" and mapping["l_upleg"][0] == "thigh.L"

@@ -1,0 +1,234 @@
+"""A character rigged with Auto-Rig Pro (Artell's add-on; its human rig), made here bone for bone after the add-on's
+public source: ``c_pos`` > ``c_traj`` > ``c_root_master.x``, the body's root control, its head at the pelvis;
+``c_root.x`` below it turns the hips about the waist (it points down, its head at the waist) and the deform
+``root.x`` copies it; each limb has an FK chain of ``c_`` controls (``c_thigh_fk.l`` below ``c_thigh_b.l``,
+``c_foot_fk.l`` lying along the ground, turned half a turn), an IK chain to ``c_foot_ik.l`` / ``c_hand_ik.l`` (the
+IK foot below its control), and
+bones that blend the two (``thigh.l``, ``leg.l``, ``foot.l``; ``arm.l``, ``forearm.l``, ``hand.l``) by the
+``ik_fk_switch`` on the IK control (1 FK, 0 IK); twist and stretch bones split each segment in two and deform.
+The shipped ``auto_rig_pro`` preset fits it with no set-up: Extend keys the FK controls and the switches."""
+
+from __future__ import annotations
+
+import bpy
+import numpy as np
+import pytest
+from scenes import (
+    _mid,
+    _rest_joints,
+    action_of,
+    build_armature,
+    evaluated_joints,
+    fcurves_of,
+    find_mocap,
+    key_ik_walk,
+    key_snapshot,
+    same_keys,
+    switch_driver,
+    switch_keys,
+)
+
+SIDES = "lr"
+
+
+def _follow(obj, bone: str, kind: str, target: str, switch: str = "") -> None:
+    con = obj.pose.bones[bone].constraints.new(kind)
+    con.target, con.subtarget = obj, target
+    if switch:
+        switch_driver(obj, con, switch)
+
+
+def arp_bones(spines: int = 3) -> list[tuple]:
+    """(name, parent, head, tail) of an Auto-Rig Pro human rig on the canonical rest skeleton; ``spines``: 3 (the
+    add-on's default) or 2 spine bones."""
+    j = _rest_joints()
+    up, fwd, back = np.array([0, 0, 0.1]), np.array([0, -0.06, 0]), np.array([0, -0.04, 0])
+    chain = [j["spine"], _mid(j["spine"], j["spine1"]), j["spine1"], j["neck"]] if spines == 3 else [
+        j["spine"], j["spine1"], j["neck"]]
+    bones = [("c_pos", None, np.zeros(3), np.array([0, 0.4, 0])),
+             ("c_traj", "c_pos", np.zeros(3), np.array([0, 0.3, 0])),
+             ("c_root_master.x", "c_traj", j["hips"], j["spine"]),
+             ("c_root.x", "c_root_master.x", j["spine"], j["hips"]), ("root.x", "c_traj", j["spine"], j["hips"])]
+    control, deform = "c_root_master.x", "root.x"
+    for k in range(spines):
+        name = f"spine_0{k + 1}.x"
+        bones += [("c_" + name, control, chain[k], chain[k + 1]), (name, deform, chain[k], chain[k + 1])]
+        control, deform = "c_" + name, name
+    top_c, top_d = control, deform
+    bones += [("c_neck.x", top_c, j["neck"], j["head"]), ("neck.x", top_d, j["neck"], j["head"]),
+              ("c_head.x", "c_neck.x", j["head"], j["head"] + 2 * up),
+              ("head.x", "neck.x", j["head"], j["head"] + 2 * up)]
+    for s in SIDES:
+        hip, knee, ankle, toe = (j[f"{s}_{n}"] for n in ("upleg", "knee", "foot", "toe"))
+        knee = knee + np.array([0, -0.03, 0])  # bent a little forward, as the add-on asks: the IK knees know their way
+        arm, elbow, wrist = (j[f"{s}_{n}"] for n in ("arm", "elbow", "wrist"))
+        hand_tip = _mid(wrist, j[f"{s}_fingertip"], 0.45)
+        clavicle = _mid(j["neck"], arm, 0.3) - up
+        S = "." + s
+        bones += [
+            ("c_shoulder" + S, top_c, clavicle, arm), ("shoulder" + S, top_d, clavicle, arm),
+            ("c_arm_fk" + S, "c_shoulder" + S, arm, elbow), ("arm_fk" + S, "c_arm_fk" + S, arm, elbow),
+            ("c_forearm_fk" + S, "c_arm_fk" + S, elbow, wrist), ("forearm_fk" + S, "c_forearm_fk" + S, elbow, wrist),
+            ("c_hand_fk" + S, "c_forearm_fk" + S, wrist, hand_tip),
+            ("c_hand_ik" + S, "c_traj", wrist, hand_tip),
+            ("arm_ik" + S, "c_shoulder" + S, arm, elbow), ("forearm_ik" + S, "arm_ik" + S, elbow, wrist),
+            ("arm" + S, "shoulder" + S, arm, elbow), ("forearm" + S, "arm" + S, elbow, wrist),
+            ("hand" + S, "forearm" + S, wrist, hand_tip),
+            ("c_arm_twist_offset" + S, "arm" + S, arm, _mid(arm, elbow)),
+            ("arm_stretch" + S, "arm" + S, _mid(arm, elbow), elbow),
+            ("forearm_stretch" + S, "forearm" + S, elbow, _mid(elbow, wrist)),
+            ("forearm_twist" + S, "forearm" + S, _mid(elbow, wrist), wrist),
+            ("c_thigh_b" + S, "c_root.x", hip - (knee - hip) / 7, hip),
+            ("c_thigh_fk" + S, "c_thigh_b" + S, hip, knee), ("thigh_fk" + S, "c_thigh_fk" + S, hip, knee),
+            ("c_leg_fk" + S, "c_thigh_fk" + S, knee, ankle), ("leg_fk" + S, "c_leg_fk" + S, knee, ankle),
+            ("c_foot_fk" + S, "c_leg_fk" + S, ankle, ankle + back), ("foot_fk" + S, "c_foot_fk" + S, ankle, toe),
+            ("c_toes_fk" + S, "foot_fk" + S, toe, toe + fwd),
+            ("c_foot_ik" + S, "c_traj", ankle, ankle + back),
+            ("thigh_ik" + S, "c_thigh_b" + S, hip, knee), ("leg_ik" + S, "thigh_ik" + S, knee, ankle),
+            ("foot_ik" + S, "c_foot_ik" + S, ankle, toe), ("c_toes_ik" + S, "foot_ik" + S, toe, toe + fwd),
+            ("thigh" + S, "root.x", hip, knee), ("leg" + S, "thigh" + S, knee, ankle),
+            ("foot" + S, "leg" + S, ankle, toe),
+            ("toes_01" + S, "foot" + S, toe, toe + fwd / 3),
+            ("thigh_twist" + S, "thigh" + S, hip, _mid(hip, knee)),
+            ("thigh_stretch" + S, "thigh" + S, _mid(hip, knee), knee),
+            ("leg_stretch" + S, "leg" + S, knee, _mid(knee, ankle)),
+            ("leg_twist" + S, "leg" + S, _mid(knee, ankle), ankle)]
+    return bones
+
+
+def arp_rig(spines: int = 3, frames: int = 60):
+    """The rig of :func:`arp_bones`, legs in IK (switch 0) and arms in FK (switch 1), a walk keyed on
+    c_root_master.x, the IK feet and the FK arms."""
+    bones = arp_bones(spines)
+    obj = build_armature("ARP_rig", bones, rotation_mode="QUATERNION")
+    bpy.ops.object.mode_set(mode="EDIT")
+    for s in SIDES:  # the foot controls lie along the ground turned half a turn, the toes' too, as the add-on's
+        for name in ("c_foot_fk", "c_foot_ik", "c_toes_fk"):
+            obj.data.edit_bones[f"{name}.{s}"].roll = np.pi
+    bpy.ops.object.mode_set(mode="OBJECT")
+    for pb in obj.pose.bones:  # the limbs' FK controls turn by Euler angles, the rest by quaternions
+        if pb.name.startswith(("c_arm_fk", "c_forearm_fk", "c_thigh_fk", "c_leg_fk")):
+            pb.rotation_mode = "XYZ"
+    _follow(obj, "root.x", "COPY_TRANSFORMS", "c_root.x")
+    names = {b[0] for b in bones}
+    for name in [n for n in names if n.endswith(".x") and "c_" + n in names]:
+        _follow(obj, name, "COPY_TRANSFORMS", "c_" + name)
+    for s in SIDES:
+        S, legs, hands = "." + s, f"c_foot_ik.{s}", f"c_hand_ik.{s}"
+        obj.pose.bones[legs]["ik_fk_switch"] = 0.0
+        obj.pose.bones[hands]["ik_fk_switch"] = 1.0
+        _follow(obj, "shoulder" + S, "COPY_TRANSFORMS", "c_shoulder" + S)
+        for bone, target in (("leg_ik" + S, legs), ("forearm_ik" + S, hands)):
+            ik = obj.pose.bones[bone].constraints.new("IK")
+            ik.target, ik.subtarget, ik.chain_count = obj, target, 2
+        for bone, switch in (("thigh", legs), ("leg", legs), ("foot", legs), ("arm", hands), ("forearm", hands)):
+            _follow(obj, bone + S, "COPY_TRANSFORMS", f"{bone}_ik{S}")
+            _follow(obj, bone + S, "COPY_TRANSFORMS", f"{bone}_fk{S}", switch)
+        _follow(obj, "toes_01" + S, "COPY_ROTATION", "c_toes_ik" + S)
+        _follow(obj, "toes_01" + S, "COPY_ROTATION", "c_toes_fk" + S, legs)
+        _follow(obj, "hand" + S, "COPY_ROTATION", hands)
+        _follow(obj, "hand" + S, "COPY_ROTATION", "c_hand_fk" + S, hands)
+    key_ik_walk(obj, frames, "c_root_master.x", ("c_foot_ik.l", "c_foot_ik.r"), ("c_arm_fk.l", "c_arm_fk.r"),
+                speed=0.6, drop=0.06)  # knees bent: every foot within the legs' reach
+    return obj
+
+
+@pytest.mark.parametrize("spines", [3, 2])
+def test_extend_keys_the_auto_rig_pro_fk_controls_with_the_legs_switched_to_fk(addon, fake_model, spines):
+    obj = arp_rig(spines)
+    original = evaluated_joints(addon, obj, np.arange(1, 61))
+    assert np.ptp(original[:, 0, 1]) > 1.1  # the body walks 1.2 m
+    assert np.ptp(original[:, 7, 1]) > 0.5  # the left ankle (IK) steps
+    knee = original[:, 5:7] - original[:, 6:8]  # the legs reach their feet: hip-knee and knee-ankle keep their length
+    assert np.ptp(np.linalg.norm(knee, axis=-1), axis=0).max() < 1e-3
+    old = action_of(obj)
+    before = key_snapshot(obj)
+    assert bpy.ops.strnn.extend_clip(frames=30) == {"FINISHED"}
+    new = action_of(obj)
+    assert new is not old and same_keys(before, key_snapshot(obj, old))
+    assert new["strnn"]["controls"]["set"] == "auto_rig_pro"
+    assert new["strnn"]["controls"]["max_error_cm"] < 0.5
+    np.testing.assert_allclose(evaluated_joints(addon, obj, np.arange(1, 61)), original, atol=1e-5)
+    keyed = {fc.data_path.split('"')[1] for fc in fcurves_of(obj, new) if fc.data_path.startswith("pose.bones")}
+    assert all(b.startswith("c_") for b in keyed), sorted(keyed)
+    assert {"c_root_master.x", "c_thigh_fk.l", "c_leg_fk.r", "c_foot_fk.l", "c_arm_fk.r", "c_spine_02.x"} <= keyed
+    assert ("c_spine_03.x" in keyed) == (spines == 3)
+    legs = switch_keys(obj, new, "c_foot_ik.l")
+    assert legs[60] == 0.0 and all(legs[f] == 1.0 for f in range(61, 91))  # IK up to the clip's end, FK after
+    assert all(v == 1.0 for v in switch_keys(obj, new, "c_hand_ik.r").values())
+    # The fake model carries the clip's last pose on at its last velocity: the blending and deform bones, now on
+    # the FK chain, do just that.
+    pos = evaluated_joints(addon, obj, np.arange(59, 91))
+    want = pos[1] + (pos[1, 0] - pos[0, 0]) * np.arange(1, 31)[:, None, None]
+    assert np.linalg.norm(pos[2:] - want, axis=-1).max() < 0.01
+
+
+def test_the_bone_map_reads_auto_rig_pro_at_the_pelvis_and_the_bones_that_blend_fk_and_ik(addon):
+    obj = arp_rig(frames=10)
+    assert bpy.ops.strnn.auto_map() == {"FINISHED"}
+    m = obj.strnn_map
+    assert m.family == "auto_rig_pro"
+    assert (m.hips, m.spine, m.spine1, m.l_upleg, m.r_knee, m.l_toe, m.r_arm, m.l_wrist) == (
+        "c_root_master.x", "spine_01.x", "spine_03.x", "thigh.l", "leg.r", "toes_01.l", "arm.r", "hand.l")
+
+
+def test_controls_from_preset_fills_the_auto_rig_pro_controls(addon):
+    obj = arp_rig(spines=2, frames=10)
+    assert bpy.ops.strnn.controls_from_preset() == {"FINISHED"}
+    listed = {c.bone: c.drives for c in obj.strnn_controls}
+    assert listed["c_root_master.x"] == "c_root_master.x" and listed["c_toes_fk.r"] == "toes_01.r"
+    assert len(listed) == 21 and "c_spine_03.x" not in listed  # a rig with two spine bones
+    assert {s.bone for s in obj.strnn_switches} == {f"c_{limb}_ik.{s}" for limb in ("foot", "hand") for s in SIDES}
+
+
+
+def moved_walk(addon, folder):
+    """The character (no action, in its rest pose) given a walk (real motion capture when unpacked) by Transfer
+    Motion with its feet locked: (character, source, new action, the floor it stands on)."""
+    from test_addon_rigify import import_walk, transfer
+
+    obj = arp_rig(frames=1)
+    obj.animation_data.action = None
+    for pb in obj.pose.bones:
+        pb.matrix_basis.identity()
+    floor = evaluated_joints(addon, obj, [1])[0, [7, 8, 11, 12], 2].min()  # where it stands: its toes, 3 cm down
+    source = import_walk(folder)
+    _, moved = transfer(source, obj, foot_lock=True)
+    return obj, source, moved, floor
+
+
+def test_a_walk_moved_onto_the_rig_is_keyed_on_its_controls_and_stands_on_its_floor(addon, tmp_path):
+    from test_addon_rigify import knee_bend_forward
+
+    obj, source, moved, floor = moved_walk(addon, tmp_path)
+    assert moved["strnn"]["controls"]["set"] == "auto_rig_pro"
+    frames = np.arange(int(moved.frame_range[0]), int(moved.frame_range[1]) + 1)
+    got, src = evaluated_joints(addon, obj, frames), evaluated_joints(addon, source, frames)
+    for side in SIDES:  # each knee bends the way the source's does
+        bent = np.abs(knee_bend_forward(src, side)) > 0.02
+        assert bent.any() and (np.sign(knee_bend_forward(got, side)[bent]) ==
+                               np.sign(knee_bend_forward(src, side)[bent])).all()
+    feet = got[:, [7, 8, 11, 12], 2].min(1) - floor  # the lowest heel or toe stands on the floor, not in it
+    assert np.percentile(feet, 5) > -0.03 and np.percentile(feet, 50) < 0.05, np.percentile(feet, [5, 50])
+    assert np.linalg.norm(got[-1, 0, :2] - got[0, 0, :2]) > 1.0  # it walks
+
+
+def test_a_walk_moved_onto_the_rig_and_extended_still_walks(addon, real_model, tmp_path):
+    """An animator's day: a real walk moved onto the character, then extended by 5 s with the bundled model: keyed
+    on the controls, and still walking in its last 2 s."""
+    from test_addon_rigify import joint_speed
+
+    if find_mocap() is None:
+        pytest.skip("needs a real walk (../shared/mocap unpacked): the procedural walk is not motion the model learnt")
+    obj, _, moved, _ = moved_walk(addon, tmp_path)
+    last = int(moved.frame_range[1])
+    fps = bpy.context.scene.render.fps
+    assert bpy.ops.strnn.extend_clip(frames=5 * fps) == {"FINISHED"}
+    new = action_of(obj)
+    assert new["strnn"]["controls"]["set"] == "auto_rig_pro" and new["strnn"]["controls"]["max_error_cm"] < 1.0
+    keyed = {fc.data_path.split('"')[1] for fc in fcurves_of(obj, new) if fc.data_path.startswith("pose.bones")}
+    assert all(b.startswith("c_") for b in keyed), sorted(keyed)
+    before = joint_speed(evaluated_joints(addon, obj, np.arange(last - 2 * fps + 1, last + 1)))
+    after = joint_speed(evaluated_joints(addon, obj, np.arange(last + 3 * fps + 1, last + 5 * fps + 1)))
+    print(f"auto-rig-pro walk extended: joint speed {after / before:.2f} x the clip's in its last 2 s")
+    assert 0.5 < after / before < 2.0, (before, after)
