@@ -119,11 +119,12 @@ _MIXAMO_RIG_CONTROLS = [
         ("Ctrl_ForeArm_FK_{S}", "mixamorig:{S}ForeArm"), ("Ctrl_Hand_FK_{S}", "mixamorig:{S}Hand"),
         ("Ctrl_UpLeg_FK_{S}", "mixamorig:{S}UpLeg"), ("Ctrl_Leg_FK_{S}", "mixamorig:{S}Leg"),
         ("Ctrl_Foot_FK_{S}", "mixamorig:{S}Foot"), ("Ctrl_Toe_FK_{S}", "mixamorig:{S}ToeBase"))]
-# Auto-Rig Pro's human rig (Artell; Blender's most used commercial rig): the body's root control c_root_master.x
+# Auto-Rig Pro's human rig (Artell's widely used commercial add-on): the body's root control c_root_master.x
 # carries everything (c_root.x, which only turns the hips about the waist, is left as it is); each deform or
 # blending bone follows its ``c_`` FK control where the ``ik_fk_switch`` on c_foot_ik / c_hand_ik is 1 (FK), the IK
 # chain where it is 0. The controls' rest orientations are not all the bones' (c_foot_fk lies along the ground),
-# which the visual bake does not mind. A rig built with two spine bones has no spine_03.
+# which the visual bake does not mind. A rig built with two spine bones has no spine_03, one built without toes
+# no toes_01 (its feet then carry the toes).
 _AUTO_RIG_PRO_CONTROLS = [
     Control("c_root_master.x", "c_root_master.x", True), Control("c_spine_01.x", "spine_01.x"),
     Control("c_spine_02.x", "spine_02.x"), Control("c_spine_03.x", "spine_03.x", optional=True),
@@ -131,7 +132,8 @@ _AUTO_RIG_PRO_CONTROLS = [
     Control(c.format(S=side), d.format(S=side)) for side in "lr" for c, d in (
         ("c_shoulder.{S}", "shoulder.{S}"), ("c_arm_fk.{S}", "arm.{S}"), ("c_forearm_fk.{S}", "forearm.{S}"),
         ("c_hand_fk.{S}", "hand.{S}"), ("c_thigh_fk.{S}", "thigh.{S}"), ("c_leg_fk.{S}", "leg.{S}"),
-        ("c_foot_fk.{S}", "foot.{S}"), ("c_toes_fk.{S}", "toes_01.{S}"))]
+        ("c_foot_fk.{S}", "foot.{S}"))] + [
+    Control(f"c_toes_fk.{side}", f"toes_01.{side}", optional=True) for side in "lr"]
 PRESETS: dict[str, ControlSet] = {
     "rigify": ControlSet(
         "rigify",

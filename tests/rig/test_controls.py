@@ -20,7 +20,14 @@ def test_auto_rig_pro_fits_with_three_or_two_spine_bones():
 
 
 def test_a_rig_without_a_bone_a_preset_needs_gets_no_preset():
-    names = [n for n in _auto_rig_pro(3)[0] if n != "c_spine_02.x"]  # only spine_03 is optional
+    names = [n for n in _auto_rig_pro(3)[0] if n != "c_spine_02.x"]  # only spine_03 and the toes are optional
     assert preset_for(names) is None
     names = [n for n in _auto_rig_pro(3)[0] if n != "c_foot_ik.r"]  # a switch's bone
     assert preset_for(names) is None
+
+
+def test_auto_rig_pro_without_toes_keys_the_rest():
+    names = [n for n in _auto_rig_pro(3)[0] if not n.startswith(("c_toes", "toes"))]
+    found = preset_for(names)
+    assert found.name == "auto_rig_pro" and len(found.controls) == 20
+    assert not any("toes" in c.bone for c in found.controls)
