@@ -559,8 +559,8 @@ def generate_rigify(bpy):
 
 
 def picture_your_rig(bpy, clip: Path, out: Path, frames: int = 90) -> dict:
-    """Transfer Motion from a BVH take onto a freshly generated Rigify rig (keyed on its FK controls),
-    then Extend Clip on the rig: its deform bones drawn frame by frame."""
+    """Transfer Motion from a BVH take onto a freshly generated Rigify rig (keyed on its controls: its limbs on their
+    IK controls, as the rig comes), then Extend Clip on the rig: its deform bones drawn frame by frame."""
     bpy.ops.wm.read_homefile(use_empty=True)
     rig = generate_rigify(bpy)
     bpy.ops.import_anim.bvh(filepath=str(clip), global_scale=BANDAI_SCALE, update_scene_fps=True,

@@ -36,6 +36,28 @@ class Control:
     drives: str
     location: bool = False
     optional: bool = False
+    twist: bool = False  # it only turns about its own axis (an IK chain's base, which sets the knee's plane)
+    pole: bool = False  # an IK pole: moved in front of the driven bone's head, in the plane of its chain
+    end: bool = False  # an IK chain's end: first put where its driven bone's target puts it as the two stand at rest
+
+
+@dataclass(frozen=True)
+class IkLimb:
+    """A limb that is keyed on its IK controls where it is animated in IK: where ``switch`` stands at ``ik_value``,
+    the limb's FK controls (``fk``) give way to ``ik`` (the IK end control, which moves; the chain's base, turned
+    about its own axis; a toe), or where the property ``pole_prop`` of the switch's bone is on, to ``ik`` without its
+    base and with the ``pole`` control, and the switch is kept at its IK value."""
+
+    switch: Switch
+    ik_value: float
+    fk: tuple[str, ...]
+    ik: tuple[Control, ...]
+    pole: Control | None = None
+    pole_prop: str = ""
+
+    def _bones(self) -> list[str]:
+        out = [self.switch.bone, *self.fk] + [b for c in self.ik for b in (c.bone, c.drives)]
+        return out + ([self.pole.bone, self.pole.drives] if self.pole is not None else [])
 
 
 @dataclass(frozen=True)
@@ -54,6 +76,8 @@ class ControlSet:
     name: str
     controls: list[Control] = field(default_factory=list)
     switches: list[Switch] = field(default_factory=list)
+    ik_limbs: list[IkLimb] = field(default_factory=list)
+    keyed_ik: list[str] = field(default_factory=list)  # of a set made by :meth:`keyed`: the limbs' switches keyed IK
 
     def missing(self, names: set[str]) -> list[str]:
         """Bones this set names that the rig lacks."""
@@ -88,7 +112,31 @@ class ControlSet:
         switches = [replace(s, bone=spell(s.bone)) for s in self.switches]
         if any(s.bone is None for s in switches):
             return None
-        return ControlSet(self.name, controls, switches)
+        limbs = []
+        for limb in self.ik_limbs:  # a limb whose IK controls the rig lacks is keyed on its FK controls
+            if any(spell(b) is None for b in limb._bones()):
+                continue
+            pole = limb.pole and replace(limb.pole, bone=spell(limb.pole.bone), drives=spell(limb.pole.drives))
+            limbs.append(replace(limb, switch=replace(limb.switch, bone=spell(limb.switch.bone)),
+                                 fk=tuple(spell(b) for b in limb.fk), pole=pole,
+                                 ik=tuple(replace(c, bone=spell(c.bone), drives=spell(c.drives)) for c in limb.ik)))
+        return ControlSet(self.name, controls, switches, limbs)
+
+    def keyed(self, values: dict[tuple[str, str], float]) -> ControlSet:
+        """The controls to key where each switch and pole property stands at ``values`` {(bone, property): value}
+        (a property not given: as the set keys it, FK): a limb found at its IK value keyed on its IK controls, its
+        switch kept there."""
+        controls, switches, on_ik = list(self.controls), list(self.switches), []
+        for limb in self.ik_limbs:
+            v = values.get((limb.switch.bone, limb.switch.prop), limb.switch.value)
+            if abs(v - limb.ik_value) >= abs(v - limb.switch.value):  # nearer FK: keyed on FK, switched there
+                continue
+            pole = limb.pole is not None and bool(values.get((limb.switch.bone, limb.pole_prop), 0.0))
+            ik = [c for c in limb.ik if not (pole and c.twist)] + ([limb.pole] if pole else [])
+            controls = [c for c in controls if c.bone not in limb.fk] + ik
+            switches = [replace(s, value=limb.ik_value) if s == limb.switch else s for s in switches]
+            on_ik.append(limb.switch.bone)
+        return ControlSet(self.name, controls, switches, keyed_ik=on_ik)
 
 
 def _sides(pairs: list[tuple], *more: tuple) -> list[tuple]:
@@ -134,11 +182,27 @@ _AUTO_RIG_PRO_CONTROLS = [
         ("c_hand_fk.{S}", "hand.{S}"), ("c_thigh_fk.{S}", "thigh.{S}"), ("c_leg_fk.{S}", "leg.{S}"),
         ("c_foot_fk.{S}", "foot.{S}"))] + [
     Control(f"c_toes_fk.{side}", f"toes_01.{side}", optional=True) for side in "lr"]
+# Rigify's limbs in IK: the foot (hand) IK control carries the chain's end, the base (thigh_ik, upper_arm_ik) turns
+# about its own axis to set the knee's (elbow's) plane where the limb has no pole, the pole control where it has
+# (the ``pole_vector`` property, off on a generated rig); toe_ik turns the toe. As Rigify's own IK->FK snap.
+_RIGIFY_IK_LIMBS = [
+    IkLimb(Switch(f"thigh_parent.{S}", "IK_FK", 1.0), 0.0,
+           tuple(f"{b}_fk.{S}" for b in ("thigh", "shin", "foot", "toe")),
+           (Control(f"foot_ik.{S}", f"ORG-foot.{S}", True, end=True),
+            Control(f"thigh_ik.{S}", f"ORG-thigh.{S}", twist=True),
+            Control(f"toe_ik.{S}", f"ORG-toe.{S}")),
+           Control(f"thigh_ik_target.{S}", f"ORG-shin.{S}", True, pole=True), "pole_vector") for S in "LR"] + [
+    IkLimb(Switch(f"upper_arm_parent.{S}", "IK_FK", 1.0), 0.0,
+           tuple(f"{b}_fk.{S}" for b in ("upper_arm", "forearm", "hand")),
+           (Control(f"hand_ik.{S}", f"ORG-hand.{S}", True, end=True),
+            Control(f"upper_arm_ik.{S}", f"ORG-upper_arm.{S}", twist=True)),
+           Control(f"upper_arm_ik_target.{S}", f"ORG-forearm.{S}", True, pole=True), "pole_vector") for S in "LR"]
 PRESETS: dict[str, ControlSet] = {
     "rigify": ControlSet(
         "rigify",
         [Control(*c) for c in _RIGIFY_CONTROLS],
-        [Switch(*s) for s in _sides([("thigh_parent.{S}", "IK_FK", 1.0), ("upper_arm_parent.{S}", "IK_FK", 1.0)])]),
+        [Switch(*s) for s in _sides([("thigh_parent.{S}", "IK_FK", 1.0), ("upper_arm_parent.{S}", "IK_FK", 1.0)])],
+        _RIGIFY_IK_LIMBS),
     "mixamo_rig": ControlSet(
         "mixamo_rig",
         [Control(*c) for c in _MIXAMO_RIG_CONTROLS],

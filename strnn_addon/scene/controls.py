@@ -44,6 +44,26 @@ def control_set(obj) -> ControlSet | None:
     return rig_controls.preset_for(obj.pose.bones.keys())
 
 
+def as_animated(obj, control_set_: ControlSet, frame: float | None) -> ControlSet:
+    """The controls to key on ``obj``: each limb of the set that can be keyed on IK controls keyed on them where its
+    switch stands nearer IK at scene ``frame`` as its action plays it (None, or a switch the action does not animate:
+    as the switch stands now), that is where the animator animates it in IK."""
+    if not control_set_.ik_limbs:
+        return control_set_
+    ad = obj.animation_data
+    channels = anim.Channels(ad.action, ad) if ad is not None and ad.action is not None else None
+    values = {}
+    for limb in control_set_.ik_limbs:
+        pb = obj.pose.bones.get(limb.switch.bone)
+        for prop in (limb.switch.prop, limb.pole_prop):
+            if pb is None or not prop or prop not in pb:
+                continue
+            path = f'pose.bones["{bpy.utils.escape_identifier(pb.name)}"]["{prop}"]'
+            fc = channels.find(path, 0) if channels is not None and frame is not None else None
+            values[(pb.name, prop)] = float(fc.evaluate(frame)) if fc is not None else float(pb[prop])
+    return control_set_.keyed(values)
+
+
 def _matrix(pb) -> np.ndarray:
     return np.array(pb.matrix, dtype=np.float64)
 
@@ -93,20 +113,56 @@ def _error(obj, chosen: list, targets: dict[str, np.ndarray]) -> float:
     return worst
 
 
-def _place(obj, c, target: np.ndarray) -> None:
+def _place(obj, c, target: np.ndarray, first: bool = False) -> None:
     """Turn (and, for a root control, move) control ``c`` so its driven bone goes to ``target``,
-    taking the rig as last evaluated."""
+    taking the rig as last evaluated (``first``: the frame's first sweep)."""
     bones = obj.pose.bones
     pb = bones[c.bone]
-    delta = target @ np.linalg.inv(_matrix(bones[c.drives]))
+    driven = _matrix(bones[c.drives])
+    delta = target @ np.linalg.inv(driven)
     now = _matrix(pb)
-    if c.location:
+    want = now.copy()
+    if c.end and first:  # where the chain may not reach it yet: as the control and the bone stand at rest
+        want = target @ np.linalg.inv(np.array(bones[c.drives].bone.matrix_local)) @ np.array(pb.bone.matrix_local)
+    elif c.pole:
+        want[:3, 3] = _pole_at(bones[c.drives], driven, target, now)
+    elif c.twist:  # the driven bone's turn about its own axis, added to the control's own turn about its axis
+        # (on its keyed transform: an IK chain's base is posed by the chain, which takes that turn as its start)
+        pb.matrix_basis = pb.matrix_basis @ Matrix.Rotation(_twist(delta[:3, :3], driven[:3, 1]), 4, "Y")
+        return
+    elif c.location:
         want = delta @ now
     else:
-        want = now.copy()
         want[:3, :3] = delta[:3, :3] @ now[:3, :3]
     pb.matrix_basis = obj.convert_space(pose_bone=pb, matrix=Matrix(want.tolist()), from_space="POSE",
                                         to_space="LOCAL")
+
+
+def _unit(v: np.ndarray) -> np.ndarray:
+    return v / max(float(np.linalg.norm(v)), 1e-12)
+
+
+def _twist(rot: np.ndarray, axis: np.ndarray) -> float:
+    """The angle (radians) by which rotation ``rot`` ``[3, 3]`` turns about ``axis`` (its swing-twist twist)."""
+    w = np.sqrt(max(0.0, 1.0 + np.trace(rot))) / 2.0
+    v = np.array([rot[2, 1] - rot[1, 2], rot[0, 2] - rot[2, 0], rot[1, 0] - rot[0, 1]]) / 4.0
+    if w < 1e-9:  # a half turn: its axis is rot's eigenvector of eigenvalue 1
+        v = _unit(np.linalg.eigh((rot + rot.T) / 2.0)[1][:, -1])
+    return 2.0 * float(np.arctan2(np.dot(v, _unit(axis)), w))
+
+
+def _pole_at(pb, driven: np.ndarray, target: np.ndarray, now: np.ndarray) -> np.ndarray:
+    """Where an IK pole goes (armature space) for the chain's middle bone ``pb`` to take ``target``: in front of the
+    bend (target's head) in the plane of the chain from the bone above it to target's tail, as far from the bend as
+    the pole is now from the bone's head; where the chain is straight, where it is now."""
+    bend = target[:3, 3]
+    end = (target @ np.array([0.0, pb.bone.length, 0.0, 1.0]))[:3]
+    start = _matrix(pb.parent)[:3, 3] if pb.parent is not None else bend
+    line = end - start
+    out = bend - (start + line * np.dot(bend - start, line) / max(float(np.dot(line, line)), 1e-12))
+    if np.linalg.norm(out) < 1e-4 * max(float(np.linalg.norm(line)), 1e-6):
+        return now[:3, 3]
+    return bend + _unit(out) * float(np.linalg.norm(now[:3, 3] - driven[:3, 3]))
 
 
 def bake(context, obj, control_set_: ControlSet, frames: np.ndarray, targets: dict[str, np.ndarray]) -> Baked:
@@ -136,15 +192,17 @@ def bake(context, obj, control_set_: ControlSet, frames: np.ndarray, targets: di
             scene.frame_set(int(np.floor(f)), subframe=float(f - np.floor(f)))
             switch_on()
             want = {d: m[i] for d, m in targets.items()}
-            for _ in range(MAX_SWEEPS):
+            last = np.inf
+            for sweep in range(MAX_SWEEPS):
                 for wave in waves:
                     layer.update()
                     for c in wave:
-                        _place(obj, c, want[c.drives])
+                        _place(obj, c, want[c.drives], first=sweep == 0)
                 layer.update()
                 err = _error(obj, chosen, want)
-                if err < TOLERANCE:
+                if err < TOLERANCE or last - err < TOLERANCE / 4:  # there, or no nearer than the sweep before
                     break
+                last = err
             worst = max(worst, err)
             for k, c in enumerate(chosen):
                 basis = np.array(bones[c.bone].matrix_basis, dtype=np.float64)

@@ -231,6 +231,8 @@ def with_bake(record: dict, clip, error: float, frames) -> dict:
     if clip.controls is not None:
         worst_cm = round(100 * error * pipeline.world_scale(clip), 2)
         record["controls"] = {"set": clip.controls.name, "max_error_cm": worst_cm}
+        if clip.controls.keyed_ik:  # limbs animated in IK, keyed on their IK controls
+            record["controls"]["ik"] = list(clip.controls.keyed_ik)
     return record
 
 

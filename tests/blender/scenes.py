@@ -432,7 +432,9 @@ def key_ik_walk(obj, frames: int, root: str, feet: tuple[str, str], arms: tuple[
                 drop: float = 0.0) -> None:
     """Key a walk on a control rig: ``root`` forward (-Y) at ``speed`` m/s with a bob, ``drop`` metres low; each IK
     foot control of ``feet`` (left, right) planted under the hips' mid-stance for 60 % of its second-long stride,
-    then carried a stride forward; the FK arm controls of ``arms`` swing (Euler)."""
+    then carried a stride forward; the FK arm controls of ``arms`` swing."""
+    from mathutils import Euler
+
     stride = speed  # metres a second-long stride
     for f in range(1, frames + 1):
         phase = 2 * np.pi * f / 30.0
@@ -447,6 +449,4 @@ def key_ik_walk(obj, frames: int, root: str, feet: tuple[str, str], arms: tuple[
             foot = obj.pose.bones[feet[k]]
             foot.location = _local(obj, foot.name, np.array([0.0, stride * (0.5 * k - 0.3 - along), lift]))
             foot.keyframe_insert("location", frame=f)
-            arm = obj.pose.bones[arms[k]]
-            arm.rotation_euler = (0.0, 0.0, 0.4 * np.sin(phase + np.pi * k))
-            arm.keyframe_insert("rotation_euler", frame=f)
+            _key_rotation(obj.pose.bones[arms[k]], Euler((0.0, 0.0, 0.4 * np.sin(phase + np.pi * k))), f)

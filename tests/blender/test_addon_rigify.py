@@ -18,6 +18,7 @@ from scenes import (
     fcurves_of,
     find_mocap,
     import_bvh,
+    key_ik_walk,
     key_snapshot,
     key_walk,
     same_keys,
@@ -68,6 +69,24 @@ def rig(rigify_file):
     return obj
 
 
+@pytest.fixture
+def ik_rig(rigify_file):
+    """The generated rig as it comes, its legs in IK: a walk keyed on torso and the IK feet (planted, knees bent),
+    the arms switched to FK and swung."""
+    obj = open_rig(rigify_file)
+    for side in "LR":
+        obj.pose.bones[f"upper_arm_parent.{side}"]["IK_FK"] = 1.0
+    key_ik_walk(obj, 60, "torso", ("foot_ik.L", "foot_ik.R"), ("upper_arm_fk.L", "upper_arm_fk.R"), speed=0.6,
+                drop=0.08)
+    bpy.context.scene.frame_set(1)
+    return obj
+
+
+# Limbs keyed on IK come within this of the solve at worst (cm): the generated rig's IK chains may stretch
+# (ik_stretch 0.1), and Blender's IK then plays a leg that reaches its foot about 1 % short, which moves the knee
+# 2 to 4 cm (the feet are where the solve puts them; README's picture: 4.2 cm at worst on an active walk).
+IK_CM = 4.5
+IK_CONTROLS = {f"{b}.{side}" for b in ("foot_ik", "thigh_ik", "hand_ik", "upper_arm_ik") for side in "LR"}
 WALK = "bandai-namco/dataset-2/dataset-2_walk_normal_001.bvh"  # a real take where the data is unpacked
 
 
@@ -158,6 +177,36 @@ def test_extend_keys_the_controls_and_the_deform_bones_follow(rig, addon, fake_m
         assert rig.pose.bones[bone]["IK_FK"] == pytest.approx(1.0)
 
 
+def test_limbs_animated_in_ik_are_extended_on_their_ik_controls(ik_rig, addon, fake_model):
+    """Legs animated in IK (the generated rig's default) are keyed on foot_ik, thigh_ik (turned only about its own
+    axis, as its locks allow) and toe_ik, and stay in IK; the arms, animated in FK, on their FK controls. The feet
+    follow the model within 1.5 cm (the IK legs read a little shorter than the bones), the knees within IK_CM."""
+    rig = ik_rig
+    original = evaluated_joints(addon, rig, np.arange(1, 61))
+    assert np.ptp(original[:, 0, 1]) > 1.0  # the body walks 1.2 m on its planted IK feet
+    old, new = run_on_rig(rig, "extend_clip", 60, frames=30)
+    np.testing.assert_allclose(evaluated_joints(addon, rig, np.arange(1, 61)), original, atol=1e-5)
+    assert new["strnn"]["controls"]["ik"] == ["thigh_parent.L", "thigh_parent.R"]
+    written = keyed_bones(new, rig, 60)
+    assert {"torso", "foot_ik.L", "foot_ik.R", "thigh_ik.L", "thigh_ik.R", "toe_ik.L", "upper_arm_fk.R"} <= written
+    assert not written & {"thigh_fk.L", "shin_fk.R", "foot_fk.L", "toe_fk.R", "upper_arm_ik.L", "hand_ik.R"}
+    for side in "LR":
+        legs = {round(k.co[0]): k.co[1] for fc in fcurves_of(rig, new)
+                if fc.data_path == f'pose.bones["thigh_parent.{side}"]["IK_FK"]' for k in fc.keyframe_points}
+        assert all(legs[f] == 0.0 for f in range(61, 91))  # still IK
+        turned = [fc for fc in fcurves_of(rig, new) if fc.data_path == f'pose.bones["thigh_ik.{side}"].rotation_euler'
+                  and fc.array_index != 1]
+        assert all(abs(k.co[1]) < 1e-6 for fc in turned for k in fc.keyframe_points)  # Y only, as its locks
+    # the deform bones follow the stand-in model (the last pose gliding on) within 1 cm
+    joints = addon_module(addon, "model_core.motion.conventions").JOINT_INDEX
+    last = evaluated_joints(addon, rig, [59, 60])
+    want = last[-1] + (last[-1, 0] - last[-2, 0]) * np.arange(1, 31)[:, None, None]
+    idx = [joints[j] for j in DEFORM_JOINTS.values()]
+    err = np.linalg.norm(deform_heads(rig, range(61, 91)) - want[:, idx], axis=-1)
+    knees = [k for k, name in enumerate(DEFORM_JOINTS) if name.startswith("DEF-shin")]
+    assert np.delete(err, knees, axis=1).max() < 0.015 and err.max() < IK_CM / 100, err.max(0)
+
+
 def run_on_rig(rig, op: str, after: float, **kw):
     """Run ``bpy.ops.strnn.<op>`` on the rig; (old action, new action) after checking that the original is
     untouched and that the new keys after frame ``after`` are on controls only, each following the solve."""
@@ -171,7 +220,7 @@ def run_on_rig(rig, op: str, after: float, **kw):
     written = keyed_bones(new, rig, after)
     assert written and not {b for b in written if b.startswith(("DEF-", "ORG-", "MCH-"))}, written
     record = new["strnn"].to_dict()
-    assert record["controls"]["max_error_cm"] < 1.0, record
+    assert record["controls"]["max_error_cm"] < (IK_CM if written & IK_CONTROLS else 1.0), record
     return old, new
 
 
@@ -285,7 +334,7 @@ def test_transfer_motion_from_a_bvh_onto_the_rig(rig, addon, walk_source):
 def test_transfer_with_foot_lock_keeps_feet_on_the_floor(walking_rig, addon):
     rig = walking_rig  # made by Transfer Motion with Foot Lock
     new = action_of(rig)
-    assert new["strnn"]["operation"] == "Transfer Motion" and new["strnn"]["controls"]["max_error_cm"] < 1.0
+    assert new["strnn"]["operation"] == "Transfer Motion" and new["strnn"]["controls"]["max_error_cm"] < IK_CM
     frames = np.arange(int(new.frame_range[0]), int(new.frame_range[1]) + 1)
     got = evaluated_joints(addon, rig, frames)
     names = addon_joint_index()

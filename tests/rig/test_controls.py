@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from test_bonemap import _auto_rig_pro
 
-from model_core.rig.controls import preset_for
+from model_core.rig.controls import PRESETS, preset_for
 
 
 def test_auto_rig_pro_fits_with_three_or_two_spine_bones():
@@ -31,3 +31,28 @@ def test_auto_rig_pro_without_toes_keys_the_rest():
     found = preset_for(names)
     assert found.name == "auto_rig_pro" and len(found.controls) == 20
     assert not any("toes" in c.bone for c in found.controls)
+
+
+def test_rigify_limbs_animated_in_ik_are_keyed_on_their_ik_controls():
+    rigify = PRESETS["rigify"]
+    fk = rigify.keyed({("thigh_parent.L", "IK_FK"): 0.8})  # nearer FK: as before, switched to FK
+    assert fk.controls == rigify.controls and fk.switches == rigify.switches and not fk.keyed_ik
+    ik = rigify.keyed({("thigh_parent.L", "IK_FK"): 0.0, ("upper_arm_parent.R", "IK_FK"): 0.1})
+    bones = {c.bone: c for c in ik.controls}
+    assert {"foot_ik.L", "thigh_ik.L", "toe_ik.L", "hand_ik.R", "upper_arm_ik.R"} <= set(bones)
+    assert not {"thigh_fk.L", "shin_fk.L", "foot_fk.L", "toe_fk.L", "upper_arm_fk.R", "hand_fk.R"} & set(bones)
+    assert {"thigh_fk.R", "upper_arm_fk.L"} <= set(bones)  # the limbs animated in FK keep their FK controls
+    assert bones["foot_ik.L"].location and bones["foot_ik.L"].end and bones["thigh_ik.L"].twist
+    assert {(s.bone, s.value) for s in ik.switches} == {("thigh_parent.L", 0.0), ("upper_arm_parent.R", 0.0),
+                                                        ("thigh_parent.R", 1.0), ("upper_arm_parent.L", 1.0)}
+    assert ik.keyed_ik == ["thigh_parent.L", "upper_arm_parent.R"]
+    pole = rigify.keyed({("thigh_parent.L", "IK_FK"): 0.0, ("thigh_parent.L", "pole_vector"): 1})
+    bones = {c.bone: c for c in pole.controls}  # with its pole on, the knee follows the pole, not thigh_ik's turn
+    assert bones["thigh_ik_target.L"].pole and "thigh_ik.L" not in bones and "foot_ik.L" in bones
+
+
+def test_a_rig_without_a_limbs_ik_controls_keys_that_limb_on_fk():
+    rigify = PRESETS["rigify"]
+    names = {b for c in rigify.controls for b in (c.bone, c.drives)} | {s.bone for s in rigify.switches}
+    found = rigify.on(names | {"foot_ik.L", "thigh_ik.L", "toe_ik.L", "thigh_ik_target.L"})
+    assert [limb.switch.bone for limb in found.ik_limbs] == ["thigh_parent.L"]
