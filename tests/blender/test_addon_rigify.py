@@ -207,6 +207,28 @@ def test_limbs_animated_in_ik_are_extended_on_their_ik_controls(ik_rig, addon, f
     assert np.delete(err, knees, axis=1).max() < 0.015 and err.max() < IK_CM / 100, err.max(0)
 
 
+def test_legs_in_ik_with_their_pole_on_are_keyed_on_the_pole(ik_rig, addon, fake_model):
+    """With a leg's Pole Vector on, its knee aims at thigh_ik_target: that is keyed (in front of the knee, in the
+    leg's plane), not thigh_ik's turn."""
+    rig = ik_rig
+    for side in "LR":
+        rig.pose.bones[f"thigh_parent.{side}"]["pole_vector"] = True
+    original = evaluated_joints(addon, rig, np.arange(1, 61))
+    old, new = run_on_rig(rig, "extend_clip", 60, frames=30)
+    np.testing.assert_allclose(evaluated_joints(addon, rig, np.arange(1, 61)), original, atol=1e-5)
+    written = keyed_bones(new, rig, 60)
+    assert {"foot_ik.L", "thigh_ik_target.L", "thigh_ik_target.R", "toe_ik.R"} <= written
+    assert not written & {"thigh_ik.L", "thigh_ik.R", "thigh_fk.L"}
+    joints = addon_module(addon, "model_core.motion.conventions").JOINT_INDEX
+    last = evaluated_joints(addon, rig, [59, 60])
+    want = last[-1] + (last[-1, 0] - last[-2, 0]) * np.arange(1, 31)[:, None, None]
+    got = evaluated_joints(addon, rig, np.arange(61, 91))
+    for side in "lr":
+        assert np.linalg.norm(got[:, joints[f"{side}_foot"]] - want[:, joints[f"{side}_foot"]], axis=-1).max() < 0.015
+        assert np.linalg.norm(got[:, joints[f"{side}_knee"]] - want[:, joints[f"{side}_knee"]], axis=-1).max() < \
+            IK_CM / 100
+
+
 def run_on_rig(rig, op: str, after: float, **kw):
     """Run ``bpy.ops.strnn.<op>`` on the rig; (old action, new action) after checking that the original is
     untouched and that the new keys after frame ``after`` are on controls only, each following the solve."""
