@@ -11,8 +11,9 @@ as a clavicle). The solved pose is then written on the controls by a visual bake
 Blender side, ``strnn_addon/scene/controls.py``): each :class:`Control` is turned until the
 bone it drives sits where the solve put it.
 
-:data:`PRESETS` holds the control sets that ship (Rigify's FK controls, the Mixamo Rig add-on's, Auto-Rig Pro's);
-any other rig gets its controls from the Bone Map panel.
+:data:`PRESETS` holds the control sets that ship (Rigify's, the Mixamo Rig add-on's, Auto-Rig Pro's): their FK
+controls, and for each limb animated in IK (:class:`IkLimb`) its IK controls, so that results are keyed where the
+animator animates; any other rig gets its controls from the Bone Map panel.
 """
 
 from __future__ import annotations
@@ -45,8 +46,9 @@ class Control:
 class IkLimb:
     """A limb that is keyed on its IK controls where it is animated in IK: where ``switch`` stands at ``ik_value``,
     the limb's FK controls (``fk``) give way to ``ik`` (the IK end control, which moves; the chain's base, turned
-    about its own axis; a toe), or where the property ``pole_prop`` of the switch's bone is on, to ``ik`` without its
-    base and with the ``pole`` control, and the switch is kept at its IK value."""
+    about its own axis; a toe), or where the limb has a pole (``pole``, always, or where the property ``pole_prop``
+    of the switch's bone is on), to ``ik`` without its base and with the ``pole`` control; the switch is kept at its
+    IK value."""
 
     switch: Switch
     ik_value: float
@@ -131,7 +133,8 @@ class ControlSet:
             v = values.get((limb.switch.bone, limb.switch.prop), limb.switch.value)
             if abs(v - limb.ik_value) >= abs(v - limb.switch.value):  # nearer FK: keyed on FK, switched there
                 continue
-            pole = limb.pole is not None and bool(values.get((limb.switch.bone, limb.pole_prop), 0.0))
+            pole = limb.pole is not None and (not limb.pole_prop or bool(values.get((limb.switch.bone,
+                                                                                      limb.pole_prop), 0.0)))
             ik = [c for c in limb.ik if not (pole and c.twist)] + ([limb.pole] if pole else [])
             controls = [c for c in controls if c.bone not in limb.fk] + ik
             switches = [replace(s, value=limb.ik_value) if s == limb.switch else s for s in switches]
@@ -167,6 +170,17 @@ _MIXAMO_RIG_CONTROLS = [
         ("Ctrl_ForeArm_FK_{S}", "mixamorig:{S}ForeArm"), ("Ctrl_Hand_FK_{S}", "mixamorig:{S}Hand"),
         ("Ctrl_UpLeg_FK_{S}", "mixamorig:{S}UpLeg"), ("Ctrl_Leg_FK_{S}", "mixamorig:{S}Leg"),
         ("Ctrl_Foot_FK_{S}", "mixamorig:{S}Foot"), ("Ctrl_Toe_FK_{S}", "mixamorig:{S}ToeBase"))]
+# Its limbs in IK: Ctrl_Foot_IK / Ctrl_Hand_IK carry the chain's end, the knee and elbow aim at their poles.
+_MIXAMO_RIG_IK_LIMBS = [
+    IkLimb(Switch(f"Ctrl_Foot_IK_{S}", "ik_fk_switch", 1.0), 0.0,
+           tuple(f"Ctrl_{b}_FK_{S}" for b in ("UpLeg", "Leg", "Foot", "Toe")),
+           (Control(f"Ctrl_Foot_IK_{S}", f"mixamorig:{S}Foot", True, end=True),
+            Control(f"Ctrl_Toe_IK_{S}", f"mixamorig:{S}ToeBase")),
+           Control(f"Ctrl_LegPole_IK_{S}", f"mixamorig:{S}Leg", True, pole=True)) for S in ("Left", "Right")] + [
+    IkLimb(Switch(f"Ctrl_Hand_IK_{S}", "ik_fk_switch", 1.0), 0.0,
+           tuple(f"Ctrl_{b}_FK_{S}" for b in ("Arm", "ForeArm", "Hand")),
+           (Control(f"Ctrl_Hand_IK_{S}", f"mixamorig:{S}Hand", True, end=True),),
+           Control(f"Ctrl_ArmPole_IK_{S}", f"mixamorig:{S}ForeArm", True, pole=True)) for S in ("Left", "Right")]
 # Auto-Rig Pro's human rig (Artell's widely used commercial add-on): the body's root control c_root_master.x
 # carries everything (c_root.x, which only turns the hips about the waist, is left as it is); each deform or
 # blending bone follows its ``c_`` FK control where the ``ik_fk_switch`` on c_foot_ik / c_hand_ik is 1 (FK), the IK
@@ -197,6 +211,16 @@ _RIGIFY_IK_LIMBS = [
            (Control(f"hand_ik.{S}", f"ORG-hand.{S}", True, end=True),
             Control(f"upper_arm_ik.{S}", f"ORG-upper_arm.{S}", twist=True)),
            Control(f"upper_arm_ik_target.{S}", f"ORG-forearm.{S}", True, pole=True), "pole_vector") for S in "LR"]
+# Its limbs in IK: c_foot_ik / c_hand_ik carry the chain's end, the knee and elbow aim at c_leg_pole / c_arms_pole.
+_AUTO_RIG_PRO_IK_LIMBS = [
+    IkLimb(Switch(f"c_foot_ik.{S}", "ik_fk_switch", 1.0), 0.0,
+           tuple(f"c_{b}_fk.{S}" for b in ("thigh", "leg", "foot", "toes")),
+           (Control(f"c_foot_ik.{S}", f"foot.{S}", True, end=True), Control(f"c_toes_ik.{S}", f"toes_01.{S}")),
+           Control(f"c_leg_pole.{S}", f"leg.{S}", True, pole=True)) for S in "lr"] + [
+    IkLimb(Switch(f"c_hand_ik.{S}", "ik_fk_switch", 1.0), 0.0,
+           tuple(f"c_{b}_fk.{S}" for b in ("arm", "forearm", "hand")),
+           (Control(f"c_hand_ik.{S}", f"hand.{S}", True, end=True),),
+           Control(f"c_arms_pole.{S}", f"forearm.{S}", True, pole=True)) for S in "lr"]
 PRESETS: dict[str, ControlSet] = {
     "rigify": ControlSet(
         "rigify",
@@ -207,10 +231,11 @@ PRESETS: dict[str, ControlSet] = {
         "mixamo_rig",
         [Control(*c) for c in _MIXAMO_RIG_CONTROLS],
         [Switch(f"Ctrl_{limb}_IK_{side}", "ik_fk_switch", 1.0)
-         for side in ("Left", "Right") for limb in ("Foot", "Hand")]),
+         for side in ("Left", "Right") for limb in ("Foot", "Hand")], _MIXAMO_RIG_IK_LIMBS),
     "auto_rig_pro": ControlSet(
         "auto_rig_pro", _AUTO_RIG_PRO_CONTROLS,
-        [Switch(f"c_{limb}_ik.{side}", "ik_fk_switch", 1.0) for side in "lr" for limb in ("foot", "hand")]),
+        [Switch(f"c_{limb}_ik.{side}", "ik_fk_switch", 1.0) for side in "lr" for limb in ("foot", "hand")],
+        _AUTO_RIG_PRO_IK_LIMBS),
 }
 
 

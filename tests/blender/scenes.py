@@ -450,3 +450,19 @@ def key_ik_walk(obj, frames: int, root: str, feet: tuple[str, str], arms: tuple[
             foot.location = _local(obj, foot.name, np.array([0.0, stride * (0.5 * k - 0.3 - along), lift]))
             foot.keyframe_insert("location", frame=f)
             _key_rotation(obj.pose.bones[arms[k]], Euler((0.0, 0.0, 0.4 * np.sin(phase + np.pi * k))), f)
+
+
+def set_pole(obj, ik, pole: str) -> None:
+    """Give IK constraint ``ik`` the pole bone ``pole``, at the pole angle (of a quarter turn's) that keeps its chain
+    as it stands at rest, as a rigger sets it."""
+    owner = next(pb for pb in obj.pose.bones if ik in pb.constraints.values())
+    ik.pole_target, ik.pole_subtarget = obj, pole
+    bones = [owner, owner.parent]
+    best = None
+    for angle in (-np.pi / 2, 0.0, np.pi / 2, np.pi):
+        ik.pole_angle = angle
+        bpy.context.view_layer.update()
+        off = sum(float(np.linalg.norm(np.array(b.matrix) - np.array(b.bone.matrix_local))) for b in bones)
+        if best is None or off < best[0]:
+            best = (off, angle)
+    ik.pole_angle = best[1]

@@ -24,6 +24,7 @@ from scenes import (
     key_ik_walk,
     key_snapshot,
     same_keys,
+    set_pole,
     switch_driver,
     switch_keys,
 )
@@ -84,6 +85,8 @@ def arp_bones(spines: int = 3) -> list[tuple]:
             ("c_foot_fk" + S, "c_leg_fk" + S, ankle, ankle + back), ("foot_fk" + S, "c_foot_fk" + S, ankle, toe),
             ("c_toes_fk" + S, "foot_fk" + S, toe, toe + fwd),
             ("c_foot_ik" + S, "c_traj", ankle, ankle + back),
+            ("c_leg_pole" + S, "c_root_master.x", knee + [0, -0.5, 0], knee + [0, -0.5, 0.1]),  # with the body
+            ("c_arms_pole" + S, "c_root_master.x", elbow + [0, 0.5, 0], elbow + [0, 0.5, 0.1]),
             ("thigh_ik" + S, "c_thigh_b" + S, hip, knee), ("leg_ik" + S, "thigh_ik" + S, knee, ankle),
             ("foot_ik" + S, "c_foot_ik" + S, ankle, toe), ("c_toes_ik" + S, "foot_ik" + S, toe, toe + fwd),
             ("thigh" + S, "root.x", hip, knee), ("leg" + S, "thigh" + S, knee, ankle),
@@ -118,9 +121,11 @@ def arp_rig(spines: int = 3, frames: int = 60):
         obj.pose.bones[legs]["ik_fk_switch"] = 0.0
         obj.pose.bones[hands]["ik_fk_switch"] = 1.0
         _follow(obj, "shoulder" + S, "COPY_TRANSFORMS", "c_shoulder" + S)
-        for bone, target in (("leg_ik" + S, legs), ("forearm_ik" + S, hands)):
+        for bone, target, pole in (("leg_ik" + S, legs, "c_leg_pole" + S),
+                                   ("forearm_ik" + S, hands, "c_arms_pole" + S)):
             ik = obj.pose.bones[bone].constraints.new("IK")
             ik.target, ik.subtarget, ik.chain_count = obj, target, 2
+            set_pole(obj, ik, pole)
         for bone, switch in (("thigh", legs), ("leg", legs), ("foot", legs), ("arm", hands), ("forearm", hands)):
             _follow(obj, bone + S, "COPY_TRANSFORMS", f"{bone}_ik{S}")
             _follow(obj, bone + S, "COPY_TRANSFORMS", f"{bone}_fk{S}", switch)
@@ -134,7 +139,7 @@ def arp_rig(spines: int = 3, frames: int = 60):
 
 
 @pytest.mark.parametrize("spines", [3, 2])
-def test_extend_keys_the_auto_rig_pro_fk_controls_with_the_legs_switched_to_fk(addon, fake_model, spines):
+def test_extend_keys_auto_rig_pro_legs_in_ik_on_their_ik_controls_and_arms_in_fk_on_fk(addon, fake_model, spines):
     obj = arp_rig(spines)
     original = evaluated_joints(addon, obj, np.arange(1, 61))
     assert np.ptp(original[:, 0, 1]) > 1.1  # the body walks 1.2 m
@@ -151,10 +156,13 @@ def test_extend_keys_the_auto_rig_pro_fk_controls_with_the_legs_switched_to_fk(a
     np.testing.assert_allclose(evaluated_joints(addon, obj, np.arange(1, 61)), original, atol=1e-5)
     keyed = {fc.data_path.split('"')[1] for fc in fcurves_of(obj, new) if fc.data_path.startswith("pose.bones")}
     assert all(b.startswith("c_") for b in keyed), sorted(keyed)
-    assert {"c_root_master.x", "c_thigh_fk.l", "c_leg_fk.r", "c_foot_fk.l", "c_arm_fk.r", "c_spine_02.x"} <= keyed
+    assert {"c_root_master.x", "c_foot_ik.l", "c_leg_pole.r", "c_toes_ik.l", "c_arm_fk.r", "c_hand_fk.l",
+            "c_spine_02.x"} <= keyed
     assert ("c_spine_03.x" in keyed) == (spines == 3)
-    legs = switch_keys(obj, new, "c_foot_ik.l")
-    assert legs[60] == 0.0 and all(legs[f] == 1.0 for f in range(61, 91))  # IK up to the clip's end, FK after
+    moved = {b for b in keyed if any(fc.data_path.startswith(f'pose.bones["{b}"].') for fc in fcurves_of(obj, new))}
+    assert not moved & {"c_thigh_fk.l", "c_leg_fk.r", "c_foot_fk.l", "c_hand_ik.r", "c_arms_pole.l"}
+    assert new["strnn"]["controls"]["ik"] == ["c_foot_ik.l", "c_foot_ik.r"]
+    assert all(v == 0.0 for v in switch_keys(obj, new, "c_foot_ik.l").values())  # the legs stay in IK
     assert all(v == 1.0 for v in switch_keys(obj, new, "c_hand_ik.r").values())
     # The fake model carries the clip's last pose on at its last velocity: the blending and deform bones, now on
     # the FK chain, do just that.

@@ -4,7 +4,8 @@ control (the hips through ``Hips_Free_Helper`` below ``Ctrl_Hips_Free``, the foo
 ``Ctrl_Foot_FK_<side>``), the limbs follow an IK chain, and their FK chain where the ``ik_fk_switch`` on
 ``Ctrl_Foot_IK_<side>`` / ``Ctrl_Hand_IK_<side>`` drives the FK constraints' influence to 1. The FK legs and arms
 have rolls of their own, as the add-on's do. The shipped ``mixamo_rig`` preset fits it with no set-up: Extend keys
-the FK controls and the switches, whatever namespace the character's bones have."""
+each limb where it is animated (the legs on their IK controls and poles, the arms on their FK controls) and keeps
+the switches there, whatever namespace the character's bones have."""
 
 from __future__ import annotations
 
@@ -20,6 +21,7 @@ from scenes import (
     key_snapshot,
     mixamo_bones,
     same_keys,
+    set_pole,
     switch_driver,
     switch_keys,
 )
@@ -67,6 +69,10 @@ def mixamo_rig(prefix: str = "mixamorig:", frames: int = 60):
         copy_of(f"Foot_FK_{side}", f"{side}Foot", f"Ctrl_Foot_FK_{side}")
         copy_of(f"Ctrl_Toe_FK_{side}", f"{side}ToeBase", f"Foot_FK_{side}")
         bones.append((f"Ctrl_Foot_IK_{side}", "Ctrl_Master", ankle, flat))
+        knee, elbow = rest[f"{side}Leg"][0], rest[f"{side}ForeArm"][0]
+        # the poles go with the body here, so that the walk's knees point ahead as it walks on
+        bones.append((f"Ctrl_LegPole_IK_{side}", "Ctrl_Hips", knee + [0, -0.5, 0], knee + [0, -0.5, 0.1]))
+        bones.append((f"Ctrl_ArmPole_IK_{side}", "Ctrl_Hips", elbow + [0, 0.5, 0], elbow + [0, 0.5, 0.1]))
         copy_of(f"UpLeg_IK_{side}", f"{side}UpLeg", "Ctrl_Hips_Free")
         copy_of(f"Leg_IK_{side}", f"{side}Leg", f"UpLeg_IK_{side}")
         copy_of(f"Foot_IK_{side}", f"{side}Foot", f"Leg_IK_{side}")
@@ -93,8 +99,10 @@ def mixamo_rig(prefix: str = "mixamorig:", frames: int = 60):
         arm_at.target, arm_at.subtarget, arm_at.head_tail = obj, f"Ctrl_Shoulder_{side}", 1.0
         ik = obj.pose.bones[f"ForeArm_IK_{side}"].constraints.new("IK")
         ik.target, ik.subtarget, ik.chain_count = obj, hand, 2
+        set_pole(obj, ik, f"Ctrl_ArmPole_IK_{side}")
         ik = obj.pose.bones[f"Leg_IK_{side}"].constraints.new("IK")
         ik.target, ik.subtarget, ik.chain_count = obj, legs, 2
+        set_pole(obj, ik, f"Ctrl_LegPole_IK_{side}")
         _copy(obj, f"Foot_IK_{side}", "COPY_ROTATION", legs, "Copy Rotation")
         for bone, ik_bone, fk_bone in ((f"{side}UpLeg", f"UpLeg_IK_{side}", f"Ctrl_UpLeg_FK_{side}"),
                                        (f"{side}Leg", f"Leg_IK_{side}", f"Ctrl_Leg_FK_{side}"),
@@ -115,7 +123,8 @@ def mixamo_rig(prefix: str = "mixamorig:", frames: int = 60):
 
 
 @pytest.mark.parametrize("prefix", ["mixamorig:", "mixamorig1:", ""])
-def test_extend_keys_the_mixamo_rig_fk_controls_with_the_legs_switched_to_fk(addon, fake_model, prefix):
+def test_extend_keys_the_mixamo_rig_legs_in_ik_on_their_ik_controls_and_the_arms_in_fk_on_fk(addon, fake_model,
+                                                                                             prefix):
     obj = mixamo_rig(prefix)
     original = evaluated_joints(addon, obj, np.arange(1, 61))
     assert np.ptp(original[:, 0, 1]) > 2.0  # the body walks 2.4 m
@@ -129,12 +138,15 @@ def test_extend_keys_the_mixamo_rig_fk_controls_with_the_legs_switched_to_fk(add
     np.testing.assert_allclose(evaluated_joints(addon, obj, np.arange(1, 61)), original, atol=1e-5)
     keyed = {fc.data_path.split('"')[1] for fc in fcurves_of(obj, new) if fc.data_path.startswith("pose.bones")}
     assert all(b.startswith("Ctrl_") for b in keyed), sorted(keyed)
-    assert {"Ctrl_Hips", "Ctrl_UpLeg_FK_Left", "Ctrl_Leg_FK_Right", "Ctrl_Foot_FK_Left", "Ctrl_Arm_FK_Right"} <= keyed
-    legs = switch_keys(obj, new, "Ctrl_Foot_IK_Left")
-    assert legs[60] == 0.0 and all(legs[f] == 1.0 for f in range(61, 91))  # IK up to the clip's end, FK after
+    assert {"Ctrl_Hips", "Ctrl_Foot_IK_Left", "Ctrl_LegPole_IK_Right", "Ctrl_Toe_IK_Left", "Ctrl_Arm_FK_Right",
+            "Ctrl_Hand_FK_Left"} <= keyed
+    moved = {b for b in keyed if any(fc.data_path.startswith(f'pose.bones["{b}"].') for fc in fcurves_of(obj, new))}
+    assert not moved & {"Ctrl_UpLeg_FK_Left", "Ctrl_Leg_FK_Right", "Ctrl_Foot_FK_Left", "Ctrl_Hand_IK_Right",
+                        "Ctrl_ArmPole_IK_Left"}
+    assert new["strnn"]["controls"]["ik"] == ["Ctrl_Foot_IK_Left", "Ctrl_Foot_IK_Right"]
+    assert all(v == 0.0 for v in switch_keys(obj, new, "Ctrl_Foot_IK_Left").values())  # the legs stay in IK
     assert all(v == 1.0 for v in switch_keys(obj, new, "Ctrl_Hand_IK_Right").values())
-    # The fake model carries the clip's last pose on at its last velocity: the deform bones, now on the FK
-    # chain, do just that.
+    # The fake model carries the clip's last pose on at its last velocity: the deform bones do just that.
     pos = evaluated_joints(addon, obj, np.arange(59, 91))
     want = pos[1] + (pos[1, 0] - pos[0, 0]) * np.arange(1, 31)[:, None, None]
     assert np.linalg.norm(pos[2:] - want, axis=-1).max() < 0.01
