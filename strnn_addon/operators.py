@@ -593,8 +593,10 @@ class STRNN_OT_controls_from_preset(_EditControls, bpy.types.Operator):
         for sw in preset.switches:
             item = obj.strnn_switches.add()
             item.bone, item.prop, item.value = sw.bone, sw.prop, sw.value
+        ik = ("; a list keys every limb on its FK controls, where the preset itself (an empty list) keys a limb "
+              "animated in IK on its IK controls" if preset.ik_limbs else "")
         self.report({"INFO"}, f"{len(preset.controls)} controls and {len(preset.switches)} switches from the "
-                              f"{preset.name} preset")
+                              f"{preset.name} preset{ik}")
         return {"FINISHED"}
 
 

@@ -396,3 +396,13 @@ def test_make_loop_keys_the_controls_and_the_rig_repeats_without_a_jump(walking_
     joints = evaluated_joints(addon, rig, np.arange(cycle["first"], cycle["first"] + 2 * cycle["frames"] + 1))
     moves = lambda j: np.linalg.norm(np.diff(j, axis=0), axis=-1)  # noqa: E731
     assert moves(joints).max() <= 1.1 * moves(take).max(), (moves(joints).max(), moves(take).max())
+
+
+def test_the_controls_panel_says_which_limbs_go_on_ik(ik_rig, addon):
+    from test_addon_ui import panel_labels
+
+    labels = panel_labels("STRNN_PT_controls", bpy.context)
+    assert ("In IK, keyed on their IK controls: thigh_parent.L, thigh_parent.R", "CON_KINEMATIC") in labels
+    for side in "LR":
+        ik_rig.pose.bones[f"thigh_parent.{side}"]["IK_FK"] = 1.0  # a rig animated in FK (its switch not keyed)
+    assert not [text for text, _ in panel_labels("STRNN_PT_controls", bpy.context) if text.startswith("In IK")]
