@@ -126,9 +126,9 @@ def _place(obj, c, target: np.ndarray, first: bool = False) -> None:
         want = target @ np.linalg.inv(np.array(bones[c.drives].bone.matrix_local)) @ np.array(pb.bone.matrix_local)
     elif c.pole:
         want[:3, 3] = _pole_at(bones[c.drives], driven, target, now)
-    elif c.twist:  # the driven bone's turn about its own axis, added to the control's own turn about its axis
-        # (on its keyed transform: an IK chain's base is posed by the chain, which takes that turn as its start)
-        pb.matrix_basis = pb.matrix_basis @ Matrix.Rotation(_twist(delta[:3, :3], driven[:3, 1]), 4, "Y")
+    elif c.twist:  # the knee's turn about the line from hip to ankle that the solve asks for, added to the chain
+        # base's own turn about its axis (on its keyed transform: the chain takes that turn as its start)
+        pb.matrix_basis = pb.matrix_basis @ Matrix.Rotation(_bend_turn(bones[c.drives], driven, target), 4, "Y")
         return
     elif c.location:
         want = delta @ now
@@ -142,13 +142,20 @@ def _unit(v: np.ndarray) -> np.ndarray:
     return v / max(float(np.linalg.norm(v)), 1e-12)
 
 
-def _twist(rot: np.ndarray, axis: np.ndarray) -> float:
-    """The angle (radians) by which rotation ``rot`` ``[3, 3]`` turns about ``axis`` (its swing-twist twist)."""
-    w = np.sqrt(max(0.0, 1.0 + np.trace(rot))) / 2.0
-    v = np.array([rot[2, 1] - rot[1, 2], rot[0, 2] - rot[2, 0], rot[1, 0] - rot[0, 1]]) / 4.0
-    if w < 1e-9:  # a half turn: its axis is rot's eigenvector of eigenvalue 1
-        v = _unit(np.linalg.eigh((rot + rot.T) / 2.0)[1][:, -1])
-    return 2.0 * float(np.arctan2(np.dot(v, _unit(axis)), w))
+def _bend_turn(pb, driven: np.ndarray, target: np.ndarray) -> float:
+    """The angle (radians) about the line from the head of an IK chain's base bone ``pb`` (the hip) to the end of
+    the chain (the ankle: the tail of its child that starts at its tail) that takes the bend (its tail, the knee)
+    from where it is (``driven``) to where ``target`` puts it; 0 where the chain is straight."""
+    tip = np.array([0.0, pb.bone.length, 0.0, 1.0])
+    hip, knee, want = driven[:3, 3], (driven @ tip)[:3], (target @ tip)[:3]
+    child = min(pb.children, key=lambda ch: float(np.linalg.norm(_matrix(ch)[:3, 3] - knee)), default=None)
+    if child is None:
+        return 0.0
+    axis = _unit((_matrix(child) @ np.array([0.0, child.bone.length, 0.0, 1.0]))[:3] - hip)
+    now, to = ((v - hip) - axis * np.dot(v - hip, axis) for v in (knee, want))
+    if min(np.linalg.norm(now), np.linalg.norm(to)) < 1e-6:
+        return 0.0
+    return float(np.arctan2(np.dot(axis, np.cross(now, to)), np.dot(now, to)))
 
 
 def _pole_at(pb, driven: np.ndarray, target: np.ndarray, now: np.ndarray) -> np.ndarray:

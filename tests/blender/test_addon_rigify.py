@@ -84,8 +84,8 @@ def ik_rig(rigify_file):
 
 # Limbs keyed on IK come within this of the solve at worst (cm): the generated rig's IK chains may stretch
 # (ik_stretch 0.1), and Blender's IK then plays a leg that reaches its foot about 1 % short, which moves the knee
-# 2 to 4 cm (the feet are where the solve puts them; README's picture: 4.2 cm at worst on an active walk).
-IK_CM = 4.5
+# 2 to 3.5 cm (the feet are where the solve puts them; README's picture: 2.6 cm at worst on an active walk).
+IK_CM = 4.0
 IK_CONTROLS = {f"{b}.{side}" for b in ("foot_ik", "thigh_ik", "hand_ik", "upper_arm_ik") for side in "LR"}
 WALK = "bandai-namco/dataset-2/dataset-2_walk_normal_001.bvh"  # a real take where the data is unpacked
 
