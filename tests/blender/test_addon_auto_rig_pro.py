@@ -63,6 +63,7 @@ def arp_bones(spines: int = 3) -> list[tuple]:
         hip, knee, ankle, toe = (j[f"{s}_{n}"] for n in ("upleg", "knee", "foot", "toe"))
         knee = knee + np.array([0, -0.03, 0])  # bent a little forward, as the add-on asks: the IK knees know their way
         arm, elbow, wrist = (j[f"{s}_{n}"] for n in ("arm", "elbow", "wrist"))
+        elbow = elbow + np.array([0, 0.03, 0])  # and the elbows a little back: the IK arms know their way too
         hand_tip = _mid(wrist, j[f"{s}_fingertip"], 0.45)
         clavicle = _mid(j["neck"], arm, 0.3) - up
         S = "." + s
@@ -190,15 +191,18 @@ def test_controls_from_preset_fills_the_auto_rig_pro_controls(addon):
 
 
 
-def moved_walk(addon, folder):
-    """The character (no action, in its rest pose) given a walk (real motion capture when unpacked) by Transfer
-    Motion with its feet locked: (character, source, new action, the floor it stands on)."""
+def moved_walk(addon, folder, hands_ik: bool = False):
+    """The character (no action, in its rest pose; its arms in FK, or in IK with ``hands_ik``) given a walk (real
+    motion capture when unpacked) by Transfer Motion with its feet locked: (character, source, new action, the floor
+    it stands on)."""
     from test_addon_rigify import import_walk, transfer
 
     obj = arp_rig(frames=1)
     obj.animation_data.action = None
     for pb in obj.pose.bones:
         pb.matrix_basis.identity()
+    for side in SIDES:
+        obj.pose.bones[f"c_hand_ik.{side}"]["ik_fk_switch"] = 0.0 if hands_ik else 1.0
     floor = evaluated_joints(addon, obj, [1])[0, [7, 8, 11, 12], 2].min()  # where it stands: its toes, 3 cm down
     source = import_walk(folder)
     _, moved = transfer(source, obj, foot_lock=True)
@@ -219,6 +223,17 @@ def test_a_walk_moved_onto_the_rig_is_keyed_on_its_controls_and_stands_on_its_fl
     feet = got[:, [7, 8, 11, 12], 2].min(1) - floor  # the lowest heel or toe stands on the floor, not in it
     assert np.percentile(feet, 5) > -0.03 and np.percentile(feet, 50) < 0.05, np.percentile(feet, [5, 50])
     assert np.linalg.norm(got[-1, 0, :2] - got[0, 0, :2]) > 1.0  # it walks
+
+
+def test_arms_animated_in_ik_are_keyed_on_their_ik_controls_and_poles(addon, tmp_path):
+    obj, _, moved, _ = moved_walk(addon, tmp_path, hands_ik=True)
+    controls = moved["strnn"]["controls"]
+    assert controls["ik"] == ["c_foot_ik.l", "c_foot_ik.r", "c_hand_ik.l", "c_hand_ik.r"]
+    assert controls["max_error_cm"] < 1.0, controls
+    paths = {fc.data_path for fc in fcurves_of(obj, moved)}
+    keyed = {p.split('"')[1] for p in paths if p.startswith("pose.bones") and '"][' not in p}
+    assert {"c_hand_ik.l", "c_hand_ik.r", "c_arms_pole.l", "c_arms_pole.r", "c_shoulder.l"} <= keyed
+    assert not keyed & {"c_arm_fk.l", "c_forearm_fk.r", "c_hand_fk.l"}
 
 
 def test_a_walk_moved_onto_the_rig_and_extended_still_walks(addon, real_model, tmp_path):
