@@ -220,6 +220,14 @@ def test_a_walk_moved_onto_the_rig_is_keyed_on_its_controls_and_stands_on_its_fl
         bent = np.abs(knee_bend_forward(src, side)) > 0.02
         assert bent.any() and (np.sign(knee_bend_forward(got, side)[bent]) ==
                                np.sign(knee_bend_forward(src, side)[bent])).all()
+    for k, side in ((6, "l"), (10, "r")):  # each knee's pole stays in front of it, never flipping behind
+        poles = []
+        for f in frames:
+            bpy.context.scene.frame_set(int(f))
+            poles.append(np.array(obj.matrix_world @ obj.pose.bones[f"c_leg_pole.{side}"].head))
+        across = got[:, 5] - got[:, 9]
+        forward = np.cross(across, [0.0, 0.0, 1.0])
+        assert (np.einsum("fi,fi->f", np.array(poles) - got[:, k], forward) > 0).all()
     feet = got[:, [7, 8, 11, 12], 2].min(1) - floor  # the lowest heel or toe stands on the floor, not in it
     assert np.percentile(feet, 5) > -0.03 and np.percentile(feet, 50) < 0.05, np.percentile(feet, [5, 50])
     assert np.linalg.norm(got[-1, 0, :2] - got[0, 0, :2]) > 1.0  # it walks
