@@ -161,14 +161,13 @@ def _bend_turn(pb, driven: np.ndarray, target: np.ndarray) -> float:
 def _pole_at(pb, driven: np.ndarray, target: np.ndarray, now: np.ndarray) -> np.ndarray:
     """Where an IK pole goes (armature space) for the chain's middle bone ``pb`` to take ``target``: in front of the
     bend (target's head) in the plane of the chain from the bone above it to target's tail, as far from the bend as
-    the pole is now from the bone's head; where the chain is all but straight (the bend within 2 % of the chain's
-    length of the line, about 5 degrees), where it is now, so that a straight leg's pole does not flip about."""
+    the pole is now from the bone's head; where the chain is straight, where it is now."""
     bend = target[:3, 3]
     end = (target @ np.array([0.0, pb.bone.length, 0.0, 1.0]))[:3]
     start = _matrix(pb.parent)[:3, 3] if pb.parent is not None else bend
     line = end - start
     out = bend - (start + line * np.dot(bend - start, line) / max(float(np.dot(line, line)), 1e-12))
-    if np.linalg.norm(out) < 0.02 * max(float(np.linalg.norm(line)), 1e-6):
+    if np.linalg.norm(out) < 1e-4 * max(float(np.linalg.norm(line)), 1e-6):
         return now[:3, 3]
     return bend + _unit(out) * float(np.linalg.norm(now[:3, 3] - driven[:3, 3]))
 
