@@ -265,8 +265,7 @@ class STRNN_PT_controls(_ArmatureSidebar, bpy.types.Panel):
             text = (f"Keys go on the {found.name} preset's {len(found.controls)} controls" if found
                     else "No controls: keys go on the mapped bones")
             layout.label(text=text, icon="INFO")
-            action = obj.animation_data.action if found is not None and obj.animation_data is not None else None
-            keyed = controls.as_animated(obj, found, action.frame_range[1] if action else None) if found else None
+            keyed = controls.as_animated(obj, found) if found is not None else None
             if keyed is not None and keyed.keyed_ik:
                 layout.label(text=f"In IK, keyed on their IK controls: {', '.join(keyed.keyed_ik)}",
                              icon="CON_KINEMATIC")

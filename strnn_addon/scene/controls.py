@@ -17,6 +17,7 @@ import bpy
 import numpy as np
 from mathutils import Matrix
 
+from ...model_core.motion.geometry import unit
 from ...model_core.rig import controls as rig_controls
 from ...model_core.rig.controls import ControlSet
 from . import anim
@@ -44,14 +45,15 @@ def control_set(obj) -> ControlSet | None:
     return rig_controls.preset_for(obj.pose.bones.keys())
 
 
-def as_animated(obj, control_set_: ControlSet, frame: float | None) -> ControlSet:
+def as_animated(obj, control_set_: ControlSet) -> ControlSet:
     """The controls to key on ``obj``: each limb of the set that can be keyed on IK controls keyed on them where its
-    switch stands nearer IK at scene ``frame`` as its action plays it (None, or a switch the action does not animate:
-    as the switch stands now), that is where the animator animates it in IK."""
+    switch stands nearer IK at its action's last frame (with no action, or a switch the action does not animate: as
+    the switch stands now), that is where the animator animates it in IK."""
     if not control_set_.ik_limbs:
         return control_set_
     ad = obj.animation_data
     channels = anim.Channels(ad.action, ad) if ad is not None and ad.action is not None else None
+    frame = ad.action.frame_range[1] if channels is not None else None
     values = {}
     for limb in control_set_.ik_limbs:
         pb = obj.pose.bones.get(limb.switch.bone)
@@ -59,13 +61,18 @@ def as_animated(obj, control_set_: ControlSet, frame: float | None) -> ControlSe
             if pb is None or not prop or prop not in pb:
                 continue
             path = f'pose.bones["{bpy.utils.escape_identifier(pb.name)}"]["{prop}"]'
-            fc = channels.find(path, 0) if channels is not None and frame is not None else None
+            fc = channels.find(path, 0) if channels is not None else None
             values[(pb.name, prop)] = float(fc.evaluate(frame)) if fc is not None else float(pb[prop])
     return control_set_.keyed(values)
 
 
 def _matrix(pb) -> np.ndarray:
     return np.array(pb.matrix, dtype=np.float64)
+
+
+def _tail(pb, m: np.ndarray) -> np.ndarray:
+    """Where bone ``pb``'s tail is with pose matrix ``m`` (armature space)."""
+    return (m @ np.array([0.0, pb.bone.length, 0.0, 1.0]))[:3]
 
 
 def _waves(obj, chosen: list, update) -> list[list]:
@@ -107,9 +114,8 @@ def _error(obj, chosen: list, targets: dict[str, np.ndarray]) -> float:
     for c in chosen:
         pb = obj.pose.bones[c.drives]
         now, want = _matrix(pb), targets[c.drives]
-        tip = np.array([0.0, pb.bone.length, 0.0, 1.0])
         worst = max(worst, float(np.linalg.norm(now[:3, 3] - want[:3, 3])),
-                    float(np.linalg.norm((now @ tip - want @ tip)[:3])))
+                    float(np.linalg.norm(_tail(pb, now) - _tail(pb, want))))
     return worst
 
 
@@ -138,20 +144,15 @@ def _place(obj, c, target: np.ndarray, first: bool = False) -> None:
                                         to_space="LOCAL")
 
 
-def _unit(v: np.ndarray) -> np.ndarray:
-    return v / max(float(np.linalg.norm(v)), 1e-12)
-
-
 def _bend_turn(pb, driven: np.ndarray, target: np.ndarray) -> float:
     """The angle (radians) about the line from the head of an IK chain's base bone ``pb`` (the hip) to the end of
     the chain (the ankle: the tail of its child that starts at its tail) that takes the bend (its tail, the knee)
     from where it is (``driven``) to where ``target`` puts it; 0 where the chain is straight."""
-    tip = np.array([0.0, pb.bone.length, 0.0, 1.0])
-    hip, knee, want = driven[:3, 3], (driven @ tip)[:3], (target @ tip)[:3]
+    hip, knee, want = driven[:3, 3], _tail(pb, driven), _tail(pb, target)
     child = min(pb.children, key=lambda ch: float(np.linalg.norm(_matrix(ch)[:3, 3] - knee)), default=None)
     if child is None:
         return 0.0
-    axis = _unit((_matrix(child) @ np.array([0.0, child.bone.length, 0.0, 1.0]))[:3] - hip)
+    axis = unit(_tail(child, _matrix(child)) - hip)
     now, to = ((v - hip) - axis * np.dot(v - hip, axis) for v in (knee, want))
     if min(np.linalg.norm(now), np.linalg.norm(to)) < 1e-6:
         return 0.0
@@ -162,14 +163,13 @@ def _pole_at(pb, driven: np.ndarray, target: np.ndarray, now: np.ndarray) -> np.
     """Where an IK pole goes (armature space) for the chain's middle bone ``pb`` to take ``target``: in front of the
     bend (target's head) in the plane of the chain from the bone above it to target's tail, as far from the bend as
     the pole is now from the bone's head; where the chain is straight, where it is now."""
-    bend = target[:3, 3]
-    end = (target @ np.array([0.0, pb.bone.length, 0.0, 1.0]))[:3]
+    bend, end = target[:3, 3], _tail(pb, target)
     start = _matrix(pb.parent)[:3, 3] if pb.parent is not None else bend
     line = end - start
     out = bend - (start + line * np.dot(bend - start, line) / max(float(np.dot(line, line)), 1e-12))
     if np.linalg.norm(out) < 1e-4 * max(float(np.linalg.norm(line)), 1e-6):
         return now[:3, 3]
-    return bend + _unit(out) * float(np.linalg.norm(now[:3, 3] - driven[:3, 3]))
+    return bend + unit(out) * float(np.linalg.norm(now[:3, 3] - driven[:3, 3]))
 
 
 def bake(context, obj, control_set_: ControlSet, frames: np.ndarray, targets: dict[str, np.ndarray]) -> Baked:

@@ -142,8 +142,7 @@ def rig_of(obj) -> tuple[Rig, Anchors, dict, ControlSet | None]:
     rig = rig_io.read_rig(obj)
     found = controls.control_set(obj)
     if found is not None:  # each limb keyed where the action animates it (its IK/FK switch at its last frame)
-        action = obj.animation_data.action if obj.animation_data is not None else None
-        found = controls.as_animated(obj, found, action.frame_range[1] if action is not None else None)
+        found = controls.as_animated(obj, found)
         absent = found.missing(set(rig.names))
         if absent:
             raise UserError(f"The controls set for {obj.name!r} name bones it does not have ({', '.join(absent)}): "
