@@ -585,18 +585,22 @@ class STRNN_OT_controls_from_preset(_EditControls, bpy.types.Operator):
             self.report({"ERROR"}, f"No shipped preset fits {obj.name!r} (presets: "
                                    f"{', '.join(controls.rig_controls.PRESETS)}): add its controls one by one")
             return {"CANCELLED"}
+        rows, switches = controls.rig_controls.as_rows(preset)
         obj.strnn_controls.clear()
         obj.strnn_switches.clear()
-        for c in preset.controls:
+        for row in rows:
             item = obj.strnn_controls.add()
-            item.bone, item.drives, item.location = c.bone, c.drives, c.location
-        for sw in preset.switches:
+            item.bone, item.drives, item.location, item.role, item.switch = (
+                row.bone, row.drives, row.location, row.role, row.switch)
+        for sw in switches:
             item = obj.strnn_switches.add()
-            item.bone, item.prop, item.value = sw.bone, sw.prop, sw.value
-        ik = ("; a list keys every limb on its FK controls, where the preset itself (an empty list) keys a limb "
-              "animated in IK on its IK controls" if preset.ik_limbs else "")
-        self.report({"INFO"}, f"{len(preset.controls)} controls and {len(preset.switches)} switches from the "
-                              f"{preset.name} preset{ik}")
+            item.bone, item.prop, item.value, item.ik_value, item.pole_prop = (
+                sw.bone, sw.prop, sw.value, sw.ik_value, sw.pole_prop)
+        obj.strnn_control_index = 0
+        ik = sum(row.role != "FK" for row in rows)
+        ik = (f" ({len(preset.controls)} FK, {ik} keyed where their limb is animated in IK)" if ik else "")
+        self.report({"INFO"}, f"{len(rows)} controls{ik} and {len(switches)} switches from the "
+                              f"{preset.name} preset")
         return {"FINISHED"}
 
 

@@ -197,6 +197,18 @@ STRNN_PG_bone_map = type("STRNN_PG_bone_map", (bpy.types.PropertyGroup,), {
 })
 
 
+# The roles of model_core/rig/controls.py's ROLES, as the Controls list offers them (icons shown in the list).
+CONTROL_ROLES = [
+    ("FK", "FK", "Keyed always, or with a Switch where its limb is animated in FK", "BONE_DATA", 0),
+    ("IK_END", "IK End", "The IK chain's end (the foot or hand IK control): moved and turned where its limb is in IK",
+     "CON_KINEMATIC", 1),
+    ("IK_BASE", "IK Base", "The IK chain's base (thigh or upper arm IK): turned about its own axis to set the knee's "
+                           "or elbow's plane, where its limb is in IK and its pole is not used", "CON_ROTLIKE", 2),
+    ("IK", "IK", "Another control of the IK limb (a toe), turned where its limb is in IK", "CON_ROTLIKE", 3),
+    ("POLE", "Pole", "The IK pole: moved in front of the knee or elbow where its limb is in IK",
+     "EMPTY_SINGLE_ARROW", 4)]
+
+
 class STRNN_PG_control(bpy.types.PropertyGroup):
     """A control bone and the mapped bone it drives (results are keyed on the control)"""
 
@@ -205,6 +217,13 @@ class STRNN_PG_control(bpy.types.PropertyGroup):
                            description="The mapped bone (or the bone between two mapped ones) that follows it")
     location: BoolProperty(name="Moves", default=False, override={"LIBRARY_OVERRIDABLE"},
                            description="Also key the control's location (the body's root control)")
+    role: EnumProperty(
+        name="Role", default="FK", override={"LIBRARY_OVERRIDABLE"}, items=CONTROL_ROLES,
+        description="What the control is for: keyed always (or, with a Switch, where its limb is in FK), or one of "
+                    "the IK controls keyed where its limb is animated in IK")
+    switch: StringProperty(name="Switch", override={"LIBRARY_OVERRIDABLE"},
+                           description="The bone of the IK/FK switch (in the switch list) of the limb this control "
+                                       "belongs to; empty: it belongs to no limb and is keyed always")
 
 
 class STRNN_PG_switch(bpy.types.PropertyGroup):
@@ -214,7 +233,14 @@ class STRNN_PG_switch(bpy.types.PropertyGroup):
     prop: StringProperty(name="Property", description="The custom property's name, e.g. IK_FK",
                          override={"LIBRARY_OVERRIDABLE"})
     value: FloatProperty(name="Value", default=1.0, override={"LIBRARY_OVERRIDABLE"},
-                         description="The value it is keyed to on the written frames")
+                         description="The value it is keyed to on the written frames (where its limb has no IK "
+                                     "controls in the list, or is animated in FK)")
+    ik_value: FloatProperty(name="IK Value", default=0.0, override={"LIBRARY_OVERRIDABLE"},
+                            description="The value that puts its limb in IK: where the action leaves the switch "
+                                        "nearer it, the limb's IK controls are keyed and the switch kept there")
+    pole_prop: StringProperty(name="Pole Property", override={"LIBRARY_OVERRIDABLE"},
+                              description="The property of the same bone that turns the limb's pole on (Rigify's "
+                                          "pole_vector); empty: the limb's Pole control, if any, is always used")
 
 
 def _engines(self, context):

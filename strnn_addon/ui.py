@@ -8,7 +8,7 @@ import bpy
 
 from ..model_core.motion.conventions import JOINTS
 from ..model_core.rig.solve import placed_between
-from . import operators
+from . import operators, props
 from .operators import check_message
 from .props import TAIL_JOINTS, joint_label
 from .scene import anim, controls
@@ -65,12 +65,17 @@ def made_by_note(col, action, context) -> None:
     notes = record_notes(action)
     col.label(text=f"Made by {record['operation']}{': check it' if notes else ''}",
               icon="ERROR" if notes else "INFO")
+    for note in notes:
+        wrapped(col, context, note)
+
+
+def wrapped(col, context, text: str, icon: str = "NONE") -> None:
+    """``text`` as labels wrapped to the sidebar's width, ``icon`` before the first."""
     region = getattr(context, "region", None)
     scale = context.preferences.view.ui_scale if context.preferences else 1.0
     width = max(24, int(region.width / (7.0 * scale)) - 4) if region is not None and region.width > 1 else 48
-    for note in notes:
-        for line in textwrap.wrap(note, width):
-            col.label(text=line)
+    for k, line in enumerate(textwrap.wrap(text, width)):
+        col.label(text=line, icon=icon if k == 0 else "NONE")
 
 
 def remembered(context, idname: str):
@@ -237,12 +242,16 @@ class STRNN_PT_bone_map(_ArmatureSidebar, bpy.types.Panel):
                 row.prop(props, f"{joint}_tail", text="", icon="BONE_DATA", toggle=True)
 
 
+_ROLE_ICONS = {role[0]: role[3] for role in props.CONTROL_ROLES}
+
+
 class STRNN_UL_controls(bpy.types.UIList):
-    """Control bone -> the mapped bone it drives, with its Moves toggle."""
+    """Control bone -> the mapped bone it drives, with its Moves toggle; its role's icon first."""
 
     def draw_item(self, context, layout, data, item, icon, active_data, active_property, index=0, flt_flag=0):
         arm = data.data
         row = layout.row(align=True)
+        row.label(icon=_ROLE_ICONS.get(item.role, "BONE_DATA"))
         row.prop_search(item, "bone", arm, "bones", text="")
         row.label(icon="FORWARD")
         row.prop_search(item, "drives", arm, "bones", text="")
@@ -260,29 +269,40 @@ class STRNN_PT_controls(_ArmatureSidebar, bpy.types.Panel):
     def draw(self, context):
         obj = context.active_object
         layout = self.layout
-        found = controls.control_set(obj)
+        found, problems = controls.listed(obj)
         if not len(obj.strnn_controls):
             text = (f"Keys go on the {found.name} preset's {len(found.controls)} controls" if found
                     else "No controls: keys go on the mapped bones")
             layout.label(text=text, icon="INFO")
-            keyed = controls.as_animated(obj, found) if found is not None else None
-            if keyed is not None and keyed.keyed_ik:
-                layout.label(text=f"In IK, keyed on their IK controls: {', '.join(keyed.keyed_ik)}",
-                             icon="CON_KINEMATIC")
+        for problem in problems:
+            wrapped(layout.column(align=True), context, problem, "ERROR")
+        keyed = controls.as_animated(obj, found) if found is not None else None
+        if keyed is not None and keyed.keyed_ik:
+            layout.label(text=f"In IK, keyed on their IK controls: {', '.join(keyed.keyed_ik)}", icon="CON_KINEMATIC")
         row = layout.row()
         row.template_list("STRNN_UL_controls", "", obj, "strnn_controls", obj, "strnn_control_index", rows=3)
         col = row.column(align=True)
         col.operator("strnn.control_add", text="", icon="ADD")
         col.operator("strnn.control_remove", text="", icon="REMOVE")
+        if 0 <= obj.strnn_control_index < len(obj.strnn_controls):
+            item = obj.strnn_controls[obj.strnn_control_index]
+            row = layout.row(align=True)
+            row.prop(item, "role", text="")
+            row.prop_search(item, "switch", obj.data, "bones", text="", icon="CON_ACTION")
         layout.operator("strnn.controls_from_preset", icon="PRESET")
         if len(obj.strnn_switches):
             box = layout.box()
-            box.label(text="Switches keyed on the new frames")
+            box.label(text="Switches keyed on the new frames (value: FK; IK value, pole property)")
             for sw in obj.strnn_switches:
-                row = box.row(align=True)
+                col = box.column(align=True)
+                row = col.row(align=True)
                 row.prop(sw, "bone", text="")
                 row.prop(sw, "prop", text="")
                 row.prop(sw, "value", text="")
+                if any(c.switch == sw.bone and c.role != "FK" for c in obj.strnn_controls):
+                    row = col.row(align=True)
+                    row.prop(sw, "ik_value", text="IK")
+                    row.prop(sw, "pole_prop", text="", icon="EMPTY_SINGLE_ARROW")
 
 
 class STRNN_MT_menu(bpy.types.Menu):

@@ -142,6 +142,87 @@ class ControlSet:
         return ControlSet(self.name, controls, switches, keyed_ik=on_ik)
 
 
+# What a control is for in an edited control list (the Bone Map panel's): keyed always or where its limb is in FK;
+# or, where its limb is in IK, an IK chain's end, the chain's base (turned about its own axis; left alone where the
+# limb's pole is used), another IK control (a toe), or the pole.
+ROLES = ("FK", "IK_END", "IK_BASE", "IK", "POLE")
+
+
+@dataclass(frozen=True)
+class Row:
+    """A row of an edited control list: a :class:`Control` with its ``role`` (:data:`ROLES`) and ``switch``, the
+    bone of the switch whose limb it belongs to ("": none, keyed always)."""
+
+    bone: str
+    drives: str
+    location: bool = False
+    role: str = "FK"
+    switch: str = ""
+
+
+@dataclass(frozen=True)
+class SwitchRow:
+    """A row of an edited switch list: a :class:`Switch` (``value`` keys its limb on FK) with the value that puts its
+    limb in IK (``ik_value``) and the property of its bone that says the limb's pole is used (``pole_prop``; "": its
+    pole, if the list gives it one, always is)."""
+
+    bone: str
+    prop: str
+    value: float
+    ik_value: float = 0.0
+    pole_prop: str = ""
+
+
+def as_rows(found: ControlSet) -> tuple[list[Row], list[SwitchRow]]:
+    """``found`` as an edited list (:func:`from_rows` gives it back): each FK control that a limb gives way to names
+    the limb's switch, and each limb's IK controls follow, limb by limb."""
+    limb_of = {b: limb for limb in found.ik_limbs for b in limb.fk}
+    rows = [Row(c.bone, c.drives, c.location, "FK", limb_of[c.bone].switch.bone if c.bone in limb_of else "")
+            for c in found.controls]
+    for limb in found.ik_limbs:
+        rows += [Row(c.bone, c.drives, c.location, "IK_END" if c.end else "IK_BASE" if c.twist else "IK",
+                     limb.switch.bone) for c in limb.ik]
+        rows += [Row(limb.pole.bone, limb.pole.drives, limb.pole.location, "POLE", limb.switch.bone)] \
+            if limb.pole is not None else []
+    ik = {limb.switch: limb for limb in found.ik_limbs}
+    switches = [SwitchRow(s.bone, s.prop, s.value, ik[s].ik_value if s in ik else 0.0,
+                          ik[s].pole_prop if s in ik else "") for s in found.switches]
+    return rows, switches
+
+
+def from_rows(name: str, rows: list[Row], switches: list[SwitchRow]) -> tuple[ControlSet, list[str]]:
+    """The control set an edited list gives, and what is wrong with the list (each a sentence saying how to fix
+    it; the set leaves out what is wrong). A switch with IK controls makes a limb (:class:`IkLimb`) of them, the
+    FK controls that name it and its pole; one without keys its FK controls alone, as a switch always did."""
+    by_bone = {s.bone: s for s in switches}
+    problems = [f"Control {r.bone!r} is {'an FK' if r.role == 'FK' else 'an IK'} control of the switch on "
+                f"{r.switch!r}, which the switch list does not have: add that switch, or clear the control's Switch"
+                for r in rows if r.switch and r.switch not in by_bone]
+    problems += [f"Control {r.bone!r} is an IK control ({r.role.replace('_', ' ').lower()}) of no switch: set its "
+                 "Switch to the bone of its limb's IK/FK switch" for r in rows if r.role != "FK" and not r.switch]
+    controls = [Control(r.bone, r.drives, r.location) for r in rows if r.role == "FK"]
+    limbs = []
+    for bone in dict.fromkeys(r.switch for r in rows if r.role != "FK" and r.switch in by_bone):
+        sw = by_bone[bone]
+        ik = [r for r in rows if r.switch == bone and r.role in ("IK_END", "IK_BASE", "IK")]
+        poles = [r for r in rows if r.switch == bone and r.role == "POLE"]
+        if not any(r.role == "IK_END" for r in ik):
+            problems.append(f"The limb of the switch on {bone!r} has IK controls but no IK End: set the Role of its "
+                            "foot's or hand's IK control to IK End, or remove its IK controls to key it on FK")
+            continue
+        if len(poles) > 1:
+            problems.append(f"The limb of the switch on {bone!r} has {len(poles)} Pole controls "
+                            f"({', '.join(r.bone for r in poles)}): keep one and remove the others")
+            continue
+        pole = Control(poles[0].bone, poles[0].drives, True, pole=True) if poles else None
+        limbs.append(IkLimb(Switch(sw.bone, sw.prop, sw.value), sw.ik_value,
+                            tuple(r.bone for r in rows if r.switch == bone and r.role == "FK"),
+                            tuple(Control(r.bone, r.drives, r.location or r.role == "IK_END",
+                                          twist=r.role == "IK_BASE", end=r.role == "IK_END") for r in ik),
+                            pole, sw.pole_prop))
+    return ControlSet(name, controls, [Switch(s.bone, s.prop, s.value) for s in switches], limbs), problems
+
+
 def _sides(pairs: list[tuple], *more: tuple) -> list[tuple]:
     """Each ``{S}`` template in ``pairs`` for both sides (``.L``, ``.R``), after ``more``."""
     return list(more) + [tuple(x.format(S=s) if isinstance(x, str) else x for x in p) for s in "LR" for p in pairs]

@@ -38,11 +38,19 @@ class Baked:
 
 def control_set(obj) -> ControlSet | None:
     """The controls of ``obj``: those set in its Bone Map panel, else the shipped preset its bones fit."""
+    return listed(obj)[0]
+
+
+def listed(obj) -> tuple[ControlSet | None, list[str]]:
+    """(:func:`control_set`, what is wrong with the list set in the Bone Map panel: sentences saying how to fix
+    it, none for a preset)."""
     stored = getattr(obj, "strnn_controls", None)
     if stored is not None and len(stored):
-        return ControlSet("custom", [rig_controls.Control(c.bone, c.drives, c.location) for c in stored],
-                          [rig_controls.Switch(s.bone, s.prop, s.value) for s in getattr(obj, "strnn_switches", ())])
-    return rig_controls.preset_for(obj.pose.bones.keys())
+        return rig_controls.from_rows(
+            "custom", [rig_controls.Row(c.bone, c.drives, c.location, c.role, c.switch) for c in stored],
+            [rig_controls.SwitchRow(s.bone, s.prop, s.value, s.ik_value, s.pole_prop)
+             for s in getattr(obj, "strnn_switches", ())])
+    return rig_controls.preset_for(obj.pose.bones.keys()), []
 
 
 def as_animated(obj, control_set_: ControlSet) -> ControlSet:

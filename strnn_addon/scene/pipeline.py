@@ -140,7 +140,9 @@ def rig_of(obj) -> tuple[Rig, Anchors, dict, ControlSet | None]:
     canonical joints on it; raises :class:`UserError` when the bone map or the controls do not fit, or
     keys on the mapped bones would not show."""
     rig = rig_io.read_rig(obj)
-    found = controls.control_set(obj)
+    found, problems = controls.listed(obj)
+    if problems:
+        raise UserError(f"The controls set for {obj.name!r} in STRNN > Bone Map > Controls: {problems[0]}")
     if found is not None:  # each limb keyed where the action animates it (its IK/FK switch at its last frame)
         found = controls.as_animated(obj, found)
         absent = found.missing(set(rig.names))

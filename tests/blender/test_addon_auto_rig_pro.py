@@ -184,10 +184,18 @@ def test_the_bone_map_reads_auto_rig_pro_at_the_pelvis_and_the_bones_that_blend_
 def test_controls_from_preset_fills_the_auto_rig_pro_controls(addon):
     obj = arp_rig(spines=2, frames=10)
     assert bpy.ops.strnn.controls_from_preset() == {"FINISHED"}
-    listed = {c.bone: c.drives for c in obj.strnn_controls}
+    listed = {c.bone: c.drives for c in obj.strnn_controls if c.role == "FK"}
     assert listed["c_root_master.x"] == "c_root_master.x" and listed["c_toes_fk.r"] == "toes_01.r"
     assert len(listed) == 21 and "c_spine_03.x" not in listed  # a rig with two spine bones
     assert {s.bone for s in obj.strnn_switches} == {f"c_{limb}_ik.{s}" for limb in ("foot", "hand") for s in SIDES}
+    ik = {c.bone: (c.role, c.switch) for c in obj.strnn_controls if c.role != "FK"}  # kept for limbs in IK
+    assert ik == {**{f"c_foot_ik.{s}": ("IK_END", f"c_foot_ik.{s}") for s in SIDES},
+                  **{f"c_toes_ik.{s}": ("IK", f"c_foot_ik.{s}") for s in SIDES},
+                  **{f"c_leg_pole.{s}": ("POLE", f"c_foot_ik.{s}") for s in SIDES},
+                  **{f"c_hand_ik.{s}": ("IK_END", f"c_hand_ik.{s}") for s in SIDES},
+                  **{f"c_arms_pole.{s}": ("POLE", f"c_hand_ik.{s}") for s in SIDES}}
+    assert {(s.bone, s.value, s.ik_value) for s in obj.strnn_switches} == {
+        (f"c_{limb}_ik.{s}", 1.0, 0.0) for limb in ("foot", "hand") for s in SIDES}
 
 
 

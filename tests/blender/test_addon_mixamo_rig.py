@@ -157,5 +157,10 @@ def test_controls_from_preset_fills_the_mixamo_rig_controls(addon):
     assert bpy.ops.strnn.controls_from_preset() == {"FINISHED"}
     listed = {c.bone: c.drives for c in obj.strnn_controls}
     assert listed["Ctrl_Hips"] == "mixamorig1:Hips" and listed["Ctrl_Toe_FK_Right"] == "mixamorig1:RightToeBase"
-    assert len(listed) == 22 and {s.bone for s in obj.strnn_switches} == {
+    assert {s.bone for s in obj.strnn_switches} == {
         f"Ctrl_{limb}_IK_{side}" for limb in ("Foot", "Hand") for side in SIDES}
+    roles = {c.bone: (c.role, c.switch) for c in obj.strnn_controls}  # 22 FK controls, 10 for the limbs in IK
+    assert len(roles) == 32 and sum(role == "FK" for role, _ in roles.values()) == 22
+    assert roles["Ctrl_Hips"] == ("FK", "") and roles["Ctrl_UpLeg_FK_Left"] == ("FK", "Ctrl_Foot_IK_Left")
+    assert roles["Ctrl_Foot_IK_Left"] == ("IK_END", "Ctrl_Foot_IK_Left")
+    assert roles["Ctrl_ArmPole_IK_Right"] == ("POLE", "Ctrl_Hand_IK_Right")

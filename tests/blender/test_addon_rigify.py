@@ -230,6 +230,41 @@ def test_legs_in_ik_with_their_pole_on_are_keyed_on_the_pole(ik_rig, addon, fake
             IK_CM / 100
 
 
+def test_controls_from_preset_keeps_the_limbs_in_ik_and_an_edited_list_keys_them(ik_rig, addon, fake_model):
+    """Controls from Preset lists the IK controls too, each with its role and its limb's switch, so a list edited
+    from it still keys the legs animated in IK on foot_ik and thigh_ik; a list whose limb has lost its IK end is
+    refused with what to fix, and nothing changes."""
+    from test_addon_ui import panel_labels
+
+    rig = ik_rig
+    assert bpy.ops.strnn.controls_from_preset() == {"FINISHED"}
+    roles = {c.bone: (c.role, c.switch) for c in rig.strnn_controls}
+    assert roles["torso"] == ("FK", "") and roles["thigh_fk.L"] == ("FK", "thigh_parent.L")
+    assert roles["foot_ik.L"] == ("IK_END", "thigh_parent.L") and roles["thigh_ik.R"] == ("IK_BASE", "thigh_parent.R")
+    assert roles["toe_ik.R"] == ("IK", "thigh_parent.R") and roles["upper_arm_ik_target.L"] == ("POLE",
+                                                                                              "upper_arm_parent.L")
+    assert {(s.bone, s.ik_value, s.pole_prop) for s in rig.strnn_switches} == {
+        (b, 0.0, "pole_vector") for b in LIMB_SWITCHES}
+    rig.strnn_controls.remove(next(k for k, c in enumerate(rig.strnn_controls) if c.bone == "toe_ik.L"))
+    labels = panel_labels("STRNN_PT_controls", bpy.context)
+    assert ("In IK, keyed on their IK controls: thigh_parent.L, thigh_parent.R", "CON_KINEMATIC") in labels
+    old, new = run_on_rig(rig, "extend_clip", 60, frames=30)
+    assert new["strnn"]["controls"]["ik"] == ["thigh_parent.L", "thigh_parent.R"]
+    written = keyed_bones(new, rig, 60)
+    assert {"foot_ik.L", "thigh_ik.L", "foot_ik.R", "thigh_ik.R", "toe_ik.R"} <= written
+    assert not written & {"toe_ik.L", "thigh_fk.L", "shin_fk.R", "toe_fk.L"}
+
+    rig.animation_data.action = old
+    next(c for c in rig.strnn_controls if c.bone == "foot_ik.R").role = "IK"
+    before = key_snapshot(rig)
+    with pytest.raises(RuntimeError, match="switch on 'thigh_parent.R' has IK controls but no IK End"):
+        bpy.ops.strnn.extend_clip(frames=30)
+    assert action_of(rig) is old and same_keys(before, key_snapshot(rig))
+    labels = panel_labels("STRNN_PT_controls", bpy.context)
+    assert ("The limb of the switch", "ERROR") in [(text[:22], icon) for text, icon in labels]
+    assert "has IK controls but no IK End" in " ".join(text for text, _ in labels)  # wrapped to the sidebar
+
+
 def run_on_rig(rig, op: str, after: float, **kw):
     """Run ``bpy.ops.strnn.<op>`` on the rig; (old action, new action) after checking that the original is
     untouched and that the new keys after frame ``after`` are on controls only, each following the solve."""

@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 from test_bonemap import _auto_rig_pro
 
-from model_core.rig.controls import PRESETS, preset_for
+from model_core.rig.controls import PRESETS, Row, SwitchRow, as_rows, from_rows, preset_for
 
 
 def test_auto_rig_pro_fits_with_three_or_two_spine_bones():
@@ -56,3 +58,44 @@ def test_a_rig_without_a_limbs_ik_controls_keys_that_limb_on_fk():
     names = {b for c in rigify.controls for b in (c.bone, c.drives)} | {s.bone for s in rigify.switches}
     found = rigify.on(names | {"foot_ik.L", "thigh_ik.L", "toe_ik.L", "thigh_ik_target.L"})
     assert [limb.switch.bone for limb in found.ik_limbs] == ["thigh_parent.L"]
+
+
+def test_each_preset_as_an_edited_list_gives_the_preset_back():
+    for preset in PRESETS.values():
+        rows, switches = as_rows(preset)
+        found, problems = from_rows(preset.name, rows, switches)
+        assert not problems
+        # a list names the bones of one rig, so nothing in it is optional
+        assert found.controls == [replace(c, optional=False) for c in preset.controls]
+        assert found.switches == preset.switches and found.ik_limbs == preset.ik_limbs
+        assert len(rows) == len(preset.controls) + sum(len(limb.ik) + (limb.pole is not None)
+                                                       for limb in preset.ik_limbs)
+
+
+def test_an_edited_list_still_keys_a_limb_animated_in_ik_on_its_ik_controls():
+    rows, switches = as_rows(PRESETS["rigify"])
+    rows = [r for r in rows if r.bone != "toe_ik.L"]  # an animator who keys the toe on FK only
+    found, problems = from_rows("custom", rows, switches)
+    assert not problems
+    ik = found.keyed({("thigh_parent.L", "IK_FK"): 0.0})
+    bones = {c.bone for c in ik.controls}
+    assert {"foot_ik.L", "thigh_ik.L"} <= bones and not {"thigh_fk.L", "toe_fk.L", "toe_ik.L"} & bones
+    assert ik.keyed_ik == ["thigh_parent.L"]
+
+
+def test_an_edited_list_says_what_is_wrong_with_it():
+    rows = [Row("torso", "ORG-spine", True), Row("foot_ik.L", "ORG-foot.L", True, "IK_END"),
+            Row("thigh_ik.L", "ORG-thigh.L", False, "IK_BASE", "thigh_parent.L"),
+            Row("hand_fk.R", "ORG-hand.R", False, "FK", "upper_arm_parent.R")]
+    found, problems = from_rows("custom", rows, [SwitchRow("thigh_parent.L", "IK_FK", 1.0)])
+    assert len(problems) == 3, problems
+    assert "'hand_fk.R'" in problems[0] and "'upper_arm_parent.R'" in problems[0]  # a switch the list lacks
+    assert "'foot_ik.L'" in problems[1] and "of no switch" in problems[1]
+    assert "no IK End" in problems[2]  # thigh_parent.L's limb: its end names no switch
+    assert not found.ik_limbs and [c.bone for c in found.controls] == ["torso", "hand_fk.R"]
+    two_poles = rows[:1] + [Row("foot_ik.L", "ORG-foot.L", True, "IK_END", "thigh_parent.L"),
+                            Row("p1", "ORG-shin.L", True, "POLE", "thigh_parent.L"),
+                            Row("p2", "ORG-shin.L", True, "POLE", "thigh_parent.L")]
+    found, problems = from_rows("custom", two_poles, [SwitchRow("thigh_parent.L", "IK_FK", 1.0)])
+    assert problems == ["The limb of the switch on 'thigh_parent.L' has 2 Pole controls (p1, p2): keep one and "
+                        "remove the others"]
