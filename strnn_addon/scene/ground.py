@@ -14,7 +14,7 @@ from mathutils.bvhtree import BVHTree
 
 from ...model_core.motion.conventions import CONTACT_JOINTS, JOINT_INDEX, UP_AXIS, yup_to_zup
 from ...model_core.motion.features import gaussian_smooth
-from ...model_core.ops import footlock
+from ...model_core.ops import footlock, footsteps
 from ...model_core.rig.rigs import leg_length
 from .pipeline import UserError
 
@@ -33,6 +33,7 @@ class Ground:
     def __init__(self, name: str, meshes: list):
         self.name, self.meshes = name, meshes
         self._trees: list | None = None  # each mesh's (BVH tree, world matrix), built on first use
+        self.steps: dict | None = None  # how :func:`carried` placed the steps (:func:`footsteps.even_steps`)
 
     def _surfaces(self, context) -> list:
         if self._trees is None:  # an operation reads the ground two or three times: the trees are built once
@@ -166,7 +167,9 @@ def body_lift(context, ground, pos: np.ndarray, known: int, fps: float,
 def carried(context, ground, pos: np.ndarray, known: int, fps: float,
             rest: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray | None, int]:
     """Motion ``pos`` ``[F, 21, 3]`` (world, Y-up, ``fps``) made on a flat floor from ``known`` on, carried over
-    ``ground`` (:func:`body_lift`; ``rest``: the pose a walk with nothing known starts from), with what Foot Lock
+    ``ground`` (:func:`body_lift`; ``rest``: the pose a walk with nothing known starts from), each of its steps
+    moved along its foot off the surface's edges (:func:`footsteps.even_steps`, what it did in ``ground.steps``),
+    with what Foot Lock
     needs to lock it there: (the carried motion, the surface's height under each heel and toe ``[F, 4]``
     (:func:`ground_heights`), how high each stood over the flat floor ``[4]`` (None: no contacts), frames with no
     surface under a foot)."""
@@ -175,6 +178,10 @@ def carried(context, ground, pos: np.ndarray, known: int, fps: float,
     standing = footlock.rest_heights(pos, contacts, np.arange(len(pos)) < known if known else None)
     out = np.array(pos, np.float64)
     out[..., UP_AXIS] += lift[:, None]
+    reach = 0.5 * leg_length(pos)  # rays cast from half a leg over each point, as for the feet
+    out, ground.steps = footsteps.even_steps(
+        out, contacts, lambda points: ground.under(context, points, reach),
+        int(round(footlock.FootLockSettings().min_gap_s * fps)), np.arange(len(out)) < known)
     heights, bare = ground_heights(context, ground, out)
     return out, heights, None if standing is None else standing - floor, bare
 
@@ -183,6 +190,8 @@ def ground_record(ground, bare: int, frames: int) -> dict:
     """The new action's record of the ground (``ground``: the mesh's or the collection's name, how many frames had no
     surface under a heel or toe and, where some had none, a note saying so)."""
     record = {"object": ground.name, "frames_without": bare}
+    if ground.steps is not None:  # steps of motion made on a flat floor, moved off edges
+        record["steps"] = {**ground.steps, "largest": round(float(ground.steps["largest"]), 4)}
     if bare:
         record["note"] = (f"The ground {ground.name!r} is under no foot on {bare} of {frames} frames: there the feet "
                           "stand as high as on the nearest frames over it")

@@ -383,6 +383,31 @@ def on_steps(obj, step: int, interpolation: str = "CONSTANT") -> None:
 
 
 
+def stairs(name: str, start: float, tread: float, rise: float, steps: int, floor: float = 0.0):
+    """A flight of ``steps`` stairs ``name`` going up along Blender's +X from ``x = start`` (a floor at height
+    ``floor`` before it, a landing after it, 20 units wide), and the function that gives its height under Blender
+    points ``[..., 3]``."""
+    verts, faces = [], []
+
+    def quad(*corners):
+        faces.append(tuple(range(len(verts), len(verts) + 4)))
+        verts.extend((x, y, z + floor) for x, y, z in corners)
+
+    quad((-10, -10, 0), (start, -10, 0), (start, 10, 0), (-10, 10, 0))
+    for k in range(steps):
+        near, far, low, high = start + k * tread, start + (k + 1) * tread, k * rise, (k + 1) * rise
+        far = far if k < steps - 1 else start + 20.0
+        quad((near, -10, low), (near, 10, low), (near, 10, high), (near, -10, high))  # the riser
+        quad((near, -10, high), (far, -10, high), (far, 10, high), (near, 10, high))  # the tread
+    mesh = bpy.data.meshes.new(name)
+    mesh.from_pydata(verts, [], faces)
+    bpy.context.scene.collection.objects.link(bpy.data.objects.new(name, mesh))
+
+    def height(p):
+        return floor + np.clip(np.floor((np.asarray(p)[..., 0] - start) / tread) + 1, 0, steps) * rise
+    return height
+
+
 def ramp(name: str, start: np.ndarray, way: np.ndarray, slope: float, size: float = 20.0):
     """A square mesh ``name`` ``2 size`` across that rises ``slope`` per unit along ``way`` from ``start`` (both
     Y-up, model axes: the ground point where it is at height 0 and a horizontal direction), and the function that

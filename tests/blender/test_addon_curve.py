@@ -312,6 +312,8 @@ def test_a_walk_along_a_curve_over_a_ramp_goes_up_it_feet_on_it(addon, real_mode
         joints = evaluated_joints(addon, obj, np.arange(first, last + 1))
         results[ground] = joints
         assert ("ground" in new["strnn"]) == bool(ground)
+        if ground:  # a slope moves no step: the feet pitch with it
+            assert new["strnn"]["ground"]["steps"]["moved"] == 0
     joints, level = results["Ramp"], results[""]
     assert joints[-1, 0, 0] > joints[0, 0, 0] + 2.0
     over = joints[:, 0, 2] - ramp(joints[:, 0])
@@ -335,3 +337,34 @@ def test_a_walk_along_a_curve_over_a_ramp_goes_up_it_feet_on_it(addon, real_mode
     assert np.abs(on_ramp - on_floor).max() < 0.01
     assert above.min() > floor.min() - 0.015  # Foot Lock leaves a toe up to 1 cm under its height where it lands
     assert np.isfinite(zup_to_yup(joints)).all()
+
+
+def test_a_walk_up_stairs_along_a_curve_steps_on_the_treads_not_their_edges(addon, real_model):
+    """Follow Curve with Ground set to a flight of stairs (35 cm treads, 12 cm risers): the model's walk, made on a
+    flat floor, is carried up them with each step moved along its foot off the stairs' edges, so that wherever a
+    toe is planted its heel is over the same tread (13 frames had the heel a step below the toe before). The
+    record says how many steps were moved."""
+    from scenes import build_armature, stairs
+
+    from model_core.motion.conventions import CONTACT_JOINTS
+
+    build_armature("Mixamo", mixamo_bones())
+    obj = bpy.context.active_object
+    floor = float(evaluated_joints(addon, obj, [1])[0, CONTACT_JOINTS, 2].min())  # where it stands
+    height = stairs("Stairs", 0.5, 0.35, 0.12, 8, floor)
+    path = add_curve("poly", points=[(-2.0, 0.0, 0.0), (5.0, 0.0, 0.0)])
+    bpy.context.view_layer.objects.active = obj
+    _, new = follow(curve=path.name, ground="Stairs")
+    steps = new["strnn"]["ground"]["steps"].to_dict()
+    assert steps["moved"] >= 2 and steps["on_edges"] == 0, steps
+    first, last = (int(f) for f in new.frame_range)
+    joints = evaluated_joints(addon, obj, np.arange(first, last + 1))
+    assert joints[-1, 0, 2] > floor + 8 * 0.12 + 0.5  # up the stairs
+    feet = joints[:, CONTACT_JOINTS]  # the left heel (at the ankle) and toe, the right heel and toe
+    over = feet[..., 2] - height(feet)
+    speed = np.r_[np.zeros((1, 4)), np.linalg.norm(np.diff(feet, axis=0), axis=-1) * bpy.context.scene.render.fps]
+    for heel, toe in ((0, 1), (2, 3)):
+        planted = (speed[:, toe] < 0.4) & (over[:, toe] < 0.03)
+        assert planted.sum() > 20
+        straddling = planted & (np.abs(height(feet[:, heel]) - height(feet[:, toe])) > 0.02)
+        assert not straddling.any(), np.flatnonzero(straddling)
