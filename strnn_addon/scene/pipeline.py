@@ -302,6 +302,53 @@ def written_bones(clip: Clip) -> list[int]:
     return solved_bones(clip.rig, clip.anchors)
 
 
+# A root bone carries the action's travel where its head moves this share of the rig's leg over the clip.
+ROOT_MOTION_SHARE = 0.1
+
+
+def root_motion_bone(context, clip: Clip, frames: np.ndarray) -> int | None:
+    """The bone above the hips that carries the action's travel over the ground, as a game rig's root does
+    (Unreal's ``root``): the nearest ancestor of the hips bone whose head the action moves by a tenth of a leg or
+    more over scene ``frames`` (the clip read). None where there is none, and on a control rig (its controls are
+    keyed as the animator keys them)."""
+    if clip.controls is not None or clip.channels is None:
+        return None
+    hips = int(clip.anchors.bone[JOINT_INDEX["hips"]])
+    above = []
+    b = int(clip.rig.parents[hips])
+    while b >= 0:
+        above.append(b)
+        b = int(clip.rig.parents[b])
+    keyed = {bone for bone, prop in rig_io.bone_channels(clip.channels.fcurves) if prop == "location"}
+    above = [b for b in above if clip.rig.names[b] in keyed]
+    if not above:
+        return None
+    loc, rot = reference_pose(context, clip, frames)
+    pose = fk(clip.rig, loc, rot)
+    joints = anchor_positions(clip.rig, clip.anchors, pose)
+    leg = np.linalg.norm(joints[:, JOINT_INDEX["l_upleg"]] - joints[:, JOINT_INDEX["l_foot"]], axis=-1).max()
+    for b in above:
+        head = pose[:, b, :3, 3]
+        if np.linalg.norm(head - head[:1], axis=-1).max() >= ROOT_MOTION_SHARE * leg:
+            return b
+    return None
+
+
+def root_carried(clip: Clip, root: int, ref_loc: np.ndarray, ref_rot: np.ndarray, world: np.ndarray,
+                 arm_world: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``ref_loc`` ``[F, B, 3]``, ``ref_rot`` ``[F, B, 3, 3]`` (the reference pose of the new frames) with bone
+    ``root`` given the world matrices ``world`` ``[F, 4, 4]`` (:func:`root_motion.carried_root`), through the armature's
+    world matrices ``arm_world`` ``[F, 4, 4]`` and its parent's reference pose."""
+    loc, rot = np.array(ref_loc, np.float64), np.array(ref_rot, np.float64)
+    armature = np.linalg.inv(arm_world) @ world  # [F, 4, 4] armature space
+    parent = int(clip.rig.parents[root])
+    base = clip.rig.rel_rest[root] if parent < 0 else fk(clip.rig, loc, rot)[:, parent] @ clip.rig.rel_rest[root]
+    local = np.linalg.inv(base) @ armature
+    u, _, vt = np.linalg.svd(local[:, :3, :3])  # the nearest rotation
+    loc[:, root], rot[:, root] = local[:, :3, 3], u @ vt
+    return loc, rot
+
+
 def keyed_names(clip: Clip) -> list[str]:
     """Names of the bones that get keys: the written bones, or on a control rig their controls."""
     if clip.controls is not None:
@@ -432,10 +479,11 @@ def leg_bones(clip: Clip) -> list[int]:
 
 def write_pose(context, clip: Clip, action, frames: np.ndarray, loc: np.ndarray, rot: np.ndarray,
                previous: dict, replace: tuple[float, float] | None, bones: list[int] | None = None,
-               follows: bool = False, interpolation: str = "") -> float:
-    """Key the solved rotations of mapped bones (and the hips bone's location) at ``frames``; on a
-    control rig, key its controls by a visual bake instead (:func:`write_controls`). Returns how far
-    (armature units) a written bone ends up from the solve at worst (0 when keyed directly).
+               follows: bool = False, interpolation: str = "", root: int | None = None) -> float:
+    """Key the solved rotations of mapped bones (and the hips bone's location) at ``frames``, and the rotation and
+    location of a ``root`` bone carrying the travel (:func:`root_motion_bone`); on a control rig, key its controls
+    by a visual bake instead (:func:`write_controls`). Returns how far (armature units) a written bone ends up from
+    the solve at worst (0 when keyed directly).
 
     ``loc`` ``[F, B, 3]``, ``rot`` ``[F, B, 3, 3]``; ``previous`` {bone: raw channel values} keeps
     Euler angles and quaternion signs continuous with the keys before (``follows``: after, frames added before
@@ -446,11 +494,11 @@ def write_pose(context, clip: Clip, action, frames: np.ndarray, loc: np.ndarray,
         return write_controls(context, clip, channels, frames, loc, rot, previous, replace, bones, follows,
                               interpolation)
     hips = int(clip.anchors.bone[JOINT_INDEX["hips"]])
-    for b in written_bones(clip) if bones is None else bones:
+    for b in (written_bones(clip) if bones is None else bones) + ([root] if root is not None else []):
         pb = clip.obj.pose.bones[clip.rig.names[b]]
         prop, values = encode_rotation(pb.rotation_mode, rot[:, b], previous.get(pb.name), follows)
         _key_property(clip, channels, pb, prop, frames, values, replace, interpolation=interpolation)
-        if b == hips:
+        if b in (hips, root):
             _key_property(clip, channels, pb, "location", frames, loc[:, b], replace, interpolation=interpolation)
     return 0.0
 
@@ -547,11 +595,11 @@ def encode_rotation(mode: str, m: np.ndarray, previous: np.ndarray | None,
     return "rotation_euler", rotations.euler_continuous(rotations.matrix_to_euler(m, mode), mode, previous)
 
 
-def raw_rotations(clip: Clip, frame: float) -> dict:
-    """{bone: rotation channel values} of the written bones at one scene frame."""
+def raw_rotations(clip: Clip, frame: float, more: tuple[str, ...] = ()) -> dict:
+    """{bone: rotation channel values} of the written bones (and the bones ``more``) at one scene frame."""
     chans = rig_io.bone_channels(clip.channels.fcurves)
     out = {}
-    for name in keyed_names(clip):
+    for name in keyed_names(clip) + list(more):
         pb = clip.obj.pose.bones[name]
         out[pb.name] = rig_io.rotation_values(chans, pb, np.array([float(frame)]))[0]
     return out

@@ -237,18 +237,20 @@ def with_bake(record: dict, clip, error: float, frames) -> dict:
 
 
 def write_new(context, clip, suffix, frames, loc, rot, previous, replace, record: dict, bones=None,
-              scene_range: bool = True, follows: bool = False, shape=None, first=None):
+              scene_range: bool = True, follows: bool = False, shape=None, first=None, root=None):
     """Create the new action, hand it to ``first`` (a change before the keys go in, e.g. baking its cycles), key it
     (``bones``: only these; ``follows``: ``previous`` is the key after the frames, which come before it), label it
     with ``record``, hand it to ``shape`` (a last change to the whole action, e.g. making it cyclic) and assign it
-    (widening the scene's range to it with ``scene_range``); on failure remove it again. An action on twos
-    (``record``'s ``key_step``) gets Constant keys in the channels this makes, as its own hold theirs."""
+    (widening the scene's range to it with ``scene_range``; ``root``: a root bone carrying the travel, keyed too);
+    on failure remove it again. An action on twos (``record``'s ``key_step``) gets Constant keys in the channels this
+    makes, as its own hold theirs."""
     action = pipeline.new_action_from(clip, suffix)
     made = "CONSTANT" if record.get("key_step", 1) > 1 else ""
     try:
         if first is not None:
             first(action)
-        error = pipeline.write_pose(context, clip, action, frames, loc, rot, previous, replace, bones, follows, made)
+        error = pipeline.write_pose(context, clip, action, frames, loc, rot, previous, replace, bones, follows, made,
+                                    root)
         action[RECORD] = with_bake(record, clip, error, frames)
         if action.use_frame_range:  # a manual frame range the animator set: widened to hold the written frames
             action.frame_start = min(action.frame_start, float(frames[0]))

@@ -4,11 +4,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from ...model_core.motion.conventions import STANDARD_LEG_LENGTH, UP_AXIS
+from ...model_core.motion.conventions import STANDARD_LEG_LENGTH, UP_AXIS, yup_to_zup
+from ...model_core.motion.features import facing
 from ...model_core.ops.extend import FLOOR_S, MEMORY_S, clip_floor, clip_in_place, floor_rise
 from ...model_core.ops.footlock import SETTLE_PASSES
+from ...model_core.ops.root_motion import carried_root
 from ...model_core.rig.rigs import leg_length
-from ...model_core.rig.solve import solve
+from ...model_core.rig.solve import fk, solve
 from .. import engine_bridge
 from ..scene import anim, cycles, pipeline
 from ..scene.ground import carried, find_ground, flattened, ground_record
@@ -127,11 +129,20 @@ def extend_steps(context, obj, *, frames: int = 120, context_frames: int = 0, fo
                       ground=heights)
     new_pos = joined[len(pos):]
     new_frames = key + sign * step * (1 + np.arange(count, dtype=np.float64))
-    if back:  # written in time order
-        new_frames, new_pos = new_frames[::-1], new_pos[::-1]
     yield "solve"
-    targets = pipeline.to_armature(clip, new_pos, pipeline.world_at(context, clip, new_frames))
-    loc, rot = solve(clip.rig, clip.anchors, targets, np.repeat(held_loc, count, 0), np.repeat(held_rot, count, 0))
+    ref_loc, ref_rot = np.repeat(held_loc, count, 0), np.repeat(held_rot, count, 0)
+    arm_world = pipeline.world_at(context, clip, new_frames)
+    root = pipeline.root_motion_bone(context, clip, mem_frames)  # a game rig's root carries the travel: on with it
+    if root is not None:
+        last = arm_world[:1] @ fk(clip.rig, held_loc, held_rot)[:, root]  # its world matrix at the edge
+        carry = carried_root(last[0], yup_to_zup(joined[:, 0]), yup_to_zup(facing(joined)), len(pos), fps)
+        ref_loc, ref_rot = pipeline.root_carried(clip, root, ref_loc, ref_rot, carry, arm_world)
+        previous.update(pipeline.raw_rotations(clip, edge, (clip.rig.names[root],)))
+    if back:  # written in time order
+        new_frames, new_pos, arm_world = new_frames[::-1], new_pos[::-1], arm_world[::-1]
+        ref_loc, ref_rot = ref_loc[::-1], ref_rot[::-1]
+    targets = pipeline.to_armature(clip, new_pos, arm_world)
+    loc, rot = solve(clip.rig, clip.anchors, targets, ref_loc, ref_rot)
     record = made_by("Extend Clip", clip, engine_bridge.model_used(prefs(context)), key_step=step,
                      frames=frames, context_frames=len(ctx_frames),
                      follow_clip_frames=len(mem_frames) if follow_clip else 0,
@@ -148,6 +159,8 @@ def extend_steps(context, obj, *, frames: int = 120, context_frames: int = 0, fo
         record["in_place"] = True
     if cycled:
         record["cycles_baked"] = [int(baked[0]), int(baked[-1])] if len(baked) else []
+    if root is not None:
+        record["root_motion"] = {"bone": clip.rig.names[root]}
     record.update(familiarity_record(model_call(engine_bridge.run_familiarity, prefs(context), pos, fps)))
     held = model_call(engine_bridge.run_first_window, prefs(context), pos, fps, followed)
     record.update(first_window_record(held, back))
@@ -160,4 +173,4 @@ def extend_steps(context, obj, *, frames: int = 120, context_frames: int = 0, fo
     unrepeat = (lambda action: cycles.bake_cycles(anim.Channels(action, clip.obj.animation_data), baked)) \
         if cycled else None
     return write_new(context, clip, "extended", new_frames, loc, rot, previous, replace, record,
-                     scene_range=scene_range, follows=back, first=unrepeat)
+                     scene_range=scene_range, follows=back, first=unrepeat, root=root)

@@ -11,8 +11,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from ...model_core.motion.conventions import zup_to_yup
-from ...model_core.rig.solve import solve
+from ...model_core.motion.conventions import yup_to_zup, zup_to_yup
+from ...model_core.motion.features import facing
+from ...model_core.ops.root_motion import carried_root
+from ...model_core.rig.solve import fk, solve
 from .. import engine_bridge
 from ..scene import anim, curves, cycles, pipeline
 from ..scene.ground import carried, find_ground, ground_record
@@ -64,12 +66,22 @@ def follow_curve_steps(context, obj, *, curve: str = "", frames: int = 0, speed:
     n = len(new_pos)
     start = clip.last + 1 if clip.action is not None else context.scene.frame_start
     new_frames = start + np.arange(n, dtype=np.float64)
-    targets = pipeline.to_armature(clip, new_pos, pipeline.world_at(context, clip, new_frames))
-    loc, rot = solve(clip.rig, clip.anchors, targets, np.repeat(held_loc, n, 0), np.repeat(held_rot, n, 0))
+    arm_world = pipeline.world_at(context, clip, new_frames)
+    ref_loc, ref_rot = np.repeat(held_loc, n, 0), np.repeat(held_rot, n, 0)
+    root = pipeline.root_motion_bone(context, clip, ctx) if context_pos is not None else None
+    if root is not None:  # a game rig's root carries the travel: along the curve with the body
+        last = arm_world[:1] @ fk(clip.rig, held_loc, held_rot)[:, root]
+        carry = carried_root(last[0], yup_to_zup(joined[:, 0]), yup_to_zup(facing(joined)), known, clip.fps)
+        ref_loc, ref_rot = pipeline.root_carried(clip, root, ref_loc, ref_rot, carry, arm_world)
+        previous.update(pipeline.raw_rotations(clip, clip.last, (clip.rig.names[root],)))
+    targets = pipeline.to_armature(clip, new_pos, arm_world)
+    loc, rot = solve(clip.rig, clip.anchors, targets, ref_loc, ref_rot)
     record = made_by("Follow Curve", clip, engine_bridge.model_used(prefs(context)), curve=curve_obj.name,
                      frames=n, speed=float(speed), foot_lock=foot_lock)
     if surface is not None:
         record.update(ground_record(surface, bare, len(joined)))
+    if root is not None:
+        record["root_motion"] = {"bone": clip.rig.names[root]}
     if context_pos is not None:
         record.update(familiarity_record(engine_bridge.run_familiarity(prefs(context), context_pos, clip.fps)))
         record.update(pace_record(context, clip))
@@ -79,8 +91,9 @@ def follow_curve_steps(context, obj, *, curve: str = "", frames: int = 0, speed:
         # along the curve following it
         unrepeat = (lambda action: cycles.bake_cycles(anim.Channels(action, clip.obj.animation_data), [])) \
             if cycles.repeats(clip) else None
+        # keys past a manual range's end go
         return write_new(context, clip, "curve", new_frames, loc, rot, previous, (clip.last + 0.5, float("inf")),
-                         record, scene_range=scene_range, first=unrepeat)  # keys past a manual range's end go
+                         record, scene_range=scene_range, first=unrepeat, root=root)
     return write_fresh(context, clip, f"{clip.obj.name}.curve", new_frames, loc, rot, record, scene_range)
 
 

@@ -1,0 +1,171 @@
+"""Root motion: a game rig whose root bone (above the hips, as Unreal's ``root``) carries the action's travel over
+the ground. Extend Clip carries the root on with the body over the new frames, keyed, so that an engine reading the
+root's motion moves the character on; a root the action does not move is left unkeyed, as before."""
+
+from __future__ import annotations
+
+import bpy
+import numpy as np
+from scenes import (
+    action_of,
+    build_armature,
+    evaluated_joints,
+    fcurves_of,
+    key_snapshot,
+    key_walk,
+    mixamo_bones,
+    same_keys,
+)
+
+STEP = 0.02  # metres a frame the walk travels
+
+
+def root_rig(frames: int = 60, travel: bool = True):
+    """A Mixamo-named body under a ``root`` bone on the floor (pointing along +Y), with a crude walk: the legs and arms
+    swing, the hips sway, and the root carries the travel along -Y, the way the body faces (``travel`` False: the
+    hips carry it, the root stays)."""
+    bones = [("root", None, (0.0, 0.0, 0.0), (0.0, 0.3, 0.0))]
+    bones += [(n, p or "root", h, t) for n, p, h, t in mixamo_bones()]
+    obj = build_armature("RootRig", bones)
+    n = lambda *names: tuple("mixamorig:" + x for x in names)  # noqa: E731
+    key_walk(obj, frames, "mixamorig:Hips", n("LeftUpLeg", "RightUpLeg"), n("LeftLeg", "RightLeg"),
+             n("LeftArm", "RightArm"), step=0.0 if travel else STEP)
+    root = obj.pose.bones["root"]
+    for f in range(1, frames + 1) if travel else ():
+        root.location = (0.0, -STEP * f, 0.0)  # the root points along +Y: its location is the world's
+        root.keyframe_insert("location", frame=f)
+    bpy.context.scene.frame_set(1)
+    return obj
+
+
+def root_heads(obj, frames) -> np.ndarray:
+    scene, out = bpy.context.scene, []
+    for f in frames:
+        scene.frame_set(int(f))
+        out.append(np.array(obj.matrix_world @ obj.pose.bones["root"].head))
+    return np.array(out)
+
+
+def test_extend_carries_a_moving_root_on_under_the_body(addon, fake_model):
+    obj = root_rig()
+    assert np.ptp(root_heads(obj, [1, 60])[:, 1]) > 1.0  # the root carries the walk
+    before = key_snapshot(obj)
+    old_joints = evaluated_joints(addon, obj, np.arange(1, 61))
+    assert bpy.ops.strnn.extend_clip(frames=30) == {"FINISHED"}
+    new = action_of(obj)
+    assert same_keys(before, key_snapshot(obj, bpy.data.actions[new["strnn"]["source_action"]]))
+    assert new["strnn"]["root_motion"].to_dict() == {"bone": "root"}
+    keyed = {fc.data_path for fc in fcurves_of(obj, new)
+             if any(k.co[0] > 60.5 for k in fc.keyframe_points)}
+    assert {'pose.bones["root"].location', 'pose.bones["root"].rotation_quaternion'} <= keyed
+    np.testing.assert_allclose(evaluated_joints(addon, obj, np.arange(1, 61)), old_joints, atol=1e-5)
+    # the body glides on as the stand-in model puts it, and the root goes on with it, still under it
+    joints = evaluated_joints(addon, obj, np.arange(59, 91))
+    want = joints[1] + (joints[1, 0] - joints[0, 0]) * np.arange(1, 31)[:, None, None]
+    assert np.linalg.norm(joints[2:] - want, axis=-1).max() < 0.01
+    roots = root_heads(obj, np.arange(60, 91))
+    assert np.all(np.diff(roots[:, 1]) < -0.5 * STEP)  # on along -Y, every frame
+    under = (roots[:, :2] - joints[1:, 0, :2]) - (roots[0, :2] - joints[1, 0, :2])
+    # where it stood against the hips at the clip's end, within their sway (2 cm each way), which stays off the root
+    assert np.linalg.norm(under, axis=-1).max() < 0.05
+    assert np.abs(roots[:, 2] - roots[0, 2]).max() < 1e-6  # on the floor
+
+
+def test_a_root_the_action_does_not_move_is_not_keyed(addon, fake_model):
+    obj = root_rig(travel=False)
+    assert bpy.ops.strnn.extend_clip(frames=30) == {"FINISHED"}
+    new = action_of(obj)
+    assert "root_motion" not in new["strnn"]
+    assert not [fc for fc in fcurves_of(obj, new) if fc.data_path.startswith('pose.bones["root"]')]
+
+
+def as_root_motion(addon, obj, root: str = "root") -> None:
+    """Give ``obj`` (an imported take, its hips bone the top) a root bone on the floor and move the take's travel onto
+    it, as a game engine's root-motion take has it: on every frame the root stands under the hips, turned as the
+    body faces, and the hips are keyed against it so that the body plays as before."""
+    from mathutils import Matrix
+
+    hips = obj.pose.bones[0]
+    action = obj.animation_data.action
+    frames = np.arange(int(action.frame_range[0]), int(action.frame_range[1]) + 1)
+    joints = evaluated_joints(addon, obj, frames)  # Blender world axes
+    facing = np.cross(joints[:, 1] - joints[:, 5], [0.0, 0.0, 1.0])  # square to the thighs: left x up
+    yaw = np.arctan2(facing[:, 1], facing[:, 0])
+    scene, inv = bpy.context.scene, np.array(obj.matrix_world.inverted())
+    played = []
+    for f in frames:
+        scene.frame_set(int(f))
+        played.append(hips.matrix.copy())
+    bpy.ops.object.mode_set(mode="EDIT")
+    eb = obj.data.edit_bones.new(root)
+    eb.head, eb.tail = (0.0, 0.0, 0.0), (0.0, 10.0, 0.0)
+    obj.data.edit_bones[hips.name].parent = eb
+    bpy.ops.object.mode_set(mode="OBJECT")
+    hips, pbr = obj.pose.bones[hips.name], obj.pose.bones[root]
+    pbr.rotation_mode = hips.rotation_mode = "QUATERNION"
+    for k, f in enumerate(frames):
+        scene.frame_set(int(f))
+        under = inv @ np.r_[joints[k, 0, :2], 0.0, 1.0]  # the hips' place on the floor, in the armature's space
+        pbr.matrix = Matrix.Translation(under[:3].tolist()) @ Matrix.Rotation(float(yaw[k] - yaw[0]), 4, "Z")
+        bpy.context.view_layer.update()
+        hips.matrix = played[k]
+        for pb in (pbr, hips):
+            pb.keyframe_insert("location", frame=int(f))
+            pb.keyframe_insert("rotation_quaternion", frame=int(f))
+    scene.frame_set(int(frames[0]))
+
+
+def test_a_real_walk_with_root_motion_extended_by_the_model_takes_its_root_along(addon, real_model, tmp_path):
+    """A walk (real motion capture when unpacked) made a root-motion take, extended 3 s by the bundled model: the
+    root goes on under the body at the body's pace and turns as it faces."""
+    from scenes import import_bvh, walk_bvh
+    from test_addon_rigify import WALK, find_mocap
+
+    mocap = find_mocap()
+    path = mocap / WALK if mocap is not None and (mocap / WALK).exists() else walk_bvh(tmp_path, frames=120)
+    obj = import_bvh(path, update_scene_fps=True, update_scene_duration=True)
+    as_root_motion(addon, obj)
+    last = int(action_of(obj).frame_range[1])
+    played = evaluated_joints(addon, obj, np.arange(1, last + 1))
+    fps = bpy.context.scene.render.fps
+    assert bpy.ops.strnn.extend_clip(frames=3 * fps) == {"FINISHED"}
+    new = action_of(obj)
+    assert new["strnn"]["root_motion"]["bone"] == "root"
+    np.testing.assert_allclose(evaluated_joints(addon, obj, np.arange(1, last + 1)), played, atol=1e-4)
+    frames = np.arange(last, last + 3 * fps + 1)
+    joints, roots = evaluated_joints(addon, obj, frames), root_heads(obj, frames)
+    hips_way = np.linalg.norm(joints[-1, 0, :2] - joints[0, 0, :2])
+    root_way = np.linalg.norm(roots[-1, :2] - roots[0, :2])
+    under = np.linalg.norm(roots[:, :2] - joints[:, 0, :2], axis=-1)
+    print(f"root motion: the hips go {hips_way:.2f}, the root {root_way:.2f}; the root {under.max():.3f} at most "
+          "from under the hips")
+    height = np.ptp(played[:, :, 2])
+    assert hips_way > height and 0.8 < root_way / hips_way < 1.2  # on at the body's pace
+    assert under.max() < 0.1 * height  # under the body: within a tenth of its height
+
+
+def test_follow_curve_takes_a_moving_root_along_the_curve(addon, real_model):
+    from test_addon_curve import add_curve, follow
+
+    obj = root_rig(frames=60)
+    path = add_curve("poly", points=[(0.0, -1.2, 0.0), (3.0, -4.0, 0.0)])
+    bpy.context.view_layer.objects.active = obj
+    _, new = follow(curve=path.name)
+    assert new["strnn"]["root_motion"]["bone"] == "root"
+    frames = np.arange(60, int(new.frame_range[1]) + 1)
+    joints, roots = evaluated_joints(addon, obj, frames), root_heads(obj, frames)
+    under = np.linalg.norm(roots[:, :2] - joints[:, 0, :2], axis=-1)
+    assert np.linalg.norm(roots[-1, :2] - roots[0, :2]) > 2.0 and under.max() < 0.15, under.max()
+
+
+def test_frames_before_the_start_take_the_root_back_with_the_body(addon, fake_model):
+    obj = root_rig()
+    bpy.context.scene.frame_start = 1
+    assert bpy.ops.strnn.extend_clip(frames=30, before_start=True) == {"FINISHED"}
+    new = action_of(obj)
+    assert new["strnn"]["root_motion"]["bone"] == "root"
+    frames = np.arange(-29, 2)
+    joints, roots = evaluated_joints(addon, obj, frames), root_heads(obj, frames)
+    assert np.all(np.diff(roots[:, 1]) < -0.5 * STEP)  # it walked in along -Y
+    under = (roots[:, :2] - joints[:, 0, :2]) - (roots[-1, :2] - joints[-1, 0, :2])
+    assert np.linalg.norm(under, axis=-1).max() < 0.05
