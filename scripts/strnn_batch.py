@@ -187,6 +187,7 @@ def build_parser() -> argparse.ArgumentParser:
     foot_lock_flag(p, "transfer_motion")
     ground_flag(p, "each take is carried up and down with it from where the character stands, feet locked on it",
                 "name of a mesh, or of a collection of meshes, in --target's .blend")
+    p.add_argument("--root-motion", action="store_true", help=opts.ROOT_MOTION.help())
     return parser
 
 
@@ -224,7 +225,7 @@ def operator_call(args) -> tuple[str, dict]:
         return "inbetween", {"use_range": args.gap is not None, "frame_start": start, "frame_end": end,
                              "follow_take": args.follow_take, "foot_lock": args.foot_lock}
     if args.command == "transfer":
-        return "transfer_motion", {"foot_lock": args.foot_lock, "ground": args.ground}
+        return "transfer_motion", {"foot_lock": args.foot_lock, "ground": args.ground, "root_motion": args.root_motion}
     if args.command == "loop":
         start, end = args.range or (1, 250)
         return "make_loop", {"use_range": args.range is not None, "frame_start": start, "frame_end": end,

@@ -447,13 +447,14 @@ class STRNN_OT_transfer_motion(_Staged, bpy.types.Operator):
     source: options.source_name()
     foot_lock: options.foot_lock("transfer_motion")
     ground: options.ground_name(walk=True)
+    root_motion: options.root_motion()
     scene_range: options.scene_range()
     output: options.output()
     simplify: options.simplify()
 
     def steps(self, context, obj):
         return transfer_steps(context, obj, source=self.source, foot_lock=self.foot_lock,
-                              scene_range=self.scene_range, ground=self.ground)
+                              scene_range=self.scene_range, ground=self.ground, root_motion=self.root_motion)
 
     def done(self, action) -> str:
         record = action.get(RECORD, {}).get("settings", {})

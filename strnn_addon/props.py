@@ -122,6 +122,10 @@ def loop_in_place():
     return BoolProperty(**opts.LOOP_IN_PLACE.blender())
 
 
+def root_motion():
+    return BoolProperty(**opts.ROOT_MOTION.blender())
+
+
 def curve_frames():
     return IntProperty(**opts.CURVE_FRAMES.blender())
 

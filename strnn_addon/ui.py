@@ -198,6 +198,7 @@ class STRNN_PT_transfer(_OperatorPanel, bpy.types.Panel):
             col.label(text="Onto each selected armature but the source", icon="INFO")
         col.prop(opts, "foot_lock")
         col.prop(opts, "ground", icon="OUTLINER_OB_MESH")
+        col.prop(opts, "root_motion")
 
 
 class _ArmatureSidebar(_Sidebar):

@@ -60,6 +60,10 @@ LOOP_MATCH = Option("Match the Start", True,
 LOOP_IN_PLACE = Option("In Place", False,
                        "Take the travel off, so the cycle repeats on the spot with its sway kept (as game engines "
                        "take root motion apart); off: each cycle walks on from where the last ended")
+ROOT_MOTION = Option("Root Motion", False,
+                     "Key the travel and the heading on the bone above the hips (a game rig's root, as Unreal's "
+                     "root), on the floor under the body, the hips moving against it, as game engines take root "
+                     "motion; off: the hips carry the travel")
 
 # Whether each operation locks the feet unless told otherwise (Foot Lock's own operator always does).
 FOOT_LOCK = {"extend_clip": False, "denoise_action": False, "inbetween": True, "follow_curve": True,

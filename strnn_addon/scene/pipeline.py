@@ -306,6 +306,16 @@ def written_bones(clip: Clip) -> list[int]:
 ROOT_MOTION_SHARE = 0.1
 
 
+def above_hips(clip: Clip) -> list[int]:
+    """The bones above the hips bone, nearest first (a game rig's root; none where the hips bone is the top)."""
+    out = []
+    b = int(clip.rig.parents[int(clip.anchors.bone[JOINT_INDEX["hips"]])])
+    while b >= 0:
+        out.append(b)
+        b = int(clip.rig.parents[b])
+    return out
+
+
 def root_motion_bone(context, clip: Clip, frames: np.ndarray) -> int | None:
     """The bone above the hips that carries the action's travel over the ground, as a game rig's root does
     (Unreal's ``root``): the nearest ancestor of the hips bone whose head the action moves by a tenth of a leg or
@@ -313,12 +323,7 @@ def root_motion_bone(context, clip: Clip, frames: np.ndarray) -> int | None:
     keyed as the animator keys them)."""
     if clip.controls is not None or clip.channels is None:
         return None
-    hips = int(clip.anchors.bone[JOINT_INDEX["hips"]])
-    above = []
-    b = int(clip.rig.parents[hips])
-    while b >= 0:
-        above.append(b)
-        b = int(clip.rig.parents[b])
+    above = above_hips(clip)
     keyed = {bone for bone, prop in rig_io.bone_channels(clip.channels.fcurves) if prop == "location"}
     above = [b for b in above if clip.rig.names[b] in keyed]
     if not above:

@@ -265,16 +265,16 @@ def write_new(context, clip, suffix, frames, loc, rot, previous, replace, record
 
 
 def write_fresh(context, clip, name: str, frames, loc, rot, record: dict, scene_range: bool = True,
-                interpolation: str = ""):
+                interpolation: str = "", root=None):
     """A new action ``name`` holding only the new frames (keys of ``interpolation``, default Linear: Constant for a
-    source on twos): keyed,
-    labelled, assigned, the scene's range widened (with ``scene_range``); an action the armature had is kept (fake
-    user)."""
+    source on twos; ``root``: a root bone carrying the travel, keyed too): keyed, labelled, assigned, the scene's
+    range widened (with ``scene_range``); an action the armature had is kept (fake user)."""
     action = bpy.data.actions.new(name)
     clip.first, clip.last = int(frames[0]), int(frames[-1])  # no static keys outside the new frames
     old = clip.obj.animation_data.action if clip.obj.animation_data else None
     try:
-        error = pipeline.write_pose(context, clip, action, frames, loc, rot, {}, None, interpolation=interpolation)
+        error = pipeline.write_pose(context, clip, action, frames, loc, rot, {}, None, interpolation=interpolation,
+                                    root=root)
         action[RECORD] = with_bake(record, clip, error, frames)
         anim.assign_action(clip.obj, action, None)
         ad = clip.obj.animation_data

@@ -4,8 +4,11 @@ from __future__ import annotations
 
 import numpy as np
 
+from ...model_core.motion.conventions import JOINT_INDEX, yup_to_zup
+from ...model_core.motion.features import facing
+from ...model_core.ops.root_motion import carried_root
 from ...model_core.ops.transfer import retarget
-from ...model_core.rig.solve import solve
+from ...model_core.rig.solve import fk, solve
 from ..scene import pipeline
 from ..scene.ground import carried, find_ground, ground_record
 from ..scene.pipeline import UserError
@@ -38,14 +41,16 @@ def find_source(context, target, name: str = ""):
 
 
 def transfer_steps(context, obj, *, source: str = "", foot_lock: bool = True, scene_range: bool = True,
-                   ground: str = ""):
+                   ground: str = "", root_motion: bool = False):
     """Put the motion of ``source`` (default: the other selected armature) on armature ``obj`` over the
     source action's frames: the target's proportions, the source's root path scaled from where the target
     stands, feet on the floor (locked during contacts with ``foot_lock``), into a new action on ``obj``
     (its own action, if any, is kept); over the mesh (or collection) named ``ground``, carried up and down with its
-    surface from where the target stands, the feet locked on it. A generator like :func:`.extend.extend_steps`."""
+    surface from where the target stands, the feet locked on it; with ``root_motion``, the travel and heading keyed
+    on the bone above the hips (:func:`root_motion.carried_root`). A generator like :func:`.extend.extend_steps`."""
     surface = find_ground(ground, obj) if ground else None
     target = pipeline.prepare_any(context, obj)
+    root = _root_of(target) if root_motion else None
     src = pipeline.prepare(context, find_source(context, obj, source))
     if abs(src.fps - target.fps) > 1e-6:  # one scene: never
         raise UserError("Source and target play at different frame rates")
@@ -68,12 +73,34 @@ def transfer_steps(context, obj, *, source: str = "", foot_lock: bool = True, sc
         new_pos = lock(new_pos, src.fps / step, ground=heights, standing=standing)
     yield "solve"
     n = len(frames)
-    loc, rot = solve(target.rig, target.anchors, pipeline.to_armature(target, new_pos,
-                                                                      pipeline.world_at(context, target, frames)),
-                     np.repeat(ref_loc, n, 0), np.repeat(ref_rot, n, 0))
+    arm_world = pipeline.world_at(context, target, frames)
+    ref_loc, ref_rot = np.repeat(ref_loc, n, 0), np.repeat(ref_rot, n, 0)
+    if root is not None:  # the root, where it stands now under the body, carried with it from the first frame on
+        start = arm_world[:1] @ fk(target.rig, ref_loc[:1], ref_rot[:1])[:, root]
+        carry = carried_root(start[0], yup_to_zup(new_pos[:, 0]), yup_to_zup(facing(new_pos)), 1, src.fps / step)
+        ref_loc, ref_rot = pipeline.root_carried(target, root, ref_loc, ref_rot,
+                                                 np.concatenate([start, carry]), arm_world)
+    loc, rot = solve(target.rig, target.anchors, pipeline.to_armature(target, new_pos, arm_world), ref_loc, ref_rot)
     yield "write"
-    record = made_by("Transfer Motion", src, key_step=step, source=src.obj.name, target=obj.name, foot_lock=foot_lock)
+    record = made_by("Transfer Motion", src, key_step=step, source=src.obj.name, target=obj.name, foot_lock=foot_lock,
+                     root_motion=root_motion or None)
     if surface is not None:
         record.update(ground_record(surface, bare, n))
+    if root is not None:
+        record["root_motion"] = {"bone": target.rig.names[root]}
     return write_fresh(context, target, f"{src.action.name}.transfer", frames, loc, rot, record, scene_range,
-                       "CONSTANT" if step > 1 else "")
+                       "CONSTANT" if step > 1 else "", root)
+
+
+def _root_of(target) -> int:
+    """The bone above the target's hips that Root Motion keys; a :class:`UserError` where there is none to key."""
+    if target.controls is not None:
+        raise UserError(f"Root Motion keys the bone above the hips of a plain rig; {target.obj.name!r} is keyed on "
+                        "its controls: turn Root Motion off and key its root control by hand")
+    above = pipeline.above_hips(target)
+    if not above:
+        hips = target.rig.names[int(target.anchors.bone[JOINT_INDEX["hips"]])]
+        raise UserError(f"Root Motion keys the bone above the hips, and {target.obj.name!r}'s hips bone {hips!r} has "
+                        "none: add a root bone on the floor as the hips' parent (as a game rig has), or turn Root "
+                        "Motion off")
+    return above[0]

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import bpy
 import numpy as np
+import pytest
 from scenes import (
     action_of,
     build_armature,
@@ -169,3 +170,51 @@ def test_frames_before_the_start_take_the_root_back_with_the_body(addon, fake_mo
     assert np.all(np.diff(roots[:, 1]) < -0.5 * STEP)  # it walked in along -Y
     under = (roots[:, :2] - joints[:, 0, :2]) - (roots[-1, :2] - joints[-1, 0, :2])
     assert np.linalg.norm(under, axis=-1).max() < 0.05
+
+
+def test_transfer_with_root_motion_keys_the_travel_on_the_targets_root(addon, tmp_path):
+    """A walk moved onto a game rig (a root bone on the floor above its hips) with Root Motion: the root goes with the
+    body, on the floor under it, turned as it faces, and the hips move against it; without Root Motion the root is
+    not keyed. A rig with no bone above its hips is refused with what to do, and nothing changes."""
+    from scenes import import_bvh, walk_bvh
+    from test_addon_rigify import WALK, find_mocap
+
+    mocap = find_mocap()
+    path = mocap / WALK if mocap is not None and (mocap / WALK).exists() else walk_bvh(tmp_path, frames=120)
+    source = import_bvh(path, update_scene_fps=True, update_scene_duration=True)
+    source.location.x = -2.0
+    bones = [("root", None, (0.0, 0.0, 0.0), (0.0, 0.3, 0.0))]
+    bones += [(n, p or "root", h, t) for n, p, h, t in mixamo_bones()]
+    target = build_armature("GameRig", bones)
+    for obj in bpy.context.view_layer.objects:
+        obj.select_set(obj in (source, target))
+    bpy.context.view_layer.objects.active = target
+    assert bpy.ops.strnn.transfer_motion(root_motion=True) == {"FINISHED"}
+    new = action_of(target)
+    assert new["strnn"]["root_motion"].to_dict() == {"bone": "root"}
+    frames = np.arange(int(new.frame_range[0]), int(new.frame_range[1]) + 1)
+    joints, roots = evaluated_joints(addon, target, frames), root_heads(target, frames)
+    assert np.linalg.norm(roots[-1, :2] - roots[0, :2]) > 1.0  # it travels
+    assert np.linalg.norm(roots[:, :2] - joints[:, 0, :2], axis=-1).max() < 0.15  # under the body
+    assert np.abs(roots[:, 2]).max() < 1e-6  # on the floor
+    scene, ahead = bpy.context.scene, []
+    for f in frames:  # the root's +Y, its own forward at rest
+        scene.frame_set(int(f))
+        ahead.append(np.array(target.pose.bones["root"].matrix.col[1][:3]))
+    ahead, facing = np.array(ahead), np.cross(joints[:, 1] - joints[:, 5], [0.0, 0.0, 1.0])
+    angle = lambda v: np.unwrap(np.arctan2(v[:, 1], v[:, 0]))  # noqa: E731
+    half = bpy.context.scene.render.fps // 2  # the body's facing sways with each step: half a second's mean
+    body_turn = angle(facing)[-half:].mean() - angle(facing)[:half].mean()
+    assert abs((angle(ahead)[-1] - angle(ahead)[0]) - body_turn) < 0.2, body_turn  # it turns as the body does
+    for obj in bpy.context.view_layer.objects:
+        obj.select_set(obj in (source, target))
+    assert bpy.ops.strnn.transfer_motion(root_motion=False) == {"FINISHED"}
+    assert not [fc for fc in fcurves_of(target, action_of(target)) if fc.data_path.startswith('pose.bones["root"]')]
+
+    plain = build_armature("Plain", mixamo_bones())
+    for obj in bpy.context.view_layer.objects:
+        obj.select_set(obj in (source, plain))
+    bpy.context.view_layer.objects.active = plain
+    with pytest.raises(RuntimeError, match="hips bone 'mixamorig:Hips' has none: add a root bone"):
+        bpy.ops.strnn.transfer_motion(root_motion=True)
+    assert action_of(plain) is None

@@ -76,6 +76,13 @@ def test_follow_flags_reach_their_operators():
     assert strnn_batch.operator_call(parse(["inbetween", "--no-follow-take", "a.bvh"]))[1]["follow_take"] is False
 
 
+def test_transfer_root_motion_flag_reaches_its_operator():
+    parse = strnn_batch.build_parser().parse_args
+    assert strnn_batch.operator_call(parse(["transfer", "--target", "r.blend", "a.bvh"]))[1]["root_motion"] is False
+    name, kw = strnn_batch.operator_call(parse(["transfer", "--target", "r.blend", "--root-motion", "a.bvh"]))
+    assert name == "transfer_motion" and kw["root_motion"] is True
+
+
 def test_good_file_processed_corrupt_one_reported(clips, tmp_path, extension, capsys):
     """A good take is extended, a broken one reported with its reason; a take that has come to rest in motion the
     model does not know is extended too, and the progress line, the summary and the report carry the operator's
