@@ -240,18 +240,23 @@ def joint_positions(context, clip: Clip, frames: np.ndarray) -> np.ndarray:
     return zup_to_yup(out)
 
 
-def solve_frames(context, clip: Clip, frames: np.ndarray, positions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def solve_frames(context, clip: Clip, frames: np.ndarray, positions: np.ndarray,
+                 root: tuple[int, np.ndarray] | None = None) -> tuple[np.ndarray, np.ndarray]:
     """The rig's local pose ``loc`` ``[F, B, 3]``, ``rot`` ``[F, B, 3, 3]`` (float32) that puts its joints on
     ``positions`` ``[F, 21, 3]`` (Y-up, scene units) at scene ``frames``, each frame starting from its own
-    reference pose (:func:`reference_pose`): read and solved :data:`CHUNK_FRAMES` frames at a time, so a
+    reference pose (:func:`reference_pose`; ``root``: (a root bone carrying the travel, its world matrices
+    ``[F, 4, 4]`` there), :func:`root_carried`): read and solved :data:`CHUNK_FRAMES` frames at a time, so a
     long take never holds more than one chunk's reference and working arrays."""
     frames = np.asarray(frames, dtype=np.float64)
-    targets = to_armature(clip, positions, world_at(context, clip, frames))
+    arm_world = world_at(context, clip, frames)
+    targets = to_armature(clip, positions, arm_world)
     n, b = len(frames), len(clip.rig.names)
     loc, rot = np.empty((n, b, 3), np.float32), np.empty((n, b, 3, 3), np.float32)
     cache = rig_io.KeyCache()
     for part in chunks(n):
         ref_loc, ref_rot = reference_pose(context, clip, frames[part], cache)
+        if root is not None:
+            ref_loc, ref_rot = root_carried(clip, root[0], ref_loc, ref_rot, root[1][part], arm_world[part])
         loc[part], rot[part] = solve(clip.rig, clip.anchors, targets[part], ref_loc, ref_rot)
     return loc, rot
 
@@ -361,17 +366,18 @@ def keyed_names(clip: Clip) -> list[str]:
     return [clip.rig.names[b] for b in written_bones(clip)]
 
 
-def written_paths(clip: Clip) -> set[str]:
-    """The F-curve data paths :func:`write_pose` keys: each written bone's rotation and the hips bone's location;
-    on a control rig its controls' rotations, and the locations of those that move."""
+def written_paths(clip: Clip, root: int | None = None) -> set[str]:
+    """The F-curve data paths :func:`write_pose` keys: each written bone's rotation and the hips bone's location
+    (and a ``root`` bone's rotation and location); on a control rig its controls' rotations, and the locations of
+    those that move."""
     if clip.controls is not None:
         return {_bone_path(c.bone, prop) for c in keyed_controls(clip)
                 for prop in (rig_io.rotation_property(clip.obj.pose.bones[c.bone]),) + (("location",) if c.location
                                                                                          else ())}
     hips = int(clip.anchors.bone[JOINT_INDEX["hips"]])
     paths = {_bone_path(clip.rig.names[b], rig_io.rotation_property(clip.obj.pose.bones[clip.rig.names[b]]))
-             for b in written_bones(clip)}
-    return paths | {_bone_path(clip.rig.names[hips], "location")}
+             for b in written_bones(clip) + ([root] if root is not None else [])}
+    return paths | {_bone_path(clip.rig.names[b], "location") for b in (hips, root) if b is not None}
 
 
 # Keys on twos (threes, ...) held by Constant interpolation, the stepped look of hand-drawn-style animation: at least

@@ -5,8 +5,12 @@ from __future__ import annotations
 
 import numpy as np
 
+from ...model_core.motion.conventions import yup_to_zup
+from ...model_core.motion.features import facing
 from ...model_core.ops.footlock import SETTLE_PASSES
 from ...model_core.ops.loop import least_cycle
+from ...model_core.ops.root_motion import carried_root
+from ...model_core.rig.solve import fk
 from .. import engine_bridge
 from ..scene import cycles, pipeline
 from .common import frame_range, lock, made_by, model_call, noop, pace_record, prefs, run, write_new
@@ -51,7 +55,14 @@ def loop_steps(context, obj, *, frame_start: int | None = None, frame_end: int |
         cycle = loop.positions
     written = frames[0] + step * np.arange(loop.seam + 1, dtype=np.float64)
     yield "solve"
-    loc, rot = pipeline.solve_frames(context, clip, written, cycle)
+    root = pipeline.root_motion_bone(context, clip, frames)
+    carry = None
+    if root is not None:  # a game rig's root carries the travel: carried with the cycle (in place: it stays)
+        held_loc, held_rot = pipeline.reference_pose(context, clip, written[:1])
+        start = pipeline.world_at(context, clip, written[:1]) @ fk(clip.rig, held_loc, held_rot)[:, root]
+        carry = (root, np.concatenate([start, carried_root(start[0], yup_to_zup(cycle[:, 0]),
+                                                           yup_to_zup(facing(cycle)), 1, fps)]))
+    loc, rot = pipeline.solve_frames(context, clip, written, cycle, carry)
     record = made_by("Make Loop", clip, engine_bridge.model_used(prefs(context)), key_step=step,
                      frame_start=a, frame_end=b, blend=float(blend), match=match, in_place=in_place,
                      foot_lock=foot_lock)
@@ -60,8 +71,11 @@ def loop_steps(context, obj, *, frame_start: int | None = None, frame_end: int |
                        "travel": round(float(np.linalg.norm(loop.travel)), 4), "match_cm": round(loop.match_cm, 2),
                        "blend_keys": loop.blend, "turn_deg": round(float(np.degrees(loop.turn)), 1)}
     record.update(pace_record(context, clip, b))
+    if root is not None:
+        record["root_motion"] = {"bone": clip.rig.names[root]}
+        previous.update(pipeline.raw_rotations(clip, frames[0], (clip.rig.names[root],)))
     yield "write"  # every check and every read done: only the writing is left
-    made = pipeline.written_paths(clip)
+    made = pipeline.written_paths(clip, root)
     return write_new(context, clip, "loop", written, loc, rot, previous, (-np.inf, np.inf), record,
-                     scene_range=False,
+                     scene_range=False, root=root,
                      shape=lambda action: cycles.make_cyclic(clip, action, written, loop.blend, made))

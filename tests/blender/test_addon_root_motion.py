@@ -218,3 +218,23 @@ def test_transfer_with_root_motion_keys_the_travel_on_the_targets_root(addon, tm
     with pytest.raises(RuntimeError, match="hips bone 'mixamorig:Hips' has none: add a root bone"):
         bpy.ops.strnn.transfer_motion(root_motion=True)
     assert action_of(plain) is None
+
+
+def test_make_loop_carries_the_root_with_the_cycle_and_in_place_keeps_it_still(addon, real_model):
+    """A root-motion walk made a cycle: the root is keyed with the cycle and walks on with it (Cycles modifiers)
+    under the body; In Place keeps it where the cycle starts, with the body."""
+    for in_place in (False, True):
+        obj = root_rig(frames=90)
+        assert bpy.ops.strnn.make_loop(in_place=in_place) == {"FINISHED"}
+        new = action_of(obj)
+        assert new["strnn"]["root_motion"]["bone"] == "root"
+        first, seam = new["strnn"]["cycle"]["first"], new["strnn"]["cycle"]["seam"]
+        frames = np.arange(first, 2 * seam - first + 1)  # the cycle and its first repeat
+        joints, roots = evaluated_joints(addon, obj, frames), root_heads(obj, frames)
+        way = np.linalg.norm(roots[-1, :2] - roots[0, :2])
+        under = np.linalg.norm(roots[:, :2] - joints[:, 0, :2], axis=-1)
+        if in_place:
+            assert way < 0.02 and np.linalg.norm(joints[-1, 0, :2] - joints[0, 0, :2]) < 0.05, way
+        else:
+            assert way > 0.5 and np.ptp(under) < 0.06, (way, np.ptp(under))
+        bpy.data.objects.remove(obj)
