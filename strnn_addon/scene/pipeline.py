@@ -323,9 +323,9 @@ def above_hips(clip: Clip) -> list[int]:
 
 def root_motion_bone(context, clip: Clip, frames: np.ndarray) -> int | None:
     """The bone above the hips that carries the action's travel over the ground, as a game rig's root does
-    (Unreal's ``root``): the nearest ancestor of the hips bone whose head the action moves by a tenth of a leg or
-    more over scene ``frames`` (the clip read). None where there is none, and on a control rig (its controls are
-    keyed as the animator keys them)."""
+    (Unreal's ``root``): the nearest ancestor of the hips bone whose head the action moves over the ground by a
+    tenth of a leg or more over scene ``frames`` (the clip read). None where there is none, and on a control rig
+    (its controls are keyed as the animator keys them)."""
     if clip.controls is not None or clip.channels is None:
         return None
     above = above_hips(clip)
@@ -337,9 +337,11 @@ def root_motion_bone(context, clip: Clip, frames: np.ndarray) -> int | None:
     pose = fk(clip.rig, loc, rot)
     joints = anchor_positions(clip.rig, clip.anchors, pose)
     leg = np.linalg.norm(joints[:, JOINT_INDEX["l_upleg"]] - joints[:, JOINT_INDEX["l_foot"]], axis=-1).max()
+    world = np.asarray(clip.world, np.float64)
     for b in above:
-        head = pose[:, b, :3, 3]
-        if np.linalg.norm(head - head[:1], axis=-1).max() >= ROOT_MOTION_SHARE * leg:
+        head = pose[:, b, :3, 3] @ world[:3, :3].T  # over the ground: the world's X and Y (a rise is no travel)
+        leg_world = leg * np.abs(np.linalg.det(world[:3, :3])) ** (1.0 / 3.0)
+        if np.linalg.norm(head[:, :2] - head[:1, :2], axis=-1).max() >= ROOT_MOTION_SHARE * leg_world:
             return b
     return None
 

@@ -238,3 +238,15 @@ def test_make_loop_carries_the_root_with_the_cycle_and_in_place_keeps_it_still(a
         else:
             assert way > 0.5 and np.ptp(under) < 0.06, (way, np.ptp(under))
         bpy.data.objects.remove(obj)
+
+
+def test_a_root_that_only_rises_carries_no_travel(addon, fake_model):
+    obj = root_rig(travel=False)
+    root = obj.pose.bones["root"]
+    for f in range(1, 61):  # the root bobs up and down (pointing along +Y, its local Z is the world's)
+        root.location = (0.0, 0.0, 0.3 * np.sin(f / 5.0))
+        root.keyframe_insert("location", frame=f)
+    heights = root_heads(obj, range(1, 61))
+    assert np.ptp(heights[:, 2]) > 0.3 and np.ptp(heights[:, 0]) + np.ptp(heights[:, 1]) < 1e-6
+    assert bpy.ops.strnn.extend_clip(frames=30) == {"FINISHED"}
+    assert "root_motion" not in action_of(obj)["strnn"]
