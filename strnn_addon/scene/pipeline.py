@@ -22,6 +22,8 @@ from ...model_core.motion.conventions import (  # noqa: F401  (MIN_MODEL_FRAMES,
     yup_to_zup,
     zup_to_yup,
 )
+from ...model_core.motion.features import facing
+from ...model_core.ops.root_motion import carried_root
 from ...model_core.rig.controls import Control, ControlSet, visual_local
 from ...model_core.rig.solve import Anchors, Rig, anchor_positions, fk, solve, solved_bones
 from . import anim, controls, mapping, rig_io
@@ -346,10 +348,21 @@ def root_motion_bone(context, clip: Clip, frames: np.ndarray) -> int | None:
     return None
 
 
+def root_track(clip: Clip, root: int, held_loc: np.ndarray, held_rot: np.ndarray, world0: np.ndarray,
+               positions: np.ndarray, seam: int, fps: float) -> np.ndarray:
+    """World matrices ``[F - seam + 1, 4, 4]`` of bone ``root`` on frames ``seam - 1`` on of ``positions``
+    ``[F, 21, 3]`` (world, Y-up, ``fps``): where it stands in the pose ``held_loc``, ``held_rot`` ``[1, B, ...]``
+    under the armature's world matrix ``world0`` ``[4, 4]`` on frame ``seam - 1``, then carried with the body
+    (:func:`root_motion.carried_root`)."""
+    start = np.asarray(world0, np.float64) @ fk(clip.rig, held_loc, held_rot)[0, root]
+    carried = carried_root(start, yup_to_zup(positions[:, 0]), yup_to_zup(facing(positions)), seam, fps)
+    return np.concatenate([start[None], carried])
+
+
 def root_carried(clip: Clip, root: int, ref_loc: np.ndarray, ref_rot: np.ndarray, world: np.ndarray,
                  arm_world: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """``ref_loc`` ``[F, B, 3]``, ``ref_rot`` ``[F, B, 3, 3]`` (the reference pose of the new frames) with bone
-    ``root`` given the world matrices ``world`` ``[F, 4, 4]`` (:func:`root_motion.carried_root`), through the armature's
+    ``root`` given the world matrices ``world`` ``[F, 4, 4]`` (:func:`root_track`), through the armature's
     world matrices ``arm_world`` ``[F, 4, 4]`` and its parent's reference pose."""
     loc, rot = np.array(ref_loc, np.float64), np.array(ref_rot, np.float64)
     armature = np.linalg.inv(arm_world) @ world  # [F, 4, 4] armature space

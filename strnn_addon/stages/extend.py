@@ -4,13 +4,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from ...model_core.motion.conventions import STANDARD_LEG_LENGTH, UP_AXIS, yup_to_zup
-from ...model_core.motion.features import facing
+from ...model_core.motion.conventions import STANDARD_LEG_LENGTH, UP_AXIS
 from ...model_core.ops.extend import FLOOR_S, MEMORY_S, clip_floor, clip_in_place, floor_rise
 from ...model_core.ops.footlock import SETTLE_PASSES
-from ...model_core.ops.root_motion import carried_root
 from ...model_core.rig.rigs import leg_length
-from ...model_core.rig.solve import fk, solve
+from ...model_core.rig.solve import solve
 from .. import engine_bridge
 from ..scene import anim, cycles, pipeline
 from ..scene.ground import carried, find_ground, flattened, ground_record
@@ -134,8 +132,7 @@ def extend_steps(context, obj, *, frames: int = 120, context_frames: int = 0, fo
     arm_world = pipeline.world_at(context, clip, new_frames)
     root = pipeline.root_motion_bone(context, clip, mem_frames)  # a game rig's root carries the travel: on with it
     if root is not None:
-        last = arm_world[:1] @ fk(clip.rig, held_loc, held_rot)[:, root]  # its world matrix at the edge
-        carry = carried_root(last[0], yup_to_zup(joined[:, 0]), yup_to_zup(facing(joined)), len(pos), fps)
+        carry = pipeline.root_track(clip, root, held_loc, held_rot, arm_world[0], joined, len(pos), fps)[1:]
         ref_loc, ref_rot = pipeline.root_carried(clip, root, ref_loc, ref_rot, carry, arm_world)
         previous.update(pipeline.raw_rotations(clip, edge, (clip.rig.names[root],)))
     if back:  # written in time order

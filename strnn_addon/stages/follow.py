@@ -11,10 +11,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ...model_core.motion.conventions import yup_to_zup, zup_to_yup
-from ...model_core.motion.features import facing
-from ...model_core.ops.root_motion import carried_root
-from ...model_core.rig.solve import fk, solve
+from ...model_core.motion.conventions import zup_to_yup
+from ...model_core.rig.solve import solve
 from .. import engine_bridge
 from ..scene import anim, curves, cycles, pipeline
 from ..scene.ground import carried, find_ground, ground_record
@@ -70,8 +68,7 @@ def follow_curve_steps(context, obj, *, curve: str = "", frames: int = 0, speed:
     ref_loc, ref_rot = np.repeat(held_loc, n, 0), np.repeat(held_rot, n, 0)
     root = pipeline.root_motion_bone(context, clip, ctx) if context_pos is not None else None
     if root is not None:  # a game rig's root carries the travel: along the curve with the body
-        last = arm_world[:1] @ fk(clip.rig, held_loc, held_rot)[:, root]
-        carry = carried_root(last[0], yup_to_zup(joined[:, 0]), yup_to_zup(facing(joined)), known, clip.fps)
+        carry = pipeline.root_track(clip, root, held_loc, held_rot, arm_world[0], joined, known, clip.fps)[1:]
         ref_loc, ref_rot = pipeline.root_carried(clip, root, ref_loc, ref_rot, carry, arm_world)
         previous.update(pipeline.raw_rotations(clip, clip.last, (clip.rig.names[root],)))
     targets = pipeline.to_armature(clip, new_pos, arm_world)

@@ -5,12 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ...model_core.motion.conventions import yup_to_zup
-from ...model_core.motion.features import facing
 from ...model_core.ops.footlock import SETTLE_PASSES
 from ...model_core.ops.loop import least_cycle
-from ...model_core.ops.root_motion import carried_root
-from ...model_core.rig.solve import fk
 from .. import engine_bridge
 from ..scene import cycles, pipeline
 from .common import frame_range, lock, made_by, model_call, noop, pace_record, prefs, run, write_new
@@ -59,9 +55,8 @@ def loop_steps(context, obj, *, frame_start: int | None = None, frame_end: int |
     carry = None
     if root is not None:  # a game rig's root carries the travel: carried with the cycle (in place: it stays)
         held_loc, held_rot = pipeline.reference_pose(context, clip, written[:1])
-        start = pipeline.world_at(context, clip, written[:1]) @ fk(clip.rig, held_loc, held_rot)[:, root]
-        carry = (root, np.concatenate([start, carried_root(start[0], yup_to_zup(cycle[:, 0]),
-                                                           yup_to_zup(facing(cycle)), 1, fps)]))
+        carry = (root, pipeline.root_track(clip, root, held_loc, held_rot,
+                                           pipeline.world_at(context, clip, written[:1])[0], cycle, 1, fps))
     loc, rot = pipeline.solve_frames(context, clip, written, cycle, carry)
     record = made_by("Make Loop", clip, engine_bridge.model_used(prefs(context)), key_step=step,
                      frame_start=a, frame_end=b, blend=float(blend), match=match, in_place=in_place,

@@ -4,11 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from ...model_core.motion.conventions import JOINT_INDEX, yup_to_zup
-from ...model_core.motion.features import facing
-from ...model_core.ops.root_motion import carried_root
+from ...model_core.motion.conventions import JOINT_INDEX
 from ...model_core.ops.transfer import retarget
-from ...model_core.rig.solve import fk, solve
+from ...model_core.rig.solve import solve
 from ..scene import pipeline
 from ..scene.ground import carried, find_ground, ground_record
 from ..scene.pipeline import UserError
@@ -76,10 +74,8 @@ def transfer_steps(context, obj, *, source: str = "", foot_lock: bool = True, sc
     arm_world = pipeline.world_at(context, target, frames)
     ref_loc, ref_rot = np.repeat(ref_loc, n, 0), np.repeat(ref_rot, n, 0)
     if root is not None:  # the root, where it stands now under the body, carried with it from the first frame on
-        start = arm_world[:1] @ fk(target.rig, ref_loc[:1], ref_rot[:1])[:, root]
-        carry = carried_root(start[0], yup_to_zup(new_pos[:, 0]), yup_to_zup(facing(new_pos)), 1, src.fps / step)
-        ref_loc, ref_rot = pipeline.root_carried(target, root, ref_loc, ref_rot,
-                                                 np.concatenate([start, carry]), arm_world)
+        carry = pipeline.root_track(target, root, ref_loc[:1], ref_rot[:1], arm_world[0], new_pos, 1, src.fps / step)
+        ref_loc, ref_rot = pipeline.root_carried(target, root, ref_loc, ref_rot, carry, arm_world)
     loc, rot = solve(target.rig, target.anchors, pipeline.to_armature(target, new_pos, arm_world), ref_loc, ref_rot)
     yield "write"
     record = made_by("Transfer Motion", src, key_step=step, source=src.obj.name, target=obj.name, foot_lock=foot_lock,
