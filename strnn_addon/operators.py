@@ -423,7 +423,8 @@ class STRNN_OT_follow_curve(_Staged, bpy.types.Operator):
         others = len(curve.data.splines) - 1
         note = f" (it followed the first of the curve's {others + 1} splines)" if others else ""
         over = f" over {self.ground!r}" if self.ground else ""
-        return f"Walked the curve {curve.name!r}{over} into new action {action.name!r}{note}{range_note(action)}"
+        return (f"Walked the curve {curve.name!r}{over} into new action {action.name!r}{note}{stepped_note(action)}"
+                f"{range_note(action)}")
 
 
 class STRNN_OT_transfer_motion(_Staged, bpy.types.Operator):
@@ -614,9 +615,12 @@ def length(value: float) -> str:
 
 
 def stepped_note(action) -> str:
-    """Where an operation read and wrote an action keyed on twos (or threes, ...) at its keys, so say."""
+    """Where an operation read and wrote an action keyed on twos (or threes, ...) at its keys, so say; and where it
+    keyed a root bone carrying the travel (root motion), which."""
     step = action.get(RECORD, {}).get("key_step", 1)
-    return f" (keyed every {step} frames with Constant interpolation, as the action is)" if step > 1 else ""
+    root = action.get(RECORD, {}).get("root_motion")
+    return ((f" (keyed every {step} frames with Constant interpolation, as the action is)" if step > 1 else "")
+            + (f"; the root {root['bone']!r} carries the travel, keyed with the body" if root else ""))
 
 
 def simplified(context, obj, action, tolerance_cm: float) -> str:

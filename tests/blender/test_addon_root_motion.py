@@ -47,12 +47,14 @@ def root_heads(obj, frames) -> np.ndarray:
     return np.array(out)
 
 
-def test_extend_carries_a_moving_root_on_under_the_body(addon, fake_model):
+def test_extend_carries_a_moving_root_on_under_the_body(addon, fake_model, capfd):
     obj = root_rig()
     assert np.ptp(root_heads(obj, [1, 60])[:, 1]) > 1.0  # the root carries the walk
     before = key_snapshot(obj)
     old_joints = evaluated_joints(addon, obj, np.arange(1, 61))
+    capfd.readouterr()
     assert bpy.ops.strnn.extend_clip(frames=30) == {"FINISHED"}
+    assert "the root 'root' carries the travel, keyed with the body" in capfd.readouterr().out
     new = action_of(obj)
     assert same_keys(before, key_snapshot(obj, bpy.data.actions[new["strnn"]["source_action"]]))
     assert new["strnn"]["root_motion"].to_dict() == {"bone": "root"}
