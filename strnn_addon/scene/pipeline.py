@@ -8,7 +8,7 @@ the file changes, so a failed run leaves the scene exactly as it was.
 from __future__ import annotations
 
 import re
-from dataclasses import dataclass
+from dataclasses import dataclass, replace as replace_set
 
 import bpy
 import numpy as np
@@ -25,6 +25,7 @@ from ...model_core.motion.conventions import (  # noqa: F401  (MIN_MODEL_FRAMES,
 from ...model_core.motion.features import facing
 from ...model_core.ops.root_motion import carried_root
 from ...model_core.rig.controls import Control, ControlSet, visual_local
+from ...model_core.rig.rigs import leg_length
 from ...model_core.rig.solve import Anchors, Rig, anchor_positions, fk, solve, solved_bones
 from . import anim, controls, mapping, rig_io
 
@@ -243,10 +244,10 @@ def joint_positions(context, clip: Clip, frames: np.ndarray) -> np.ndarray:
 
 
 def solve_frames(context, clip: Clip, frames: np.ndarray, positions: np.ndarray,
-                 root: tuple[int, np.ndarray] | None = None) -> tuple[np.ndarray, np.ndarray]:
+                 root: tuple[str, np.ndarray] | None = None) -> tuple[np.ndarray, np.ndarray]:
     """The rig's local pose ``loc`` ``[F, B, 3]``, ``rot`` ``[F, B, 3, 3]`` (float32) that puts its joints on
     ``positions`` ``[F, 21, 3]`` (Y-up, scene units) at scene ``frames``, each frame starting from its own
-    reference pose (:func:`reference_pose`; ``root``: (a root bone carrying the travel, its world matrices
+    reference pose (:func:`reference_pose`; ``root``: (a root bone carrying the travel, its armature-space pose
     ``[F, 4, 4]`` there), :func:`root_carried`): read and solved :data:`CHUNK_FRAMES` frames at a time, so a
     long take never holds more than one chunk's reference and working arrays."""
     frames = np.asarray(frames, dtype=np.float64)
@@ -258,7 +259,7 @@ def solve_frames(context, clip: Clip, frames: np.ndarray, positions: np.ndarray,
     for part in chunks(n):
         ref_loc, ref_rot = reference_pose(context, clip, frames[part], cache)
         if root is not None:
-            ref_loc, ref_rot = root_carried(clip, root[0], ref_loc, ref_rot, root[1][part], arm_world[part])
+            ref_loc, ref_rot = root_carried(clip, root[0], ref_loc, ref_rot, root[1][part])
         loc[part], rot[part] = solve(clip.rig, clip.anchors, targets[part], ref_loc, ref_rot)
     return loc, rot
 
@@ -311,66 +312,94 @@ def written_bones(clip: Clip) -> list[int]:
 
 # A root bone carries the action's travel where its head moves this share of the rig's leg over the clip.
 ROOT_MOTION_SHARE = 0.1
+ROOT_SAMPLES = 24  # frames of the clip read to tell whether a root bone travels
 
 
-def above_hips(clip: Clip) -> list[int]:
-    """The bones above the hips bone, nearest first (a game rig's root; none where the hips bone is the top)."""
-    out = []
-    b = int(clip.rig.parents[int(clip.anchors.bone[JOINT_INDEX["hips"]])])
-    while b >= 0:
-        out.append(b)
-        b = int(clip.rig.parents[b])
+@dataclass
+class Root:
+    """A bone above the hips that carries the travel (a game rig's root, as Unreal's ``root`` or Auto-Rig Pro's
+    ``c_traj``) and its world matrix ``start`` ``[4, 4]`` on the frame the new frames go on from."""
+
+    bone: str
+    start: np.ndarray
+
+    def track(self, positions: np.ndarray, seam: int, fps: float) -> np.ndarray:
+        """World matrices ``[F - seam + 1, 4, 4]`` on frames ``seam - 1`` on of ``positions`` ``[F, 21, 3]`` (world,
+        Y-up, ``fps``): ``start``, then carried with the body (:func:`root_motion.carried_root`)."""
+        carried = carried_root(self.start, yup_to_zup(positions[:, 0]), yup_to_zup(facing(positions)), seam, fps)
+        return np.concatenate([self.start[None], carried])
+
+
+# Prefixes of a generated rig's mechanism, original and deform bones (Rigify's), which no animator keys.
+MECHANISM = ("MCH-", "ORG-", "DEF-")
+
+
+def above_hips(clip: Clip) -> list[str]:
+    """The bones of the armature above the hips bone (on a control rig, above the control that carries the body)
+    that an animator keys, nearest first: a game rig's root, Auto-Rig Pro's ``c_traj``; none where there is none
+    (a generated Rigify rig's ``torso`` hangs from a mechanism bone that follows ``root`` by a constraint)."""
+    hips = clip.rig.names[int(clip.anchors.bone[JOINT_INDEX["hips"]])]
+    if clip.controls is not None:
+        hips = next((c.bone for c in clip.controls.controls if c.drives == hips), hips)
+    out, pb = [], clip.obj.pose.bones[hips].parent
+    while pb is not None:
+        if not pb.name.startswith(MECHANISM):
+            out.append(pb.name)
+        pb = pb.parent
     return out
 
 
-def root_motion_bone(context, clip: Clip, frames: np.ndarray) -> int | None:
-    """The bone above the hips that carries the action's travel over the ground, as a game rig's root does
-    (Unreal's ``root``): the nearest ancestor of the hips bone whose head the action moves over the ground by a
-    tenth of a leg or more over scene ``frames`` (the clip read). None where there is none, and on a control rig
-    (its controls are keyed as the animator keys them)."""
-    if clip.controls is not None or clip.channels is None:
+def world_matrices(context, obj, names: list[str], frames: np.ndarray) -> np.ndarray:
+    """World matrices ``[F, N, 4, 4]`` of pose bones ``names`` as Blender plays scene ``frames`` (constraints and
+    all); the scene's current frame is restored."""
+    scene = context.scene
+    keep = (scene.frame_current, scene.frame_subframe)
+    out = np.empty((len(frames), len(names), 4, 4))
+    try:
+        for k, f in enumerate(frames):
+            scene.frame_set(int(np.floor(f)), subframe=float(f - np.floor(f)))
+            world = np.array(obj.matrix_world, np.float64)
+            out[k] = [world @ np.array(obj.pose.bones[n].matrix, np.float64) for n in names]
+    finally:
+        scene.frame_set(keep[0], subframe=keep[1])
+    return out
+
+
+def moving_root(context, clip: Clip, frames: np.ndarray, at: float) -> Root | None:
+    """The bone above the hips that carries the action's travel over the ground, as a game rig's root does: the
+    nearest one the action keys whose head it moves over the ground (the world's X and Y: a rise is no travel) by a
+    tenth of a leg or more over scene ``frames`` (the clip read), with its world matrix on frame ``at``; None where
+    there is none."""
+    if clip.channels is None:
         return None
-    above = above_hips(clip)
     keyed = {bone for bone, prop in rig_io.bone_channels(clip.channels.fcurves) if prop == "location"}
-    above = [b for b in above if clip.rig.names[b] in keyed]
+    above = [name for name in above_hips(clip) if name in keyed]
     if not above:
         return None
-    loc, rot = reference_pose(context, clip, frames)
-    pose = fk(clip.rig, loc, rot)
-    joints = anchor_positions(clip.rig, clip.anchors, pose)
-    leg = np.linalg.norm(joints[:, JOINT_INDEX["l_upleg"]] - joints[:, JOINT_INDEX["l_foot"]], axis=-1).max()
-    world = np.asarray(clip.world, np.float64)
-    for b in above:
-        head = pose[:, b, :3, 3] @ world[:3, :3].T  # over the ground: the world's X and Y (a rise is no travel)
-        leg_world = leg * np.abs(np.linalg.det(world[:3, :3])) ** (1.0 / 3.0)
-        if np.linalg.norm(head[:, :2] - head[:1, :2], axis=-1).max() >= ROOT_MOTION_SHARE * leg_world:
-            return b
+    frames = np.asarray(frames, np.float64)
+    sample = frames[np.unique(np.linspace(0, len(frames) - 1, min(ROOT_SAMPLES, len(frames))).round().astype(int))]
+    heads = world_matrices(context, clip.obj, above, sample)[..., :2, 3]  # [S, N, 2]
+    leg = leg_length(joint_positions(context, clip, sample[:1]))
+    for k, name in enumerate(above):
+        if np.linalg.norm(heads[:, k] - heads[:1, k], axis=-1).max() >= ROOT_MOTION_SHARE * leg:
+            return Root(name, world_matrices(context, clip.obj, [name], np.array([at], np.float64))[0, 0])
     return None
 
 
-def root_track(clip: Clip, root: int, held_loc: np.ndarray, held_rot: np.ndarray, world0: np.ndarray,
-               positions: np.ndarray, seam: int, fps: float) -> np.ndarray:
-    """World matrices ``[F - seam + 1, 4, 4]`` of bone ``root`` on frames ``seam - 1`` on of ``positions``
-    ``[F, 21, 3]`` (world, Y-up, ``fps``): where it stands in the pose ``held_loc``, ``held_rot`` ``[1, B, ...]``
-    under the armature's world matrix ``world0`` ``[4, 4]`` on frame ``seam - 1``, then carried with the body
-    (:func:`root_motion.carried_root`)."""
-    start = np.asarray(world0, np.float64) @ fk(clip.rig, held_loc, held_rot)[0, root]
-    carried = carried_root(start, yup_to_zup(positions[:, 0]), yup_to_zup(facing(positions)), seam, fps)
-    return np.concatenate([start[None], carried])
-
-
-def root_carried(clip: Clip, root: int, ref_loc: np.ndarray, ref_rot: np.ndarray, world: np.ndarray,
-                 arm_world: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def root_carried(clip: Clip, root: str, ref_loc: np.ndarray, ref_rot: np.ndarray,
+                 pose: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """``ref_loc`` ``[F, B, 3]``, ``ref_rot`` ``[F, B, 3, 3]`` (the reference pose of the new frames) with bone
-    ``root`` given the world matrices ``world`` ``[F, 4, 4]`` (:func:`root_track`), through the armature's
-    world matrices ``arm_world`` ``[F, 4, 4]`` and its parent's reference pose."""
+    ``root`` at the armature-space pose matrices ``pose`` ``[F, 4, 4]``, through its parent's reference pose (a plain
+    rig's; a control rig's root is keyed by the bake, :func:`write_controls`)."""
+    if clip.controls is not None:
+        return ref_loc, ref_rot
+    b = clip.rig.names.index(root)
     loc, rot = np.array(ref_loc, np.float64), np.array(ref_rot, np.float64)
-    armature = np.linalg.inv(arm_world) @ world  # [F, 4, 4] armature space
-    parent = int(clip.rig.parents[root])
-    base = clip.rig.rel_rest[root] if parent < 0 else fk(clip.rig, loc, rot)[:, parent] @ clip.rig.rel_rest[root]
-    local = np.linalg.inv(base) @ armature
+    parent = int(clip.rig.parents[b])
+    base = clip.rig.rel_rest[b] if parent < 0 else fk(clip.rig, loc, rot)[:, parent] @ clip.rig.rel_rest[b]
+    local = np.linalg.inv(base) @ pose
     u, _, vt = np.linalg.svd(local[:, :3, :3])  # the nearest rotation
-    loc[:, root], rot[:, root] = local[:, :3, 3], u @ vt
+    loc[:, b], rot[:, b] = local[:, :3, 3], u @ vt
     return loc, rot
 
 
@@ -381,18 +410,20 @@ def keyed_names(clip: Clip) -> list[str]:
     return [clip.rig.names[b] for b in written_bones(clip)]
 
 
-def written_paths(clip: Clip, root: int | None = None) -> set[str]:
+def written_paths(clip: Clip, root: str | None = None) -> set[str]:
     """The F-curve data paths :func:`write_pose` keys: each written bone's rotation and the hips bone's location
     (and a ``root`` bone's rotation and location); on a control rig its controls' rotations, and the locations of
     those that move."""
+    carried = ({_bone_path(root, rig_io.rotation_property(clip.obj.pose.bones[root])), _bone_path(root, "location")}
+               if root is not None else set())
     if clip.controls is not None:
-        return {_bone_path(c.bone, prop) for c in keyed_controls(clip)
-                for prop in (rig_io.rotation_property(clip.obj.pose.bones[c.bone]),) + (("location",) if c.location
-                                                                                         else ())}
+        return carried | {_bone_path(c.bone, prop) for c in keyed_controls(clip)
+                          for prop in (rig_io.rotation_property(clip.obj.pose.bones[c.bone]),)
+                          + (("location",) if c.location else ())}
     hips = int(clip.anchors.bone[JOINT_INDEX["hips"]])
     paths = {_bone_path(clip.rig.names[b], rig_io.rotation_property(clip.obj.pose.bones[clip.rig.names[b]]))
-             for b in written_bones(clip) + ([root] if root is not None else [])}
-    return paths | {_bone_path(clip.rig.names[b], "location") for b in (hips, root) if b is not None}
+             for b in written_bones(clip)}
+    return carried | paths | {_bone_path(clip.rig.names[hips], "location")}
 
 
 # Keys on twos (threes, ...) held by Constant interpolation, the stepped look of hand-drawn-style animation: at least
@@ -505,11 +536,12 @@ def leg_bones(clip: Clip) -> list[int]:
 
 def write_pose(context, clip: Clip, action, frames: np.ndarray, loc: np.ndarray, rot: np.ndarray,
                previous: dict, replace: tuple[float, float] | None, bones: list[int] | None = None,
-               follows: bool = False, interpolation: str = "", root: int | None = None) -> float:
+               follows: bool = False, interpolation: str = "", root: tuple[str, np.ndarray] | None = None) -> float:
     """Key the solved rotations of mapped bones (and the hips bone's location) at ``frames``, and the rotation and
-    location of a ``root`` bone carrying the travel (:func:`root_motion_bone`); on a control rig, key its controls
-    by a visual bake instead (:func:`write_controls`). Returns how far (armature units) a written bone ends up from
-    the solve at worst (0 when keyed directly).
+    location of a ``root`` bone carrying the travel ((name, its armature-space pose ``[F, 4, 4]``): :func:`moving_root`,
+    already in ``loc``, ``rot`` on a plain rig); on a control rig, key its controls by a visual bake instead
+    (:func:`write_controls`). Returns how far (armature units) a written bone ends up from the solve at worst (0 when
+    keyed directly).
 
     ``loc`` ``[F, B, 3]``, ``rot`` ``[F, B, 3, 3]``; ``previous`` {bone: raw channel values} keeps
     Euler angles and quaternion signs continuous with the keys before (``follows``: after, frames added before
@@ -518,25 +550,33 @@ def write_pose(context, clip: Clip, action, frames: np.ndarray, loc: np.ndarray,
     channels = anim.Channels(action, clip.obj.animation_data, ensure=True)
     if clip.controls is not None:
         return write_controls(context, clip, channels, frames, loc, rot, previous, replace, bones, follows,
-                              interpolation)
+                              interpolation, root)
     hips = int(clip.anchors.bone[JOINT_INDEX["hips"]])
-    for b in (written_bones(clip) if bones is None else bones) + ([root] if root is not None else []):
+    moved = clip.rig.names.index(root[0]) if root is not None else None
+    for b in (written_bones(clip) if bones is None else bones) + ([moved] if moved is not None else []):
         pb = clip.obj.pose.bones[clip.rig.names[b]]
         prop, values = encode_rotation(pb.rotation_mode, rot[:, b], previous.get(pb.name), follows)
         _key_property(clip, channels, pb, prop, frames, values, replace, interpolation=interpolation)
-        if b in (hips, root):
+        if b in (hips, moved):
             _key_property(clip, channels, pb, "location", frames, loc[:, b], replace, interpolation=interpolation)
     return 0.0
 
 
 def write_controls(context, clip: Clip, channels: anim.Channels, frames: np.ndarray, loc: np.ndarray,
                    rot: np.ndarray, previous: dict, replace: tuple[float, float] | None,
-                   bones: list[int] | None, follows: bool = False, interpolation: str = "") -> float:
-    """Key a control rig's controls (and switches) so that its joint skeleton takes the solved pose."""
+                   bones: list[int] | None, follows: bool = False, interpolation: str = "",
+                   root: tuple[str, np.ndarray] | None = None) -> float:
+    """Key a control rig's controls (and switches) so that its joint skeleton takes the solved pose; a ``root``
+    control carrying the travel ((name, armature-space pose ``[F, 4, 4]``)) is set there first and keyed too."""
     pose = fk(clip.rig, loc, rot)
     chosen = keyed_controls(clip, bones)
     index = {n: b for b, n in enumerate(clip.rig.names)}
     targets = {c.drives: pose[:, index[c.drives]] for c in chosen}
+    control_set = clip.controls
+    if root is not None:  # the root control drives itself, to where it is carried; it goes first
+        carrier = Control(root[0], root[0], True)
+        chosen, targets[root[0]] = [carrier] + chosen, np.asarray(root[1], np.float64)
+        control_set = replace_set(control_set, controls=[carrier] + list(control_set.controls))
     # where NLA strips show through, a channel the action lacks takes the pose as played on its other frames: read
     # before the bake turns any bone, and only if such a channel will be made
     lacking = clip.layered and any(
@@ -544,7 +584,7 @@ def write_controls(context, clip: Clip, channels: anim.Channels, frames: np.ndar
         for c in chosen for prop in (rig_io.rotation_property(clip.obj.pose.bones[c.bone]),)
         + (("location",) if c.location else ()))
     played = _played(context, clip, frames) if lacking else None
-    baked = controls.bake(context, clip.obj, clip.controls, frames, targets)
+    baked = controls.bake(context, clip.obj, control_set, frames, targets)
     for k, c in enumerate(chosen):
         pb = clip.obj.pose.bones[c.bone]
         prop, values = encode_rotation(pb.rotation_mode, baked.rot[:, k], previous.get(pb.name), follows)

@@ -130,14 +130,16 @@ def extend_steps(context, obj, *, frames: int = 120, context_frames: int = 0, fo
     yield "solve"
     ref_loc, ref_rot = np.repeat(held_loc, count, 0), np.repeat(held_rot, count, 0)
     arm_world = pipeline.world_at(context, clip, new_frames)
-    root = pipeline.root_motion_bone(context, clip, mem_frames)  # a game rig's root carries the travel: on with it
+    # a game rig's root carries the travel: on with the body
+    root, carry = pipeline.moving_root(context, clip, mem_frames, ctx_frames[-1]), None
     if root is not None:
-        carry = pipeline.root_track(clip, root, held_loc, held_rot, arm_world[0], joined, len(pos), fps)[1:]
-        ref_loc, ref_rot = pipeline.root_carried(clip, root, ref_loc, ref_rot, carry, arm_world)
-        previous.update(pipeline.raw_rotations(clip, edge, (clip.rig.names[root],)))
+        carry = np.linalg.inv(arm_world) @ root.track(joined, len(pos), fps)[1:]
+        ref_loc, ref_rot = pipeline.root_carried(clip, root.bone, ref_loc, ref_rot, carry)
+        previous.update(pipeline.raw_rotations(clip, edge, (root.bone,)))
     if back:  # written in time order
         new_frames, new_pos, arm_world = new_frames[::-1], new_pos[::-1], arm_world[::-1]
         ref_loc, ref_rot = ref_loc[::-1], ref_rot[::-1]
+        carry = carry[::-1] if carry is not None else None
     targets = pipeline.to_armature(clip, new_pos, arm_world)
     loc, rot = solve(clip.rig, clip.anchors, targets, ref_loc, ref_rot)
     record = made_by("Extend Clip", clip, engine_bridge.model_used(prefs(context)), key_step=step,
@@ -157,7 +159,7 @@ def extend_steps(context, obj, *, frames: int = 120, context_frames: int = 0, fo
     if cycled:
         record["cycles_baked"] = [int(baked[0]), int(baked[-1])] if len(baked) else []
     if root is not None:
-        record["root_motion"] = {"bone": clip.rig.names[root]}
+        record["root_motion"] = {"bone": root.bone}
     record.update(familiarity_record(model_call(engine_bridge.run_familiarity, prefs(context), pos, fps)))
     held = model_call(engine_bridge.run_first_window, prefs(context), pos, fps, followed)
     record.update(first_window_record(held, back))
@@ -170,4 +172,5 @@ def extend_steps(context, obj, *, frames: int = 120, context_frames: int = 0, fo
     unrepeat = (lambda action: cycles.bake_cycles(anim.Channels(action, clip.obj.animation_data), baked)) \
         if cycled else None
     return write_new(context, clip, "extended", new_frames, loc, rot, previous, replace, record,
-                     scene_range=scene_range, follows=back, first=unrepeat, root=root)
+                     scene_range=scene_range, follows=back, first=unrepeat,
+                     root=(root.bone, carry) if root is not None else None)

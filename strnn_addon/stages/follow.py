@@ -66,11 +66,12 @@ def follow_curve_steps(context, obj, *, curve: str = "", frames: int = 0, speed:
     new_frames = start + np.arange(n, dtype=np.float64)
     arm_world = pipeline.world_at(context, clip, new_frames)
     ref_loc, ref_rot = np.repeat(held_loc, n, 0), np.repeat(held_rot, n, 0)
-    root = pipeline.root_motion_bone(context, clip, ctx) if context_pos is not None else None
+    root = pipeline.moving_root(context, clip, ctx, clip.last) if context_pos is not None else None
+    carry = None
     if root is not None:  # a game rig's root carries the travel: along the curve with the body
-        carry = pipeline.root_track(clip, root, held_loc, held_rot, arm_world[0], joined, known, clip.fps)[1:]
-        ref_loc, ref_rot = pipeline.root_carried(clip, root, ref_loc, ref_rot, carry, arm_world)
-        previous.update(pipeline.raw_rotations(clip, clip.last, (clip.rig.names[root],)))
+        carry = np.linalg.inv(arm_world) @ root.track(joined, known, clip.fps)[1:]
+        ref_loc, ref_rot = pipeline.root_carried(clip, root.bone, ref_loc, ref_rot, carry)
+        previous.update(pipeline.raw_rotations(clip, clip.last, (root.bone,)))
     targets = pipeline.to_armature(clip, new_pos, arm_world)
     loc, rot = solve(clip.rig, clip.anchors, targets, ref_loc, ref_rot)
     record = made_by("Follow Curve", clip, engine_bridge.model_used(prefs(context)), curve=curve_obj.name,
@@ -78,7 +79,7 @@ def follow_curve_steps(context, obj, *, curve: str = "", frames: int = 0, speed:
     if surface is not None:
         record.update(ground_record(surface, bare, len(joined)))
     if root is not None:
-        record["root_motion"] = {"bone": clip.rig.names[root]}
+        record["root_motion"] = {"bone": root.bone}
     if context_pos is not None:
         record.update(familiarity_record(engine_bridge.run_familiarity(prefs(context), context_pos, clip.fps)))
         record.update(pace_record(context, clip))
@@ -90,7 +91,8 @@ def follow_curve_steps(context, obj, *, curve: str = "", frames: int = 0, speed:
             if cycles.repeats(clip) else None
         # keys past a manual range's end go
         return write_new(context, clip, "curve", new_frames, loc, rot, previous, (clip.last + 0.5, float("inf")),
-                         record, scene_range=scene_range, first=unrepeat, root=root)
+                         record, scene_range=scene_range, first=unrepeat,
+                         root=(root.bone, carry) if root is not None else None)
     return write_fresh(context, clip, f"{clip.obj.name}.curve", new_frames, loc, rot, record, scene_range)
 
 

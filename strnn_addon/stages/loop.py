@@ -51,12 +51,10 @@ def loop_steps(context, obj, *, frame_start: int | None = None, frame_end: int |
         cycle = loop.positions
     written = frames[0] + step * np.arange(loop.seam + 1, dtype=np.float64)
     yield "solve"
-    root = pipeline.root_motion_bone(context, clip, frames)
+    root = pipeline.moving_root(context, clip, frames, written[0])
     carry = None
     if root is not None:  # a game rig's root carries the travel: carried with the cycle (in place: it stays)
-        held_loc, held_rot = pipeline.reference_pose(context, clip, written[:1])
-        carry = (root, pipeline.root_track(clip, root, held_loc, held_rot,
-                                           pipeline.world_at(context, clip, written[:1])[0], cycle, 1, fps))
+        carry = (root.bone, np.linalg.inv(pipeline.world_at(context, clip, written)) @ root.track(cycle, 1, fps))
     loc, rot = pipeline.solve_frames(context, clip, written, cycle, carry)
     record = made_by("Make Loop", clip, engine_bridge.model_used(prefs(context)), key_step=step,
                      frame_start=a, frame_end=b, blend=float(blend), match=match, in_place=in_place,
@@ -67,10 +65,10 @@ def loop_steps(context, obj, *, frame_start: int | None = None, frame_end: int |
                        "blend_keys": loop.blend, "turn_deg": round(float(np.degrees(loop.turn)), 1)}
     record.update(pace_record(context, clip, b))
     if root is not None:
-        record["root_motion"] = {"bone": clip.rig.names[root]}
-        previous.update(pipeline.raw_rotations(clip, frames[0], (clip.rig.names[root],)))
+        record["root_motion"] = {"bone": root.bone}
+        previous.update(pipeline.raw_rotations(clip, frames[0], (root.bone,)))
     yield "write"  # every check and every read done: only the writing is left
-    made = pipeline.written_paths(clip, root)
+    made = pipeline.written_paths(clip, root.bone if root is not None else None)
     return write_new(context, clip, "loop", written, loc, rot, previous, (-np.inf, np.inf), record,
-                     scene_range=False, root=root,
+                     scene_range=False, root=carry,
                      shape=lambda action: cycles.make_cyclic(clip, action, written, loop.blend, made))

@@ -48,7 +48,7 @@ def transfer_steps(context, obj, *, source: str = "", foot_lock: bool = True, sc
     on the bone above the hips (:func:`root_motion.carried_root`). A generator like :func:`.extend.extend_steps`."""
     surface = find_ground(ground, obj) if ground else None
     target = pipeline.prepare_any(context, obj)
-    root = _root_of(target) if root_motion else None
+    root = _root_of(context, target) if root_motion else None
     src = pipeline.prepare(context, find_source(context, obj, source))
     if abs(src.fps - target.fps) > 1e-6:  # one scene: never
         raise UserError("Source and target play at different frame rates")
@@ -73,9 +73,10 @@ def transfer_steps(context, obj, *, source: str = "", foot_lock: bool = True, sc
     n = len(frames)
     arm_world = pipeline.world_at(context, target, frames)
     ref_loc, ref_rot = np.repeat(ref_loc, n, 0), np.repeat(ref_rot, n, 0)
+    carry = None
     if root is not None:  # the root, where it stands now under the body, carried with it from the first frame on
-        carry = pipeline.root_track(target, root, ref_loc[:1], ref_rot[:1], arm_world[0], new_pos, 1, src.fps / step)
-        ref_loc, ref_rot = pipeline.root_carried(target, root, ref_loc, ref_rot, carry, arm_world)
+        carry = np.linalg.inv(arm_world) @ root.track(new_pos, 1, src.fps / step)
+        ref_loc, ref_rot = pipeline.root_carried(target, root.bone, ref_loc, ref_rot, carry)
     loc, rot = solve(target.rig, target.anchors, pipeline.to_armature(target, new_pos, arm_world), ref_loc, ref_rot)
     yield "write"
     record = made_by("Transfer Motion", src, key_step=step, source=src.obj.name, target=obj.name, foot_lock=foot_lock,
@@ -83,20 +84,25 @@ def transfer_steps(context, obj, *, source: str = "", foot_lock: bool = True, sc
     if surface is not None:
         record.update(ground_record(surface, bare, n))
     if root is not None:
-        record["root_motion"] = {"bone": target.rig.names[root]}
+        record["root_motion"] = {"bone": root.bone}
     return write_fresh(context, target, f"{src.action.name}.transfer", frames, loc, rot, record, scene_range,
-                       "CONSTANT" if step > 1 else "", root)
+                       "CONSTANT" if step > 1 else "", (root.bone, carry) if root is not None else None)
 
 
-def _root_of(target) -> int:
-    """The bone above the target's hips that Root Motion keys; a :class:`UserError` where there is none to key."""
-    if target.controls is not None:
-        raise UserError(f"Root Motion keys the bone above the hips of a plain rig; {target.obj.name!r} is keyed on "
-                        "its controls: turn Root Motion off and key its root control by hand")
+def _root_of(context, target) -> pipeline.Root:
+    """The bone above the target's hips that Root Motion keys, where it stands now; a :class:`UserError` where there
+    is none."""
     above = pipeline.above_hips(target)
     if not above:
         hips = target.rig.names[int(target.anchors.bone[JOINT_INDEX["hips"]])]
+        if target.controls is not None:
+            body = next((c.bone for c in target.controls.controls if c.drives == hips), hips)
+            raise UserError(f"Root Motion keys the control above the one that carries the body, and "
+                            f"{target.obj.name!r}'s {body!r} hangs from none an animator keys (a generated Rigify "
+                            "rig's torso follows root by a constraint): turn Root Motion off and key the root "
+                            "control by hand")
         raise UserError(f"Root Motion keys the bone above the hips, and {target.obj.name!r}'s hips bone {hips!r} has "
                         "none: add a root bone on the floor as the hips' parent (as a game rig has), or turn Root "
                         "Motion off")
-    return above[0]
+    now = np.array([float(context.scene.frame_current)])
+    return pipeline.Root(above[0], pipeline.world_matrices(context, target.obj, above[:1], now)[0, 0])

@@ -272,3 +272,41 @@ def test_a_walk_moved_onto_the_rig_and_extended_still_walks(addon, real_model, t
     after = joint_speed(evaluated_joints(addon, obj, np.arange(last + 3 * fps + 1, last + 5 * fps + 1)))
     print(f"auto-rig-pro walk extended: joint speed {after / before:.2f} x the clip's in its last 2 s")
     assert 0.5 < after / before < 2.0, (before, after)
+
+
+def test_root_motion_goes_on_c_traj_and_extend_carries_it_on(addon, fake_model, tmp_path):
+    """Transfer Motion with Root Motion keys the travel on ``c_traj`` (the rig's root-motion control), under the body
+    on the floor, and the body's controls against it; Extend then carries ``c_traj`` on with the body."""
+    from test_addon_rigify import import_walk, transfer
+
+    obj = arp_rig(frames=1)
+    obj.animation_data.action = None
+    for pb in obj.pose.bones:
+        pb.matrix_basis.identity()
+    source = import_walk(tmp_path)
+    _, moved = transfer(source, obj, foot_lock=True, root_motion=True)
+    assert moved["strnn"]["root_motion"].to_dict() == {"bone": "c_traj"}
+    frames = np.arange(int(moved.frame_range[0]), int(moved.frame_range[1]) + 1)
+
+    def traj(frames):
+        out = []
+        for f in frames:
+            bpy.context.scene.frame_set(int(f))
+            out.append(np.array(obj.matrix_world @ obj.pose.bones["c_traj"].head))
+        return np.array(out)
+
+    joints, roots = evaluated_joints(addon, obj, frames), traj(frames)
+    assert np.linalg.norm(roots[-1, :2] - roots[0, :2]) > 1.0  # it carries the walk
+    assert np.linalg.norm(roots[:, :2] - joints[:, 0, :2], axis=-1).max() < 0.15  # under the body
+    assert np.abs(roots[:, 2] - roots[0, 2]).max() < 1e-5  # on the floor
+    for o in bpy.context.view_layer.objects:
+        o.select_set(o is obj)
+    bpy.context.view_layer.objects.active = obj
+    last = int(frames[-1])
+    assert bpy.ops.strnn.extend_clip(frames=30) == {"FINISHED"}
+    new = action_of(obj)
+    assert new["strnn"]["root_motion"]["bone"] == "c_traj" and new["strnn"]["controls"]["max_error_cm"] < 1.0
+    more = np.arange(last, last + 31)
+    joints, roots = evaluated_joints(addon, obj, more), traj(more)
+    assert np.linalg.norm(roots[-1, :2] - roots[0, :2]) > 0.3  # on with the body
+    assert np.linalg.norm(roots[:, :2] - joints[:, 0, :2], axis=-1).max() < 0.15

@@ -442,3 +442,15 @@ def test_the_controls_panel_says_which_limbs_go_on_ik(ik_rig, addon):
     for side in "LR":
         ik_rig.pose.bones[f"thigh_parent.{side}"]["IK_FK"] = 1.0  # a rig animated in FK (its switch not keyed)
     assert not [text for text, _ in panel_labels("STRNN_PT_controls", bpy.context) if text.startswith("In IK")]
+
+
+def test_root_motion_is_refused_on_a_generated_rig_whose_torso_hangs_from_no_keyed_bone(rig, addon, walk_source):
+    """A generated Rigify rig's torso follows ``root`` by a constraint, not as its child: Root Motion has no control
+    to key the travel on, says so, and changes nothing."""
+    before = key_snapshot(rig)
+    for obj in bpy.context.view_layer.objects:
+        obj.select_set(obj in (walk_source, rig))
+    bpy.context.view_layer.objects.active = rig
+    with pytest.raises(RuntimeError, match="'torso' hangs from none an animator keys"):
+        bpy.ops.strnn.transfer_motion(root_motion=True)
+    assert same_keys(before, key_snapshot(rig))
