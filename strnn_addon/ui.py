@@ -8,9 +8,9 @@ import bpy
 
 from ..model_core.motion.conventions import JOINTS
 from ..model_core.rig.solve import placed_between
-from . import operators, props
+from . import operators
 from .operators import check_message
-from .props import TAIL_JOINTS, joint_label
+from .props import CONTROL_ROLES, TAIL_JOINTS, joint_label
 from .scene import anim, controls
 from .stages.common import RECORD, record_notes
 
@@ -243,7 +243,7 @@ class STRNN_PT_bone_map(_ArmatureSidebar, bpy.types.Panel):
                 row.prop(props, f"{joint}_tail", text="", icon="BONE_DATA", toggle=True)
 
 
-_ROLE_ICONS = {role[0]: role[3] for role in props.CONTROL_ROLES}
+_ROLE_ICONS = {role[0]: role[3] for role in CONTROL_ROLES}
 
 
 class STRNN_UL_controls(bpy.types.UIList):
