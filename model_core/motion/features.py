@@ -30,12 +30,20 @@ def gaussian_taps(sigma: float) -> np.ndarray:
     return taps / taps.sum()
 
 
-def gaussian_smooth(x: np.ndarray, sigma: float) -> np.ndarray:
+def gaussian_smooth(x: np.ndarray, sigma: float, ends: str = "nearest") -> np.ndarray:
     """Gaussian filter along axis 0 with edge padding; equals ``scipy.ndimage.gaussian_filter1d``
-    (mode ``nearest``, truncate 4). NumPy only, because Blender's Python has no SciPy."""
+    (mode ``nearest``, truncate 4). NumPy only, because Blender's Python has no SciPy. ``ends="trend"``: padded
+    instead by reflecting ``x`` through its first and last frames, so a steady trend goes on to the ends (a walk
+    near the last frame is not held back towards where it stands there)."""
     taps = gaussian_taps(sigma)
     radius = len(taps) // 2
-    padded = np.concatenate([np.repeat(x[:1], radius, 0), x, np.repeat(x[-1:], radius, 0)])
+    if ends == "trend" and len(x) > 1:
+        r = min(radius, len(x) - 1)
+        before, after = 2 * x[:1] - x[r:0:-1], 2 * x[-1:] - x[-2:-r - 2:-1]
+        padded = np.concatenate([np.repeat(before[:1], radius - r, 0), before, x, after,
+                                 np.repeat(after[-1:], radius - r, 0)])
+    else:
+        padded = np.concatenate([np.repeat(x[:1], radius, 0), x, np.repeat(x[-1:], radius, 0)])
     return sum(w * padded[k:k + len(x)] for k, w in enumerate(taps))
 
 

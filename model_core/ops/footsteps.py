@@ -22,7 +22,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from ..motion.conventions import GROUND_AXES, UP_AXIS
+from ..motion.conventions import GROUND_AXES, STANDARD_LEG_LENGTH, UP_AXIS
 from ..rig.rigs import leg_length
 from .footlock import _ANKLE, _HEEL_CHANNELS, _HIP, _KNEE, _TOE, _TOE_CHANNELS, body_forward, fill_gaps, two_bone_ik
 
@@ -97,7 +97,7 @@ def even_steps(pos: np.ndarray, contacts: np.ndarray, height_at: Callable, min_g
     pos = np.asarray(pos, np.float64)
     n = len(pos)
     fixed = np.zeros(n, bool) if fixed is None else np.asarray(fixed, bool)
-    unit = leg_length(pos) / 0.87
+    unit = leg_length(pos) / STANDARD_LEG_LENGTH
     found = stances(contacts, min_gap)
     way_of = np.zeros((n, 2, 3))  # each leg's shift, frame by frame
     report = {"steps": 0, "moved": 0, "on_edges": 0, "largest": 0.0}

@@ -351,18 +351,9 @@ def above_hips(clip: Clip) -> list[str]:
 
 def world_matrices(context, obj, names: list[str], frames: np.ndarray) -> np.ndarray:
     """World matrices ``[F, N, 4, 4]`` of pose bones ``names`` as Blender plays scene ``frames`` (constraints and
-    all); the scene's current frame is restored."""
-    scene = context.scene
-    keep = (scene.frame_current, scene.frame_subframe)
-    out = np.empty((len(frames), len(names), 4, 4))
-    try:
-        for k, f in enumerate(frames):
-            scene.frame_set(int(np.floor(f)), subframe=float(f - np.floor(f)))
-            world = np.array(obj.matrix_world, np.float64)
-            out[k] = [world @ np.array(obj.pose.bones[n].matrix, np.float64) for n in names]
-    finally:
-        scene.frame_set(keep[0], subframe=keep[1])
-    return out
+    all; :func:`rig_io.pose_matrices_evaluated`)."""
+    pose, world = rig_io.pose_matrices_evaluated(context, obj, names, np.asarray(frames, np.float64))
+    return world[:, None] @ pose
 
 
 def moving_root(context, clip: Clip, frames: np.ndarray, at: float) -> Root | None:
@@ -378,11 +369,12 @@ def moving_root(context, clip: Clip, frames: np.ndarray, at: float) -> Root | No
         return None
     frames = np.asarray(frames, np.float64)
     sample = frames[np.unique(np.linspace(0, len(frames) - 1, min(ROOT_SAMPLES, len(frames))).round().astype(int))]
-    heads = world_matrices(context, clip.obj, above, sample)[..., :2, 3]  # [S, N, 2]
+    read = world_matrices(context, clip.obj, above, np.r_[sample, at])  # [S + 1, N, 4, 4]: the samples, then ``at``
+    heads = read[:-1, :, :2, 3]
     leg = leg_length(joint_positions(context, clip, sample[:1]))
     for k, name in enumerate(above):
         if np.linalg.norm(heads[:, k] - heads[:1, k], axis=-1).max() >= ROOT_MOTION_SHARE * leg:
-            return Root(name, world_matrices(context, clip.obj, [name], np.array([at], np.float64))[0, 0])
+            return Root(name, read[-1, k])
     return None
 
 
@@ -661,11 +653,11 @@ def encode_rotation(mode: str, m: np.ndarray, previous: np.ndarray | None,
     return "rotation_euler", rotations.euler_continuous(rotations.matrix_to_euler(m, mode), mode, previous)
 
 
-def raw_rotations(clip: Clip, frame: float, more: tuple[str, ...] = ()) -> dict:
-    """{bone: rotation channel values} of the written bones (and the bones ``more``) at one scene frame."""
+def raw_rotations(clip: Clip, frame: float, names: list[str] | None = None) -> dict:
+    """{bone: rotation channel values} of the written bones (or of the bones ``names``) at one scene frame."""
     chans = rig_io.bone_channels(clip.channels.fcurves)
     out = {}
-    for name in keyed_names(clip) + list(more):
+    for name in keyed_names(clip) if names is None else names:
         pb = clip.obj.pose.bones[name]
         out[pb.name] = rig_io.rotation_values(chans, pb, np.array([float(frame)]))[0]
     return out

@@ -261,14 +261,15 @@ def pose_matrices_fast(obj, rig: Rig, fcurves, frames: np.ndarray, cache: KeyCac
     return fk(rig, loc, rot, scale)
 
 
-def pose_matrices_evaluated(context, obj, rig: Rig, frames: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Pose matrices ``[F, B, 4, 4]`` and world matrices ``[F, 4, 4]`` by letting Blender evaluate
-    each frame (constraints, drivers, parents); the scene's current frame is restored."""
+def pose_matrices_evaluated(context, obj, rig: Rig | list[str], frames: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Pose matrices ``[F, B, 4, 4]`` of the bones of ``rig`` (or of the bones named) and world matrices ``[F, 4, 4]``
+    by letting Blender evaluate each frame (constraints, drivers, parents); the scene's current frame is restored."""
     scene = context.scene
     keep = (scene.frame_current, scene.frame_subframe)
+    names = rig.names if isinstance(rig, Rig) else list(rig)
     order = {name: i for i, name in enumerate(obj.pose.bones.keys())}
-    perm = [order[n] for n in rig.names]
-    out = np.empty((len(frames), len(rig.names), 4, 4))
+    perm = [order[n] for n in names]
+    out = np.empty((len(frames), len(names), 4, 4))
     world = np.empty((len(frames), 4, 4))
     try:
         for k, f in enumerate(frames):

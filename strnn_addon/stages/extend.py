@@ -135,7 +135,7 @@ def extend_steps(context, obj, *, frames: int = 120, context_frames: int = 0, fo
     if root is not None:
         carry = np.linalg.inv(arm_world) @ root.track(joined, len(pos), fps)[1:]
         ref_loc, ref_rot = pipeline.root_carried(clip, root.bone, ref_loc, ref_rot, carry)
-        previous.update(pipeline.raw_rotations(clip, edge, (root.bone,)))
+        previous.update(pipeline.raw_rotations(clip, edge, [root.bone]))
     if back:  # written in time order
         new_frames, new_pos, arm_world = new_frames[::-1], new_pos[::-1], arm_world[::-1]
         ref_loc, ref_rot = ref_loc[::-1], ref_rot[::-1]

@@ -71,7 +71,7 @@ def follow_curve_steps(context, obj, *, curve: str = "", frames: int = 0, speed:
     if root is not None:  # a game rig's root carries the travel: along the curve with the body
         carry = np.linalg.inv(arm_world) @ root.track(joined, known, clip.fps)[1:]
         ref_loc, ref_rot = pipeline.root_carried(clip, root.bone, ref_loc, ref_rot, carry)
-        previous.update(pipeline.raw_rotations(clip, clip.last, (root.bone,)))
+        previous.update(pipeline.raw_rotations(clip, clip.last, [root.bone]))
     targets = pipeline.to_armature(clip, new_pos, arm_world)
     loc, rot = solve(clip.rig, clip.anchors, targets, ref_loc, ref_rot)
     record = made_by("Follow Curve", clip, engine_bridge.model_used(prefs(context)), curve=curve_obj.name,

@@ -66,7 +66,7 @@ def loop_steps(context, obj, *, frame_start: int | None = None, frame_end: int |
     record.update(pace_record(context, clip, b))
     if root is not None:
         record["root_motion"] = {"bone": root.bone}
-        previous.update(pipeline.raw_rotations(clip, frames[0], (root.bone,)))
+        previous.update(pipeline.raw_rotations(clip, frames[0], [root.bone]))
     yield "write"  # every check and every read done: only the writing is left
     made = pipeline.written_paths(clip, root.bone if root is not None else None)
     return write_new(context, clip, "loop", written, loc, rot, previous, (-np.inf, np.inf), record,

@@ -33,3 +33,14 @@ def test_a_root_goes_on_with_the_body_round_a_turn_keeping_its_place_against_it(
     ground = walk[seam:, 0] * [1.0, 0.0, 1.0]
     gap = np.linalg.norm(out[:, :3, 3] - ground, axis=-1)
     assert gap.max() < 0.15 and abs(gap[-1] - gap[len(gap) // 2]) < 0.03, gap
+
+
+def test_smoothing_to_the_trend_keeps_a_steady_walk_going_to_the_ends():
+    """``gaussian_smooth(..., ends="trend")`` leaves a straight track straight to its last frame, where padding with
+    the last frame holds it back; on a track shorter than the filter it still gives one value a frame."""
+    from model_core.motion.features import gaussian_smooth
+
+    track = np.outer(np.arange(60.0), [0.05, 0.0, 0.02])
+    np.testing.assert_allclose(gaussian_smooth(track, 15.0, ends="trend"), track, atol=1e-5)
+    assert np.abs(gaussian_smooth(track, 15.0) - track)[-1].max() > 0.2  # held back by about a third of a metre
+    assert gaussian_smooth(track[:5], 15.0, ends="trend").shape == (5, 3)
