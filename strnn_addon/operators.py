@@ -599,9 +599,13 @@ class STRNN_OT_controls_from_preset(_EditControls, bpy.types.Operator):
             item.bone, item.prop, item.value, item.ik_value, item.pole_prop = (
                 sw.bone, sw.prop, sw.value, sw.ik_value, sw.pole_prop)
         obj.strnn_control_index = 0
-        ik = sum(row.role != "FK" for row in rows)
-        ik = (f" ({len(preset.controls)} FK, {ik} keyed where their limb is animated in IK)" if ik else "")
-        self.report({"INFO"}, f"{len(rows)} controls{ik} and {len(switches)} switches from the "
+        switched = sum(row.role != "FK" and bool(row.switch) for row in rows)
+        always = sum(row.role != "FK" and not row.switch for row in rows)
+        parts = ([f"{len(rows) - switched - always} FK"] if switched or always else []) + (
+            [f"{switched} keyed where their limb is animated in IK"] if switched else []) + (
+            [f"{always} on limbs always in IK, keyed always"] if always else [])
+        parts = f" ({', '.join(parts)})" if parts else ""
+        self.report({"INFO"}, f"{len(rows)} controls{parts} and {len(switches)} switches from the "
                               f"{preset.name} preset")
         return {"FINISHED"}
 

@@ -204,8 +204,8 @@ STRNN_PG_bone_map = type("STRNN_PG_bone_map", (bpy.types.PropertyGroup,), {
 # The roles of model_core/rig/controls.py's ROLES, as the Controls list offers them (icons shown in the list).
 CONTROL_ROLES = [
     ("FK", "FK", "Keyed always, or with a Switch where its limb is animated in FK", "BONE_DATA", 0),
-    ("IK_END", "IK End", "The IK chain's end (the foot or hand IK control): moved and turned where its limb is in IK",
-     "CON_KINEMATIC", 1),
+    ("IK_END", "IK End", "The IK chain's end (the foot or hand IK control): moved and turned where its limb is in IK "
+                         "(with no Switch: always, a limb that never leaves IK)", "CON_KINEMATIC", 1),
     ("IK_BASE", "IK Base", "The IK chain's base (thigh or upper arm IK): turned about its own axis to set the knee's "
                            "or elbow's plane, where its limb is in IK and its pole is not used", "CON_ROTLIKE", 2),
     ("IK", "IK", "Another control of the IK limb (a toe), turned where its limb is in IK", "CON_ROTLIKE", 3),
@@ -227,7 +227,8 @@ class STRNN_PG_control(bpy.types.PropertyGroup):
                     "the IK controls keyed where its limb is animated in IK")
     switch: StringProperty(name="Switch", override={"LIBRARY_OVERRIDABLE"},
                            description="The bone of the IK/FK switch (in the switch list) of the limb this control "
-                                       "belongs to; empty: it belongs to no limb and is keyed always")
+                                       "belongs to; empty: it is keyed always, in its role (an IK control of a limb "
+                                       "that never leaves IK, as an MMD model's legs)")
 
 
 class STRNN_PG_switch(bpy.types.PropertyGroup):

@@ -143,8 +143,8 @@ class ControlSet:
 
 
 # What a control is for in an edited control list (the Bone Map panel's): keyed always or where its limb is in FK;
-# or, where its limb is in IK, an IK chain's end, the chain's base (turned about its own axis; left alone where the
-# limb's pole is used), another IK control (a toe), or the pole.
+# or, where its limb is in IK (or always, a control of no switch), an IK chain's end, the chain's base (turned about
+# its own axis; left alone where the limb's pole is used), another IK control (a toe), or the pole.
 ROLES = ("FK", "IK_END", "IK_BASE", "IK", "POLE")
 
 
@@ -177,11 +177,10 @@ def as_rows(found: ControlSet) -> tuple[list[Row], list[SwitchRow]]:
     """``found`` as an edited list (:func:`from_rows` gives it back): each FK control that a limb gives way to names
     the limb's switch, and each limb's IK controls follow, limb by limb."""
     limb_of = {b: limb for limb in found.ik_limbs for b in limb.fk}
-    rows = [Row(c.bone, c.drives, c.location, "FK", limb_of[c.bone].switch.bone if c.bone in limb_of else "")
+    rows = [Row(c.bone, c.drives, c.location, _role(c, "FK"), limb_of[c.bone].switch.bone if c.bone in limb_of else "")
             for c in found.controls]
     for limb in found.ik_limbs:
-        rows += [Row(c.bone, c.drives, c.location, "IK_END" if c.end else "IK_BASE" if c.twist else "IK",
-                     limb.switch.bone) for c in limb.ik]
+        rows += [Row(c.bone, c.drives, c.location, _role(c, "IK"), limb.switch.bone) for c in limb.ik]
         rows += [Row(limb.pole.bone, limb.pole.drives, limb.pole.location, "POLE", limb.switch.bone)] \
             if limb.pole is not None else []
     ik = {limb.switch: limb for limb in found.ik_limbs}
@@ -190,17 +189,23 @@ def as_rows(found: ControlSet) -> tuple[list[Row], list[SwitchRow]]:
     return rows, switches
 
 
+def _role(c: Control, plain: str) -> str:
+    """The role of control ``c`` in a list (:data:`ROLES`); ``plain``: that of a control that only turns or moves."""
+    return "IK_END" if c.end else "IK_BASE" if c.twist else "POLE" if c.pole else plain
+
+
 def from_rows(name: str, rows: list[Row], switches: list[SwitchRow]) -> tuple[ControlSet, list[str]]:
     """The control set an edited list gives, and what is wrong with the list (each a sentence saying how to fix
     it; the set leaves out what is wrong). A switch with IK controls makes a limb (:class:`IkLimb`) of them, the
-    FK controls that name it and its pole; one without keys its FK controls alone, as a switch always did."""
+    FK controls that name it and its pole; one without keys its FK controls alone, as a switch always did. A control of
+    no switch is keyed always, whatever its role: an IK control of no switch belongs to a limb that never leaves IK
+    (an MMD model's legs)."""
     by_bone = {s.bone: s for s in switches}
     problems = [f"Control {r.bone!r} is {'an FK' if r.role == 'FK' else 'an IK'} control of the switch on "
                 f"{r.switch!r}, which the switch list does not have: add that switch, or clear the control's Switch"
                 for r in rows if r.switch and r.switch not in by_bone]
-    problems += [f"Control {r.bone!r} is an IK control ({r.role.replace('_', ' ').lower()}) of no switch: set its "
-                 "Switch to the bone of its limb's IK/FK switch" for r in rows if r.role != "FK" and not r.switch]
-    controls = [Control(r.bone, r.drives, r.location) for r in rows if r.role == "FK"]
+    controls = [Control(r.bone, r.drives, r.location or r.role in ("IK_END", "POLE"), twist=r.role == "IK_BASE",
+                        pole=r.role == "POLE", end=r.role == "IK_END") for r in rows if r.role == "FK" or not r.switch]
     limbs = []
     for bone in dict.fromkeys(r.switch for r in rows if r.role != "FK" and r.switch in by_bone):
         sw = by_bone[bone]
@@ -302,6 +307,18 @@ _AUTO_RIG_PRO_IK_LIMBS = [
            tuple(f"c_{b}_fk.{S}" for b in ("arm", "forearm", "hand")),
            (Control(f"c_hand_ik.{S}", f"hand.{S}", True, end=True),),
            Control(f"c_arms_pole.{S}", f"forearm.{S}", True, pole=True)) for S in "lr"]
+# MikuMikuDance models as mmd_tools imports them (``足.L``; :data:`rigs.RIG_FAMILIES` ``mmd``): the centre
+# (``センター``) carries the body, the lower body (``下半身``, the hips) and the upper body hanging from it apart.
+# The legs are always in IK: an IK constraint on the knee (``ひざ``, two bones, to ``足ＩＫ``; the knee bends only
+# about its X axis) and on the ankle (``足首``, one bone, aimed at ``つま先ＩＫ``, which hangs from ``足ＩＫ``), so
+# ``足ＩＫ`` puts the foot where it goes, turned so that its toe IK takes the toe there, and the thigh (``足``) is
+# turned about its own axis to set the knee's plane (as Rigify's ``thigh_ik``); the knee and ankle are keyed too, as
+# a VMD motion has them, so that each IK starts from the solved pose. No switch: the legs never leave IK.
+_MMD_CONTROLS = [Control("センター", "下半身", True), Control("上半身", "上半身"),
+                 Control("上半身2", "上半身2", optional=True), Control("首", "首"), Control("頭", "頭")] + [
+    Control(f"{bone}.{S}", f"{bone}.{S}") for S in "LR" for bone in ("肩", "腕", "ひじ", "手首", "ひざ", "足首")] + [
+    c for S in "LR"
+    for c in (Control(f"足.{S}", f"足.{S}", twist=True), Control(f"足ＩＫ.{S}", f"足首.{S}", True, end=True))]
 PRESETS: dict[str, ControlSet] = {
     "rigify": ControlSet(
         "rigify",
@@ -317,6 +334,7 @@ PRESETS: dict[str, ControlSet] = {
         "auto_rig_pro", _AUTO_RIG_PRO_CONTROLS,
         [Switch(f"c_{limb}_ik.{side}", "ik_fk_switch", 1.0) for side in "lr" for limb in ("foot", "hand")],
         _AUTO_RIG_PRO_IK_LIMBS),
+    "mmd": ControlSet("mmd", _MMD_CONTROLS),
 }
 
 

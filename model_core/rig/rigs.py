@@ -103,6 +103,20 @@ RIG_FAMILIES: dict[str, dict[str, list[str]]] = {
         "{s}_toe": ["toe.{S}"], "{s}_arm": ["upper_arm.{S}"], "{s}_elbow": ["forearm.{S}"], "{s}_wrist": ["hand.{S}"],
         "{s}_fingertip": ["f_middle.03.{S}_end", "f_middle.03.{S}"],
     }, ("L", ""), ("R", "")),
+    # MikuMikuDance models as mmd_tools imports them: Japanese names, left and right as a suffix (``足.L``, the
+    # default), with an underscore (``足_L``) or as the model has them (``左足``). No bone sits at the pelvis: the
+    # lower body (``下半身``) hangs from the centre and points down from the waist to it, so the hips are its tail.
+    # The legs' FK bones (``足``, ``ひざ``, ``足首``) are what the IK solves and the deform bones (``足D``) copy.
+    "mmd": {
+        "hips": ["下半身_end"], "spine": ["上半身"], "spine1": ["上半身2", "上半身1"], "neck": ["首"], "head": ["頭"],
+        **{f"{s}_{joint}": [f"{word}{sep}{S}" for sep in (".", "_")] + [f"{side}{word}"]
+           for s, S, side in (("l", "L", "左"), ("r", "R", "右"))
+           for joint, word in (("upleg", "足"), ("knee", "ひざ"), ("foot", "足首"), ("arm", "腕"), ("elbow", "ひじ"),
+                               ("wrist", "手首"))},
+        **{f"{s}_{joint}": [f"{word}{sep}{S}_end" for sep in (".", "_")] + [f"{side}{word}_end"]
+           for s, S, side in (("l", "L", "左"), ("r", "R", "右"))
+           for joint, word in (("toe", "足首"), ("fingertip", "中指３"))},
+    },
     "rigify_deform": _sided({
         "hips": ["DEF-spine"], "spine": ["DEF-spine.001"], "spine1": ["DEF-spine.003"],
         "neck": ["DEF-spine.004"], "head": ["DEF-spine.006"],

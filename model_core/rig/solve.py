@@ -141,21 +141,22 @@ class Anchors:
         neighbours: the one above below the one below)."""
         for j, name in enumerate(JOINTS):
             parent = PARENT_NAMES[name]
-            if parent is None:
-                if self.tail[j]:
-                    raise SolveError("the hips joint must be a bone head, not a tail")
+            if parent is None:  # the hips: at a bone's head, or at its tail (an MMD model's lower body)
                 continue
             if j in self.between:
                 continue
             p = self.carrier(JOINT_INDEX[parent])
             same = self.bone[j] == self.bone[p] and self.tail[j] == self.tail[p]
-            if same or not rig.is_ancestor(int(self.bone[p]), int(self.bone[j])) or self.tail[p]:
+            on_tail = self.tail[p] and PARENT_NAMES[JOINTS[p]] is not None  # the hips may be a tail (an MMD model's)
+            if same or not rig.is_ancestor(int(self.bone[p]), int(self.bone[j])) or on_tail:
                 raise SolveError(f"joint {name} (bone {rig.names[self.bone[j]]!r}) must be a different place "
                                  f"below joint {JOINTS[p]} (bone {rig.names[self.bone[p]]!r})")
 
     def on_bones(self) -> dict[int, str]:
-        """{bone: canonical joint} of the joints at bone heads (the bones the solve aims)."""
-        return {int(self.bone[j]): name for j, name in enumerate(JOINTS) if not self.tail[j] and j not in self.between}
+        """{bone: canonical joint} of the joints at bone heads, and the hips wherever they are (the bones the solve
+        aims)."""
+        return {int(self.bone[j]): name for j, name in enumerate(JOINTS)
+                if (not self.tail[j] or PARENT_NAMES[name] is None) and j not in self.between}
 
 
 def compose(loc: np.ndarray, rot: np.ndarray) -> np.ndarray:
@@ -233,6 +234,9 @@ def _aim(rig: Rig, anchors: Anchors, joint: str, ref: tuple, head: np.ndarray, b
     to_local = lambda p: np.einsum("fji,fnj->fni", g_ref, p - head_ref[:, None])  # (F, N, 3) in the bone's frame
     u = to_local(ref_anchor[:, kids])
     t = targets[:, kids] - head[:, None]
+    if anchors.tail[JOINT_INDEX[joint]]:  # the hips at the bone's tail: the children about it
+        u = u - np.array([0.0, rig.lengths[b], 0.0])
+        t = targets[:, kids] - targets[:, [JOINT_INDEX[joint]]]
     if len(kids) > 1:
         weights = np.array([2.0] + [1.0] * (len(kids) - 1))  # the torso child first: keep the spine aimed
         return _kabsch(u, t, weights)
@@ -311,6 +315,9 @@ def solve(rig: Rig, anchors: Anchors, targets: np.ndarray, ref_loc: np.ndarray,
         if b in joint_at:
             g = _aim(rig, anchors, joint_at[b], ref, head, base_rot, targets)
             rot[:, b] = np.swapaxes(r_base, -1, -2) @ g
+            if b == hips and anchors.tail[JOINT_INDEX["hips"]]:  # the hips at the tail: the head goes where that
+                head = targets[:, JOINT_INDEX["hips"]] - g[:, :, 1] * rig.lengths[b]  # puts the tail on its target
+                loc[:, b] = np.einsum("fji,fj->fi", r_base, head - t_base)
         elif b in bridges:  # an unmapped bone just above joints (a clavicle, a pelvis): aim it at them
             g = _aim_bridge(ref, b, bridges[b], head, base_rot, targets)
             rot[:, b] = np.swapaxes(r_base, -1, -2) @ g

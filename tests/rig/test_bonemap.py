@@ -243,3 +243,25 @@ def test_a_rig_with_some_auto_rig_pro_names_is_not_read_as_one():
     family, mapping = auto_map(names, parents)
     assert family != "auto_rig_pro" and not missing(mapping)
     assert mapping["hips"][0] == "hips" and mapping["l_upleg"][0] == "thigh.L"
+
+
+@pytest.mark.parametrize("spell", ["{w}.{S}", "{w}_{S}", "{side}{w}"])
+def test_an_mmd_model_maps_its_japanese_names_with_the_hips_at_the_lower_bodys_tail(spell):
+    """As mmd_tools imports it (left and right as ``.L``, as ``_L``, or as the model spells them, ``左足``): the lower
+    body points down from the waist to the pelvis, the ankle to the toe tip; the deform copies (``足D``) and the IK
+    bones are not joints."""
+    sided = lambda w, s: spell.format(w=w, S=s, side="左" if s == "L" else "右")
+    names = ["全ての親", "センター", "グルーブ", "下半身", "上半身", "上半身2", "首", "頭"]
+    parents = [-1, 0, 1, 2, 2, 4, 5, 6]
+    for s in "LR":
+        for word, parent in (("足", "下半身"), ("ひざ", "足"), ("足首", "ひざ"), ("つま先", "足首"),
+                             ("足D", "下半身"), ("足ＩＫ", "全ての親"), ("つま先ＩＫ", "足ＩＫ"), ("肩", "上半身2"),
+                             ("腕", "肩"), ("ひじ", "腕"), ("手首", "ひじ"), ("中指１", "手首"), ("中指２", "中指１"),
+                             ("中指３", "中指２")):
+            names.append(sided(word, s))
+            parents.append(names.index(parent if parent in names else sided(parent, s)))
+    family, mapping = auto_map(names, parents)
+    assert family == "mmd" and not missing(mapping)
+    assert mapping["hips"] == ("下半身", True) and mapping["spine"] == ("上半身", False)
+    assert mapping["l_upleg"] == (sided("足", "L"), False) and mapping["r_knee"] == (sided("ひざ", "R"), False)
+    assert mapping["l_toe"] == (sided("足首", "L"), True) and mapping["r_fingertip"] == (sided("中指３", "R"), True)

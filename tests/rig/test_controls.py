@@ -88,14 +88,37 @@ def test_an_edited_list_says_what_is_wrong_with_it():
             Row("thigh_ik.L", "ORG-thigh.L", False, "IK_BASE", "thigh_parent.L"),
             Row("hand_fk.R", "ORG-hand.R", False, "FK", "upper_arm_parent.R")]
     found, problems = from_rows("custom", rows, [SwitchRow("thigh_parent.L", "IK_FK", 1.0)])
-    assert len(problems) == 3, problems
+    assert len(problems) == 2, problems
     assert "'hand_fk.R'" in problems[0] and "'upper_arm_parent.R'" in problems[0]  # a switch the list lacks
-    assert "'foot_ik.L'" in problems[1] and "of no switch" in problems[1]
-    assert "no IK End" in problems[2]  # thigh_parent.L's limb: its end names no switch
-    assert not found.ik_limbs and [c.bone for c in found.controls] == ["torso", "hand_fk.R"]
+    assert "no IK End" in problems[1]  # thigh_parent.L's limb: its end names no switch
+    assert not found.ik_limbs and [c.bone for c in found.controls] == ["torso", "foot_ik.L", "hand_fk.R"]
+    assert found.controls[1].end and found.controls[1].location  # an IK End of no switch: keyed always
     two_poles = rows[:1] + [Row("foot_ik.L", "ORG-foot.L", True, "IK_END", "thigh_parent.L"),
                             Row("p1", "ORG-shin.L", True, "POLE", "thigh_parent.L"),
                             Row("p2", "ORG-shin.L", True, "POLE", "thigh_parent.L")]
     found, problems = from_rows("custom", two_poles, [SwitchRow("thigh_parent.L", "IK_FK", 1.0)])
     assert problems == ["The limb of the switch on 'thigh_parent.L' has 2 Pole controls (p1, p2): keep one and "
                         "remove the others"]
+
+
+MMD_NAMES = ["全ての親", "センター", "グルーブ", "上半身", "上半身2", "首", "頭", "下半身"] + [
+    f"{w}.{S}" for S in "LR"
+    for w in ("肩", "腕", "ひじ", "手首", "足", "ひざ", "足首", "つま先", "足ＩＫ", "つま先ＩＫ", "足D")]
+
+
+def test_an_mmd_model_is_keyed_on_its_centre_its_fk_bones_and_its_leg_ik():
+    found = preset_for(MMD_NAMES)
+    assert found is not None and found.name == "mmd" and not found.switches and not found.ik_limbs
+    by_bone = {c.bone: c for c in found.controls}
+    assert by_bone["センター"].drives == "下半身" and by_bone["センター"].location
+    for side in "LR":  # the foot IK puts the ankle where it goes; the leg's own bones start each IK from the solve
+        ik = by_bone[f"足ＩＫ.{side}"]
+        assert ik.drives == f"足首.{side}" and ik.end and ik.location
+        assert {f"足.{side}", f"ひざ.{side}", f"足首.{side}"} <= set(by_bone)
+    assert not {"つま先ＩＫ.L", "足D.L", "下半身", "グルーブ"} & set(by_bone)
+    rows, switches = as_rows(found)  # as an edited list: the foot IK an IK End of no switch, and back again
+    assert [r.role for r in rows if r.bone.startswith("足ＩＫ")] == ["IK_END", "IK_END"] and not switches
+    again, problems = from_rows("mmd", rows, switches)
+    assert not problems and again.controls == [replace(c, optional=False) for c in found.controls]
+    assert preset_for([n for n in MMD_NAMES if n != "上半身2"]) is not None  # a model without the second upper body
+    assert preset_for([n for n in MMD_NAMES if n != "足ＩＫ.L"]) is None  # nor one without its leg IK

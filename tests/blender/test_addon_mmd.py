@@ -1,0 +1,217 @@
+"""A MikuMikuDance model as mmd_tools imports it, made here bone for bone after the add-on's public source (the
+add-on itself cannot be installed in a test): Japanese bone names with left and right as ``.L`` / ``.R``;
+``全ての親`` > ``センター`` > ``グルーブ``, from which the upper body (``上半身`` > ``上半身2`` > ``首`` > ``頭``, the
+shoulders and arms) and the lower body (``下半身``, pointing down from the waist to the pelvis, and the legs ``足`` >
+``ひざ`` > ``足首`` > ``つま先``) hang apart; the legs always in IK as the importer sets them: an IK constraint named
+"IK" on the knee (two bones, to ``足ＩＫ``, the knee bending only about its X axis within its limits) and on the
+ankle (one bone, to ``つま先ＩＫ``, which hangs from ``足ＩＫ``), and the deform copies of the legs (``足D``) turning
+with them. The shipped ``mmd`` preset fits it with no set-up."""
+
+from __future__ import annotations
+
+import math
+
+import bpy
+import numpy as np
+import pytest
+from scenes import _mid, _rest_joints, action_of, build_armature, evaluated_joints, fcurves_of, find_mocap
+
+SIDES = "LR"
+# Canonical joint -> (bone, at its tail) of the model, as the bone map reads it.
+LEG = ("足", "ひざ", "足首")
+
+
+def mmd_bones() -> list[tuple]:
+    """(name, parent, head, tail) of an MMD model's standard bones on the canonical rest skeleton."""
+    j = _rest_joints()
+    up, fwd = np.array([0, 0, 0.1]), np.array([0, -0.08, 0])
+    centre = np.array([0.0, 0.0, 0.7 * j["hips"][2]])
+    bones = [("全ての親", None, np.zeros(3), up), ("センター", "全ての親", centre, centre - up),
+             ("グルーブ", "センター", centre + 0.2 * up, centre + up),
+             ("下半身", "グルーブ", j["spine"], j["hips"]), ("上半身", "グルーブ", j["spine"], j["spine1"]),
+             ("上半身2", "上半身", j["spine1"], j["neck"]), ("首", "上半身2", j["neck"], j["head"]),
+             ("頭", "首", j["head"], j["head"] + 2 * up)]
+    for s, S in (("l", "L"), ("r", "R")):
+        hand = [_mid(j[f"{s}_wrist"], j[f"{s}_fingertip"], t) for t in (0.0, 0.45, 0.65, 0.85, 1.0)]
+        bones += [(f"肩.{S}", "上半身2", _mid(j["neck"], j[f"{s}_arm"], 0.3) - up, j[f"{s}_arm"]),
+                  (f"腕.{S}", f"肩.{S}", j[f"{s}_arm"], j[f"{s}_elbow"]),
+                  (f"ひじ.{S}", f"腕.{S}", j[f"{s}_elbow"], j[f"{s}_wrist"]),
+                  (f"手首.{S}", f"ひじ.{S}", hand[0], hand[1])]
+        fingers = [f"手首.{S}"] + [f"中指{k}.{S}" for k in "１２３"]
+        bones += [(fingers[n], fingers[n - 1], hand[n], hand[n + 1]) for n in (1, 2, 3)]
+        bones += [(f"足.{S}", "下半身", j[f"{s}_upleg"], j[f"{s}_knee"]),
+                  (f"ひざ.{S}", f"足.{S}", j[f"{s}_knee"], j[f"{s}_foot"]),
+                  (f"足首.{S}", f"ひざ.{S}", j[f"{s}_foot"], j[f"{s}_toe"]),
+                  (f"つま先.{S}", f"足首.{S}", j[f"{s}_toe"], j[f"{s}_toe"] - 0.3 * up),
+                  (f"足ＩＫ.{S}", "全ての親", j[f"{s}_foot"], j[f"{s}_foot"] + fwd),
+                  (f"つま先ＩＫ.{S}", f"足ＩＫ.{S}", j[f"{s}_toe"], j[f"{s}_toe"] - 0.3 * up),
+                  (f"足D.{S}", "下半身", j[f"{s}_upleg"], j[f"{s}_knee"]),
+                  (f"ひざD.{S}", f"足D.{S}", j[f"{s}_knee"], j[f"{s}_foot"]),
+                  (f"足首D.{S}", f"ひざD.{S}", j[f"{s}_foot"], j[f"{s}_toe"])]
+    return bones
+
+
+def _constrain(obj, bone: str, kind: str, target: str, name: str):
+    con = obj.pose.bones[bone].constraints.new(kind)
+    con.name, con.target, con.subtarget = name, obj, target
+    return con
+
+
+def mmd_model():
+    """The model of :func:`mmd_bones` with its leg IK and deform copies set as mmd_tools sets them, no action."""
+    obj = build_armature("MMD_model", mmd_bones(), rotation_mode="QUATERNION")
+    bones = obj.pose.bones
+    for S in SIDES:
+        knee = bones[f"ひざ.{S}"]
+        ik = _constrain(obj, knee.name, "IK", f"足ＩＫ.{S}", "IK")
+        ik.chain_count, ik.iterations = 2, 40
+        # the knee bends only about its X axis, forwards never (the importer turns MMD's limits into these)
+        bend = _bend_sign(obj, knee)
+        knee.use_ik_limit_x = knee.use_ik_limit_y = knee.use_ik_limit_z = True
+        knee.ik_min_x, knee.ik_max_x = sorted((bend * math.radians(0.5), bend * math.radians(180)))
+        knee.ik_min_y = knee.ik_max_y = knee.ik_min_z = knee.ik_max_z = 0.0
+        limit = knee.constraints.new("LIMIT_ROTATION")
+        limit.name, limit.owner_space, limit.mute = "mmd_ik_limit_override", "LOCAL", False
+        limit.use_limit_x = False  # as the importer leaves it where its limits match the IK's
+        ankle = _constrain(obj, f"足首.{S}", "IK", f"つま先ＩＫ.{S}", "IK")
+        ankle.chain_count, ankle.iterations = 1, 3
+        for target, link in ((f"足首.{S}", knee.name), (f"つま先.{S}", f"足首.{S}")):
+            track = _constrain(obj, target, "DAMPED_TRACK", link, "mmd_ik_target_override")
+            track.mute, track.influence = True, 0.0
+        for bone in LEG:  # the deform copies turn with the leg (mmd_tools' additional rotation)
+            copy = _constrain(obj, f"{bone}D.{S}", "COPY_ROTATION", f"{bone}.{S}", "mmd_additional_rotation")
+            copy.owner_space = copy.target_space = "LOCAL"
+    return obj
+
+
+def _bend_sign(obj, knee) -> float:
+    """+1 where turning the knee about its X axis by a positive angle swings the ankle backwards (+Y), else -1."""
+    m = np.array(knee.bone.matrix_local)
+    x, y = m[:3, 0], m[:3, 1]
+    return 1.0 if np.cross(x, y)[1] > 0 or (np.cross(x, y)[1] == 0 and y[1] > 0) else -1.0
+
+
+def moved_walk(addon, folder):
+    """The model given a walk (real motion capture when unpacked) by Transfer Motion with its feet locked:
+    (model, source, new action, the floor it stands on)."""
+    from test_addon_rigify import import_walk
+
+    obj = mmd_model()
+    floor = evaluated_joints(addon, obj, [1])[0, [7, 8, 11, 12], 2].min()
+    source = import_walk(folder)
+    for o in bpy.context.view_layer.objects:
+        o.select_set(o in (source, obj))
+    bpy.context.view_layer.objects.active = obj
+    assert bpy.ops.strnn.transfer_motion(foot_lock=True) == {"FINISHED"}
+    return obj, source, action_of(obj), floor
+
+
+def keyed_bones(obj, action) -> set[str]:
+    return {fc.data_path.split('"')[1] for fc in fcurves_of(obj, action) if fc.data_path.startswith("pose.bones")}
+
+
+def test_the_bone_map_reads_an_mmd_model_with_its_hips_at_the_lower_bodys_tail(addon):
+    obj = mmd_model()
+    assert bpy.ops.strnn.auto_map() == {"FINISHED"}
+    m = obj.strnn_map
+    assert m.family == "mmd"
+    assert (m.hips, m.spine, m.spine1, m.neck, m.l_upleg, m.r_knee, m.l_foot, m.r_arm, m.l_wrist) == (
+        "下半身", "上半身", "上半身2", "首", "足.L", "ひざ.R", "足首.L", "腕.R", "手首.L")
+
+
+def test_controls_from_preset_fills_the_mmd_controls_with_the_leg_ik_keyed_always(addon):
+    from test_addon_ui import panel_labels
+
+    obj = mmd_model()
+    assert ("Always in IK, keyed on: 足ＩＫ.L, 足ＩＫ.R", "CON_KINEMATIC") in panel_labels("STRNN_PT_controls",
+                                                                                       bpy.context)
+    assert bpy.ops.strnn.controls_from_preset() == {"FINISHED"}
+    listed = {c.bone: (c.drives, c.role, c.switch) for c in obj.strnn_controls}
+    assert listed["センター"] == ("下半身", "FK", "") and listed["腕.L"] == ("腕.L", "FK", "")
+    for S in SIDES:  # no switch: an MMD model's legs never leave IK
+        assert listed[f"足ＩＫ.{S}"] == (f"足首.{S}", "IK_END", "")
+        assert listed[f"足.{S}"] == (f"足.{S}", "IK_BASE", "")
+    assert len(listed) == 21 and not len(obj.strnn_switches)
+
+
+def test_a_walk_moved_onto_the_model_is_keyed_on_its_centre_and_leg_ik_and_its_legs_follow(addon, tmp_path):
+    """Transfer Motion keys the centre, the upper body, the arms, each foot's IK and the leg bones each IK starts
+    from; the knees' IK then lands them where the solve put them, the deform copies follow, and the feet stand on the
+    model's floor."""
+    from test_addon_rigify import knee_bend_forward
+
+    obj, source, moved, floor = moved_walk(addon, tmp_path)
+    record = moved["strnn"]["controls"].to_dict()
+    assert record["set"] == "mmd" and record["max_error_cm"] < 1.0, record
+    keyed = keyed_bones(obj, moved)
+    assert {"センター", "上半身", "頭", "腕.L", "足ＩＫ.L", "足ＩＫ.R", "足.L", "ひざ.R"} <= keyed
+    assert not keyed & {"下半身", "グルーブ", "全ての親", "つま先ＩＫ.L", "足D.L", "ひざD.R", "つま先.L"}, keyed
+    frames = np.arange(int(moved.frame_range[0]), int(moved.frame_range[1]) + 1)
+    got, src = evaluated_joints(addon, obj, frames), evaluated_joints(addon, source, frames)
+    for side in "lr":  # each knee bends the way the source's does
+        bent = np.abs(knee_bend_forward(src, side)) > 0.02
+        assert bent.any() and (np.sign(knee_bend_forward(got, side)[bent]) ==
+                               np.sign(knee_bend_forward(src, side)[bent])).all()
+    bones = obj.pose.bones
+    for f in frames[::15]:
+        bpy.context.scene.frame_set(int(f))
+        for S in SIDES:  # each IK reaches its target, and the deform copies turn with the leg
+            assert np.linalg.norm(np.array(bones[f"ひざ.{S}"].tail - bones[f"足ＩＫ.{S}"].head)) < 1e-3
+            assert np.linalg.norm(np.array(bones[f"足首.{S}"].tail - bones[f"つま先ＩＫ.{S}"].head)) < 1e-3
+            for bone in LEG:
+                copy, leg = (np.array(bones[f"{bone}{d}.{S}"].matrix) for d in ("D", ""))
+                assert np.abs(copy - leg).max() < 1e-4
+    feet = got[:, [7, 8, 11, 12], 2].min(1) - floor  # the lowest heel or toe stands on the floor, not in it
+    assert np.percentile(feet, 5) > -0.03 and np.percentile(feet, 50) < 0.05, np.percentile(feet, [5, 50])
+    assert np.linalg.norm(got[-1, 0, :2] - got[0, 0, :2]) > 1.0  # it walks
+
+
+def test_a_walk_moved_onto_the_model_and_extended_still_walks(addon, real_model, tmp_path):
+    """A real walk moved onto the model, then extended by 5 s with the bundled model: keyed where the animator keys
+    an MMD model, within 1 cm of the solve, and still walking in its last 2 s."""
+    from test_addon_rigify import joint_speed
+
+    if find_mocap() is None:
+        pytest.skip("needs a real walk (../shared/mocap unpacked): the procedural walk is not motion the model learnt")
+    obj, _, moved, floor = moved_walk(addon, tmp_path)
+    last = int(moved.frame_range[1])
+    fps = bpy.context.scene.render.fps
+    for o in bpy.context.view_layer.objects:
+        o.select_set(o == obj)
+    assert bpy.ops.strnn.extend_clip(frames=5 * fps) == {"FINISHED"}
+    new = action_of(obj)
+    record = new["strnn"]["controls"].to_dict()
+    assert record["set"] == "mmd" and record["max_error_cm"] < 1.0, record
+    assert keyed_bones(obj, new) == keyed_bones(obj, moved)
+    before = joint_speed(evaluated_joints(addon, obj, np.arange(last - 2 * fps + 1, last + 1)))
+    joints = evaluated_joints(addon, obj, np.arange(last + 3 * fps + 1, last + 5 * fps + 1))
+    after = joint_speed(joints)
+    print(f"mmd walk extended: joint speed {after / before:.2f} x the clip's in its last 2 s")
+    assert 0.5 < after / before < 2.0, (before, after)
+    assert np.percentile(joints[:, [7, 8, 11, 12], 2].min(1) - floor, 5) > -0.03
+
+
+PRESET_BONES = {"センター", "上半身", "上半身2", "首", "頭"} | {
+    f"{b}.{S}" for S in SIDES for b in ("肩", "腕", "ひじ", "手首", "足", "ひざ", "足首", "足ＩＫ")}
+
+
+@pytest.mark.parametrize("op, kw", [("denoise_action", {}), ("foot_lock", {}), ("make_loop", {}),
+                                    ("inbetween", {"use_range": True, "frame_start": 25, "frame_end": 40}),
+                                    ("follow_curve", {"frames": 60})],
+                         ids=["denoise", "foot_lock", "make_loop", "fill_gap", "follow_curve"])
+def test_each_operation_keys_the_model_where_the_animator_keys_it(addon, real_model, tmp_path, op, kw):
+    """Every operation on a walking MMD model writes a new action keyed on the preset's bones alone (never the lower
+    body, the deform copies or the IK targets), each driven bone within 1 cm of the solve; the original is kept."""
+    obj, source, moved, _ = moved_walk(addon, tmp_path)
+    bpy.data.objects.remove(source)
+    if op == "follow_curve":
+        bpy.ops.curve.primitive_nurbs_path_add()
+        kw = {**kw, "curve": bpy.context.active_object.name}
+    bpy.context.view_layer.objects.active = obj
+    obj.select_set(True)
+    assert getattr(bpy.ops.strnn, op)(**kw) == {"FINISHED"}
+    new = action_of(obj)
+    assert new is not moved and moved.use_fake_user
+    record = new["strnn"]["controls"].to_dict()
+    assert record["set"] == "mmd" and record["max_error_cm"] < 1.0, record
+    assert keyed_bones(obj, new) <= PRESET_BONES, keyed_bones(obj, new) - PRESET_BONES
