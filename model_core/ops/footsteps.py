@@ -22,7 +22,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from ..motion.conventions import GROUND_AXES, STANDARD_LEG_LENGTH, UP_AXIS
+from ..motion.conventions import CONTACT_JOINTS, GROUND_AXES, STANDARD_LEG_LENGTH, UP_AXIS
 from ..rig.rigs import leg_length
 from .footlock import _ANKLE, _HEEL_CHANNELS, _HIP, _KNEE, _TOE, _TOE_CHANNELS, body_forward, fill_gaps, two_bone_ik
 
@@ -159,3 +159,50 @@ def _carried_between(keys: list[tuple[int, int, np.ndarray]], frames: int, fixed
     out[last[1] + 1:, ground] = last[2][ground]
     out[fixed] = 0.0
     return out
+
+
+FLOOR_TOLERANCE = 0.01  # metres for a standard leg: Foot Lock's floor tolerance
+CLEAR_S = 0.1  # seconds: a foot raised clear of the surface rises and comes down again over this much either side
+
+
+def clear_of_surface(pos: np.ndarray, heights: np.ndarray, standing: np.ndarray, fps: float,
+                     fixed: np.ndarray | None = None, tolerance: float = FLOOR_TOLERANCE,
+                     softness: float = 0.03) -> tuple[np.ndarray, int]:
+    """Positions ``[F, 21, 3]`` (Y-up) with each foot raised where its heel or toe would be under the surface: lower
+    than ``heights`` ``[F, 4]`` (the surface under each heel and toe, NaN where there is none) plus ``standing``
+    ``[4]`` (how high each stands over the floor when down), by more than ``tolerance`` (metres for a standard leg:
+    Foot Lock's, within which a planted foot counts as on the floor; a straight leg raised even a millimetre must
+    bend its knee by centimetres), to that tolerance. Motion made on a flat floor and carried with the surface under
+    the hips drops its feet with the hips: a foot leaving a stair's tread on the way down, or one reaching over a
+    step's nose, passes through the tread. The rise is eased in and out over :data:`CLEAR_S` (a running maximum
+    then a mean of the same width, so it is never less than the shortfall), the foot keeps its orientation, the knee
+    follows by two-bone IK from the hip; ``fixed`` frames stay. Also on how many frames a foot was raised."""
+    pos = np.asarray(pos, np.float64)
+    n = len(pos)
+    fixed = np.zeros(n, bool) if fixed is None else np.asarray(fixed, bool)
+    tolerance = tolerance * leg_length(pos) / STANDARD_LEG_LENGTH
+    short = np.nan_to_num(np.asarray(heights, np.float64) + np.asarray(standing, np.float64)
+                          - pos[:, CONTACT_JOINTS, UP_AXIS], nan=0.0) - tolerance
+    w = max(1, int(round(CLEAR_S * fps)))
+    rise = np.zeros((n, 2))
+    for leg in (0, 1):
+        d = np.maximum(short[:, [_HEEL_CHANNELS[leg], _TOE_CHANNELS[leg]]].max(1), 0.0)
+        d[fixed] = 0.0
+        padded = np.pad(d, w)
+        peak = np.lib.stride_tricks.sliding_window_view(padded, 2 * w + 1).max(1)
+        rise[:, leg] = np.convolve(np.pad(peak, w, mode="edge"), np.full(2 * w + 1, 1 / (2 * w + 1)), "valid")
+    rise[fixed] = 0.0
+    raised = rise > 0.0
+    if not raised.any():
+        return pos.copy(), 0
+    out = pos.copy()
+    target = pos[:, _ANKLE].copy()
+    target[..., UP_AXIS] += rise
+    fwd = body_forward(pos)[:, None].repeat(2, 1)
+    knee, ankle = two_bone_ik(pos[:, _HIP], pos[:, _KNEE], pos[:, _ANKLE], target, softness, fwd)
+    keep = ~raised[..., None]
+    out[:, _KNEE] = np.where(keep, pos[:, _KNEE], knee)
+    out[:, _ANKLE] = np.where(keep, pos[:, _ANKLE], ankle)
+    out[:, _TOE] = out[:, _ANKLE] + (pos[:, _TOE] - pos[:, _ANKLE])
+    out[fixed] = pos[fixed]
+    return out, int(raised.any(1).sum())

@@ -183,6 +183,9 @@ def carried(context, ground, pos: np.ndarray, known: int, fps: float,
         out, contacts, lambda points: ground.under(context, points, reach),
         int(round(footlock.FootLockSettings().min_gap_s * fps)), np.arange(len(out)) < known)
     heights, bare = ground_heights(context, ground, out)
+    if standing is not None:  # no foot passes through the surface it is carried over (a stair's nose on the way down)
+        out, ground.steps["raised"] = footsteps.clear_of_surface(out, heights, standing - floor, fps,
+                                                                 np.arange(len(out)) < known)
     return out, heights, None if standing is None else standing - floor, bare
 
 

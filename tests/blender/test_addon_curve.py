@@ -368,3 +368,28 @@ def test_a_walk_up_stairs_along_a_curve_steps_on_the_treads_not_their_edges(addo
         assert planted.sum() > 20
         straddling = planted & (np.abs(height(feet[:, heel]) - height(feet[:, toe])) > 0.02)
         assert not straddling.any(), np.flatnonzero(straddling)
+
+
+def test_a_walk_down_stairs_along_a_curve_lifts_its_feet_clear_of_the_treads(addon, real_model):
+    """Follow Curve down a flight of stairs (25 cm treads, 18 cm risers): the walk is carried down with the surface
+    under its hips, which dropped each foot leaving a tread through its nose (a toe 7.6 cm under it, and 22 cm for a
+    frame); each foot is now raised clear of the surface under it, so no toe goes further under a tread than Foot
+    Lock's tolerance and the solve allow. The record counts the frames a foot was raised on."""
+    from scenes import build_armature, stairs
+
+    from model_core.motion.conventions import CONTACT_JOINTS
+
+    build_armature("Mixamo", mixamo_bones())
+    obj = bpy.context.active_object
+    floor = float(evaluated_joints(addon, obj, [1])[0, CONTACT_JOINTS, 2].min())
+    height = stairs("Stairs", 0.5, 0.25, 0.18, 8, floor)
+    path = add_curve("poly", points=[(5.0, 0.0, 0.0), (-2.0, 0.0, 0.0)])
+    bpy.context.view_layer.objects.active = obj
+    _, new = follow(curve=path.name, ground="Stairs")
+    assert new["strnn"]["ground"]["steps"]["raised"] > 0
+    first, last = (int(f) for f in new.frame_range)
+    joints = evaluated_joints(addon, obj, np.arange(first, last + 1))
+    assert joints[-1, 0, 2] < joints[0, 0, 2] - 8 * 0.18 + 0.2  # down the stairs
+    feet = joints[:, CONTACT_JOINTS]
+    over = feet[..., 2] - height(feet)
+    assert over.min() > -0.045, (over.min(0), np.argmin(over, 0))

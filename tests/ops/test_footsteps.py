@@ -8,7 +8,7 @@ from model_core.motion.conventions import JOINT_INDEX
 from model_core.motion.features import gaussian_smooth
 from model_core.motion.synthetic import walking_skeleton
 from model_core.ops import footlock
-from model_core.ops.footsteps import FOOTPRINT, even_steps, stances
+from model_core.ops.footsteps import FOOTPRINT, clear_of_surface, even_steps, stances
 
 FPS = 30.0
 ANKLES, TOES = [JOINT_INDEX["l_foot"], JOINT_INDEX["r_foot"]], [JOINT_INDEX["l_toe"], JOINT_INDEX["r_toe"]]
@@ -91,3 +91,40 @@ def test_a_step_with_no_even_ground_near_is_left_and_counted():
     on_flight = [1 for leg, a, b in stances(contacts, 2) if pos[(a + b) // 2, ANKLES[leg], 2] > 1.1]
     assert report["on_edges"] >= len(on_flight) > 0
     assert report["moved"] == 0 and np.array_equal(out, pos)
+
+
+def _under(pos, height, standing) -> np.ndarray:
+    """How far ``[F, 4]`` each heel and toe is under the surface plus where it stands when down (>0: under)."""
+    joints = pos[:, [7, 8, 11, 12]]
+    return height(joints) + standing - joints[..., 1]
+
+
+def test_feet_carried_down_stairs_are_raised_clear_of_the_treads_they_would_pass_through():
+    height = stairs()
+    flight = lambda p: height(np.asarray(p) * [1, 1, -1] + [0, 0, 4.0])  # walked down: the treads fall along +Z
+    pos, contacts = carried_walk(flight)
+    flat = walking_skeleton(150, radius=1e6).astype(np.float64)
+    standing = footlock.rest_heights(flat - [0, flat[:, [7, 8, 11, 12], 1].min(), 0], contacts)
+    before = _under(pos, flight, standing)
+    assert before.max() > 0.05  # the feet drop with the hips into the treads they leave or reach over
+    out, raised = clear_of_surface(pos, flight(pos[:, [7, 8, 11, 12]]), standing, FPS)
+    assert _under(out, flight, standing).max() < 0.0101 and raised > 0  # within Foot Lock's tolerance (1 cm)
+    assert (out[:, [7, 8, 11, 12], 1] >= pos[:, [7, 8, 11, 12], 1] - 1e-9).all()  # only ever raised
+    for hip, knee, ankle in ((5, 6, 7), (9, 10, 11)):  # the legs keep their bones, the feet their shape
+        for a, b in ((hip, knee), (knee, ankle)):
+            np.testing.assert_allclose(np.linalg.norm(out[:, a] - out[:, b], axis=-1),
+                                       np.linalg.norm(pos[:, a] - pos[:, b], axis=-1), atol=1e-9)
+    np.testing.assert_allclose(out[:, TOES] - out[:, ANKLES], pos[:, TOES] - pos[:, ANKLES], atol=1e-12)
+    legs = [6, 7, 8, 10, 11, 12]
+    np.testing.assert_array_equal(np.delete(out, legs, axis=1), np.delete(pos, legs, axis=1))  # the body as it was
+    assert np.abs(np.diff(out[:, ANKLES, 1] - pos[:, ANKLES, 1], axis=0)).max() < 0.05  # eased in and out
+    fixed = np.arange(len(pos)) < 40
+    kept, _ = clear_of_surface(pos, flight(pos[:, [7, 8, 11, 12]]), standing, FPS, fixed)
+    np.testing.assert_array_equal(kept[fixed], pos[fixed])
+
+
+def test_feet_over_a_floor_are_left_as_they_are():
+    pos, contacts = carried_walk(lambda p: np.zeros(np.shape(p)[:-1]))
+    standing = footlock.rest_heights(pos, contacts)
+    out, raised = clear_of_surface(pos, np.zeros((len(pos), 4)), standing, FPS)
+    assert raised == 0 and np.array_equal(out, pos)
