@@ -599,8 +599,9 @@ class STRNN_OT_controls_from_preset(_EditControls, bpy.types.Operator):
             item.bone, item.prop, item.value, item.ik_value, item.pole_prop = (
                 sw.bone, sw.prop, sw.value, sw.ik_value, sw.pole_prop)
         obj.strnn_control_index = 0
-        switched = sum(row.role != "FK" and bool(row.switch) for row in rows)
-        always = sum(row.role != "FK" and not row.switch for row in rows)
+        ik = controls.rig_controls.IK_ROLES
+        switched = sum(row.role in ik and bool(row.switch) for row in rows)
+        always = sum(row.role in ik and not row.switch for row in rows)
         parts = ([f"{len(rows) - switched - always} FK"] if switched or always else []) + (
             [f"{switched} keyed where their limb is animated in IK"] if switched else []) + (
             [f"{always} on limbs always in IK, keyed always"] if always else [])

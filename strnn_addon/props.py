@@ -204,6 +204,8 @@ STRNN_PG_bone_map = type("STRNN_PG_bone_map", (bpy.types.PropertyGroup,), {
 # The roles of model_core/rig/controls.py's ROLES, as the Controls list offers them (icons shown in the list).
 CONTROL_ROLES = [
     ("FK", "FK", "Keyed always, or with a Switch where its limb is animated in FK", "BONE_DATA", 0),
+    ("MOVE", "Move", "Moved, never turned, keyed as FK is (a centre that carries the body while the bones below it "
+                     "turn it: an MMD model's センター)", "EMPTY_ARROWS", 5),
     ("IK_END", "IK End", "The IK chain's end (the foot or hand IK control): moved and turned where its limb is in IK "
                          "(with no Switch: always, a limb that never leaves IK)", "CON_KINEMATIC", 1),
     ("IK_BASE", "IK Base", "The IK chain's base (thigh or upper arm IK): turned about its own axis to set the knee's "

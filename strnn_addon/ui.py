@@ -303,7 +303,7 @@ class STRNN_PT_controls(_ArmatureSidebar, bpy.types.Panel):
                 row.prop(sw, "bone", text="")
                 row.prop(sw, "prop", text="")
                 row.prop(sw, "value", text="")
-                if any(c.switch == sw.bone and c.role != "FK" for c in obj.strnn_controls):
+                if any(c.switch == sw.bone and c.role in controls.rig_controls.IK_ROLES for c in obj.strnn_controls):
                     row = col.row(align=True)
                     row.prop(sw, "ik_value", text="IK")
                     row.prop(sw, "pole_prop", text="", icon="EMPTY_SINGLE_ARROW")

@@ -38,6 +38,7 @@ class Control:
     location: bool = False
     optional: bool = False
     twist: bool = False  # it only turns about its own axis (an IK chain's base, which sets the knee's plane)
+    turns: bool = True  # False: it only moves (an MMD model's centre, the bones below it turning the body)
     pole: bool = False  # an IK pole: moved in front of the driven bone's head, in the plane of its chain
     end: bool = False  # an IK chain's end: first put where its driven bone's target puts it as the two stand at rest
 
@@ -142,10 +143,12 @@ class ControlSet:
         return ControlSet(self.name, controls, switches, keyed_ik=on_ik)
 
 
-# What a control is for in an edited control list (the Bone Map panel's): keyed always or where its limb is in FK;
+# What a control is for in an edited control list (the Bone Map panel's): keyed always or where its limb is in FK
+# (turned, or with Moves also moved), or the same but moved and never turned (a centre whose children turn the body);
 # or, where its limb is in IK (or always, a control of no switch), an IK chain's end, the chain's base (turned about
 # its own axis; left alone where the limb's pole is used), another IK control (a toe), or the pole.
-ROLES = ("FK", "IK_END", "IK_BASE", "IK", "POLE")
+IK_ROLES = ("IK_END", "IK_BASE", "IK", "POLE")
+ROLES = ("FK", "MOVE") + IK_ROLES
 
 
 @dataclass(frozen=True)
@@ -191,7 +194,7 @@ def as_rows(found: ControlSet) -> tuple[list[Row], list[SwitchRow]]:
 
 def _role(c: Control, plain: str) -> str:
     """The role of control ``c`` in a list (:data:`ROLES`); ``plain``: that of a control that only turns or moves."""
-    return "IK_END" if c.end else "IK_BASE" if c.twist else "POLE" if c.pole else plain
+    return "IK_END" if c.end else "IK_BASE" if c.twist else "POLE" if c.pole else "MOVE" if not c.turns else plain
 
 
 def from_rows(name: str, rows: list[Row], switches: list[SwitchRow]) -> tuple[ControlSet, list[str]]:
@@ -201,13 +204,14 @@ def from_rows(name: str, rows: list[Row], switches: list[SwitchRow]) -> tuple[Co
     no switch is keyed always, whatever its role: an IK control of no switch belongs to a limb that never leaves IK
     (an MMD model's legs)."""
     by_bone = {s.bone: s for s in switches}
-    problems = [f"Control {r.bone!r} is {'an FK' if r.role == 'FK' else 'an IK'} control of the switch on "
+    problems = [f"Control {r.bone!r} is {'an IK' if r.role in IK_ROLES else 'an FK'} control of the switch on "
                 f"{r.switch!r}, which the switch list does not have: add that switch, or clear the control's Switch"
                 for r in rows if r.switch and r.switch not in by_bone]
-    controls = [Control(r.bone, r.drives, r.location or r.role in ("IK_END", "POLE"), twist=r.role == "IK_BASE",
-                        pole=r.role == "POLE", end=r.role == "IK_END") for r in rows if r.role == "FK" or not r.switch]
+    controls = [Control(r.bone, r.drives, r.location or r.role in ("IK_END", "POLE", "MOVE"), twist=r.role == "IK_BASE",
+                        pole=r.role == "POLE", end=r.role == "IK_END", turns=r.role != "MOVE")
+                for r in rows if r.role in ("FK", "MOVE") or not r.switch]
     limbs = []
-    for bone in dict.fromkeys(r.switch for r in rows if r.role != "FK" and r.switch in by_bone):
+    for bone in dict.fromkeys(r.switch for r in rows if r.role in IK_ROLES and r.switch in by_bone):
         sw = by_bone[bone]
         ik = [r for r in rows if r.switch == bone and r.role in ("IK_END", "IK_BASE", "IK")]
         poles = [r for r in rows if r.switch == bone and r.role == "POLE"]
@@ -221,7 +225,7 @@ def from_rows(name: str, rows: list[Row], switches: list[SwitchRow]) -> tuple[Co
             continue
         pole = Control(poles[0].bone, poles[0].drives, True, pole=True) if poles else None
         limbs.append(IkLimb(Switch(sw.bone, sw.prop, sw.value), sw.ik_value,
-                            tuple(r.bone for r in rows if r.switch == bone and r.role == "FK"),
+                            tuple(r.bone for r in rows if r.switch == bone and r.role in ("FK", "MOVE")),
                             tuple(Control(r.bone, r.drives, r.location or r.role == "IK_END",
                                           twist=r.role == "IK_BASE", end=r.role == "IK_END") for r in ik),
                             pole, sw.pole_prop))
@@ -308,14 +312,16 @@ _AUTO_RIG_PRO_IK_LIMBS = [
            (Control(f"c_hand_ik.{S}", f"hand.{S}", True, end=True),),
            Control(f"c_arms_pole.{S}", f"forearm.{S}", True, pole=True)) for S in "lr"]
 # MikuMikuDance models as mmd_tools imports them (``足.L``; :data:`rigs.RIG_FAMILIES` ``mmd``): the centre
-# (``センター``) carries the body, the lower body (``下半身``, the hips) and the upper body hanging from it apart.
+# (``センター``) carries the body, the lower body (``下半身``, the hips) and the upper body hanging from it apart; as
+# MMD animators key it, the centre only moves and the lower and upper bodies turn.
 # The legs are always in IK: an IK constraint on the knee (``ひざ``, two bones, to ``足ＩＫ``; the knee bends only
 # about its X axis) and on the ankle (``足首``, one bone, aimed at ``つま先ＩＫ``, which hangs from ``足ＩＫ``), so
 # ``足ＩＫ`` puts the foot where it goes, turned so that its toe IK takes the toe there, and the thigh (``足``) is
 # turned about its own axis to set the knee's plane (as Rigify's ``thigh_ik``); the knee and ankle are keyed too, as
 # a VMD motion has them, so that each IK starts from the solved pose. No switch: the legs never leave IK.
-_MMD_CONTROLS = [Control("センター", "下半身", True), Control("上半身", "上半身"),
-                 Control("上半身2", "上半身2", optional=True), Control("首", "首"), Control("頭", "頭")] + [
+_MMD_CONTROLS = [Control("センター", "下半身", True, turns=False), Control("下半身", "下半身"),
+                 Control("上半身", "上半身"), Control("上半身2", "上半身2", optional=True), Control("首", "首"),
+                 Control("頭", "頭")] + [
     Control(f"{bone}.{S}", f"{bone}.{S}") for S in "LR" for bone in ("肩", "腕", "ひじ", "手首", "ひざ", "足首")] + [
     c for S in "LR"
     for c in (Control(f"足.{S}", f"足.{S}", twist=True), Control(f"足ＩＫ.{S}", f"足首.{S}", True, end=True))]

@@ -144,6 +144,8 @@ def _place(obj, c, target: np.ndarray, first: bool = False) -> None:
         # base's own turn about its axis (on its keyed transform: the chain takes that turn as its start)
         pb.matrix_basis = pb.matrix_basis @ Matrix.Rotation(_bend_turn(bones[c.drives], driven, target), 4, "Y")
         return
+    elif c.location and not c.turns:  # moved as far as its driven bone is off, not turned
+        want[:3, 3] = now[:3, 3] + target[:3, 3] - driven[:3, 3]
     elif c.location:
         want = delta @ now
     else:

@@ -127,11 +127,12 @@ def test_controls_from_preset_fills_the_mmd_controls_with_the_leg_ik_keyed_alway
                                                                                        bpy.context)
     assert bpy.ops.strnn.controls_from_preset() == {"FINISHED"}
     listed = {c.bone: (c.drives, c.role, c.switch) for c in obj.strnn_controls}
-    assert listed["センター"] == ("下半身", "FK", "") and listed["腕.L"] == ("腕.L", "FK", "")
+    assert listed["センター"] == ("下半身", "MOVE", "") and listed["下半身"] == ("下半身", "FK", "")
+    assert listed["腕.L"] == ("腕.L", "FK", "")
     for S in SIDES:  # no switch: an MMD model's legs never leave IK
         assert listed[f"足ＩＫ.{S}"] == (f"足首.{S}", "IK_END", "")
         assert listed[f"足.{S}"] == (f"足.{S}", "IK_BASE", "")
-    assert len(listed) == 21 and not len(obj.strnn_switches)
+    assert len(listed) == 22 and not len(obj.strnn_switches)
 
 
 def test_a_walk_moved_onto_the_model_is_keyed_on_its_centre_and_leg_ik_and_its_legs_follow(addon, tmp_path):
@@ -144,8 +145,12 @@ def test_a_walk_moved_onto_the_model_is_keyed_on_its_centre_and_leg_ik_and_its_l
     record = moved["strnn"]["controls"].to_dict()
     assert record["set"] == "mmd" and record["max_error_cm"] < 1.0, record
     keyed = keyed_bones(obj, moved)
-    assert {"センター", "上半身", "頭", "腕.L", "足ＩＫ.L", "足ＩＫ.R", "足.L", "ひざ.R"} <= keyed
-    assert not keyed & {"下半身", "グルーブ", "全ての親", "つま先ＩＫ.L", "足D.L", "ひざD.R", "つま先.L"}, keyed
+    assert {"センター", "下半身", "上半身", "頭", "腕.L", "足ＩＫ.L", "足ＩＫ.R", "足.L", "ひざ.R"} <= keyed
+    assert not keyed & {"グルーブ", "全ての親", "つま先ＩＫ.L", "足D.L", "ひざD.R", "つま先.L"}, keyed
+    centre = [fc for fc in fcurves_of(obj, moved) if fc.data_path == 'pose.bones["センター"].rotation_quaternion']
+    for fc in centre:  # the centre carries the body without turning: the lower and upper bodies turn it
+        values = [k.co[1] for k in fc.keyframe_points]
+        assert max(values) - min(values) < 1e-6, (fc.array_index, min(values), max(values))
     frames = np.arange(int(moved.frame_range[0]), int(moved.frame_range[1]) + 1)
     got, src = evaluated_joints(addon, obj, frames), evaluated_joints(addon, source, frames)
     for side in "lr":  # each knee bends the way the source's does
@@ -191,7 +196,7 @@ def test_a_walk_moved_onto_the_model_and_extended_still_walks(addon, real_model,
     assert np.percentile(joints[:, [7, 8, 11, 12], 2].min(1) - floor, 5) > -0.03
 
 
-PRESET_BONES = {"センター", "上半身", "上半身2", "首", "頭"} | {
+PRESET_BONES = {"センター", "下半身", "上半身", "上半身2", "首", "頭"} | {
     f"{b}.{S}" for S in SIDES for b in ("肩", "腕", "ひじ", "手首", "足", "ひざ", "足首", "足ＩＫ")}
 
 

@@ -110,14 +110,17 @@ def test_an_mmd_model_is_keyed_on_its_centre_its_fk_bones_and_its_leg_ik():
     found = preset_for(MMD_NAMES)
     assert found is not None and found.name == "mmd" and not found.switches and not found.ik_limbs
     by_bone = {c.bone: c for c in found.controls}
-    assert by_bone["センター"].drives == "下半身" and by_bone["センター"].location
+    # the centre only moves (as MMD animators key it), the lower body turns the hips
+    assert by_bone["センター"].drives == "下半身" and by_bone["センター"].location and not by_bone["センター"].turns
+    assert by_bone["下半身"].turns and not by_bone["下半身"].location
     for side in "LR":  # the foot IK puts the ankle where it goes; the leg's own bones start each IK from the solve
         ik = by_bone[f"足ＩＫ.{side}"]
         assert ik.drives == f"足首.{side}" and ik.end and ik.location
         assert {f"足.{side}", f"ひざ.{side}", f"足首.{side}"} <= set(by_bone)
-    assert not {"つま先ＩＫ.L", "足D.L", "下半身", "グルーブ"} & set(by_bone)
+    assert not {"つま先ＩＫ.L", "足D.L", "グルーブ", "全ての親"} & set(by_bone)
     rows, switches = as_rows(found)  # as an edited list: the foot IK an IK End of no switch, and back again
     assert [r.role for r in rows if r.bone.startswith("足ＩＫ")] == ["IK_END", "IK_END"] and not switches
+    assert [r.role for r in rows if r.bone == "センター"] == ["MOVE"]
     again, problems = from_rows("mmd", rows, switches)
     assert not problems and again.controls == [replace(c, optional=False) for c in found.controls]
     assert preset_for([n for n in MMD_NAMES if n != "上半身2"]) is not None  # a model without the second upper body
