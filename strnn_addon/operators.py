@@ -584,8 +584,9 @@ class STRNN_OT_controls_from_preset(_EditControls, bpy.types.Operator):
         obj = context.active_object
         preset = controls.rig_controls.preset_for(obj.pose.bones.keys())
         if preset is None:
-            self.report({"ERROR"}, f"No shipped preset fits {obj.name!r} (presets: "
-                                   f"{', '.join(controls.rig_controls.PRESETS)}): add its controls one by one")
+            names = ", ".join(dict.fromkeys(p.name for p in controls.rig_controls.PRESETS.values()))
+            self.report({"ERROR"}, f"No shipped preset fits {obj.name!r} (presets: {names}): add its controls one by "
+                                   "one")
             return {"CANCELLED"}
         rows, switches = controls.rig_controls.as_rows(preset)
         obj.strnn_controls.clear()

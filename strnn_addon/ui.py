@@ -280,8 +280,9 @@ class STRNN_PT_controls(_ArmatureSidebar, bpy.types.Panel):
         keyed = controls.as_animated(obj, found) if found is not None else None
         if keyed is not None and keyed.keyed_ik:
             layout.label(text=f"In IK, keyed on their IK controls: {', '.join(keyed.keyed_ik)}", icon="CON_KINEMATIC")
-        always = [c.bone for c in found.controls if c.end] if found is not None else []
-        if always:  # IK controls of no switch: limbs that never leave IK (an MMD model's legs)
+        kept = {c.bone for c in keyed.controls} if keyed is not None else set()
+        always = [c.bone for c in found.controls if c.end and c.bone in kept] if found is not None else []
+        if always:  # IK controls of no switch: limbs that never leave IK (an MMD model's legs), their IK on
             layout.label(text=f"Always in IK, keyed on: {', '.join(always)}", icon="CON_KINEMATIC")
         row = layout.row()
         row.template_list("STRNN_UL_controls", "", obj, "strnn_controls", obj, "strnn_control_index", rows=3)

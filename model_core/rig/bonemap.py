@@ -68,7 +68,7 @@ def split_side(name: str) -> tuple[str | None, str]:
 
 
 # Families read only where they find every body joint (their names mean other joints in other rigs).
-WHOLE_ONLY = {"rigify_metarig", "auto_rig_pro"}
+WHOLE_ONLY = {"rigify_metarig", "auto_rig_pro", "mmd_english"}
 
 
 def _family_map(names: list[str]) -> tuple[str, Mapping]:
@@ -161,7 +161,7 @@ def _by_hierarchy(names: list[str], parents: list[int], mapping: Mapping) -> Non
     """Fill hips, chest (spine1), spine and neck from where the limbs meet, in place."""
     idx = {n: i for i, n in enumerate(names)}
     have = lambda j: j in mapping and not mapping[j][1]
-    if not have("hips") and have("l_upleg") and have("r_upleg"):
+    if "hips" not in mapping and have("l_upleg") and have("r_upleg"):  # (hips at a tail are an MMD model's)
         c = _common(parents, idx[mapping["l_upleg"][0]], idx[mapping["r_upleg"][0]])
         if c >= 0:
             mapping["hips"] = (names[c], False)

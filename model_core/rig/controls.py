@@ -23,7 +23,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from ..motion.conventions import JOINTS, PARENT_NAMES
-from .rigs import normalise_name
+from .rigs import MMD_SPELLINGS, mmd_name, normalise_name
 from .solve import Rig, SolveError, placed as placed_in
 
 
@@ -124,6 +124,16 @@ class ControlSet:
                                  fk=tuple(spell(b) for b in limb.fk), pole=pole,
                                  ik=tuple(replace(c, bone=spell(c.bone), drives=spell(c.drives)) for c in limb.ik)))
         return ControlSet(self.name, controls, switches, limbs)
+
+    def ik_off(self, ends: set[str], chains: set[str]) -> ControlSet:
+        """This set where the IK of the IK End controls of no switch ``ends`` is turned off (an MMD model posed with
+        its leg IK off): those ends left out, and each chain base among ``chains`` (the bones of their IK chains)
+        keyed whole, turned as its bone goes, as FK."""
+        if not ends:
+            return self
+        controls = [replace(c, twist=False) if c.twist and c.bone in chains else c
+                    for c in self.controls if c.bone not in ends]
+        return replace(self, controls=controls)
 
     def keyed(self, values: dict[tuple[str, str], float]) -> ControlSet:
         """The controls to key where each switch and pole property stands at ``values`` {(bone, property): value}
@@ -319,12 +329,17 @@ _AUTO_RIG_PRO_IK_LIMBS = [
 # ``足ＩＫ`` puts the foot where it goes, turned so that its toe IK takes the toe there, and the thigh (``足``) is
 # turned about its own axis to set the knee's plane (as Rigify's ``thigh_ik``); the knee and ankle are keyed too, as
 # a VMD motion has them, so that each IK starts from the solved pose. No switch: the legs never leave IK.
-_MMD_CONTROLS = [Control("センター", "下半身", True, turns=False), Control("下半身", "下半身"),
-                 Control("上半身", "上半身"), Control("上半身2", "上半身2", optional=True), Control("首", "首"),
-                 Control("頭", "頭")] + [
-    Control(f"{bone}.{S}", f"{bone}.{S}") for S in "LR" for bone in ("肩", "腕", "ひじ", "手首", "ひざ", "足首")] + [
-    c for S in "LR"
-    for c in (Control(f"足.{S}", f"足.{S}", twist=True), Control(f"足ＩＫ.{S}", f"足首.{S}", True, end=True))]
+def _mmd_controls(spelling: str) -> list[Control]:
+    """The controls of an MMD model whose bones are named in ``spelling`` (:data:`rigs.MMD_SPELLINGS`)."""
+    n = lambda word, side=None: mmd_name(word, side, spelling)
+    return [Control(n("センター"), n("下半身"), True, turns=False), Control(n("下半身"), n("下半身")),
+            Control(n("上半身"), n("上半身")), Control(n("上半身2"), n("上半身2"), optional=True),
+            Control(n("首"), n("首")), Control(n("頭"), n("頭"))] + [
+        Control(n(bone, S), n(bone, S)) for S in "LR" for bone in ("肩", "腕", "ひじ", "手首", "ひざ", "足首")] + [
+        c for S in "LR"
+        for c in (Control(n("足", S), n("足", S), twist=True), Control(n("足ＩＫ", S), n("足首", S), True, end=True))]
+
+
 PRESETS: dict[str, ControlSet] = {
     "rigify": ControlSet(
         "rigify",
@@ -340,7 +355,9 @@ PRESETS: dict[str, ControlSet] = {
         "auto_rig_pro", _AUTO_RIG_PRO_CONTROLS,
         [Switch(f"c_{limb}_ik.{side}", "ik_fk_switch", 1.0) for side in "lr" for limb in ("foot", "hand")],
         _AUTO_RIG_PRO_IK_LIMBS),
-    "mmd": ControlSet("mmd", _MMD_CONTROLS),
+    # one per way the bones may be named, each the "mmd" preset
+    **{"mmd" + ("" if k == 0 else f"_{k}"): ControlSet("mmd", _mmd_controls(spelling))
+       for k, spelling in enumerate(MMD_SPELLINGS)},
 }
 
 

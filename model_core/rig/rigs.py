@@ -35,6 +35,39 @@ def _sided(template: dict[str, list[str]], left: tuple[str, str], right: tuple[s
     return out
 
 
+# MMD bone words (the model's Japanese) and the PMX format's standard English names for them.
+MMD_ENGLISH = {"センター": "center", "下半身": "lower body", "上半身": "upper body", "上半身2": "upper body2",
+               "首": "neck", "頭": "head", "肩": "shoulder", "腕": "arm", "ひじ": "elbow", "手首": "wrist", "足": "leg",
+               "ひざ": "knee", "足首": "ankle", "足ＩＫ": "leg IK", "つま先ＩＫ": "toe IK"}
+# How a model's MMD bones may be named: as mmd_tools renames them by default (``足.L``), with an underscore (``足_L``),
+# as the model names them (``左足``), or by their standard English names (``leg_L``).
+MMD_SPELLINGS = ("{w}.{S}", "{w}_{S}", "{side}{w}", "english")
+
+
+def mmd_name(word: str, side: str | None, spelling: str) -> str:
+    """The name of MMD bone ``word`` (Japanese: ``足``) on ``side`` (``"L"``, ``"R"`` or None for a centre bone) in
+    ``spelling`` (:data:`MMD_SPELLINGS`)."""
+    if spelling == "english":
+        return f"{MMD_ENGLISH[word]}_{side}" if side else MMD_ENGLISH[word]
+    return word if side is None else spelling.format(w=word, S=side, side="左" if side == "L" else "右")
+
+
+def _mmd_family(spellings: tuple[str, ...]) -> dict[str, list[str]]:
+    """An MMD family's candidates in ``spellings``: the hips at the lower body's tail, the toe at the ankle's (the
+    ankle points at the toe's tip), the finger tip at the middle finger's last bone's tail where it is named."""
+    torso = {"hips": [("下半身", "_end")], "spine": [("上半身", "")], "spine1": [("上半身2", "")],
+             "neck": [("首", "")], "head": [("頭", "")]}
+    out = {joint: [mmd_name(w, None, sp) + end for w, end in words for sp in spellings]
+           for joint, words in torso.items()}
+    limbs = {"upleg": ("足", ""), "knee": ("ひざ", ""), "foot": ("足首", ""), "toe": ("足首", "_end"),
+             "arm": ("腕", ""), "elbow": ("ひじ", ""), "wrist": ("手首", "")}
+    for s, side in (("l", "L"), ("r", "R")):
+        out.update({f"{s}_{joint}": [mmd_name(w, side, sp) + end for sp in spellings]
+                    for joint, (w, end) in limbs.items()})
+        out[f"{s}_fingertip"] = [mmd_name("中指３", side, sp) + "_end" for sp in spellings if sp != "english"]
+    return out
+
+
 RIG_FAMILIES: dict[str, dict[str, list[str]]] = {
     "bandai_namco": _sided({
         "hips": ["Hips"], "spine": ["Spine"], "spine1": ["Chest"], "neck": ["Neck"], "head": ["Head"],
@@ -104,19 +137,15 @@ RIG_FAMILIES: dict[str, dict[str, list[str]]] = {
         "{s}_fingertip": ["f_middle.03.{S}_end", "f_middle.03.{S}"],
     }, ("L", ""), ("R", "")),
     # MikuMikuDance models as mmd_tools imports them: Japanese names, left and right as a suffix (``足.L``, the
-    # default), with an underscore (``足_L``) or as the model has them (``左足``). No bone sits at the pelvis: the
-    # lower body (``下半身``) hangs from the centre and points down from the waist to it, so the hips are its tail.
-    # The legs' FK bones (``足``, ``ひざ``, ``足首``) are what the IK solves and the deform bones (``足D``) copy.
-    "mmd": {
-        "hips": ["下半身_end"], "spine": ["上半身"], "spine1": ["上半身2", "上半身1"], "neck": ["首"], "head": ["頭"],
-        **{f"{s}_{joint}": [f"{word}{sep}{S}" for sep in (".", "_")] + [f"{side}{word}"]
-           for s, S, side in (("l", "L", "左"), ("r", "R", "右"))
-           for joint, word in (("upleg", "足"), ("knee", "ひざ"), ("foot", "足首"), ("arm", "腕"), ("elbow", "ひじ"),
-                               ("wrist", "手首"))},
-        **{f"{s}_{joint}": [f"{word}{sep}{S}_end" for sep in (".", "_")] + [f"{side}{word}_end"]
-           for s, S, side in (("l", "L", "左"), ("r", "R", "右"))
-           for joint, word in (("toe", "足首"), ("fingertip", "中指３"))},
-    },
+    # default), with an underscore (``足_L``) or as the model has them (``左足``) (:func:`mmd_name`). No bone sits at
+    # the pelvis: the lower body (``下半身``) hangs from the centre and points down from the waist to it, so the hips
+    # are its tail. The legs' FK bones (``足``, ``ひざ``, ``足首``) are what the IK solves and the deform bones
+    # (``足D``) copy.
+    "mmd": _mmd_family(("{w}.{S}", "{w}_{S}", "{side}{w}")),
+    # The same named in English, as the PMX format's standard English names (``leg_L``) that mmd_tools can rename
+    # the bones to: read only where every body joint is found (``bonemap.WHOLE_ONLY``), as other rigs' ``leg`` is the
+    # shin.
+    "mmd_english": _mmd_family(("english",)),
     "rigify_deform": _sided({
         "hips": ["DEF-spine"], "spine": ["DEF-spine.001"], "spine1": ["DEF-spine.003"],
         "neck": ["DEF-spine.004"], "head": ["DEF-spine.006"],

@@ -56,7 +56,10 @@ def listed(obj) -> tuple[ControlSet | None, list[str]]:
 def as_animated(obj, control_set_: ControlSet) -> ControlSet:
     """The controls to key on ``obj``: each limb of the set that can be keyed on IK controls keyed on them where its
     switch stands nearer IK at its action's last frame (with no action, or a switch the action does not animate: as
-    the switch stands now), that is where the animator animates it in IK."""
+    the switch stands now), that is where the animator animates it in IK; a limb always in IK (an IK End of no
+    switch) whose IK constraints are all off (muted or of no influence: an MMD model's leg IK toggled off) keyed on
+    FK (:meth:`ControlSet.ik_off`)."""
+    control_set_ = _ik_off(obj, control_set_)
     if not control_set_.ik_limbs:
         return control_set_
     ad = obj.animation_data
@@ -72,6 +75,27 @@ def as_animated(obj, control_set_: ControlSet) -> ControlSet:
             fc = channels.find(path, 0) if channels is not None else None
             values[(pb.name, prop)] = float(fc.evaluate(frame)) if fc is not None else float(pb[prop])
     return control_set_.keyed(values)
+
+
+def _ik_off(obj, control_set_: ControlSet) -> ControlSet:
+    """``control_set_`` with each IK End of no switch whose IK constraints (those aimed at it) are all off left out,
+    and the chain bases in those constraints' chains keyed whole (:meth:`ControlSet.ik_off`)."""
+    ends, chains = set(), set()
+    for c in control_set_.controls:
+        if not c.end:
+            continue
+        aimed = [(pb, con) for pb in obj.pose.bones for con in pb.constraints
+                 if con.type == "IK" and getattr(con, "subtarget", "") == c.bone]
+        if not aimed or any(not con.mute and con.influence > 0 for _, con in aimed):
+            continue
+        ends.add(c.bone)
+        for pb, con in aimed:  # the bones the constraint moves: its owner and chain_count - 1 above (0: all)
+            for _ in range(con.chain_count or len(obj.pose.bones)):
+                if pb is None:
+                    break
+                chains.add(pb.name)
+                pb = pb.parent
+    return control_set_.ik_off(ends, chains)
 
 
 def _matrix(pb) -> np.ndarray:

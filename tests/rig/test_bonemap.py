@@ -6,6 +6,7 @@ import pytest
 
 from model_core.motion.conventions import JOINTS
 from model_core.rig.bonemap import auto_map, missing, placed, split_side
+from model_core.rig.rigs import MMD_ENGLISH, MMD_SPELLINGS, mmd_name
 
 
 @pytest.mark.parametrize("name, want", [
@@ -245,23 +246,54 @@ def test_a_rig_with_some_auto_rig_pro_names_is_not_read_as_one():
     assert mapping["hips"][0] == "hips" and mapping["l_upleg"][0] == "thigh.L"
 
 
-@pytest.mark.parametrize("spell", ["{w}.{S}", "{w}_{S}", "{side}{w}"])
-def test_an_mmd_model_maps_its_japanese_names_with_the_hips_at_the_lower_bodys_tail(spell):
-    """As mmd_tools imports it (left and right as ``.L``, as ``_L``, or as the model spells them, ``左足``): the lower
-    body points down from the waist to the pelvis, the ankle to the toe tip; the deform copies (``足D``) and the IK
-    bones are not joints."""
-    sided = lambda w, s: spell.format(w=w, S=s, side="左" if s == "L" else "右")
-    names = ["全ての親", "センター", "グルーブ", "下半身", "上半身", "上半身2", "首", "頭"]
+@pytest.mark.parametrize("spelling", MMD_SPELLINGS)
+def test_an_mmd_model_maps_its_names_with_the_hips_at_the_lower_bodys_tail(spelling):
+    """As mmd_tools imports it (left and right as ``.L``, as ``_L``, as the model spells them, ``左足``, or the PMX
+    standard English names, ``leg_L``): the lower body points down from the waist to the pelvis, the ankle to the toe
+    tip; the deform copies (``足D``) and the IK bones are not joints."""
+    def sided(word, side):
+        if spelling == "english" and word not in MMD_ENGLISH:
+            return f"{word}_{side}"  # a bone of no standard English name keeps its own
+        return mmd_name(word, side, spelling)
+
+    names = [sided(w, None) if w in MMD_ENGLISH or spelling != "english" else w
+             for w in ("全ての親", "センター", "グルーブ", "下半身", "上半身", "上半身2", "首", "頭")]
+    names = [n if not n.endswith("_None") else n[:-5] for n in names]
     parents = [-1, 0, 1, 2, 2, 4, 5, 6]
+    centre = dict(zip(("全ての親", "センター", "グルーブ", "下半身", "上半身", "上半身2", "首", "頭"), names))
     for s in "LR":
         for word, parent in (("足", "下半身"), ("ひざ", "足"), ("足首", "ひざ"), ("つま先", "足首"),
                              ("足D", "下半身"), ("足ＩＫ", "全ての親"), ("つま先ＩＫ", "足ＩＫ"), ("肩", "上半身2"),
                              ("腕", "肩"), ("ひじ", "腕"), ("手首", "ひじ"), ("中指１", "手首"), ("中指２", "中指１"),
                              ("中指３", "中指２")):
             names.append(sided(word, s))
-            parents.append(names.index(parent if parent in names else sided(parent, s)))
+            parents.append(names.index(centre.get(parent) or sided(parent, s)))
     family, mapping = auto_map(names, parents)
-    assert family == "mmd" and not missing(mapping)
-    assert mapping["hips"] == ("下半身", True) and mapping["spine"] == ("上半身", False)
+    assert family == ("mmd_english" if spelling == "english" else "mmd") and not missing(mapping), mapping
+    assert mapping["hips"] == (centre["下半身"], True) and mapping["spine"] == (centre["上半身"], False)
     assert mapping["l_upleg"] == (sided("足", "L"), False) and mapping["r_knee"] == (sided("ひざ", "R"), False)
-    assert mapping["l_toe"] == (sided("足首", "L"), True) and mapping["r_fingertip"] == (sided("中指３", "R"), True)
+    assert mapping["l_toe"] == (sided("足首", "L"), True)
+    assert mapping["r_fingertip"] == (sided("中指３" if spelling != "english" else "手首", "R"), True)
+
+
+def test_a_rig_whose_leg_is_its_shin_is_not_read_as_an_mmd_model():
+    """``leg_L`` is an MMD model's thigh but many rigs' shin: without the rest of an MMD model's English names the
+    bone map reads it by words, as the shin."""
+    names = ["hips", "spine", "chest", "neck", "head"] + [f"{w}_{s}" for s in "LR" for w in (
+        "upleg", "leg", "foot", "toe", "arm", "elbow", "wrist")]
+    parents = [-1, 0, 1, 2, 3] + [p for k in range(2) for p in (0, 5 + 7 * k, 6 + 7 * k, 7 + 7 * k, 2, 9 + 7 * k,
+                                                                   10 + 7 * k)]
+    family, mapping = auto_map(names, parents)
+    assert family != "mmd_english" and mapping["l_knee"] == ("leg_L", False)
+
+
+def test_an_mmd_model_without_a_second_upper_body_places_the_chest_and_keeps_the_hips_at_the_lower_bodys_tail():
+    names, parents = ["全ての親", "センター", "グルーブ", "下半身", "上半身", "首", "頭"], [-1, 0, 1, 2, 2, 4, 5]
+    for s in "LR":
+        for word, parent in (("足", "下半身"), ("ひざ", "足"), ("足首", "ひざ"), ("肩", "上半身"), ("腕", "肩"),
+                             ("ひじ", "腕"), ("手首", "ひじ")):
+            names.append(f"{word}.{s}")
+            parents.append(names.index(parent if parent in names else f"{parent}.{s}"))
+    _, mapping = auto_map(names, parents)
+    assert not missing(mapping) and "spine1" not in mapping  # placed between the spine and the neck
+    assert mapping["hips"] == ("下半身", True) and mapping["spine"] == ("上半身", False)

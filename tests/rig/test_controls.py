@@ -7,6 +7,7 @@ from dataclasses import replace
 from test_bonemap import _auto_rig_pro
 
 from model_core.rig.controls import PRESETS, Row, SwitchRow, as_rows, from_rows, preset_for
+from model_core.rig.rigs import MMD_SPELLINGS, mmd_name
 
 
 def test_auto_rig_pro_fits_with_three_or_two_spine_bones():
@@ -124,4 +125,19 @@ def test_an_mmd_model_is_keyed_on_its_centre_its_fk_bones_and_its_leg_ik():
     again, problems = from_rows("mmd", rows, switches)
     assert not problems and again.controls == [replace(c, optional=False) for c in found.controls]
     assert preset_for([n for n in MMD_NAMES if n != "上半身2"]) is not None  # a model without the second upper body
+    for spelling in MMD_SPELLINGS:  # however the model's bones are named
+        names = [mmd_name(w, None, spelling) for w in ("センター", "下半身", "上半身", "首", "頭")] + [
+            mmd_name(w, S, spelling) for S in "LR"
+            for w in ("肩", "腕", "ひじ", "手首", "足", "ひざ", "足首", "足ＩＫ")]
+        spelt = preset_for(names)
+        assert spelt is not None and spelt.name == "mmd" and {c.bone for c in spelt.controls} == set(names)
     assert preset_for([n for n in MMD_NAMES if n != "足ＩＫ.L"]) is None  # nor one without its leg IK
+
+
+def test_a_limb_always_in_ik_with_its_ik_off_is_keyed_on_fk():
+    found = preset_for(MMD_NAMES)
+    off = found.ik_off({"足ＩＫ.L"}, {"ひざ.L", "足.L", "下半身"})
+    bones = {c.bone: c for c in off.controls}
+    assert "足ＩＫ.L" not in bones and "足ＩＫ.R" in bones  # the right leg's IK is still on
+    assert not bones["足.L"].twist and bones["足.R"].twist  # the left thigh keyed whole, the right about its axis
+    assert found.ik_off(set(), {"足.L"}) is found
