@@ -11,9 +11,10 @@ as a clavicle). The solved pose is then written on the controls by a visual bake
 Blender side, ``strnn_addon/scene/controls.py``): each :class:`Control` is turned until the
 bone it drives sits where the solve put it.
 
-:data:`PRESETS` holds the control sets that ship (Rigify's, the Mixamo Rig add-on's, Auto-Rig Pro's): their FK
-controls, and for each limb animated in IK (:class:`IkLimb`) its IK controls, so that results are keyed where the
-animator animates; any other rig gets its controls from the Bone Map panel.
+:data:`PRESETS` holds the control sets that ship (Rigify's, the Mixamo Rig add-on's, Auto-Rig Pro's, and MMD models'
+as mmd_tools imports them): their FK controls, and for each limb animated in IK (:class:`IkLimb`) its IK controls
+(an MMD model's legs, always in IK, have theirs among the controls), so that results are keyed where the animator
+animates; any other rig gets its controls from the Bone Map panel.
 """
 
 from __future__ import annotations
