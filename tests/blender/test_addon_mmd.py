@@ -312,3 +312,30 @@ def test_with_its_leg_ik_off_the_legs_are_keyed_on_fk(addon, tmp_path):
     assert record["max_error_cm"] < 1.0, record
     keyed = keyed_bones(obj, moved)
     assert {"足.L", "ひざ.L", "足首.R"} <= keyed and not keyed & {"足ＩＫ.L", "足ＩＫ.R"}, keyed
+
+
+def test_root_motion_goes_on_the_models_parent_of_all(addon, tmp_path):
+    """Transfer Motion's Root Motion keys the travel on the bone above the centre, the model's ``全ての親`` (the
+    parent of all, which MMD motions move to place a character), under the body on the floor; the centre moves
+    against it."""
+    from test_addon_rigify import import_walk
+
+    obj = mmd_model()
+    source = import_walk(tmp_path)
+    for o in bpy.context.view_layer.objects:
+        o.select_set(o in (source, obj))
+    bpy.context.view_layer.objects.active = obj
+    assert bpy.ops.strnn.transfer_motion(foot_lock=True, root_motion=True) == {"FINISHED"}
+    moved = action_of(obj)
+    assert moved["strnn"]["controls"]["max_error_cm"] < 1.0
+    assert "全ての親" in keyed_bones(obj, moved)
+    frames = np.arange(int(moved.frame_range[0]), int(moved.frame_range[1]) + 1)
+    got = evaluated_joints(addon, obj, frames)
+    root = []
+    for f in frames:
+        bpy.context.scene.frame_set(int(f))
+        root.append(np.array(obj.matrix_world @ obj.pose.bones["全ての親"].head))
+    root = np.array(root)
+    assert np.linalg.norm(root[-1, :2] - root[0, :2]) > 1.0  # the root travels
+    assert np.abs(root[:, 2] - root[0, 2]).max() < 1e-3  # on the floor
+    assert np.linalg.norm(root[:, :2] - got[:, 0, :2], axis=1).max() < 0.15  # under the body
