@@ -34,6 +34,7 @@ class Ground:
         self.name, self.meshes = name, meshes
         self._trees: list | None = None  # each mesh's (BVH tree, world matrix), built on first use
         self.steps: dict | None = None  # how :func:`carried` placed the steps (:func:`footsteps.even_steps`)
+        self.lift: np.ndarray | None = None  # how far :func:`carried` carried the body up, frame by frame
 
     def _surfaces(self, context) -> list:
         if self._trees is None:  # an operation reads the ground two or three times: the trees are built once
@@ -167,13 +168,14 @@ def body_lift(context, ground, pos: np.ndarray, known: int, fps: float,
 def carried(context, ground, pos: np.ndarray, known: int, fps: float,
             rest: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray | None, int]:
     """Motion ``pos`` ``[F, 21, 3]`` (world, Y-up, ``fps``) made on a flat floor from ``known`` on, carried over
-    ``ground`` (:func:`body_lift`; ``rest``: the pose a walk with nothing known starts from), each of its steps
-    moved along its foot off the surface's edges (:func:`footsteps.even_steps`, what it did in ``ground.steps``),
-    with what Foot Lock
+    ``ground`` (:func:`body_lift`, kept in ``ground.lift``; ``rest``: the pose a walk with nothing known starts from),
+    each of its steps moved along its foot off the surface's edges (:func:`footsteps.even_steps`, what it did in
+    ``ground.steps``), each foot raised clear of the surface (:func:`footsteps.clear_of_surface`), with what Foot Lock
     needs to lock it there: (the carried motion, the surface's height under each heel and toe ``[F, 4]``
     (:func:`ground_heights`), how high each stood over the flat floor ``[4]`` (None: no contacts), frames with no
     surface under a foot)."""
     lift, floor = body_lift(context, ground, pos, known, fps, rest)
+    ground.lift = lift
     contacts = footlock.detect_foot_contacts(pos, fps)
     standing = footlock.rest_heights(pos, contacts, np.arange(len(pos)) < known if known else None)
     out = np.array(pos, np.float64)

@@ -323,10 +323,12 @@ class Root:
     bone: str
     start: np.ndarray
 
-    def track(self, positions: np.ndarray, seam: int, fps: float) -> np.ndarray:
+    def track(self, positions: np.ndarray, seam: int, fps: float, lift: np.ndarray | None = None) -> np.ndarray:
         """World matrices ``[F - seam + 1, 4, 4]`` on frames ``seam - 1`` on of ``positions`` ``[F, 21, 3]`` (world,
-        Y-up, ``fps``): ``start``, then carried with the body (:func:`root_motion.carried_root`)."""
-        carried = carried_root(self.start, yup_to_zup(positions[:, 0]), yup_to_zup(facing(positions)), seam, fps)
+        Y-up, ``fps``): ``start``, then carried with the body (:func:`root_motion.carried_root`; ``lift`` ``[F]``: how
+        far the body was carried up over a ground, ``ground.carried``, which the root rides too)."""
+        carried = carried_root(self.start, yup_to_zup(positions[:, 0]), yup_to_zup(facing(positions)), seam, fps,
+                               lift=lift)
         return np.concatenate([self.start[None], carried])
 
 

@@ -174,15 +174,11 @@ def test_frames_before_the_start_take_the_root_back_with_the_body(addon, fake_mo
     assert np.linalg.norm(under, axis=-1).max() < 0.05
 
 
-def test_transfer_with_root_motion_keys_the_travel_on_the_targets_root(addon, tmp_path):
-    """A walk moved onto a game rig (a root bone on the floor above its hips) with Root Motion: the root goes with the
-    body, on the floor under it, turned as it faces, and the hips move against it; without Root Motion the root is
-    not keyed. A rig with no bone above its hips is refused with what to do, and nothing changes."""
-    from scenes import import_bvh, walk_bvh
-    from test_addon_rigify import WALK, find_mocap
+def game_rig_and_walk(path):
+    """(source, target): the walk at ``path`` imported 2 m aside, and a game rig (the Mixamo body under a ``root`` bone
+    on the floor), both selected, the rig active, ready for Transfer Motion."""
+    from scenes import import_bvh
 
-    mocap = find_mocap()
-    path = mocap / WALK if mocap is not None and (mocap / WALK).exists() else walk_bvh(tmp_path, frames=120)
     source = import_bvh(path, update_scene_fps=True, update_scene_duration=True)
     source.location.x = -2.0
     bones = [("root", None, (0.0, 0.0, 0.0), (0.0, 0.3, 0.0))]
@@ -191,6 +187,19 @@ def test_transfer_with_root_motion_keys_the_travel_on_the_targets_root(addon, tm
     for obj in bpy.context.view_layer.objects:
         obj.select_set(obj in (source, target))
     bpy.context.view_layer.objects.active = target
+    return source, target
+
+
+def test_transfer_with_root_motion_keys_the_travel_on_the_targets_root(addon, tmp_path):
+    """A walk moved onto a game rig (a root bone on the floor above its hips) with Root Motion: the root goes with the
+    body, on the floor under it, turned as it faces, and the hips move against it; without Root Motion the root is
+    not keyed. A rig with no bone above its hips is refused with what to do, and nothing changes."""
+    from scenes import walk_bvh
+    from test_addon_rigify import WALK, find_mocap
+
+    mocap = find_mocap()
+    path = mocap / WALK if mocap is not None and (mocap / WALK).exists() else walk_bvh(tmp_path, frames=120)
+    source, target = game_rig_and_walk(path)
     assert bpy.ops.strnn.transfer_motion(root_motion=True) == {"FINISHED"}
     new = action_of(target)
     assert new["strnn"]["root_motion"].to_dict() == {"bone": "root"}
@@ -252,3 +261,27 @@ def test_a_root_that_only_rises_carries_no_travel(addon, fake_model):
     assert np.ptp(heights[:, 2]) > 0.3 and np.ptp(heights[:, 0]) + np.ptp(heights[:, 1]) < 1e-6
     assert bpy.ops.strnn.extend_clip(frames=30) == {"FINISHED"}
     assert "root_motion" not in action_of(obj)["strnn"]
+
+
+def test_a_root_carried_over_a_ground_rides_it_with_the_body(addon, tmp_path):
+    """Transfer Motion with Root Motion and a Ground (a ramp rising 15 cm a metre the way the walk goes): the root
+    goes up the ramp with the body, by as much as the body is carried up (within 5 cm of the ramp under it, 3.6 cm
+    at the ends, where the body's ride is smoothed; it kept the floor's height before), and stays under the body."""
+    from scenes import ramp, walk_bvh
+
+    _, target = game_rig_and_walk(walk_bvh(tmp_path, frames=120))
+    assert bpy.ops.strnn.transfer_motion(root_motion=True) == {"FINISHED"}
+    frames = np.arange(int(action_of(target).frame_range[0]), int(action_of(target).frame_range[1]) + 1)
+    flat = evaluated_joints(addon, target, frames)
+    start, travel = flat[0, 0], flat[-1, 0] - flat[0, 0]  # the ramp rises the way the walk goes (given Y-up)
+    height = ramp("Ramp", [start[0], 0.0, -start[1]], [travel[0], 0.0, -travel[1]], 0.15)
+    target.animation_data.action = None
+    for pb in target.pose.bones:
+        pb.matrix_basis.identity()
+    assert bpy.ops.strnn.transfer_motion(root_motion=True, ground="Ramp") == {"FINISHED"}
+    joints, roots = evaluated_joints(addon, target, frames), root_heads(target, frames)
+    under = height(np.stack([roots[:, 0], roots[:, 2], -roots[:, 1]], -1))  # the ramp's height under the root
+    assert roots[-1, 2] > 0.15 * np.linalg.norm(travel[:2]) * 0.8  # up the ramp
+    print(f"root over the ramp under it: {100 * np.abs(roots[:, 2] - under).max():.2f} cm at most")
+    assert np.abs(roots[:, 2] - under).max() < 0.05, np.abs(roots[:, 2] - under).max()
+    assert np.linalg.norm(roots[:, :2] - joints[:, 0, :2], axis=-1).max() < 0.15  # under the body

@@ -44,3 +44,14 @@ def test_smoothing_to_the_trend_keeps_a_steady_walk_going_to_the_ends():
     np.testing.assert_allclose(gaussian_smooth(track, 15.0, ends="trend"), track, atol=1e-5)
     assert np.abs(gaussian_smooth(track, 15.0) - track)[-1].max() > 0.2  # held back by about a third of a metre
     assert gaussian_smooth(track[:5], 15.0, ends="trend").shape == (5, 3)
+
+
+def test_a_root_carried_over_a_ground_rises_as_the_body_is_carried():
+    walk = walking_skeleton(120, radius=1e6).astype(np.float64)
+    seam, lift = 30, np.linspace(-0.2, 0.7, 120)  # the body carried up a slope, from 0.2 below where it was
+    root = np.eye(4)
+    root[:3, 3] = walk[seam - 1, 0] * [1.0, 0.0, 1.0]
+    flat = carried_root(root, walk[:, 0], facing(walk), seam, 30.0, up=1)
+    up = carried_root(root, walk[:, 0], facing(walk), seam, 30.0, up=1, lift=lift)
+    np.testing.assert_allclose(up[:, 1, 3] - flat[:, 1, 3], lift[seam:] - lift[seam - 1])  # from where it stood
+    np.testing.assert_allclose(up[:, [0, 2], 3], flat[:, [0, 2], 3])  # along the same track
