@@ -133,3 +133,32 @@ def test_a_rig_without_a_chest_or_neck_bone_places_them_and_is_solved_exactly(ri
     assert set(skeleton.names) == set(small.names)  # every bone here carries a joint or lies between two
     on_skeleton = Anchors.from_map(skeleton, mapping)
     assert on_skeleton.between == placed.between
+
+
+def test_hips_at_the_tail_of_a_bone_pointing_down_from_the_waist_are_solved_exactly(rig_and_motion):
+    """An MMD model has no bone at the pelvis: its lower body points down from the waist, the hips at its tail, and
+    the legs and the spine hang from it. The solve turns that bone about the hips and puts its head where that sets
+    its tail on them."""
+    rig, anchors, _, _ = rig_and_motion
+    mapping = {j: (rig.names[b], bool(t)) for j, b, t in zip(JOINTS, anchors.bone, anchors.tail)}
+    hips = rig.names.index(mapping["hips"][0])
+    down = np.eye(4)
+    down[:3, :3] = np.diag([1.0, -1.0, -1.0])  # its +Y along the bone points down
+    down[:3, 3] = rig.rest[hips, :3, 3] + [0.0, 0.1, 0.0]  # its head 10 cm over the pelvis, at the waist
+    lower = Rig(["Lower"] + rig.names, np.r_[-1, np.where(rig.parents < 0, 0, rig.parents + 1)],
+                np.concatenate([down[None], rig.rest]), np.r_[0.1, rig.lengths])
+    lower = _without(lower, [mapping["hips"][0]])  # the pelvis bone gone: the legs and spine hang from Lower
+    mapping["hips"] = ("Lower", True)
+    at_tail = Anchors.from_map(lower, mapping)
+    rng = np.random.default_rng(1)
+    n, b = 40, len(lower.names)
+    turns = rng.normal(0.0, 0.4, (n, b, 3))
+    turns[:, [x not in at_tail.on_bones() for x in range(b)]] = 0.0
+    rot = rotvec_to_matrix(turns)
+    loc = np.zeros((n, b, 3))
+    loc[:, 0] = rng.normal(0.0, 0.3, (n, 3))
+    targets = anchor_positions(lower, at_tail, fk(lower, loc, rot))
+    loc2, rot2 = solve(lower, at_tail, targets, np.zeros_like(loc), np.repeat(np.eye(3)[None, None], n, 0).repeat(b, 1))
+    got = anchor_positions(lower, at_tail, fk(lower, loc2, rot2))
+    assert np.abs(got - targets).max() < 1e-6
+    assert np.allclose(loc2[:, 0], loc[:, 0]) and np.allclose(rot2[:, 0], rot[:, 0])  # the same pose, not another
