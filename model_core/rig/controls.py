@@ -335,6 +335,7 @@ def _mmd_controls(spelling: str) -> list[Control]:
     n = lambda word, side=None: mmd_name(word, side, spelling)
     return [Control(n("センター"), n("下半身"), True, turns=False), Control(n("下半身"), n("下半身")),
             Control(n("上半身"), n("上半身")), Control(n("上半身2"), n("上半身2"), optional=True),
+            Control(n("上半身3"), n("上半身3"), optional=True),  # some models' chest, from which the arms hang
             Control(n("首"), n("首")), Control(n("頭"), n("頭"))] + [
         Control(n(bone, S), n(bone, S)) for S in "LR" for bone in ("肩", "腕", "ひじ", "手首", "ひざ", "足首")] + [
         c for S in "LR"

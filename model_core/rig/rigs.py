@@ -37,8 +37,9 @@ def _sided(template: dict[str, list[str]], left: tuple[str, str], right: tuple[s
 
 # MMD bone words (the model's Japanese) and the PMX format's standard English names for them.
 MMD_ENGLISH = {"センター": "center", "下半身": "lower body", "上半身": "upper body", "上半身2": "upper body2",
-               "首": "neck", "頭": "head", "肩": "shoulder", "腕": "arm", "ひじ": "elbow", "手首": "wrist", "足": "leg",
-               "ひざ": "knee", "足首": "ankle", "足ＩＫ": "leg IK", "つま先ＩＫ": "toe IK"}
+               "上半身3": "upper body3", "首": "neck", "頭": "head", "肩": "shoulder", "腕": "arm", "ひじ": "elbow",
+               "手首": "wrist", "足": "leg", "ひざ": "knee", "足首": "ankle", "足ＩＫ": "leg IK",
+               "つま先ＩＫ": "toe IK"}
 # How a model's MMD bones may be named: as mmd_tools renames them by default (``足.L``), with an underscore (``足_L``),
 # as the model names them (``左足``), or by their standard English names (``leg_L``).
 MMD_SPELLINGS = ("{w}.{S}", "{w}_{S}", "{side}{w}", "english")
