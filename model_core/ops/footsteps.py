@@ -24,7 +24,18 @@ import numpy as np
 
 from ..motion.conventions import CONTACT_JOINTS, GROUND_AXES, STANDARD_LEG_LENGTH, UP_AXIS
 from ..rig.rigs import leg_length
-from .footlock import _ANKLE, _HEEL_CHANNELS, _HIP, _KNEE, _TOE, _TOE_CHANNELS, body_forward, fill_gaps, two_bone_ik
+from .footlock import (
+    _ANKLE,
+    _HEEL_CHANNELS,
+    _HIP,
+    _KNEE,
+    _TOE,
+    _TOE_CHANNELS,
+    FootLockSettings,
+    body_forward,
+    fill_gaps,
+    two_bone_ik,
+)
 
 # Where the footprint is read, as shares of the ankle-to-toe vector from the ankle: from behind the ankle (which
 # stands over the heel, in front of its back) to just past the toe joint, the ball of the foot. The toes' tips may
@@ -161,7 +172,7 @@ def _carried_between(keys: list[tuple[int, int, np.ndarray]], frames: int, fixed
     return out
 
 
-FLOOR_TOLERANCE = 0.01  # metres for a standard leg: Foot Lock's floor tolerance
+FLOOR_TOLERANCE = FootLockSettings.floor_tolerance  # metres for a standard leg: Foot Lock's (1 cm)
 CLEAR_S = 0.1  # seconds: a foot raised clear of the surface rises and comes down again over this much either side
 
 
