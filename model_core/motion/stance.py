@@ -76,6 +76,20 @@ def settle_stances(feats: np.ndarray, n: int, first: int = SETTLE_FROM, share: f
     return out[0] if single else out
 
 
+def held_and_eased(x: np.ndarray, ease: int) -> np.ndarray:
+    """``x`` ``[..., F]`` with each value held for ``ease`` frames either side (a running maximum) and averaged over
+    as many, so that a rise is reached and left smoothly and never undercut (at least ``x`` on every frame)."""
+    x = np.asarray(x)
+    if ease <= 0 or x.shape[-1] < 2:
+        return x
+
+    def spread(v, reduce):
+        padded = np.pad(v, [(0, 0)] * (v.ndim - 1) + [(ease, ease)], mode="edge")
+        return reduce(np.lib.stride_tricks.sliding_window_view(padded, 2 * ease + 1, axis=-1), -1)
+
+    return spread(spread(x, np.max), np.mean)
+
+
 def ground(pos: np.ndarray, floor: float | np.ndarray, ease: int = GROUND_EASE, start: int = 0,
            ramp: int = 0) -> np.ndarray:
     """Joints ``[F, 21, 3]`` or ``[B, F, 21, 3]`` (Y up) lifted, frame by frame, so that the lowest heel or toe is
@@ -89,11 +103,7 @@ def ground(pos: np.ndarray, floor: float | np.ndarray, ease: int = GROUND_EASE, 
     floors = np.broadcast_to(np.asarray(floor, np.float64), (len(out),))
     lift = np.maximum(0.0, floors[:, None] - out[..., CONTACT_JOINTS, 1].min(-1))  # (B, F)
     lift[np.isnan(lift)] = 0.0
-    if ease > 0 and lift.shape[1] > 1:
-        def spread(x, reduce):
-            padded = np.pad(x, ((0, 0), (ease, ease)), mode="edge")
-            return reduce(np.lib.stride_tricks.sliding_window_view(padded, 2 * ease + 1, axis=1), -1)
-        lift = spread(spread(lift, np.max), np.mean)
+    lift = held_and_eased(lift, ease)
     lift *= np.clip((np.arange(lift.shape[1]) - start + 1) / (ramp + 1), 0.0, 1.0)
     out[..., 1] += lift[..., None].astype(out.dtype)
     return out[0] if single else out

@@ -23,6 +23,7 @@ from collections.abc import Callable
 import numpy as np
 
 from ..motion.conventions import CONTACT_JOINTS, GROUND_AXES, STANDARD_LEG_LENGTH, UP_AXIS
+from ..motion.stance import held_and_eased
 from ..rig.rigs import leg_length
 from .footlock import (
     _ANKLE,
@@ -185,23 +186,18 @@ def clear_of_surface(pos: np.ndarray, heights: np.ndarray, standing: np.ndarray,
     Foot Lock's, within which a planted foot counts as on the floor; a straight leg raised even a millimetre must
     bend its knee by centimetres), to that tolerance. Motion made on a flat floor and carried with the surface under
     the hips drops its feet with the hips: a foot leaving a stair's tread on the way down, or one reaching over a
-    step's nose, passes through the tread. The rise is eased in and out over :data:`CLEAR_S` (a running maximum
-    then a mean of the same width, so it is never less than the shortfall), the foot keeps its orientation, the knee
+    step's nose, passes through the tread. The rise is eased in and out over :data:`CLEAR_S`
+    (:func:`stance.held_and_eased`, never less than the shortfall), the foot keeps its orientation, the knee
     follows by two-bone IK from the hip; ``fixed`` frames stay. Also on how many frames a foot was raised."""
     pos = np.asarray(pos, np.float64)
     n = len(pos)
     fixed = np.zeros(n, bool) if fixed is None else np.asarray(fixed, bool)
     tolerance = tolerance * leg_length(pos) / STANDARD_LEG_LENGTH
-    short = np.nan_to_num(np.asarray(heights, np.float64) + np.asarray(standing, np.float64)
-                          - pos[:, CONTACT_JOINTS, UP_AXIS], nan=0.0) - tolerance
-    w = max(1, int(round(CLEAR_S * fps)))
-    rise = np.zeros((n, 2))
-    for leg in (0, 1):
-        d = np.maximum(short[:, [_HEEL_CHANNELS[leg], _TOE_CHANNELS[leg]]].max(1), 0.0)
-        d[fixed] = 0.0
-        padded = np.pad(d, w)
-        peak = np.lib.stride_tricks.sliding_window_view(padded, 2 * w + 1).max(1)
-        rise[:, leg] = np.convolve(np.pad(peak, w, mode="edge"), np.full(2 * w + 1, 1 / (2 * w + 1)), "valid")
+    under = np.nan_to_num(np.asarray(heights, np.float64) + np.asarray(standing, np.float64)
+                          - pos[:, CONTACT_JOINTS, UP_AXIS], nan=0.0) - tolerance  # [F, 4]: each heel and toe
+    short = np.maximum(np.stack([under[:, [_HEEL_CHANNELS[leg], _TOE_CHANNELS[leg]]].max(1) for leg in (0, 1)], 1), 0)
+    short[fixed] = 0.0
+    rise = held_and_eased(short.T, max(1, int(round(CLEAR_S * fps)))).T  # [F, 2]
     rise[fixed] = 0.0
     raised = rise > 0.0
     if not raised.any():

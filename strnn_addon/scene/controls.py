@@ -81,14 +81,19 @@ def _ik_off(obj, control_set_: ControlSet) -> ControlSet:
     """``control_set_`` with each IK End of no switch whose IK constraints (those aimed at it) are all off left out,
     and the chain bases in those constraints' chains keyed whole (:meth:`ControlSet.ik_off`)."""
     ends, chains = set(), set()
-    for c in control_set_.controls:
-        if not c.end:
-            continue
-        aimed = [(pb, con) for pb in obj.pose.bones for con in pb.constraints
-                 if con.type == "IK" and getattr(con, "subtarget", "") == c.bone]
+    wanted = {c.bone for c in control_set_.controls if c.end}
+    if not wanted:  # no limb always in IK
+        return control_set_
+    aiming: dict[str, list] = {}
+    for pb in obj.pose.bones:
+        for con in pb.constraints:
+            if con.type == "IK" and getattr(con, "subtarget", "") in wanted:
+                aiming.setdefault(con.subtarget, []).append((pb, con))
+    for end in sorted(wanted):
+        aimed = aiming.get(end, [])
         if not aimed or any(not con.mute and con.influence > 0 for _, con in aimed):
             continue
-        ends.add(c.bone)
+        ends.add(end)
         for pb, con in aimed:  # the bones the constraint moves: its owner and chain_count - 1 above (0: all)
             for _ in range(con.chain_count or len(obj.pose.bones)):
                 if pb is None:

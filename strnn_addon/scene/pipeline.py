@@ -323,12 +323,12 @@ class Root:
     bone: str
     start: np.ndarray
 
-    def track(self, positions: np.ndarray, seam: int, fps: float, lift: np.ndarray | None = None) -> np.ndarray:
+    def track(self, positions: np.ndarray, seam: int, fps: float, ground=None) -> np.ndarray:
         """World matrices ``[F - seam + 1, 4, 4]`` on frames ``seam - 1`` on of ``positions`` ``[F, 21, 3]`` (world,
-        Y-up, ``fps``): ``start``, then carried with the body (:func:`root_motion.carried_root`; ``lift`` ``[F]``: how
-        far the body was carried up over a ground, ``ground.carried``, which the root rides too)."""
+        Y-up, ``fps``): ``start``, then carried with the body (:func:`root_motion.carried_root`), riding the ``ground``
+        the body was carried over (``ground.carried``, its ``lift``) as the body does."""
         carried = carried_root(self.start, yup_to_zup(positions[:, 0]), yup_to_zup(facing(positions)), seam, fps,
-                               lift=lift)
+                               lift=ground.lift if ground is not None else None)
         return np.concatenate([self.start[None], carried])
 
 

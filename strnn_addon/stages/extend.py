@@ -133,8 +133,7 @@ def extend_steps(context, obj, *, frames: int = 120, context_frames: int = 0, fo
     # a game rig's root carries the travel: on with the body
     root, carry = pipeline.moving_root(context, clip, mem_frames, ctx_frames[-1]), None
     if root is not None:
-        lift = surface.lift if surface is not None else None  # over a ground the root rides it with the body
-        carry = np.linalg.inv(arm_world) @ root.track(joined, len(pos), fps, lift)[1:]
+        carry = np.linalg.inv(arm_world) @ root.track(joined, len(pos), fps, surface)[1:]
         ref_loc, ref_rot = pipeline.root_carried(clip, root.bone, ref_loc, ref_rot, carry)
         previous.update(pipeline.raw_rotations(clip, edge, [root.bone]))
     if back:  # written in time order

@@ -69,8 +69,7 @@ def follow_curve_steps(context, obj, *, curve: str = "", frames: int = 0, speed:
     root = pipeline.moving_root(context, clip, ctx, clip.last) if context_pos is not None else None
     carry = None
     if root is not None:  # a game rig's root carries the travel: along the curve with the body
-        lift = surface.lift if surface is not None else None  # over a ground the root rides it with the body
-        carry = np.linalg.inv(arm_world) @ root.track(joined, known, clip.fps, lift)[1:]
+        carry = np.linalg.inv(arm_world) @ root.track(joined, known, clip.fps, surface)[1:]
         ref_loc, ref_rot = pipeline.root_carried(clip, root.bone, ref_loc, ref_rot, carry)
         previous.update(pipeline.raw_rotations(clip, clip.last, [root.bone]))
     targets = pipeline.to_armature(clip, new_pos, arm_world)

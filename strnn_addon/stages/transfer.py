@@ -75,8 +75,7 @@ def transfer_steps(context, obj, *, source: str = "", foot_lock: bool = True, sc
     ref_loc, ref_rot = np.repeat(ref_loc, n, 0), np.repeat(ref_rot, n, 0)
     carry = None
     if root is not None:  # the root, where it stands now under the body, carried with it from the first frame on
-        lift = surface.lift if surface is not None else None  # over a ground the root rides it with the body
-        carry = np.linalg.inv(arm_world) @ root.track(new_pos, 1, src.fps / step, lift)
+        carry = np.linalg.inv(arm_world) @ root.track(new_pos, 1, src.fps / step, surface)
         ref_loc, ref_rot = pipeline.root_carried(target, root.bone, ref_loc, ref_rot, carry)
     loc, rot = solve(target.rig, target.anchors, pipeline.to_armature(target, new_pos, arm_world), ref_loc, ref_rot)
     yield "write"
