@@ -1,5 +1,6 @@
 """Small geometry every layer shares, written once: unit vectors, rotation vectors, the
-shortest-arc rotation, turns about +Y on the ground, and linear interpolation of frames.
+shortest-arc rotation, the nearest rotation to a matrix, turns about +Y on the ground, and linear
+interpolation of frames.
 
 NumPy; arrays broadcast over leading dimensions (``[..., 3]`` vectors, ``[..., 3, 3]``
 matrices). :func:`rotate_ground` also runs on torch tensors (``xp=torch``), so the NumPy and
@@ -38,6 +39,16 @@ def shortest_arc(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     flip = c < -1 + 1e-9
     axis_angle = np.where(flip[..., None], perp * np.pi, unit(v) * np.arctan2(np.linalg.norm(v, axis=-1), c)[..., None])
     return rotvec_to_matrix(axis_angle)
+
+
+def nearest_rotation(m: np.ndarray) -> np.ndarray:
+    """The rotations ``[..., 3, 3]`` nearest to matrices ``m`` ``[..., 3, 3]`` (the polar factor, by SVD): a matrix
+    that is a rotation up to rounding comes back one to the last bit, where a chain of them would grow the error
+    bone by bone."""
+    u, _, vt = np.linalg.svd(np.asarray(m, np.float64))
+    d = np.sign(np.linalg.det(u @ vt))
+    u = u * np.concatenate([np.ones(d.shape + (2,)), d[..., None]], -1)[..., None, :]
+    return u @ vt
 
 
 def rotate_ground(yaw, xz, xp=np):

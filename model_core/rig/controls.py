@@ -24,6 +24,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from ..motion.conventions import JOINTS, PARENT_NAMES
+from ..motion.geometry import nearest_rotation
 from .rigs import MMD_SPELLINGS, mmd_name, normalise_name
 from .solve import Rig, SolveError, placed as placed_in
 
@@ -420,7 +421,4 @@ def visual_local(rig: Rig, pose: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     parent = np.where((rig.parents < 0)[None, :, None, None], np.eye(4),
                       pose[:, np.maximum(rig.parents, 0)])
     local = np.linalg.inv(parent @ rig.rel_rest) @ pose
-    rot = local[..., :3, :3]
-    u, _, vt = np.linalg.svd(rot)  # the nearest rotation: drops scale and shear
-    rot = u @ vt
-    return local[..., :3, 3], rot
+    return local[..., :3, 3], nearest_rotation(local[..., :3, :3])  # drops scale and shear

@@ -32,7 +32,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..motion.conventions import JOINT_INDEX, JOINTS, PARENT_NAMES
-from ..motion.geometry import rotvec_to_matrix, shortest_arc, unit
+from ..motion.geometry import nearest_rotation, rotvec_to_matrix, shortest_arc, unit
 
 # Upper limbs whose twist follows the plane of (joint, child, grandchild).
 _PLANE_TWIST = {"l_upleg": ("l_knee", "l_foot"), "r_upleg": ("r_knee", "r_foot"),
@@ -77,7 +77,11 @@ class SolveError(ValueError):
 @dataclass
 class Rig:
     """An armature's rest pose. ``parents`` int ``[B]`` (-1 for roots, parents first),
-    ``rest`` ``[B, 4, 4]`` armature space, ``lengths`` ``[B]`` in armature units."""
+    ``rest`` ``[B, 4, 4]`` armature space, ``lengths`` ``[B]`` in armature units.
+
+    Each rest matrix's rotation is taken as the rotation nearest to it: Blender's ``Bone.matrix_local`` of a bone
+    that points straight up or down (a leg, an MMD model's lower body) is a rotation only to about 1e-4, and a chain
+    of bones that turns each child from its parent's turn would grow that by a factor of about three a bone."""
 
     names: list[str]
     parents: np.ndarray
@@ -86,7 +90,8 @@ class Rig:
 
     def __post_init__(self):
         self.parents = np.asarray(self.parents, dtype=np.int64)
-        self.rest = np.asarray(self.rest, dtype=np.float64)
+        self.rest = np.array(self.rest, dtype=np.float64)
+        self.rest[:, :3, :3] = nearest_rotation(self.rest[:, :3, :3])
         self.lengths = np.asarray(self.lengths, dtype=np.float64)
         for b, p in enumerate(self.parents):
             if p >= b:
@@ -297,12 +302,13 @@ def solve(rig: Rig, anchors: Anchors, targets: np.ndarray, ref_loc: np.ndarray,
     (only the hips bone's changes) and ``rot`` ``[F, B, 3, 3]``.
     """
     targets = np.asarray(targets, dtype=np.float64)
+    ref_rot = nearest_rotation(ref_rot)  # a pose read in float32: rotations again, so that no chain grows its error
     ref_pose = fk(rig, ref_loc, ref_rot)
     ref = (ref_pose, anchor_positions(rig, anchors, ref_pose))
     joint_at = anchors.on_bones()
     bridges = _bridges(rig, anchors, joint_at)
     hips = int(anchors.bone[JOINT_INDEX["hips"]])
-    loc, rot = np.array(ref_loc, dtype=np.float64), np.array(ref_rot, dtype=np.float64)
+    loc, rot = np.array(ref_loc, dtype=np.float64), ref_rot.copy()
     pose = np.empty(ref_pose.shape)
     for b, p in enumerate(rig.parents):
         base = rig.rel_rest[b] if p < 0 else pose[:, p] @ rig.rel_rest[b]  # (F, 4, 4) or (4, 4)

@@ -17,7 +17,7 @@ import bpy
 import numpy as np
 from mathutils import Matrix
 
-from ...model_core.motion.geometry import unit
+from ...model_core.motion.geometry import nearest_rotation, unit
 from ...model_core.rig import controls as rig_controls
 from ...model_core.rig.controls import ControlSet
 from . import anim
@@ -259,8 +259,7 @@ def bake(context, obj, control_set_: ControlSet, frames: np.ndarray, targets: di
         for (bone, prop), value in keep_switch.items():
             bones[bone][prop] = value
         scene.frame_set(keep_frame[0], subframe=keep_frame[1])
-    u, _, vt = np.linalg.svd(rot)
-    return Baked(loc, u @ vt, worst)
+    return Baked(loc, nearest_rotation(rot), worst)
 
 
 def key_switches(channels: anim.Channels, obj, control_set_: ControlSet, frames: np.ndarray, edges: np.ndarray):

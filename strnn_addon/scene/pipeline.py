@@ -23,6 +23,7 @@ from ...model_core.motion.conventions import (  # noqa: F401  (MIN_MODEL_FRAMES,
     zup_to_yup,
 )
 from ...model_core.motion.features import facing
+from ...model_core.motion.geometry import nearest_rotation
 from ...model_core.ops.root_motion import carried_root
 from ...model_core.rig.controls import Control, ControlSet, visual_local
 from ...model_core.rig.rigs import leg_length
@@ -392,8 +393,7 @@ def root_carried(clip: Clip, root: str, ref_loc: np.ndarray, ref_rot: np.ndarray
     parent = int(clip.rig.parents[b])
     base = clip.rig.rel_rest[b] if parent < 0 else fk(clip.rig, loc, rot)[:, parent] @ clip.rig.rel_rest[b]
     local = np.linalg.inv(base) @ pose
-    u, _, vt = np.linalg.svd(local[:, :3, :3])  # the nearest rotation
-    loc[:, b], rot[:, b] = local[:, :3, 3], u @ vt
+    loc[:, b], rot[:, b] = local[:, :3, 3], nearest_rotation(local[:, :3, :3])
     return loc, rot
 
 

@@ -7,7 +7,14 @@ import numpy as np
 import pytest
 
 from model_core.motion.features import facing, heading, yaw_matrix
-from model_core.motion.geometry import cubic_frames, interpolate_frames, rotate_ground, shortest_arc
+from model_core.motion.geometry import (
+    cubic_frames,
+    interpolate_frames,
+    nearest_rotation,
+    rotate_ground,
+    rotvec_to_matrix,
+    shortest_arc,
+)
 from model_core.motion.synthetic import walking_skeleton
 
 
@@ -33,6 +40,16 @@ def test_shortest_arc_matches_the_closed_form_on_vectors():
     axis, c = np.cross(a, b), np.sum(a * b, -1, keepdims=True)
     closed = v * c + np.cross(axis, v) + axis * np.sum(axis * v, -1, keepdims=True) / (1.0 + c)
     np.testing.assert_allclose(np.einsum("fij,fj->fi", shortest_arc(a, b), v), closed, atol=1e-9)
+
+
+def test_nearest_rotation_keeps_rotations_and_mends_a_nearly_rotation_over_leading_dimensions():
+    rng = np.random.default_rng(0)
+    r = rotvec_to_matrix(rng.normal(size=(4, 5, 3)))
+    assert np.allclose(nearest_rotation(r), r, atol=1e-12)
+    near = nearest_rotation(r @ (np.eye(3) + 1e-3 * rng.normal(size=(4, 5, 3, 3))))
+    assert np.abs(np.swapaxes(near, -1, -2) @ near - np.eye(3)).max() < 1e-12
+    assert np.allclose(np.linalg.det(near), 1.0) and np.abs(near - r).max() < 1e-2
+    assert np.allclose(np.linalg.det(nearest_rotation(-r)), 1.0)  # a reflection gives a rotation, never a mirror
 
 
 def test_rotate_ground_numpy_and_torch_twins_agree_with_yaw_matrix():
