@@ -223,6 +223,39 @@ def makehuman_bones() -> list[tuple]:
     return bones
 
 
+def genesis8_bones() -> list[tuple]:
+    """(name, parent, head, tail) of a Daz Genesis 8 figure as Diffeo imports it: ``hip`` with ``pelvis`` (the legs)
+    and ``abdomenLower`` (the spine) hanging from it apart, two abdomen, two chest and two neck bones, and each limb
+    in a Bend and a Twist bone (``lThighBend`` > ``lThighTwist`` > ``lShin``; ``lShldrBend`` > ``lShldrTwist`` >
+    ``lForearmBend`` > ``lForearmTwist`` > ``lHand``), the legs straight down: long chains of bones that point along
+    an axis."""
+    j = _rest_joints()
+    up, fwd = np.array([0, 0, 0.1]), np.array([0, -0.06, 0])
+    spine = [_mid(j["spine"], j["spine1"], t) for t in (0.0, 0.5, 0.8)] + [j["spine1"], j["neck"]]
+    bones = [("hip", None, j["hips"], j["spine"]), ("pelvis", "hip", j["hips"], j["hips"] - up),
+             ("abdomenLower", "hip", spine[0], spine[1]), ("abdomenUpper", "abdomenLower", spine[1], spine[2]),
+             ("chestLower", "abdomenUpper", spine[2], spine[3]), ("chestUpper", "chestLower", spine[3], spine[4]),
+             ("neckLower", "chestUpper", j["neck"], _mid(j["neck"], j["head"])),
+             ("neckUpper", "neckLower", _mid(j["neck"], j["head"]), j["head"]),
+             ("head", "neckUpper", j["head"], j["head"] + up * 2)]
+    for s in "lr":
+        hand = [_mid(j[f"{s}_wrist"], j[f"{s}_fingertip"], t) for t in (0.0, 0.45, 0.65, 0.85, 1.0)]
+        bones += [(f"{s}Collar", "chestUpper", _mid(j["neck"], j[f"{s}_arm"], 0.3) - up, j[f"{s}_arm"]),
+                  (f"{s}ShldrBend", f"{s}Collar", j[f"{s}_arm"], _mid(j[f"{s}_arm"], j[f"{s}_elbow"])),
+                  (f"{s}ShldrTwist", f"{s}ShldrBend", _mid(j[f"{s}_arm"], j[f"{s}_elbow"]), j[f"{s}_elbow"]),
+                  (f"{s}ForearmBend", f"{s}ShldrTwist", j[f"{s}_elbow"], _mid(j[f"{s}_elbow"], j[f"{s}_wrist"])),
+                  (f"{s}ForearmTwist", f"{s}ForearmBend", _mid(j[f"{s}_elbow"], j[f"{s}_wrist"]), j[f"{s}_wrist"]),
+                  (f"{s}Hand", f"{s}ForearmTwist", hand[0], hand[1])]
+        fingers = [f"{s}Hand"] + [f"{s}Mid{k}" for k in (1, 2, 3)]
+        bones += [(fingers[k], fingers[k - 1], hand[k], hand[k + 1]) for k in (1, 2, 3)]
+        bones += [(f"{s}ThighBend", "pelvis", j[f"{s}_upleg"], _mid(j[f"{s}_upleg"], j[f"{s}_knee"], 0.4)),
+                  (f"{s}ThighTwist", f"{s}ThighBend", _mid(j[f"{s}_upleg"], j[f"{s}_knee"], 0.4), j[f"{s}_knee"]),
+                  (f"{s}Shin", f"{s}ThighTwist", j[f"{s}_knee"], j[f"{s}_foot"]),
+                  (f"{s}Foot", f"{s}Shin", j[f"{s}_foot"], j[f"{s}_toe"]),
+                  (f"{s}Toe", f"{s}Foot", j[f"{s}_toe"], j[f"{s}_toe"] + fwd)]
+    return bones
+
+
 def smpl_bones() -> list[tuple]:
     """(name, parent, head, tail) of an SMPL skeleton as the SMPL-X add-on and AMASS conversions name it: the ankle
     above ``L_Foot`` (the ball of the foot), the wrist above ``L_Hand`` (the knuckles), ``Spine1..3`` with the arms

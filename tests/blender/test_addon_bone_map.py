@@ -12,6 +12,7 @@ from scenes import (
     evaluated_joints,
     fewer_torso_bones,
     find_mocap,
+    genesis8_bones,
     import_bvh,
     makehuman_bones,
     mixamo_bones,
@@ -177,18 +178,25 @@ def walk_onto(obj, folder):
     return source, np.arange(int(new.frame_range[0]), int(new.frame_range[1]) + 1)
 
 
+def walk_and_its_error(addon, obj, folder):
+    """:func:`walk_onto` ``obj``, and how far (metres) each of its joints is frame by frame ``[F, 21]`` from where the
+    source's motion on ``obj``'s proportions has it: (the source, the frames written, that distance)."""
+    rest = evaluated_joints(addon, obj, [1])
+    source, frames = walk_onto(obj, folder)
+    transfer = addon_module(addon, "model_core.ops.transfer")
+    conventions = addon_module(addon, "model_core.motion.conventions")
+    want = conventions.yup_to_zup(transfer.retarget(conventions.zup_to_yup(evaluated_joints(addon, source, frames)),
+                                                   conventions.zup_to_yup(rest)))
+    return source, frames, np.linalg.norm(evaluated_joints(addon, obj, frames) - want, axis=-1)
+
+
 @pytest.mark.parametrize("kind", sorted(FEWER_TORSO_BONES))
 def test_motion_moved_onto_a_rig_with_fewer_torso_bones_follows_and_extends(addon, real_model, tmp_path, kind):
     """A walk moved onto such a rig puts its every joint where the source's motion on the rig's proportions
     has it (the one spine bone turning to carry the arms and the head), and Extend walks it on from there."""
     obj = build_armature("Game", FEWER_TORSO_BONES[kind]())
-    rest = evaluated_joints(addon, obj, [1])
-    source, frames = walk_onto(obj, tmp_path)
-    transfer = addon_module(addon, "model_core.ops.transfer")
-    conventions = addon_module(addon, "model_core.motion.conventions")
-    want = conventions.yup_to_zup(transfer.retarget(conventions.zup_to_yup(evaluated_joints(addon, source, frames)),
-                                                   conventions.zup_to_yup(rest)))
-    err = np.linalg.norm(evaluated_joints(addon, obj, frames) - want, axis=-1).mean(0)
+    source, frames, err = walk_and_its_error(addon, obj, tmp_path)
+    err = err.mean(0)
     own = [k for j, k in JOINT_INDEX.items() if j not in PLACED[kind]]
     print(kind, "transfer, mean cm per joint:", np.round(100 * err, 2))
     assert err[own].max() < 0.015 and err.max() < 0.02  # metres; a placed joint lies on its neighbours' line
@@ -267,3 +275,19 @@ def test_motion_moved_onto_a_rig_over_a_ramp_goes_up_it(addon, tmp_path):
     assert height(over[-1, 0]) > 0.3 and action_of(target)["strnn"]["ground"]["object"] == "Ramp"
     assert np.abs(hips - flat[:, 0, 1]).max() < 0.05
     assert np.abs(on_ramp - on_floor).max() < 0.02
+
+
+@pytest.mark.parametrize("kind", ["genesis8", "makehuman"])
+def test_a_walk_moved_onto_limbs_of_bend_and_twist_bones_or_numbered_segments_lands_every_joint(addon, tmp_path, kind):
+    """A Daz Genesis 8 figure (each limb a Bend and a Twist bone, the legs hanging straight down from the pelvis) and
+    a MakeHuman skeleton (limbs in numbered segments) are auto-mapped, and a walk moved onto them puts every joint
+    within a few millimetres of where the walk on their proportions has it: the bones between the joints turn with
+    the joint above them."""
+    obj = build_armature("Figure", genesis8_bones() if kind == "genesis8" else makehuman_bones())
+    found = auto_map(obj)
+    assert all(found.values()), found
+    assert (found["l_knee"], found["r_elbow"]) == (
+        ("lShin", "rForearmBend") if kind == "genesis8" else ("lowerleg01.L", "lowerarm01.R"))
+    _, _, err = walk_and_its_error(addon, obj, tmp_path)
+    print(kind, "transfer, mean cm per joint:", np.round(100 * err.mean(0), 2))
+    assert err.mean(0).max() < 0.006 and err.max() < 0.01  # metres
