@@ -402,6 +402,15 @@ def evaluated_joints(addon, obj, frames) -> np.ndarray:
     return np.einsum("fij,fkj->fki", world[:, :3, :3], local) + world[:, None, :3, 3]
 
 
+def retargeted(addon, source, rest: np.ndarray, frames) -> np.ndarray:
+    """Where ``source``'s joints at ``frames`` go on a body of the ``rest`` joints ``[1, 21, 3]`` (Blender axes), as
+    Transfer Motion retargets them: ``[F, 21, 3]``."""
+    transfer = addon_module(addon, "model_core.ops.transfer")
+    conventions = addon_module(addon, "model_core.motion.conventions")
+    src = conventions.zup_to_yup(evaluated_joints(addon, source, frames))
+    return conventions.yup_to_zup(transfer.retarget(src, conventions.zup_to_yup(rest)))
+
+
 def on_steps(obj, step: int, interpolation: str = "CONSTANT") -> None:
     """Key ``obj``'s action on ``step``s: keep the keys on every ``step``-th frame from the first, with
     ``interpolation`` (Constant: the stepped look of animation on twos)."""

@@ -17,6 +17,7 @@ from scenes import (
     makehuman_bones,
     mixamo_bones,
     ramp,
+    retargeted,
     rigify_bones,
     roblox_r15_bones,
     smpl_bones,
@@ -183,10 +184,7 @@ def walk_and_its_error(addon, obj, folder):
     source's motion on ``obj``'s proportions has it: (the source, the frames written, that distance)."""
     rest = evaluated_joints(addon, obj, [1])
     source, frames = walk_onto(obj, folder)
-    transfer = addon_module(addon, "model_core.ops.transfer")
-    conventions = addon_module(addon, "model_core.motion.conventions")
-    want = conventions.yup_to_zup(transfer.retarget(conventions.zup_to_yup(evaluated_joints(addon, source, frames)),
-                                                   conventions.zup_to_yup(rest)))
+    want = retargeted(addon, source, rest, frames)
     return source, frames, np.linalg.norm(evaluated_joints(addon, obj, frames) - want, axis=-1)
 
 

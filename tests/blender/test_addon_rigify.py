@@ -22,6 +22,7 @@ from scenes import (
     key_ik_walk,
     key_snapshot,
     key_walk,
+    retargeted,
     same_keys,
     walk_bvh,
 )
@@ -373,10 +374,7 @@ def test_transfer_motion_from_a_bvh_onto_the_rig(rig, addon, walk_source):
     frames = np.arange(int(new.frame_range[0]), int(new.frame_range[1]) + 1)
     src = evaluated_joints(addon, walk_source, frames)
     got = evaluated_joints(addon, rig, frames)
-    transfer_core = addon_module(addon, "model_core.ops.transfer")
-    conventions = addon_module(addon, "model_core.motion.conventions")
-    want = conventions.yup_to_zup(transfer_core.retarget(conventions.zup_to_yup(src),
-                                                        conventions.zup_to_yup(rest)))
+    want = retargeted(addon, walk_source, rest, frames)
     # the rig's joints follow the source's motion on its own proportions
     err = np.linalg.norm(got - want, axis=-1)
     print(f"transfer: mean {100 * err.mean():.2f} cm, max {100 * err.max():.2f} cm over {len(frames)} frames")
@@ -454,3 +452,28 @@ def test_root_motion_is_refused_on_a_generated_rig_whose_torso_hangs_from_no_key
     with pytest.raises(RuntimeError, match="'torso' hangs from none an animator keys"):
         bpy.ops.strnn.transfer_motion(root_motion=True)
     assert same_keys(before, key_snapshot(rig))
+
+
+def test_a_rig_generated_from_the_basic_human_metarig_takes_a_walk_on_its_controls(addon, tmp_path):
+    """Rigify's other human metarig, Basic Human (no fingers, no face), generates a rig of the same controls: a walk
+    moved onto it is keyed on the shipped preset with the legs in IK, every joint where the walk on the rig's
+    proportions has it but the IK knees (:data:`IK_CM`), and the hands, with no finger bones, end at the hand's tail."""
+    addon_utils.enable("rigify", default_set=True)
+    bpy.ops.wm.read_homefile(use_empty=True)
+    bpy.ops.object.armature_basic_human_metarig_add()
+    bpy.ops.pose.rigify_generate()
+    rig = bpy.data.objects["rig"]
+    assert not any(b.name.startswith("DEF-f_") for b in rig.pose.bones)  # no fingers
+    rest = evaluated_joints(addon, rig, [1])
+    source = import_walk(tmp_path)
+    _, new = transfer(source, rig, foot_lock=False)
+    record = new["strnn"]["controls"].to_dict()
+    assert record["set"] == "rigify" and record["max_error_cm"] < IK_CM, record
+    assert {"thigh_parent.L", "thigh_parent.R"} <= set(record["ik"]), record
+    frames = np.arange(int(new.frame_range[0]), int(new.frame_range[1]) + 1)
+    want = retargeted(addon, source, rest, frames)
+    err = np.linalg.norm(evaluated_joints(addon, rig, frames) - want, axis=-1).mean(0)
+    names = addon_joint_index()
+    knees = [names["l_knee"], names["r_knee"]]
+    print("basic human, mean cm per joint:", np.round(100 * err, 2))
+    assert np.delete(err, knees).max() < 0.01 and err[knees].max() < IK_CM / 100  # metres
