@@ -29,7 +29,7 @@ from pathlib import Path as FilePath
 
 import numpy as np
 
-from ..inference.engine import Engine, bone_lengths, on_learnt_body, project_to_skeleton
+from ..inference.engine import Engine, bone_lengths, on_body, on_learnt_body, project_to_skeleton
 from ..inference.steps import drive
 from ..io.checkpoint import Checkpoint, walk_seed_index
 from ..motion.conventions import LAYOUT, MODEL_FPS, UP_AXIS
@@ -40,6 +40,7 @@ from ..motion.features import (
     features_to_positions,
     heading,
     integrate_root,
+    lowest_foot,
     positions_to_features,
     yaw_matrix,
 )
@@ -272,6 +273,18 @@ def follow_curve_positions(follower: PathFollower, points: np.ndarray, cyclic: b
     return drive(follow_curve_positions_steps(follower, points, cyclic, fps, frames, speed, context, rest))
 
 
+def on_rest_body(walk: np.ndarray, rest: np.ndarray) -> np.ndarray:
+    """A walk ``[F, 21, 3]`` made from the shipped seed (the body the model learnt, scaled to the legs of ``rest``)
+    put on the body of ``rest`` ``[21, 3]`` (the rig's joints as it stands: :func:`engine.on_body`), each frame's
+    lowest heel or toe as high as it was. The rig's solve keeps its bones and pelvis: a walk left on the model's
+    body came out of it with the feet up to 2 cm from where Foot Lock and a Ground had put them (a toe 18 cm into
+    a stair's riser for a frame)."""
+    walk = np.asarray(walk, np.float64)
+    out = on_body(walk, np.asarray(rest, np.float64)[None])
+    out[..., UP_AXIS] += (lowest_foot(walk) - lowest_foot(out))[:, None]
+    return out
+
+
 def follow_curve_positions_steps(follower: PathFollower, points: np.ndarray, cyclic: bool, fps: float,
                        frames: int | None = None, speed: float | None = None, context: np.ndarray | None = None,
                        rest: np.ndarray | None = None):
@@ -294,8 +307,8 @@ def follow_curve_positions_steps(follower: PathFollower, points: np.ndarray, cyc
     walked, _ = yield from follow_path_steps(follower, seed, path, n_model, align=context is None,
                                              speed=speed * norm.scale if speed else None)
     new = norm.to_user(walked)
-    if context is None:
-        seq, first = new, 0
+    if context is None:  # the shipped seed's body, scaled to the legs of ``rest``: on the rig's own
+        seq, first = on_rest_body(new, rest), 0
     else:
         seq, first = join_clip(ctx, new), 1
     duration = (len(seq) - 1) / MODEL_FPS
