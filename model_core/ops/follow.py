@@ -277,8 +277,8 @@ def on_rest_body(walk: np.ndarray, rest: np.ndarray) -> np.ndarray:
     """A walk ``[F, 21, 3]`` made from the shipped seed (the body the model learnt, scaled to the legs of ``rest``)
     put on the body of ``rest`` ``[21, 3]`` (the rig's joints as it stands: :func:`engine.on_body`), each frame's
     lowest heel or toe as high as it was. The rig's solve keeps its bones and pelvis: a walk left on the model's
-    body came out of it with the feet up to 2 cm from where Foot Lock and a Ground had put them (a toe 18 cm into
-    a stair's riser for a frame)."""
+    body came out of it with the feet elsewhere than Foot Lock and a Ground had put them (on a generated Rigify rig,
+    whose thighs sit 7 cm above its hips, 4 cm over the floor; a toe 18 cm into a stair's riser for a frame)."""
     walk = np.asarray(walk, np.float64)
     out = on_body(walk, np.asarray(rest, np.float64)[None])
     out[..., UP_AXIS] += (lowest_foot(walk) - lowest_foot(out))[:, None]
