@@ -533,21 +533,11 @@ def on_learnt_body(engine, positions: np.ndarray):
     dtype = positions.dtype
 
     def back(frames: np.ndarray) -> np.ndarray:
-        return on_body(frames, positions).astype(np.asarray(frames).dtype)
+        _, _, local = root_and_local(positions)
+        pelvis = (local[:, _UPLEGS] - local[:, :1]).mean(0)  # the clip's hips -> thighs, in the body's frame
+        return keep_pelvis(with_bone_lengths(frames, own), pelvis).astype(np.asarray(frames).dtype)
 
     return with_bone_lengths(positions, body).astype(dtype), back
-
-
-def on_body(frames: np.ndarray, body: np.ndarray) -> np.ndarray:
-    """Joints ``[F, 21, 3]`` put on the body of ``body`` ``[K, 21, 3]`` (a clip, or a rig's joints in one pose): its
-    bone lengths, the frames' bone directions (:func:`features.with_bone_lengths`), and its pelvis
-    (:func:`keep_pelvis`: the thighs' heads where ``body`` has them from its hips, in the body's frame). A rig's solve
-    keeps its bones and its pelvis, so motion on another body's comes out of it with the legs, and the feet,
-    elsewhere."""
-    body = np.asarray(body, np.float64)
-    _, _, local = root_and_local(body)
-    pelvis = (local[:, _UPLEGS] - local[:, :1]).mean(0)  # hips -> thighs, in the body's frame
-    return keep_pelvis(with_bone_lengths(frames, body_lengths(body)), pelvis)
 
 
 _UPLEGS = [JOINT_INDEX["l_upleg"], JOINT_INDEX["r_upleg"]]

@@ -29,7 +29,7 @@ from pathlib import Path as FilePath
 
 import numpy as np
 
-from ..inference.engine import Engine, bone_lengths, on_body, on_learnt_body, project_to_skeleton
+from ..inference.engine import Engine, bone_lengths, on_learnt_body, project_to_skeleton
 from ..inference.steps import drive
 from ..io.checkpoint import Checkpoint, walk_seed_index
 from ..motion.conventions import LAYOUT, MODEL_FPS, UP_AXIS
@@ -50,6 +50,7 @@ from .normalise import fit_normalisation, model_frames_available, sample_at
 from .paths import Path, Steering, control_signal, turning_path
 from .seam import SEAM_FRAMES, blend_seam
 from .skeleton import join_clip
+from .transfer import with_lengths
 
 WALK_SPEED = 1.3  # m/s used when the seed barely moves (its own speed cannot steer anything)
 LEAD_IN = 0.3  # metres: a character farther than this from the path's start walks to it first
@@ -275,12 +276,14 @@ def follow_curve_positions(follower: PathFollower, points: np.ndarray, cyclic: b
 
 def on_rest_body(walk: np.ndarray, rest: np.ndarray) -> np.ndarray:
     """A walk ``[F, 21, 3]`` made from the shipped seed (the body the model learnt, scaled to the legs of ``rest``)
-    put on the body of ``rest`` ``[21, 3]`` (the rig's joints as it stands: :func:`engine.on_body`), each frame's
-    lowest heel or toe as high as it was. The rig's solve keeps its bones and pelvis: a walk left on the model's
-    body came out of it with the feet elsewhere than Foot Lock and a Ground had put them (on a generated Rigify rig,
-    whose thighs sit 7 cm above its hips, 4 cm over the floor; a toe 18 cm into a stair's riser for a frame)."""
+    put on the body of ``rest`` ``[21, 3]`` (the rig's joints as it stands), as Transfer Motion puts a take on it
+    (:func:`transfer.with_lengths`: the rig's bone lengths, its pelvis and chest turned whole), each frame's lowest
+    heel or toe as high as it was. The rig's solve keeps its bones, pelvis and chest: a walk left on the model's body
+    came out of it with the feet elsewhere than Foot Lock and a Ground had put them (on a generated Rigify rig, whose
+    thighs sit 7 cm above its hips, 4 cm over the floor; a toe 18 cm into a stair's riser for a frame) and, on an MMD
+    model whose shoulders hang wide of its neck, the shoulders 18 cm from where it wanted them."""
     walk = np.asarray(walk, np.float64)
-    out = on_body(walk, np.asarray(rest, np.float64)[None])
+    out = with_lengths(walk, np.asarray(rest, np.float64), walk[:, 0])
     out[..., UP_AXIS] += (lowest_foot(walk) - lowest_foot(out))[:, None]
     return out
 

@@ -375,10 +375,10 @@ def test_a_walk_up_or_down_stairs_along_a_curve_keeps_its_feet_out_of_the_treads
     """Follow Curve down and up a flight of stairs (25 cm treads, 18 cm risers). Down, the walk is carried with the
     surface under its hips, which dropped each foot leaving a tread through its nose (a toe 7.6 cm under it, and 22 cm
     for a frame): each foot is raised clear of the surface under it. And the walk, made from the shipped seed's body,
-    is put on the rig's own bones and pelvis first, so that the feet the rig's solve plays are the feet that were
-    raised and locked (they came up to 2 cm apart: 4.1 cm under a tread going down, a toe 17.6 cm into a riser for a
-    frame going up). No heel or toe goes further under the surface than 2.5 cm (the rig's feet at rest stand 1.8 cm
-    lower than the walk's); the record counts the frames a foot was raised on."""
+    is put on the rig's own body first (its bones, its pelvis and chest turned whole), so that the feet the rig's
+    solve plays are the feet that were raised and locked (they came up to 2 cm apart: 4.1 cm under a tread going
+    down, a toe 17.6 cm into a riser for a frame going up). No heel or toe goes further under the surface than 2.5 cm
+    (1.6 cm here); the record counts the frames a foot was raised on."""
     from scenes import build_armature, stairs
 
     from model_core.motion.conventions import CONTACT_JOINTS

@@ -482,8 +482,8 @@ def test_a_rig_generated_from_the_basic_human_metarig_takes_a_walk_on_its_contro
 def test_follow_curve_from_the_rigs_rest_pose_walks_with_its_feet_on_the_floor(rigify_file, addon, real_model):
     """With no action, Follow Curve walks the shipped seed's body scaled to the rig's legs. The generated rig's thighs
     sit 7 cm above its hips joint where that body's sit 4 cm below, and its solve keeps its own pelvis: the walk is
-    put on the rig's bones and pelvis first, so its feet stand on the floor where Foot Lock pinned them (they floated
-    4.2 cm over it at the median, 8.9 cm at the 95th percentile, and the bake missed the solve by 10.4 cm)."""
+    put on the rig's bones, pelvis and chest first, so its feet stand on the floor where Foot Lock pinned them (they
+    floated 4.2 cm over it at the median, 8.9 cm at the 95th percentile, and the bake missed the solve by 10.4 cm)."""
     from model_core.motion.conventions import CONTACT_JOINTS
 
     obj = open_rig(rigify_file)

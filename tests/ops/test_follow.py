@@ -171,30 +171,33 @@ def test_curve_positions_start_from_a_shipped_seed_on_the_curve(bundled):
 
 def test_a_walk_from_the_shipped_seed_is_put_on_the_rigs_own_body_with_its_feet_as_high(bundled):
     """Without a clip to continue, Follow Curve walks the shipped seed's body scaled to the rig's legs. A rig whose
-    pelvis is another shape (its thighs lower and wider under the hips) and whose bones are of other lengths gets the
-    walk on its own bones and pelvis, each frame's lowest heel or toe as high as before, so that what Foot Lock and a
-    Ground do to the feet is what the rig's solve then plays."""
-    from model_core.inference.engine import root_and_local
+    pelvis and chest are other shapes (its thighs lower and wider under the hips, its shoulders high and wide of the
+    neck, as an MMD model's) and whose bones are of other lengths gets the walk on its own bones, its pelvis and chest
+    turned whole, each frame's lowest heel or toe as high as before, so that what Foot Lock and a Ground do to the
+    feet is what the rig's solve then plays."""
     from model_core.motion.conventions import JOINT_INDEX
     from model_core.motion.features import body_lengths, lowest_foot
     from model_core.ops.follow import on_rest_body
+    from model_core.ops.transfer import part_frames
 
     rest = walking_skeleton(1)[0].copy()
-    for side in ("l", "r"):  # the thighs 3 cm lower and 2 cm further out; the legs below them come along
-        below = [JOINT_INDEX[f"{side}_{j}"] for j in ("upleg", "knee", "foot", "toe")]
+    for side in ("l", "r"):
         out_way = np.sign(rest[JOINT_INDEX[f"{side}_upleg"], 0] - rest[0, 0])
-        rest[below] += [0.02 * out_way, -0.03, 0.0]
+        legs = [JOINT_INDEX[f"{side}_{j}"] for j in ("upleg", "knee", "foot", "toe")]
+        rest[legs] += [0.02 * out_way, -0.03, 0.0]  # the thighs 3 cm lower and 2 cm further out
+        arms = [JOINT_INDEX[f"{side}_{j}"] for j in ("arm", "elbow", "wrist", "fingertip")]
+        rest[arms] += [0.05 * out_way, 0.04, 0.0]  # the shoulders 4 cm higher and 5 cm further out
     rest[JOINT_INDEX["head"]] += [0.0, 0.05, 0.0]  # a longer neck
     curve = np.stack([np.zeros(20), np.zeros(20), np.linspace(0, 4, 20)], -1)
     walk = follow_curve_positions(bundled, curve, False, 30.0, frames=45, rest=rest)
-    thighs = [JOINT_INDEX["l_upleg"], JOINT_INDEX["r_upleg"]]
-    bones = [j for j in range(1, 21) if j not in thighs]  # below and above the pelvis: the rig's lengths
-    np.testing.assert_allclose(body_lengths(walk)[bones], body_lengths(rest[None])[bones], atol=1e-6)
-    _, _, local = root_and_local(walk)
-    _, _, at_rest = root_and_local(rest[None])
-    pelvis = lambda x: (x[:, thighs] - x[:, :1]).mean(1)  # noqa: E731 (hips -> the thighs' middle, body frame)
-    np.testing.assert_allclose(pelvis(local), np.repeat(pelvis(at_rest), 45, 0), atol=1e-6)
-    assert np.abs(pelvis(local)[:, 1] - pelvis(root_and_local(walking_skeleton(1))[2])[:, 1]).min() > 0.025
+    np.testing.assert_allclose(body_lengths(walk), body_lengths(rest[None]), atol=1e-6)
+    def in_part(x, part, sides):  # the joints spanning a rigid part, from its joint, in the part's own frame
+        offsets = x[:, [JOINT_INDEX[j] for j in sides]] - x[:, [JOINT_INDEX[part]]]
+        return np.einsum("fji,fkj->fki", part_frames(x, part), offsets)
+
+    for part, sides in (("hips", ("l_upleg", "r_upleg")), ("spine1", ("l_arm", "r_arm"))):
+        np.testing.assert_allclose(in_part(walk, part, sides), np.repeat(in_part(rest[None], part, sides), 45, 0),
+                                   atol=1e-6)
     seed_body = on_rest_body(walk, walking_skeleton(1)[0])  # and back on the standard body: the feet as high
     np.testing.assert_allclose(lowest_foot(seed_body), lowest_foot(walk), atol=1e-9)
 
