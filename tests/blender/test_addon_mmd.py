@@ -358,18 +358,9 @@ def test_follow_curve_from_the_models_rest_pose_keeps_its_shoulders(addon, real_
     wide of the neck, and its chest is turned whole, as Transfer Motion does. Put on the model's bone lengths alone,
     the walk's shoulders were 18 cm from where the model's chest carries them and each upper arm's twist bone turned
     half a circle to reach an elbow closer than itself: the bake missed the solve by 22.4 cm."""
-    obj = mmd_model(semi_standard=True)
-    floor = evaluated_joints(addon, obj, [1])[0, [7, 8, 11, 12], 2].min()
-    bpy.ops.curve.primitive_nurbs_path_add()
-    path = bpy.context.active_object
-    path.scale = (3.0, 3.0, 3.0)
-    for o in bpy.context.view_layer.objects:
-        o.select_set(o is obj)
-    bpy.context.view_layer.objects.active = obj
-    assert bpy.ops.strnn.follow_curve(curve=path.name, frames=90) == {"FINISHED"}
-    new = action_of(obj)
+    from scenes import follow_from_rest
+
+    new, _, lowest = follow_from_rest(addon, mmd_model(semi_standard=True), 90)
     record = new["strnn"]["controls"].to_dict()
     assert record["set"] == "mmd" and record["max_error_cm"] < 1.0, record
-    joints = evaluated_joints(addon, obj, np.arange(int(new.frame_range[0]), int(new.frame_range[1]) + 1))
-    lowest = joints[:, [7, 8, 11, 12], 2].min(1) - floor
     assert abs(np.median(lowest)) < 0.01 and lowest.min() > -0.03, np.percentile(lowest, [0, 50])

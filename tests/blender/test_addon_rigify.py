@@ -484,22 +484,12 @@ def test_follow_curve_from_the_rigs_rest_pose_walks_with_its_feet_on_the_floor(r
     sit 7 cm above its hips joint where that body's sit 4 cm below, and its solve keeps its own pelvis: the walk is
     put on the rig's bones, pelvis and chest first, so its feet stand on the floor where Foot Lock pinned them (they
     floated 4.2 cm over it at the median, 8.9 cm at the 95th percentile, and the bake missed the solve by 10.4 cm)."""
-    from model_core.motion.conventions import CONTACT_JOINTS
+    from scenes import follow_from_rest
 
     obj = open_rig(rigify_file)
     obj.animation_data_clear()
-    floor = float(evaluated_joints(addon, obj, [1])[0, CONTACT_JOINTS, 2].min())
-    bpy.ops.curve.primitive_nurbs_path_add()
-    path = bpy.context.active_object
-    path.scale = (3.0, 3.0, 3.0)
-    for other in bpy.context.view_layer.objects:
-        other.select_set(other is obj)
-    bpy.context.view_layer.objects.active = obj
-    assert bpy.ops.strnn.follow_curve(curve=path.name, frames=150) == {"FINISHED"}
-    new = action_of(obj)
+    new, joints, lowest = follow_from_rest(addon, obj, 150)
     assert new["strnn"]["controls"]["max_error_cm"] < IK_CM
-    joints = evaluated_joints(addon, obj, np.arange(int(new.frame_range[0]), int(new.frame_range[1]) + 1))
-    lowest = joints[:, CONTACT_JOINTS, 2].min(1) - floor
     print("follow curve from rest: the lowest foot over the floor (cm), median and 95th percentile",
           np.round(100 * np.percentile(lowest, [50, 95]), 2))
     assert abs(np.median(lowest)) < 0.01 and np.percentile(lowest, 95) < 0.03 and lowest.min() > -0.03
