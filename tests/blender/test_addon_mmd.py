@@ -364,3 +364,36 @@ def test_follow_curve_from_the_models_rest_pose_keeps_its_shoulders(addon, real_
     record = new["strnn"]["controls"].to_dict()
     assert record["set"] == "mmd" and record["max_error_cm"] < 1.0, record
     assert abs(np.median(lowest)) < 0.01 and lowest.min() > -0.03, np.percentile(lowest, [0, 50])
+
+
+def test_follow_curve_after_a_walk_keeps_the_models_chest_and_twist_bones(addon, real_model, tmp_path, monkeypatch):
+    """Follow Curve continuing a walk on a model with the semi-standard bones: the walk the model makes comes back on
+    the model's own body with its chest turned whole (its shoulders high and wide of its neck), so the solve puts
+    every joint where the walk has it; on the clip's bone lengths alone the chest was turned to fit shoulders 18 cm
+    from where it carries them, and each upper arm's twist bone, aimed again at an elbow nearer than itself, turned
+    half a circle (the bake 22.4 cm off the solve)."""
+    from scenes import addon_module
+
+    stage = addon_module(addon, "strnn_addon.stages.follow")
+    solve_module = addon_module(addon, "model_core.rig.solve")
+    off = []
+
+    def solve_and_measure(rig, anchors, targets, ref_loc, ref_rot, solve=stage.solve):
+        loc, rot = solve(rig, anchors, targets, ref_loc, ref_rot)
+        got = solve_module.anchor_positions(rig, anchors, solve_module.fk(rig, loc, rot))
+        off.append(float(np.linalg.norm(got - targets, axis=-1).max()))
+        return loc, rot
+
+    monkeypatch.setattr(stage, "solve", solve_and_measure)
+    obj, source, _, _ = moved_walk(addon, tmp_path, "semi_standard")
+    source.select_set(False)
+    bpy.ops.curve.primitive_nurbs_path_add()
+    path = bpy.context.active_object
+    path.scale = (3.0, 3.0, 3.0)
+    path.select_set(False)
+    obj.select_set(True)
+    bpy.context.view_layer.objects.active = obj
+    assert bpy.ops.strnn.follow_curve(curve=path.name, frames=150) == {"FINISHED"}
+    record = action_of(obj)["strnn"]["controls"].to_dict()
+    assert record["max_error_cm"] < 1.0, record
+    assert off and max(off) < 0.01, off  # metres: every joint where the walk has it

@@ -180,3 +180,45 @@ def test_rest_matrices_that_are_rotations_only_to_rounding_solve_without_growing
     assert np.abs(np.swapaxes(rot2, -1, -2) @ rot2 - np.eye(3)).max() < 1e-9
     got = anchor_positions(rounded, anchors, fk(rounded, loc2, rot2))
     assert np.linalg.norm(got - targets, axis=-1).max() < 1e-3  # metres: the rounding's own size, not grown
+
+
+def _with_bone_above(rig: Rig, name: str, child: str, head: np.ndarray) -> Rig:
+    """``rig`` with an unmapped bone ``name`` (head at ``head``, the rest turn of the bone above ``child``) inserted
+    between ``child`` and its parent."""
+    c = rig.names.index(child)
+    rest = np.eye(4)
+    rest[:3, :3], rest[:3, 3] = rig.rest[int(rig.parents[c]), :3, :3], head
+    names = rig.names[:c] + [name] + rig.names[c:]
+    shift = lambda p: p + 1 if p >= c else p  # noqa: E731 (an index past the new bone)
+    parents = [shift(int(p)) if p >= 0 else -1 for p in rig.parents[:c]] + [int(rig.parents[c])] + \
+        [c] + [shift(int(p)) if p >= 0 else -1 for p in rig.parents[c + 1:]]
+    return Rig(names, np.array(parents), np.concatenate([rig.rest[:c], rest[None], rig.rest[c:]]),
+               np.r_[rig.lengths[:c], 0.1, rig.lengths[c:]])
+
+
+def test_a_twist_bone_in_line_and_a_bone_at_its_joint_keep_their_pose_however_near_the_target(rig_and_motion):
+    """An arm's twist bone (part way along the upper arm, in line with it) and an MMD model's shoulder cancel bone
+    (its head at the shoulder) carry joints but turn nothing the bone above does not: the solve leaves them in their
+    reference pose. A twist bone aimed again from part way along used to turn half a circle where the elbow asked
+    for was nearer the shoulder than itself (an MMD model's forearm came 22 cm off)."""
+    rig, anchors, loc, rot = rig_and_motion
+    mapping = {j: (rig.names[b], bool(t)) for j, b, t in zip(JOINTS, anchors.bone, anchors.tail)}
+    arm, elbow = mapping["l_arm"][0], mapping["l_elbow"][0]
+    shoulder, at_elbow = (rig.rest[rig.names.index(n), :3, 3] for n in (arm, elbow))
+    twisted = _with_bone_above(rig, "ArmTwist", elbow, shoulder + 0.6 * (at_elbow - shoulder))
+    twisted = _with_bone_above(twisted, "ShoulderCancel", arm, shoulder)
+    on_it = Anchors.from_map(twisted, mapping)
+    n, b = 20, len(twisted.names)
+    ref_loc, ref_rot = np.zeros((n, b, 3)), np.repeat(np.eye(3)[None, None], n, 0).repeat(b, 1)
+    targets = anchor_positions(twisted, on_it, fk(twisted, ref_loc, ref_rot))
+    j_arm, j_elbow = JOINTS.index("l_arm"), JOINTS.index("l_elbow")
+    swing = rotvec_to_matrix(np.linspace(0.0, 1.2, n)[:, None] * np.array([1.0, 0.0, 0.0]))
+    reach = np.linspace(1.0, 0.3, n)[:, None]  # down to 0.3 of the upper arm: nearer than the twist bone's head
+    targets[:, j_elbow] = targets[:, j_arm] + reach * np.einsum("fij,j->fi", swing, at_elbow - shoulder)
+    _, rot2 = solve(twisted, on_it, targets, ref_loc, ref_rot)
+    for bone in ("ArmTwist", "ShoulderCancel"):
+        np.testing.assert_allclose(rot2[:, twisted.names.index(bone)], ref_rot[:, 0], atol=1e-9)
+    got = anchor_positions(twisted, on_it, fk(twisted, ref_loc, rot2))
+    way = lambda p: (p[:, j_elbow] - p[:, j_arm]) / np.linalg.norm(p[:, j_elbow] - p[:, j_arm], axis=-1)[:, None]  # noqa: E731
+    assert np.abs(got[:, j_arm] - targets[:, j_arm]).max() < 1e-6
+    np.testing.assert_allclose(way(got), way(targets), atol=1e-6)  # the elbow on the way to its target, never behind
