@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from ..io.checkpoint import Checkpoint, load_release
-from ..motion.conventions import JOINT_INDEX, LAYOUT, PARENTS
+from ..motion.conventions import LAYOUT, PARENTS
 from ..motion.features import (
     RootStart,
     body_lengths,
@@ -25,9 +25,9 @@ from ..motion.features import (
     integrate_root,
     learnt_bodies,
     learnt_body,
+    on_body_of,
     positions_to_features,
     read_mirrored,
-    root_and_local,
     with_bone_lengths,
     yaw_matrix,
 )
@@ -521,9 +521,13 @@ def on_learnt_body(engine, positions: np.ndarray):
     the clip's own body). A model reads a body of other proportions (a rig whose spine and legs a bone map
     reads otherwise) as another way of moving: a walk on a generated Rigify rig, read as it is, slowed to a
     third of its pace within seconds. The same motion on the model's body (:func:`features.learnt_body`:
-    its bone lengths, the clip's bone directions and hips; :func:`features.with_bone_lengths`) walks on.
-    A body within :data:`LEARNT_BODY_TOLERANCE` of one the model learnt (any of its seed windows'), or a model
-    without seeds, reads the clip as it is."""
+    its bone lengths, the clip's bone directions and hips; :func:`features.with_bone_lengths`) walks on, and comes
+    back on the clip's body with its pelvis and chest turned whole (:func:`features.on_body_of`: a rig's solve keeps
+    them; a generated Rigify rig's thighs sit 7 cm above its hips joint, where the learnt body's sit 4 cm below, and
+    given back its bone lengths alone the whole leg came out 11 cm high, the feet 6 cm over the floor; an MMD model's
+    arms, whose shoulders hang high and wide of its neck, up to 3.8 cm from the continuation's). A body within
+    :data:`LEARNT_BODY_TOLERANCE` of one the model learnt (any of its seed windows'), or a model without seeds, reads
+    the clip as it is."""
     seeds = getattr(engine, "seeds", None)
     bodies, body = learnt_bodies(seeds), learnt_body(seeds)
     positions = np.asarray(positions)
@@ -533,40 +537,9 @@ def on_learnt_body(engine, positions: np.ndarray):
     dtype = positions.dtype
 
     def back(frames: np.ndarray) -> np.ndarray:
-        _, _, local = root_and_local(positions)
-        pelvis = (local[:, _UPLEGS] - local[:, :1]).mean(0)  # the clip's hips -> thighs, in the body's frame
-        return keep_pelvis(with_bone_lengths(frames, own), pelvis).astype(np.asarray(frames).dtype)
+        return on_body_of(with_bone_lengths(frames, own), positions[-1]).astype(np.asarray(frames).dtype)
 
     return with_bone_lengths(positions, body).astype(dtype), back
-
-
-_UPLEGS = [JOINT_INDEX["l_upleg"], JOINT_INDEX["r_upleg"]]
-
-
-def _legs() -> np.ndarray:
-    """Whether each joint is a thigh's head or below it (the legs hang from the pelvis)."""
-    legs = np.zeros(len(PARENTS), bool)
-    for j in range(1, len(PARENTS)):  # parents first
-        legs[j] = j in _UPLEGS or legs[PARENTS[j]]
-    return legs
-
-
-_LEGS = _legs()
-
-
-def keep_pelvis(frames: np.ndarray, pelvis: np.ndarray) -> np.ndarray:
-    """Joints ``[F, 21, 3]`` whose trunk (the hips and everything above them) is moved so that the thighs' heads
-    sit at ``pelvis`` ``[2, 3]`` (hips -> left and right thigh, in the body's frame) from the hips, the legs left where
-    they are. A rig's pelvis is rigid: a generated Rigify rig's thighs sit 7 cm above its hips joint, where a
-    continuation read on the body the model learnt puts them 4 cm below; the solve keeps the rig's pelvis, so the
-    whole leg came out 11 cm high and the feet floated 6 cm over the floor (Follow the Clip off)."""
-    frames = np.asarray(frames, np.float64)
-    _, yaw, _ = root_and_local(frames)
-    offsets = np.einsum("fij,kj->fki", yaw_matrix(yaw), pelvis)  # (F, 2, 3) in the world
-    move = (frames[:, _UPLEGS] - offsets).mean(1) - frames[:, 0]  # where the hips go, less where they are
-    out = frames.copy()
-    out[:, ~_LEGS] += move[:, None]
-    return out
 
 
 def bone_lengths(feats: np.ndarray) -> np.ndarray:

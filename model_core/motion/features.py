@@ -15,6 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .conventions import CONTACT_JOINTS, CONTACTS, JOINT_INDEX, JOINTS, LAYOUT, MODEL_FPS, PARENTS, ROOT, UP_AXIS
+from .geometry import unit
 
 # Contact thresholds: a foot joint is in contact when it is within this height
 # of its own lowest level in the clip and moves slower than this ground speed.
@@ -197,6 +198,55 @@ def with_bone_lengths(pos: np.ndarray, lengths: np.ndarray) -> np.ndarray:
         d = pos[..., j, :] - pos[..., PARENTS[j], :]
         out[..., j, :] = out[..., PARENTS[j], :] + d / np.maximum(np.linalg.norm(d, axis=-1, keepdims=True), 1e-12) \
             * lengths[j]
+    return out
+
+
+# Rigid parts: (parent joint, (left, right) joints that span it, the torso joint above it).
+RIGID_PARTS = {"hips": (("l_upleg", "r_upleg"), "spine"), "spine1": (("l_arm", "r_arm"), "neck")}
+
+
+def part_frames(pos: np.ndarray, parent: str) -> np.ndarray:
+    """Orientation ``[F, 3, 3]`` (columns: across to the left, up the torso, their cross) of the rigid
+    part at joint ``parent`` (:data:`RIGID_PARTS`) in joints ``[F, 21, 3]``."""
+    (left, right), up = RIGID_PARTS[parent]
+    x = pos[:, JOINT_INDEX[left]] - pos[:, JOINT_INDEX[right]]
+    y = pos[:, JOINT_INDEX[up]] - pos[:, JOINT_INDEX[parent]]
+    x = unit(x)
+    y = unit(y - np.sum(y * x, -1, keepdims=True) * x)
+    return np.stack([x, y, np.cross(x, y)], -1)
+
+
+def with_lengths(pos: np.ndarray, rest: np.ndarray, hips: np.ndarray) -> np.ndarray:
+    """Joints ``[F, 21, 3]`` moving like ``pos`` on the body of ``rest`` ``[21, 3]``: each bone points like
+    ``pos``'s with ``rest``'s length, except that the joints of a rigid part (:data:`RIGID_PARTS`) keep their
+    offsets in ``rest`` turned with ``pos``'s part; the hips at ``hips`` ``[F, 3]``."""
+    pos = np.asarray(pos, dtype=np.float64)
+    lengths = body_lengths(rest[None])
+    turn = {}
+    for parent, ((left, right), _) in RIGID_PARTS.items():
+        spin = part_frames(pos, parent) @ part_frames(rest[None], parent)[0].T  # rest part -> each frame's
+        for j in (left, right):
+            turn[JOINT_INDEX[j]] = np.einsum("fij,j->fi", spin, rest[JOINT_INDEX[j]] - rest[JOINT_INDEX[parent]])
+    out = np.empty_like(pos)
+    out[:, 0] = hips
+    for j in range(1, len(JOINTS)):  # parents first
+        p = PARENTS[j]
+        if j in turn:
+            out[:, j] = out[:, p] + turn[j]
+            continue
+        out[:, j] = out[:, p] + unit(pos[:, j] - pos[:, p]) * lengths[j]
+    return out
+
+
+def on_body_of(motion: np.ndarray, pose: np.ndarray) -> np.ndarray:
+    """Joints ``[F, 21, 3]`` of ``motion`` put on the body of ``pose`` ``[21, 3]`` (a rig's joints in one pose: as it
+    stands, or the last frame of the clip a continuation follows) as Transfer Motion puts a take on a rig
+    (:func:`with_lengths`: its bone lengths, its pelvis and chest turned whole), the hips over the same ground and
+    each frame's lowest heel or toe as high as it was. A rig's solve keeps its bones, pelvis and chest: motion on
+    another body comes out of it with the feet and the arms elsewhere."""
+    motion = np.asarray(motion, np.float64)
+    out = with_lengths(motion, np.asarray(pose, np.float64), motion[:, 0])
+    out[..., UP_AXIS] += (lowest_foot(motion) - lowest_foot(out))[:, None]
     return out
 
 

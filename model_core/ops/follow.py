@@ -40,7 +40,7 @@ from ..motion.features import (
     features_to_positions,
     heading,
     integrate_root,
-    lowest_foot,
+    on_body_of,
     positions_to_features,
     yaw_matrix,
 )
@@ -50,7 +50,6 @@ from .normalise import fit_normalisation, model_frames_available, sample_at
 from .paths import Path, Steering, control_signal, turning_path
 from .seam import SEAM_FRAMES, blend_seam
 from .skeleton import join_clip
-from .transfer import with_lengths
 
 WALK_SPEED = 1.3  # m/s used when the seed barely moves (its own speed cannot steer anything)
 LEAD_IN = 0.3  # metres: a character farther than this from the path's start walks to it first
@@ -274,22 +273,6 @@ def follow_curve_positions(follower: PathFollower, points: np.ndarray, cyclic: b
     return drive(follow_curve_positions_steps(follower, points, cyclic, fps, frames, speed, context, rest))
 
 
-def on_rig_body(walk: np.ndarray, pose: np.ndarray) -> np.ndarray:
-    """A walk ``[F, 21, 3]`` put on the body of ``pose`` ``[21, 3]`` (the rig's joints in one pose: as it stands, or
-    the last frame of the clip it continues) as Transfer Motion puts a take on it (:func:`transfer.with_lengths`: the
-    rig's bone lengths, its pelvis and chest turned whole), each frame's lowest heel or toe as high as it was. The
-    rig's solve keeps its bones, pelvis and chest: a walk on another body (the shipped seed's, scaled to the rig's
-    legs; or the body the model learnt, :func:`engine.on_learnt_body`, which gives a clip back its pelvis but not its
-    chest) came out of it with the feet elsewhere than Foot Lock and a Ground had put them (on a generated Rigify
-    rig, whose thighs sit 7 cm above its hips, 4 cm over the floor; a toe 18 cm into a stair's riser for a frame) and,
-    on an MMD model, whose shoulders hang high and wide of its neck, the chest turned to fit shoulders 18 cm from
-    where it carries them."""
-    walk = np.asarray(walk, np.float64)
-    out = with_lengths(walk, np.asarray(pose, np.float64), walk[:, 0])
-    out[..., UP_AXIS] += (lowest_foot(walk) - lowest_foot(out))[:, None]
-    return out
-
-
 def follow_curve_positions_steps(follower: PathFollower, points: np.ndarray, cyclic: bool, fps: float,
                        frames: int | None = None, speed: float | None = None, context: np.ndarray | None = None,
                        rest: np.ndarray | None = None):
@@ -313,9 +296,9 @@ def follow_curve_positions_steps(follower: PathFollower, points: np.ndarray, cyc
                                              speed=speed * norm.scale if speed else None)
     new = norm.to_user(walked)
     if context is None:  # the shipped seed's body, scaled to the legs of ``rest``: on the rig's own
-        seq, first = on_rig_body(new, rest), 0
+        seq, first = on_body_of(new, rest), 0
     else:
-        seq, first = join_clip(ctx, on_rig_body(new, ctx[-1])), 1
+        seq, first = join_clip(ctx, on_body_of(new, ctx[-1])), 1
     duration = (len(seq) - 1) / MODEL_FPS
     count = frames if frames is not None else int(math.floor(duration * fps + 1e-6)) + 1 - first
     return sample_at(seq, MODEL_FPS, (np.arange(count) + first) / fps)

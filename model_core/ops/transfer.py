@@ -14,9 +14,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..motion.conventions import GROUND_AXES, JOINT_INDEX, JOINTS, PARENTS, UP_AXIS
-from ..motion.features import body_lengths, floor_height, lowest_foot
-from ..motion.geometry import unit
+from ..motion.conventions import GROUND_AXES, JOINTS, UP_AXIS
+from ..motion.features import body_lengths, floor_height, lowest_foot, with_lengths
 from ..rig.rigs import leg_length
 
 
@@ -24,43 +23,6 @@ def bone_lengths(pos: np.ndarray) -> np.ndarray:
     """Median length ``[21]`` of each canonical bone (joint to its parent; 0 for the hips) over
     frames ``[F, 21, 3]`` (:func:`features.body_lengths`)."""
     return body_lengths(pos)
-
-
-# Rigid parts: (parent joint, (left, right) joints that span it, the torso joint above it).
-_RIGID = {"hips": (("l_upleg", "r_upleg"), "spine"), "spine1": (("l_arm", "r_arm"), "neck")}
-
-
-def part_frames(pos: np.ndarray, parent: str) -> np.ndarray:
-    """Orientation ``[F, 3, 3]`` (columns: across to the left, up the torso, their cross) of the rigid
-    part at joint ``parent`` (:data:`_RIGID`) in joints ``[F, 21, 3]``."""
-    (left, right), up = _RIGID[parent]
-    x = pos[:, JOINT_INDEX[left]] - pos[:, JOINT_INDEX[right]]
-    y = pos[:, JOINT_INDEX[up]] - pos[:, JOINT_INDEX[parent]]
-    x = unit(x)
-    y = unit(y - np.sum(y * x, -1, keepdims=True) * x)
-    return np.stack([x, y, np.cross(x, y)], -1)
-
-
-def with_lengths(pos: np.ndarray, rest: np.ndarray, hips: np.ndarray) -> np.ndarray:
-    """Joints ``[F, 21, 3]`` moving like ``pos`` on the body of ``rest`` ``[21, 3]``: each bone points like
-    ``pos``'s with ``rest``'s length, except that the joints of a rigid part (:data:`_RIGID`) keep their
-    offsets in ``rest`` turned with ``pos``'s part; the hips at ``hips`` ``[F, 3]``."""
-    pos = np.asarray(pos, dtype=np.float64)
-    lengths = bone_lengths(rest[None])
-    turn = {}
-    for parent, ((left, right), _) in _RIGID.items():
-        spin = part_frames(pos, parent) @ part_frames(rest[None], parent)[0].T  # rest part -> each frame's
-        for j in (left, right):
-            turn[JOINT_INDEX[j]] = np.einsum("fij,j->fi", spin, rest[JOINT_INDEX[j]] - rest[JOINT_INDEX[parent]])
-    out = np.empty_like(pos)
-    out[:, 0] = hips
-    for j in range(1, len(JOINTS)):  # parents first
-        p = PARENTS[j]
-        if j in turn:
-            out[:, j] = out[:, p] + turn[j]
-            continue
-        out[:, j] = out[:, p] + unit(pos[:, j] - pos[:, p]) * lengths[j]
-    return out
 
 
 def retarget(source: np.ndarray, target_rest: np.ndarray) -> np.ndarray:

@@ -9,7 +9,13 @@ import numpy as np
 from model_core.inference.engine import Engine, on_learnt_body
 from model_core.io.checkpoint import walk_seed_index
 from model_core.motion.conventions import JOINT_INDEX, PARENTS
-from model_core.motion.features import body_lengths, features_to_positions, learnt_body, with_bone_lengths
+from model_core.motion.features import (
+    body_lengths,
+    features_to_positions,
+    learnt_body,
+    part_frames,
+    with_bone_lengths,
+)
 from model_core.motion.synthetic import walking_skeleton
 
 
@@ -39,10 +45,17 @@ def test_a_walk_on_other_proportions_walks_on_like_the_same_walk_on_the_learnt_b
     stretch[[1, 2, 3, 6, 7, 10, 11]] = [0.8, 2.5, 0.8, 1.15, 0.85, 1.15, 0.85]  # spine, chest, neck, thighs, shins
     rig = with_bone_lengths(walk, learnt_body(engine.seeds) * stretch)
     ours, theirs = engine.extend(walk, 90), engine.extend(rig, 90)
-    # back on the rig's own bones (the pelvis's within 2 mm: the trunk sits where both thighs' heads ask, on average)
-    np.testing.assert_allclose(body_lengths(theirs), body_lengths(rig), atol=2e-3)
-    pelvis = [JOINT_INDEX["l_upleg"], JOINT_INDEX["r_upleg"]]
-    others = [j for j in range(1, 21) if j not in pelvis]
+    # back on the rig's own bones, its pelvis and chest turned whole as the rig's last frame holds them
+    np.testing.assert_allclose(body_lengths(theirs), body_lengths(rig), atol=1e-6)
+    for part, (left, right) in (("hips", ("l_upleg", "r_upleg")), ("spine1", ("l_arm", "r_arm"))):
+        spans = [JOINT_INDEX[left], JOINT_INDEX[right]]
+
+        def in_part(x, part=part, spans=spans):  # the joints spanning the part, from its joint, in its own frame
+            return np.einsum("fji,fkj->fki", part_frames(x, part), x[:, spans] - x[:, [JOINT_INDEX[part]]])
+
+        np.testing.assert_allclose(in_part(theirs), np.repeat(in_part(rig[-1:]), len(theirs), 0), atol=1e-6)
+    rigid = [JOINT_INDEX[j] for j in ("l_upleg", "r_upleg", "l_arm", "r_arm")]
+    others = [j for j in range(1, 21) if j not in rigid]
     np.testing.assert_allclose(directions(theirs)[:, others], directions(ours)[:, others], atol=2e-3)  # the same motion
     seen, _ = on_learnt_body(engine, rig)
     np.testing.assert_allclose(body_lengths(seen), learnt_body(engine.seeds), atol=1e-4)

@@ -176,9 +176,7 @@ def test_a_walk_from_the_shipped_seed_is_put_on_the_rigs_own_body_with_its_feet_
     turned whole, each frame's lowest heel or toe as high as before, so that what Foot Lock and a Ground do to the
     feet is what the rig's solve then plays."""
     from model_core.motion.conventions import JOINT_INDEX
-    from model_core.motion.features import body_lengths, lowest_foot
-    from model_core.ops.follow import on_rig_body
-    from model_core.ops.transfer import part_frames
+    from model_core.motion.features import body_lengths, lowest_foot, on_body_of, part_frames
 
     rest = walking_skeleton(1)[0].copy()
     for side in ("l", "r"):
@@ -198,7 +196,7 @@ def test_a_walk_from_the_shipped_seed_is_put_on_the_rigs_own_body_with_its_feet_
     for part, sides in (("hips", ("l_upleg", "r_upleg")), ("spine1", ("l_arm", "r_arm"))):
         np.testing.assert_allclose(in_part(walk, part, sides), np.repeat(in_part(rest[None], part, sides), 45, 0),
                                    atol=1e-6)
-    seed_body = on_rig_body(walk, walking_skeleton(1)[0])  # and back on the standard body: the feet as high
+    seed_body = on_body_of(walk, walking_skeleton(1)[0])  # and back on the standard body: the feet as high
     np.testing.assert_allclose(lowest_foot(seed_body), lowest_foot(walk), atol=1e-9)
 
 
