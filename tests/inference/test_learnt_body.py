@@ -76,7 +76,8 @@ def test_a_rigs_pelvis_comes_back_as_the_rig_holds_it_and_its_feet_stay_on_the_f
     """A generated Rigify rig's thighs sit above its hips joint (7 cm as the bone map reads it); read on the body
     the model learnt, whose thighs hang below, the continuation came back with the thighs where the model put them,
     which the rig's rigid pelvis cannot follow: the solved legs came out 11 cm high and the feet floated. The frames
-    come back with the clip's own pelvis, the trunk moved onto it and the legs, feet on the floor, where they were."""
+    come back with the clip's own pelvis turned whole, the legs hanging from it and the body as high as keeps each
+    frame's lowest foot where it was, on the floor."""
     engine = Engine.load()
     seed = np.concatenate([engine.seeds[walk_seed_index(engine.ckpt.seed_names)]] * 2)
     walk = features_to_positions(seed)
