@@ -295,7 +295,9 @@ def follow_curve_positions_steps(follower: PathFollower, points: np.ndarray, cyc
     walked, _ = yield from follow_path_steps(follower, seed, path, n_model, align=context is None,
                                              speed=speed * norm.scale if speed else None)
     new = norm.to_user(walked)
-    if context is None:  # the shipped seed's body, scaled to the legs of ``rest``: on the rig's own
+    # on the rig's own body, which its solve keeps: from the shipped seed's body (scaled to the legs of ``rest``), or
+    # after a clip from whatever chest and pelvis the walk drifted to (the clip's last frame holds the rig's)
+    if context is None:
         seq, first = on_body_of(new, rest), 0
     else:
         seq, first = join_clip(ctx, on_body_of(new, ctx[-1])), 1

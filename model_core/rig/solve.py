@@ -281,6 +281,15 @@ def _bridges(rig: Rig, anchors: Anchors, joint_at: dict[int, str]) -> dict[int, 
     return out
 
 
+def _with_ancestors(rig: Rig, b: int) -> list[int]:
+    """Bone ``b`` and every bone above it."""
+    out = []
+    while b >= 0:
+        out.append(b)
+        b = int(rig.parents[b])
+    return out
+
+
 def _in_line(rig: Rig, anchors: Anchors, b: int, joints: list[int]) -> bool:
     """Whether bridge ``b`` (:func:`_bridges`) carries one joint from a head that is, at rest, at that joint or on
     the line to it from the head of the bone the joint's parent is on: an arm's twist bone part way along the upper
@@ -322,11 +331,15 @@ def solve(rig: Rig, anchors: Anchors, targets: np.ndarray, ref_loc: np.ndarray,
     (only the hips bone's changes) and ``rot`` ``[F, B, 3, 3]``.
     """
     targets = np.asarray(targets, dtype=np.float64)
-    ref_rot = nearest_rotation(ref_rot)  # a pose read in float32: rotations again, so that no chain grows its error
-    ref_pose = fk(rig, ref_loc, ref_rot)
-    ref = (ref_pose, anchor_positions(rig, anchors, ref_pose))
     joint_at = anchors.on_bones()
     bridges = _bridges(rig, anchors, joint_at)
+    # a pose read in float32, made rotations again where a solved bone reads it (the solved bones and the bones above
+    # them), so that no chain grows its error; the other bones (fingers, a face) only hold it
+    chain = sorted({a for b in set(joint_at) | set(bridges) for a in _with_ancestors(rig, b)})
+    ref_rot = np.array(ref_rot, dtype=np.float64)
+    ref_rot[:, chain] = nearest_rotation(ref_rot[:, chain])
+    ref_pose = fk(rig, ref_loc, ref_rot)
+    ref = (ref_pose, anchor_positions(rig, anchors, ref_pose))
     hips = int(anchors.bone[JOINT_INDEX["hips"]])
     loc, rot = np.array(ref_loc, dtype=np.float64), ref_rot.copy()
     pose = np.empty(ref_pose.shape)
