@@ -9,6 +9,7 @@ share the key of the lower-numbered file.
 from __future__ import annotations
 
 import fnmatch
+import functools
 import hashlib
 import os
 import sys
@@ -154,8 +155,34 @@ def file_of(name: str) -> str:
     return name.split(PHASE_MARK)[0]
 
 
+# The code that turns a BVH file into a clip's arrays: the cache is keyed by its source too, so arrays cached by
+# another version of the reader (a change since made, or one since undone) are never read as this one's.
+READER_SOURCES = ("io", "motion", "rig", "model/dataset.py")
+
+
+def reader_files() -> list[Path]:
+    """The source files of :data:`READER_SOURCES` (every ``.py`` file of its folders), sorted."""
+    package = Path(__file__).resolve().parents[1]
+    return sorted(f for part in READER_SOURCES
+                  for f in ((package / part).rglob("*.py") if (package / part).is_dir() else [package / part]))
+
+
+def source_digest(files: list[Path]) -> bytes:
+    """A digest of ``files``' names and contents."""
+    h = hashlib.sha1()
+    for f in files:
+        h.update(f.name.encode() + b"\0" + f.read_bytes() + b"\0")
+    return h.digest()
+
+
+@functools.lru_cache(maxsize=1)
+def _reader_digest() -> bytes:
+    return source_digest(reader_files())
+
+
 def _cache_path(root: Path, files: list[Path], cache_dir: Path, capture_phases: bool = False) -> Path:
     h = hashlib.sha1(CACHE_VERSION.encode() + (b"|capture_phases" if capture_phases else b""))
+    h.update(_reader_digest())
     h.update(DATA_CONFIG.read_bytes() if DATA_CONFIG.exists() else b"")
     for f in files:
         st = f.stat()

@@ -87,6 +87,35 @@ def test_load_folder_applies_the_override_and_caches(tmp_path):
         assert a.split == b.split
 
 
+def test_arrays_cached_by_another_version_of_the_reader_are_not_read(tmp_path, monkeypatch):
+    """The cache is keyed by the reader's source as well as the files: arrays a reader wrote before its code changed
+    (here doctored, as a reader that kept another frame would have left them) are read again only by that code."""
+    from model_core.model import dataset
+
+    sources = {f.relative_to(Path(dataset.__file__).resolve().parents[1]).as_posix() for f in dataset.reader_files()}
+    assert {"io/bvh.py", "rig/rigs.py", "motion/features.py", "model/dataset.py"} <= sources
+    code = tmp_path / "bvh.py"
+    code.write_text("x = 1\n")
+    before = dataset.source_digest([code])
+    code.write_text("x = 2\n")
+    assert dataset.source_digest([code]) != before
+
+    write_bvh(tmp_path / "data/bandai/walk_001.bvh", walking_skeleton(61), fps=30)
+    fresh = load_folder(tmp_path / "data", cache_dir=tmp_path / "cache", workers=1, progress=False)
+    (cached,) = (tmp_path / "cache").glob("motion-*.npz")
+    with np.load(cached) as z:
+        arrays = {k: z[k] for k in z.files}
+    arrays["positions"] = arrays["positions"] + 1.0  # what another reader might have left
+    with open(cached, "wb") as f:
+        np.savez(f, **arrays)
+    stale = load_folder(tmp_path / "data", cache_dir=tmp_path / "cache", workers=1, progress=False)
+    np.testing.assert_allclose(stale.clips[0].positions, fresh.clips[0].positions + 1.0)  # the same reader: a hit
+    monkeypatch.setattr(dataset, "_reader_digest", lambda: b"the reader as changed since")
+    again = load_folder(tmp_path / "data", cache_dir=tmp_path / "cache", workers=1, progress=False)
+    np.testing.assert_array_equal(again.clips[0].positions, fresh.clips[0].positions)
+    assert len(list((tmp_path / "cache").glob("motion-*.npz"))) == 2
+
+
 def test_capture_phases_give_one_clip_per_phase_in_the_takes_split_and_group(tmp_path):
     """A 60 fps take is read at 30 fps from its first frame; with capture_phases (training) also from its
     second, as a clip of its own in the take's split and held-out group. A 30 fps take stays one clip."""
