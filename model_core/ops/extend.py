@@ -204,7 +204,10 @@ def extend_positions(engine, pos: np.ndarray, fps: float, frames: int, memory: n
         floor = clip_floor(pos if memory is None else memory, fps)
     kw["floor"] = (floor - norm.ground) * norm.scale  # in the model's units, as Normalisation.to_model puts it
     new = np.asarray(engine.extend(model_ctx, n_model, settle=True, **kw), dtype=np.float64)
-    joined = join_clip(ctx, norm.to_user(new), momentum)  # model frame 0 is the last context frame
+    # model frame 0 is the last context frame; a first window held near the last pose coasts to a stop from the
+    # clip's last motion as far as it is held (seam.blend_seam's coast), rather than carrying it on and coming back
+    coast = {"coast": 1.0 - still, "coast_frames": engine.n} if still < 1.0 else {}
+    joined = join_clip(ctx, norm.to_user(new), momentum, **coast)
     if _steps_in_place(looked):  # a walk in place goes on in place
         joined = np.concatenate([joined[:1], kept_in_place(looked, joined[1:])])
     return sample_at(joined, MODEL_FPS, np.arange(1, frames + 1) / fps)

@@ -8,7 +8,8 @@ Every seam length lives here. Three kinds of seam:
 - new frames after a clip (:func:`extend.extend_positions`, :func:`follow.smooth_seam`): the jump
   from where the clip's last motion leads (:func:`seam_target`) fades out over :data:`SEAM_FRAMES`
   model frames on a half cosine (:func:`blend_seam`), and on motion the model does not know the
-  clip's momentum eases into the model's over :data:`MOMENTUM_FRAMES` (:func:`momentum_share`);
+  clip's momentum eases into the model's over :data:`MOMENTUM_FRAMES` (:func:`momentum_share`); new
+  frames held at the clip's last pose keep what the seam carried on through their window (``coast``);
 - a replaced range inside a clip (Denoise on part of an action): the new frames are blended from
   the old ones over :data:`EDGE_FADE_S` seconds at each edge (:func:`fade_edges`).
 """
@@ -77,7 +78,7 @@ def _cosine_fade(n: int, frames: int) -> np.ndarray:
 
 
 def blend_seam(ctx: np.ndarray, new: np.ndarray, frames: int = SEAM_FRAMES, accel: float = SEAM_ACCEL,
-               momentum: float = 0.0, land: bool = True) -> np.ndarray:
+               momentum: float = 0.0, land: bool = True, coast: float = 0.0, coast_frames: int = 0) -> np.ndarray:
     """Fade out the jump between a context ``[C, 21, 3]`` and its continuation ``[N, 21, 3]``
     (same rate): the first new frame is moved to where the context's last motion leads
     (:func:`seam_target`), and that correction decays smoothly to zero over ``frames`` frames.
@@ -88,17 +89,33 @@ def blend_seam(ctx: np.ndarray, new: np.ndarray, frames: int = SEAM_FRAMES, acce
     momentum into the model's instead of turning at once.
 
     With ``land``, a heel or toe coming down at the context's end lands on its floor (:func:`_landed`):
-    for the seam after a user's clip; Follow Curve's seams between its own windows leave it off."""
+    for the seam after a user's clip; Follow Curve's seams between its own windows leave it off.
+
+    With ``coast`` (0 to 1), that share of what the seam carries on (the jump and the momentum's drift) is not given
+    back through the first ``coast_frames`` new frames, and is given back over as many again on a half cosine: for new
+    frames held at the context's last pose (Extend's first window after a clip at rest, held that share), where the
+    body coasts to a stop from its last motion rather than carrying it on and coming back to the pose."""
     if len(ctx) < 2 or len(new) == 0:
         return new
     target = seam_target(ctx, accel)
-    out = new + _cosine_fade(len(new), frames)[:, None, None] * (target - new[0])
+    kept = _kept(len(new), coast, coast_frames)
+    out = new + kept(_cosine_fade(len(new), frames))[:, None, None] * (target - new[0])
     if momentum > 0.0 and len(new) > 1:
         dv = (target - np.asarray(ctx[-1], np.float64)) - (new[1] - new[0])  # (21, 3) per frame
         k = np.arange(len(new), dtype=np.float64)
         carried = np.cumsum(np.exp(-k / MOMENTUM_FRAMES)) - 1.0  # 0 at the first new frame
-        out = out + momentum * (carried * _cosine_fade(len(new), MOMENTUM_FADE_FRAMES))[:, None, None] * dv
+        out = out + momentum * (carried * kept(_cosine_fade(len(new), MOMENTUM_FADE_FRAMES)))[:, None, None] * dv
     return _landed(ctx, new, out) if land else out
+
+
+def _kept(n: int, coast: float, frames: int):
+    """A function of a seam's fade ``[n]`` (1 -> 0) that keeps ``coast`` of its full weight through ``frames``
+    frames and gives it back over as many again (:func:`blend_seam`); the fade as it is without ``coast``."""
+    share = float(np.clip(coast, 0.0, 1.0))
+    if share == 0.0 or frames <= 0:
+        return lambda fade: fade
+    hold = np.concatenate([np.ones(frames), _cosine_fade(max(n - frames, 0), frames)])[:n]  # 1, then 1 -> 0
+    return lambda fade: fade + share * np.maximum(hold - fade, 0.0)
 
 
 def _landed(ctx: np.ndarray, new: np.ndarray, out: np.ndarray) -> np.ndarray:

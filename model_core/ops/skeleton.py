@@ -91,8 +91,10 @@ def on_clip_bones(frames: np.ndarray, clip: np.ndarray) -> np.ndarray:
     return on_skeleton(frames, lengths, lengths, knee_side(clip)).astype(np.float64)
 
 
-def join_clip(clip: np.ndarray, new: np.ndarray, momentum: float = 0.0) -> np.ndarray:
+def join_clip(clip: np.ndarray, new: np.ndarray, momentum: float = 0.0, coast: float = 0.0,
+              coast_frames: int = 0) -> np.ndarray:
     """``[1 + N, J, 3]``: the ``clip``'s last frame and its continuation ``new`` ``[N, J, 3]`` (same rate) joined as
-    Extend joins them: the jump faded out (:func:`seam.blend_seam`, with ``momentum``) and every frame on the clip's
-    bones (:func:`on_clip_bones`)."""
-    return on_clip_bones(np.concatenate([clip[-1:], blend_seam(clip, new, momentum=momentum)]), clip)
+    Extend joins them: the jump faded out (:func:`seam.blend_seam`, with ``momentum``, ``coast`` and
+    ``coast_frames``) and every frame on the clip's bones (:func:`on_clip_bones`)."""
+    seam = blend_seam(clip, new, momentum=momentum, coast=coast, coast_frames=coast_frames)
+    return on_clip_bones(np.concatenate([clip[-1:], seam]), clip)

@@ -91,6 +91,29 @@ def test_momentum_eases_from_the_clips_velocity_into_the_continuations():
     assert momentum_share(hi) == momentum_share(3 * hi) == 1.0 and momentum_share((lo + hi) / 2) == 0.5
 
 
+def test_new_frames_held_at_the_last_pose_coast_to_a_stop():
+    """With ``coast``, new frames held at the clip's last pose keep that share of what the seam carries on (the
+    clip's last velocity, its momentum's drift) through ``coast_frames`` frames and give it back over as many
+    again: a body drifting 3 mm a frame as the clip ends coasts to a stop, where without it it carries the drift on
+    and comes back to the pose within the seam's fade."""
+    from model_core.ops.seam import MOMENTUM_FADE_FRAMES
+
+    ctx = np.zeros((20, 21, 3))
+    ctx[..., 0] = (np.arange(20) * 0.003)[:, None]
+    held = np.repeat(ctx[-1:], 60, 0)
+    drift = lambda out: out[:, 0, 0] - held[:, 0, 0]  # noqa: E731
+    for momentum in (0.0, 1.0):
+        back = drift(blend_seam(ctx, held, momentum=momentum))
+        coasted = drift(blend_seam(ctx, held, momentum=momentum, coast=1.0, coast_frames=20))
+        half = drift(blend_seam(ctx, held, momentum=momentum, coast=0.5, coast_frames=20))
+        assert back[0] == pytest.approx(0.003) and np.all(back[MOMENTUM_FADE_FRAMES:] == 0.0)  # on, then back
+        assert np.all(np.diff(coasted[:20]) >= -1e-12) and coasted[19] >= 0.003  # coasts and stays
+        assert np.all(np.diff(coasted[20:]) <= 1e-12) and np.all(coasted[40:] == 0.0)  # given back after
+        assert np.all(half[:20] >= back[:20] - 1e-12) and np.all(half[:20] <= coasted[:20] + 1e-12)
+        np.testing.assert_allclose(blend_seam(ctx, held, momentum=momentum, coast=0.0, coast_frames=20),
+                                   held + back[:, None, None] * np.array([1.0, 0.0, 0.0]))
+
+
 def test_a_foot_coming_down_at_the_seam_lands_on_the_floor():
     """A heel and toe falling fast at the clip's end would be carried by the seam through the floor they
     stood on; they land on it instead, and every other joint is placed exactly as before."""
