@@ -23,6 +23,7 @@ from ..motion.features import floor_height, gaussian_smooth, positions_to_featur
 from ..rig.rigs import leg_length
 from .familiarity import momentum_shares
 from .normalise import fit_normalisation, model_frames_available, sample_at
+from .seam import SEAM_FRAMES
 from .skeleton import join_clip
 
 # Seconds of the clip before its end that Extend Clip reads as the clip's own motion, which long
@@ -44,6 +45,12 @@ STILL_SPEED, STILL_POWER, STILL_FRAMES = 0.01, 2.0, 4
 # the held share is their mean weighed by the momentum share. Chosen on the held-out groups and the validation split
 # (models/strnn_default/HISTORY.md, "a clip at rest in motion the model knows is held too"). 0: off.
 STILL_KNOWN_SPEED = 0.003
+# After a first window held near the last pose the next window is eased in (:func:`eased_after_hold`): where the
+# window was held 70 % or more, the joints' mean speed jumped 0.65 cm a model frame (martial arts) from the held
+# window's last frame to the next window's first, against 0.02 between other frames; eased, 0.13, every figure of the
+# as-Extend rows the same to 0.01 cm (models/strnn_default/HISTORY.md, "a held first window coasts to a stop").
+# False: off.
+EASE_AFTER_HOLD = True
 # The report says the first window was held near the last pose when it kept at most this share of its motion.
 HELD_NOTE = 0.75
 # A clip whose own floor (its lowest heel or toe, the lowest over FLOOR_RISE_S seconds about each frame) rises or
@@ -183,6 +190,7 @@ def extend_positions(engine, pos: np.ndarray, fps: float, frames: int, memory: n
     window leans on where the continuation comes back to something the clip did (the first only as far as the
     model does not know the context's motion: :func:`inference.memory.first_scale`). Where the model does not
     know the motion and the clip has come to rest, the first window stays near the last pose (:func:`first_motion`),
+    the window after it eased in (:func:`eased_after_hold`),
     and as far as it does not know it, the first two windows lean on the release's regularised model
     (:meth:`Engine.extrapolate`'s ``unfamiliar``).
     A long continuation that settles into a stance stands where it is (:func:`stance.settle_stances`), and no
@@ -204,6 +212,8 @@ def extend_positions(engine, pos: np.ndarray, fps: float, frames: int, memory: n
         floor = clip_floor(pos if memory is None else memory, fps)
     kw["floor"] = (floor - norm.ground) * norm.scale  # in the model's units, as Normalisation.to_model puts it
     new = np.asarray(engine.extend(model_ctx, n_model, settle=True, **kw), dtype=np.float64)
+    if still < 1.0 and EASE_AFTER_HOLD:
+        new = eased_after_hold(new, engine.n)
     # model frame 0 is the last context frame; a first window held near the last pose coasts to a stop from the
     # clip's last motion as far as it is held (seam.blend_seam's coast), rather than carrying it on and coming back
     coast = {"coast": 1.0 - still, "coast_frames": engine.n} if still < 1.0 else {}
@@ -211,6 +221,30 @@ def extend_positions(engine, pos: np.ndarray, fps: float, frames: int, memory: n
     if _steps_in_place(looked):  # a walk in place goes on in place
         joined = np.concatenate([joined[:1], kept_in_place(looked, joined[1:])])
     return sample_at(joined, MODEL_FPS, np.arange(1, frames + 1) / fps)
+
+
+def eased_after_hold(new: np.ndarray, n: int, frames: int = SEAM_FRAMES) -> np.ndarray:
+    """A continuation ``[N, 21, 3]`` whose first ``n`` frames were held near the last pose, with the window after them
+    eased in: the model reads the held window as a body at rest and starts its next window at its own pace at once,
+    a jump into motion. Its first ``frames`` frames are retimed along the model's path (a cubic time warp) so that
+    the body leaves the held window at the pace it had there and meets the model's own frames, at their pace,
+    ``frames`` frames on. A next window no faster than the held one is left as it is."""
+    k = min(frames, len(new) - n)
+    if k < 2 or n < 2:
+        return new
+    out = np.array(new, dtype=np.float64)
+    pace = lambda a, b: float(np.linalg.norm(out[b] - out[a], axis=-1).mean())  # noqa: E731
+    held, next_ = pace(n - 2, n - 1), pace(n - 1, n)
+    if next_ <= held:
+        return new
+    start = held / next_  # the warp's pace at its start, as a share of the model's
+    u = np.arange(k + 1) / k
+    when = k * (-2 * u ** 3 + 3 * u ** 2 + start * (u ** 3 - 2 * u ** 2 + u) + u ** 3 - u ** 2)  # Hermite, 0 .. k
+    path = out[n - 1:n + k]  # the held window's last frame and the next window's first k frames
+    lo = np.minimum(np.floor(when).astype(int), k - 1)
+    t = (when - lo)[:, None, None]
+    out[n - 1:n + k] = path[lo] + t * (path[lo + 1] - path[lo])
+    return out
 
 
 def floor_rise(clip: np.ndarray, fps: float) -> np.ndarray | None:
