@@ -20,6 +20,7 @@ from ..motion.conventions import (
     UP_AXIS,
 )
 from ..motion.features import floor_height, gaussian_smooth, positions_to_features
+from ..motion.geometry import interpolate_frames
 from ..rig.rigs import leg_length
 from .familiarity import momentum_shares
 from .normalise import fit_normalisation, model_frames_available, sample_at
@@ -240,10 +241,7 @@ def eased_after_hold(new: np.ndarray, n: int, frames: int = SEAM_FRAMES) -> np.n
     start = held / next_  # the warp's pace at its start, as a share of the model's
     u = np.arange(k + 1) / k
     when = k * (-2 * u ** 3 + 3 * u ** 2 + start * (u ** 3 - 2 * u ** 2 + u) + u ** 3 - u ** 2)  # Hermite, 0 .. k
-    path = out[n - 1:n + k]  # the held window's last frame and the next window's first k frames
-    lo = np.minimum(np.floor(when).astype(int), k - 1)
-    t = (when - lo)[:, None, None]
-    out[n - 1:n + k] = path[lo] + t * (path[lo + 1] - path[lo])
+    out[n - 1:n + k] = interpolate_frames(out[n - 1:n + k], when)  # along the held window's last frame and the next k
     return out
 
 
