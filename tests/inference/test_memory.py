@@ -49,6 +49,29 @@ def test_motion_the_clip_never_did_gets_no_share():
     np.testing.assert_allclose(clip.lean(far, predicted), predicted, atol=1e-5)
 
 
+def test_a_windows_share_of_the_clip_is_eased_in_from_the_window_befores(monkeypatch):
+    """A window the clip matches well after one it did not match leans on it more and more over SHARE_EASE_FRAMES
+    (a half cosine from the last window's share), not all at once at the boundary; with 1 it switches at once."""
+    ones = np.ones(LAYOUT.size, np.float32)
+    feats = walk_features()
+    predicted = np.zeros((20, LAYOUT.size), np.float32)
+    share, frames = ClipMemory(feats, 20, 20, ones).follow(feats[60:100], window=1)
+    assert share == pytest.approx(mem.SHARE, rel=1e-5)
+
+    def leant() -> np.ndarray:
+        clip = ClipMemory(feats, 20, 20, ones, first_scale=0.3)
+        clip.lean(feats[60:100] + 5.0, predicted, first=True, window=0)  # nothing like the clip: share 0
+        assert clip.share < 1e-6
+        return clip.lean(feats[60:100], predicted, window=1)
+
+    weights = mem.ease_in(20, mem.SHARE_EASE_FRAMES) * share
+    assert weights[0] < 0.05 * share and np.all(np.diff(weights) >= 0)
+    np.testing.assert_allclose(weights[mem.SHARE_EASE_FRAMES - 1:], share, rtol=1e-6)
+    np.testing.assert_allclose(leant(), weights[:, None] * frames, atol=1e-5)
+    monkeypatch.setattr(mem, "SHARE_EASE_FRAMES", 1)
+    np.testing.assert_allclose(leant(), share * frames, atol=1e-5)
+
+
 def test_a_clip_too_short_to_lean_on_is_followed_only_played_on():
     """A clip one frame short of a context and a window offers no stretch: the windows before ``LONG_FROM`` are the
     model's alone; the later ones follow the clip played on (``memory.played_on``)."""
