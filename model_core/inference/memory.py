@@ -8,11 +8,11 @@ found (features normalised by the model's own spread), and the frames that follo
 blended into the model's window by ``SHARE * exp(-distance / SCALE)``: much where the clip has been here
 before (a walk's next step), nothing where it has not (a clip that ends in a pose it never held before).
 The frames that followed are first moved to start where the continuation stands (their jump from it fades
-out over :data:`ALIGN_FRAMES`), so no window pops. The first window leans on the clip as well where Extend
-Clip asks it to (:func:`first_scale`): only where the clip did just this before, and less where the model
-knows the motion. The features are the body's own (root-local joints,
-the root's velocity in the body's frame, the turn rate), so a stretch of the clip fits wherever the
-continuation has walked to. Chosen on the held-out groups (model card, "Extend follows the clip").
+out over :data:`ALIGN_FRAMES`) and, after the first window, to go on at its pace (:func:`aligned_offsets`), so no
+window pops. The first window leans on the clip as well where Extend Clip asks it to (:func:`first_scale`): only
+where the clip did just this before, and less where the model knows the motion. The features are the body's own
+(root-local joints, the root's velocity in the body's frame, the turn rate), so a stretch of the clip fits wherever
+the continuation has walked to. Chosen on the held-out groups (model card, "Extend follows the clip").
 """
 
 from __future__ import annotations
@@ -28,12 +28,9 @@ SHARE = 0.8  # the clip's share of a window where its frames match the continuat
 SCALE = 1.0  # the mean squared normalised distance at which the share has fallen to SHARE / e
 MATCH_FRAMES = 10  # how many of the continuation's last frames are compared with the clip's
 ALIGN_FRAMES = 10  # over how many frames the followed stretch's jump from the continuation fades out
-# Each window's share of the clip is eased in from the window before's over SHARE_EASE_FRAMES (a half cosine)
-# instead of switching at the boundary: where the lean grows at once (from LONG_FROM on, 0.8 x exp(-d) to
-# 0.9 x exp(-d / 10)), the joints' mean speed jumped there by 0.36 cm a model frame on the validation split and 0.70
-# on martial arts, against 0.15 and 0.22 between other frames; eased, 0.18 and 0.30, for 0.03 to 0.05 cm more error at
-# 1 s (models/strnn_default/HISTORY.md, "the lean on the clip eased in at each window"). 1: switched at once.
-SHARE_EASE_FRAMES = 10
+# Where a window after the first takes a stretch of the clip, its frames go on at the continuation's pace and turn to
+# the stretch's over ALIGN_FRAMES (memory.aligned_offsets), instead of at once. False: the jump alone fades out.
+ALIGN_VELOCITY = True
 # The first window leans on the clip too, where the clip did just this before (a drill's next kick, a walk's
 # next step): by exp(-distance / scale), the scale FIRST_SCALE where the model does not know the context's
 # motion (momentum share 1) and FIRST_FAMILIAR x that where it does (0), so that familiar motion is left to
@@ -85,7 +82,6 @@ class ClipMemory:
         self.scale = np.asarray(std, np.float32)[_CHANNELS]
         self.recent: list[int] = []  # the stretches followed in the last RECENT windows (index into ends), oldest first
         self.playhead = None  # the stretch that follows it, where the clip goes on
-        self.share: float | None = None  # the clip's share of the window last leant on it (None: none yet)
         first = max(m, MATCH_FRAMES)  # a stretch ends at frame e - 1 and is followed by frames e .. e + n - 1
         self.ends = np.arange(first, len(self.feats) - n + 1)
         self.keys = np.stack([self.feats[e - MATCH_FRAMES:e, _CHANNELS] for e in self.ends]) / self.scale \
@@ -133,10 +129,8 @@ class ClipMemory:
         self.playhead = min(best + self.n, len(self.ends) - 1) if best < len(self.ends) - 1 else None
         end = self.ends[best]
         frames = self.feats[end:end + self.n].copy()
-        jump = last - self.feats[end - 1]
-        jump[LAYOUT.contacts] = 0.0
-        fade = np.clip(1.0 - np.arange(1, self.n + 1) / ALIGN_FRAMES, 0.0, 1.0)
-        frames += fade[:, None] * jump
+        frames += aligned_offsets(self.n, last - self.feats[end - 1],
+                                  None if first or not ALIGN_VELOCITY else _turn(context, self.feats[end - 1:end + 1]))
         if first:
             return float(np.exp(-distance[best] / self.first_scale)) if self.first_scale else 0.0, frames
         share, scale = (LONG_SHARE, LONG_SCALE) if long else (SHARE, SCALE)
@@ -164,23 +158,40 @@ class ClipMemory:
 
     def lean(self, context: np.ndarray, predicted: np.ndarray, first: bool = False, window: int = 1) -> np.ndarray:
         """``predicted`` ``[n, C]`` (the model's window after ``context`` ``[T, C]``; ``first``: the rollout's
-        first) blended with what followed the clip's nearest stretch by its share (:meth:`follow`), eased in from the
-        share of the window last leant (:data:`SHARE_EASE_FRAMES`)."""
+        first) blended with what followed the clip's nearest stretch by its share (:meth:`follow`)."""
         share, frames = self.follow(context, first, window)
-        before, self.share = self.share, share
-        weight = np.full(len(predicted), share, np.float32)
-        if not first and before is not None:
-            weight = before + (share - before) * ease_in(len(predicted), SHARE_EASE_FRAMES)
-        if not weight.any():
-            return predicted
-        return predicted + weight[:, None] * (frames[:len(predicted)] - predicted)
+        return predicted + share * (frames[:len(predicted)] - predicted) if share > 0 else predicted
 
 
-def ease_in(frames: int, over: int) -> np.ndarray:
-    """Weights ``[frames]`` rising from 0 (before the first frame) to 1 at frame ``over`` on a half cosine, 1 after
-    (``over`` under 2: 1 throughout)."""
-    k = np.arange(1, frames + 1)
-    return np.where(k < over, 0.5 * (1.0 - np.cos(np.pi * k / max(over, 1))), 1.0).astype(np.float32)
+def aligned_offsets(n: int, jump: np.ndarray, turn: np.ndarray | None = None, over: int = ALIGN_FRAMES) -> np.ndarray:
+    """What is added ``[n, C]`` to the ``n`` frames that followed a stretch of the clip so that they go on from where
+    the continuation stands: its ``jump`` ``[C]`` (the continuation's last frame less the stretch's; contacts are
+    left alone) faded out over ``over`` frames, linearly where ``turn`` is None (a window's first, whose seam the
+    clip's own joins), else on a cubic Hermite that also takes out ``turn`` ``[C]``, the difference in the joints'
+    velocity (:func:`_turn`), so that the motion goes on at the continuation's pace and turns to the stretch's
+    over those frames instead of at once. On martial arts the joints' acceleration on the last frame of the second
+    to fifth windows went 1.56 / 0.90 / 1.19 / 1.52 -> 0.60 / 0.53 / 0.60 / 0.76 cm a frame squared (0.62 between
+    other frames), for no change at 1 s (models/strnn_default/HISTORY.md, "a stretch of the clip taken at the
+    continuation's pace")."""
+    jump = np.array(jump, np.float32)
+    jump[LAYOUT.contacts] = 0.0
+    k = np.arange(1, n + 1, dtype=np.float32)[:, None]
+    if turn is None:
+        return np.clip(1.0 - k / over, 0.0, 1.0) * jump
+    t = np.minimum(k / over, 1.0)
+    return (2 * t ** 3 - 3 * t ** 2 + 1) * jump + (t ** 3 - 2 * t ** 2 + t) * over * turn
+
+
+def _turn(context: np.ndarray, stretch_end: np.ndarray) -> np.ndarray | None:
+    """The continuation's last step ``context`` ``[T, C]`` less the clip's from a stretch's last frame to the frame
+    after it (``stretch_end`` ``[2, C]``), on the joints' positions only (zero elsewhere); None for a context of
+    one frame."""
+    if len(context) < 2:
+        return None
+    turn = np.zeros(context.shape[-1], np.float32)
+    step = np.asarray(context[-1], np.float32) - np.asarray(context[-2], np.float32)
+    turn[LAYOUT.positions] = (step - (stretch_end[1] - stretch_end[0]))[LAYOUT.positions]
+    return turn
 
 
 def play_frames(m: int, n: int) -> int:

@@ -39,6 +39,28 @@ def test_the_followed_frames_start_where_the_continuation_stands():
     assert np.all(np.diff(jump[:mem.ALIGN_FRAMES, LAYOUT.positions][:, 0]) < 0)
 
 
+def test_a_later_windows_stretch_goes_on_at_the_continuations_pace():
+    """After the first window, the followed frames start where the continuation stands and at its pace (a step of the
+    context's size), then turn to the clip's own frames and pace by ALIGN_FRAMES; the first window's only start where
+    it stands, as before (its seam is the clip's)."""
+    feats = walk_features()
+    clip = ClipMemory(feats, 20, 20, np.ones(LAYOUT.size, np.float32))
+    context = feats[60:100].copy()
+    context[-1, LAYOUT.positions] += 0.02  # 2 cm from the clip, and a step 2 cm longer than its
+    _, frames = clip.follow(context, window=1)
+    pos = LAYOUT.positions
+    step = frames[0, pos] - context[-1, pos]
+    own = feats[100, pos] - feats[99, pos]
+    continuation = context[-1, pos] - context[-2, pos]
+    # the first step is the continuation's pace turning towards the stretch's, a tenth of the way at most
+    assert np.abs(step - continuation).max() < 0.25 * np.abs(continuation - own).max()
+    np.testing.assert_allclose(frames[mem.ALIGN_FRAMES - 1:], feats[100 + mem.ALIGN_FRAMES - 1:120], atol=1e-5)
+    _, first = ClipMemory(feats, 20, 20, np.ones(LAYOUT.size, np.float32)).follow(context, first=True)
+    np.testing.assert_allclose(first[0, pos] - feats[100, pos], 0.02 * (1 - 1 / mem.ALIGN_FRAMES), atol=1e-5)
+    offsets = mem.aligned_offsets(20, np.ones(LAYOUT.size), np.zeros(LAYOUT.size))
+    assert np.all(offsets[:, LAYOUT.contacts] == 0) and np.all(np.diff(offsets[:, 0]) <= 0)
+
+
 def test_motion_the_clip_never_did_gets_no_share():
     feats = walk_features()
     clip = ClipMemory(feats, 20, 20, np.full(LAYOUT.size, 0.01, np.float32))
@@ -47,29 +69,6 @@ def test_motion_the_clip_never_did_gets_no_share():
     assert share < 1e-6
     predicted = np.zeros((20, LAYOUT.size), np.float32)
     np.testing.assert_allclose(clip.lean(far, predicted), predicted, atol=1e-5)
-
-
-def test_a_windows_share_of_the_clip_is_eased_in_from_the_window_befores(monkeypatch):
-    """A window the clip matches well after one it did not match leans on it more and more over SHARE_EASE_FRAMES
-    (a half cosine from the last window's share), not all at once at the boundary; with 1 it switches at once."""
-    ones = np.ones(LAYOUT.size, np.float32)
-    feats = walk_features()
-    predicted = np.zeros((20, LAYOUT.size), np.float32)
-    share, frames = ClipMemory(feats, 20, 20, ones).follow(feats[60:100], window=1)
-    assert share == pytest.approx(mem.SHARE, rel=1e-5)
-
-    def leant() -> np.ndarray:
-        clip = ClipMemory(feats, 20, 20, ones, first_scale=0.3)
-        clip.lean(feats[60:100] + 5.0, predicted, first=True, window=0)  # nothing like the clip: share 0
-        assert clip.share < 1e-6
-        return clip.lean(feats[60:100], predicted, window=1)
-
-    weights = mem.ease_in(20, mem.SHARE_EASE_FRAMES) * share
-    assert weights[0] < 0.05 * share and np.all(np.diff(weights) >= 0)
-    np.testing.assert_allclose(weights[mem.SHARE_EASE_FRAMES - 1:], share, rtol=1e-6)
-    np.testing.assert_allclose(leant(), weights[:, None] * frames, atol=1e-5)
-    monkeypatch.setattr(mem, "SHARE_EASE_FRAMES", 1)
-    np.testing.assert_allclose(leant(), share * frames, atol=1e-5)
 
 
 def test_a_clip_too_short_to_lean_on_is_followed_only_played_on():
