@@ -32,6 +32,7 @@ from ..motion.features import (
     yaw_matrix,
 )
 from ..motion.stance import SETTLE_FROM, ground, settle_stances
+from ..ops.footlock import legs_out_of_floor
 from ..ops.seam import PREDICT_SEAM_FRAMES, seam_fade
 from .memory import ClipMemory
 from .simlpe_engine import SiMLPeEngine
@@ -421,9 +422,11 @@ class Engine:
         return new if floor is None else self.ground(new, floor)
 
     def ground(self, pos: np.ndarray, floor: float | np.ndarray) -> np.ndarray:
-        """A rollout's joints ``[..., F, 21, 3]`` (its first frame the first new one) kept out of ``floor`` from its
-        third window on, eased in over that window (:func:`stance.ground`), as its stances settle."""
-        return ground(pos, floor, start=SETTLE_FROM * self.n, ramp=self.n)
+        """A rollout's joints ``[..., F, 21, 3]`` (its first frame the first new one) kept out of ``floor``: lifted
+        as a whole from its third window on, eased in over that window (:func:`stance.ground`), as its stances
+        settle; a foot the hips still leave under it (the first two windows, where the model's hips are kept) is
+        raised by its own leg (:func:`footlock.legs_out_of_floor`)."""
+        return legs_out_of_floor(ground(pos, floor, start=SETTLE_FROM * self.n, ramp=self.n), floor)
 
     def reconstruct_positions(self, positions: np.ndarray, root_weight: float = 3.0,
                           yaw_weight: float = 10.0) -> np.ndarray:

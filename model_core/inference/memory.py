@@ -130,7 +130,7 @@ class ClipMemory:
         end = self.ends[best]
         frames = self.feats[end:end + self.n].copy()
         frames += aligned_offsets(self.n, last - self.feats[end - 1],
-                                  None if first or not ALIGN_VELOCITY else _turn(context, self.feats[end - 1:end + 1]))
+                                  None if first or not ALIGN_VELOCITY else _turn(context, self.feats[end - 2:end]))
         if first:
             return float(np.exp(-distance[best] / self.first_scale)) if self.first_scale else 0.0, frames
         share, scale = (LONG_SHARE, LONG_SCALE) if long else (SHARE, SCALE)
@@ -183,9 +183,9 @@ def aligned_offsets(n: int, jump: np.ndarray, turn: np.ndarray | None = None, ov
 
 
 def _turn(context: np.ndarray, stretch_end: np.ndarray) -> np.ndarray | None:
-    """The continuation's last step ``context`` ``[T, C]`` less the clip's from a stretch's last frame to the frame
-    after it (``stretch_end`` ``[2, C]``), on the joints' positions only (zero elsewhere); None for a context of
-    one frame."""
+    """The continuation's last step (``context`` ``[T, C]``) less the clip's into the last frame of the stretch it
+    matched (``stretch_end``: the stretch's last two frames ``[2, C]``), on the joints' positions only (zero
+    elsewhere): none where the continuation moves as the clip did there. None for a context of one frame."""
     if len(context) < 2:
         return None
     turn = np.zeros(context.shape[-1], np.float32)

@@ -18,8 +18,9 @@ it learnt, and a rollout put back on another body's bones sinks window after win
 heel or toe went 5.4 to 6.4 cm under its floor (model card, "Feet out of the floor"). Each frame that would go
 under is lifted, the lift eased over a few frames; nothing is pushed down (a hop stays a hop), and again only
 what comes out changes (lifting the windows fed back slowed the rollouts). Like the stances, the first two windows
-are left alone (they continue the clip, and lifting them cost martial arts 0.4 cm at 400 ms: its fighters' predicted
-feet dip a little under the floor where the hips are right); the lift eases in over the third window.
+are not lifted (they continue the clip, and lifting them cost martial arts 0.4 cm at 400 ms: its fighters' predicted
+feet dip under the floor where the hips are right); the lift eases in over the third window. Their feet are kept
+out of the floor by the legs alone (:func:`ops.footlock.legs_out_of_floor`, :meth:`Engine.ground`).
 """
 
 from __future__ import annotations

@@ -51,6 +51,7 @@ from ..motion.conventions import (
 )
 from ..motion.features import detect_contacts, facing, gaussian_smooth
 from ..motion.geometry import shortest_arc
+from ..motion.stance import GROUND_EASE, held_and_eased
 from ..rig.rigs import leg_length
 from .normalise import fit_normalisation
 
@@ -408,6 +409,35 @@ def face_along(foot: np.ndarray, towards: np.ndarray) -> np.ndarray:
 def body_forward(pos: np.ndarray) -> np.ndarray:
     """Horizontal facing direction ``[F, 3]`` (unit) from the hips and shoulders (Y-up): :func:`features.facing`."""
     return _unit(facing(pos))[0]
+
+
+def legs_out_of_floor(pos: np.ndarray, floor: float | np.ndarray, ease: int = GROUND_EASE) -> np.ndarray:
+    """Joints ``[F, 21, 3]`` or ``[B, F, 21, 3]`` (Y up) with each foot kept out of ``floor`` (a height, or one per
+    clip ``[B]``; NaN: that clip is left as it is) by its own leg: where a leg's heel (read at the ankle) or toe is
+    under it, the ankle and toe are raised by as much (the lift held ``ease`` frames either side and averaged over
+    as many, as :func:`stance.ground`'s) and the knee bends to reach, by two-bone IK from the hip, which stays where
+    it is. The hips and every other joint are left alone, and so is a foot on or over the floor: where the model
+    has the hips right and its feet dip under the floor (a fighter's continuation), only the legs change."""
+    pos = np.asarray(pos)
+    single = pos.ndim == 3
+    out = np.array(pos[None] if single else pos, np.float64)
+    floors = np.broadcast_to(np.asarray(floor, np.float64), (len(out),))
+    for hip, knee, ankle, toe in LEGS:
+        need = np.maximum(0.0, floors[:, None] - np.minimum(out[..., ankle, UP_AXIS], out[..., toe, UP_AXIS]))
+        need[np.isnan(need)] = 0.0
+        need = held_and_eased(need, ease)
+        up = need > 1e-6  # only the frames that need it (the IK eases a nearly straight leg it is given)
+        if not up.any():
+            continue
+        leg = out[up]  # [N, 21, 3]
+        target = leg[:, ankle].copy()
+        target[:, UP_AXIS] += need[up]
+        new_knee, new_ankle = two_bone_ik(leg[:, hip], leg[:, knee], leg[:, ankle], target)
+        leg[:, toe] += new_ankle - leg[:, ankle]
+        leg[:, knee], leg[:, ankle] = new_knee, new_ankle
+        out[up] = leg
+    out = out.astype(pos.dtype, copy=False)
+    return out[0] if single else out
 
 
 def foot_lock(pos: np.ndarray, fps: float = MODEL_FPS, contacts: np.ndarray | None = None,

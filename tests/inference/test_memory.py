@@ -30,33 +30,38 @@ def test_the_followed_frames_start_where_the_continuation_stands():
     feats = walk_features()
     clip = ClipMemory(feats, 20, 20, np.ones(LAYOUT.size, np.float32))
     context = feats[60:100].copy()
-    context[-1, LAYOUT.positions] += 0.02  # the continuation's last frame is 2 cm from the clip's
+    context[-2:, LAYOUT.positions] += 0.02  # the continuation's last frames are 2 cm from the clip's (at its pace)
     share, frames = clip.follow(context)
     assert 0 < share < mem.SHARE
     jump = frames - feats[100:120]
-    np.testing.assert_allclose(jump[0, LAYOUT.positions], 0.02 * (1 - 1 / mem.ALIGN_FRAMES), atol=1e-5)
+    t = 1 / mem.ALIGN_FRAMES  # faded out on a cubic that leaves the pace alone at the start
+    np.testing.assert_allclose(jump[0, LAYOUT.positions], 0.02 * (2 * t ** 3 - 3 * t ** 2 + 1), atol=1e-5)
     assert np.abs(jump[mem.ALIGN_FRAMES - 1:]).max() < 1e-5  # faded out
     assert np.all(np.diff(jump[:mem.ALIGN_FRAMES, LAYOUT.positions][:, 0]) < 0)
 
 
-def test_a_later_windows_stretch_goes_on_at_the_continuations_pace():
-    """After the first window, the followed frames start where the continuation stands and at its pace (a step of the
-    context's size), then turn to the clip's own frames and pace by ALIGN_FRAMES; the first window's only start where
-    it stands, as before (its seam is the clip's)."""
+def test_a_later_windows_stretch_goes_on_at_the_continuations_pace(monkeypatch):
+    """After the first window, the followed frames start where the continuation stands and at its pace (here a step
+    2 cm longer than the clip's into the matched frame), then turn to the clip's own frames and pace by
+    ALIGN_FRAMES; with ALIGN_VELOCITY off (and in the first window, whose seam is the clip's) the jump alone fades
+    out, and the first step keeps the clip's pace."""
     feats = walk_features()
-    clip = ClipMemory(feats, 20, 20, np.ones(LAYOUT.size, np.float32))
     context = feats[60:100].copy()
-    context[-1, LAYOUT.positions] += 0.02  # 2 cm from the clip, and a step 2 cm longer than its
-    _, frames = clip.follow(context, window=1)
+    context[-1, LAYOUT.positions] += 0.02
     pos = LAYOUT.positions
-    step = frames[0, pos] - context[-1, pos]
-    own = feats[100, pos] - feats[99, pos]
-    continuation = context[-1, pos] - context[-2, pos]
-    # the first step is the continuation's pace turning towards the stretch's, a tenth of the way at most
-    assert np.abs(step - continuation).max() < 0.25 * np.abs(continuation - own).max()
+    pace = context[-1, pos] - context[-2, pos]
+
+    def first_step(**kw):
+        _, frames = ClipMemory(feats, 20, 20, np.ones(LAYOUT.size, np.float32)).follow(context, **kw)
+        return frames, np.abs(frames[0, pos] - context[-1, pos] - pace).mean()
+
+    frames, off_pace = first_step(window=1)
     np.testing.assert_allclose(frames[mem.ALIGN_FRAMES - 1:], feats[100 + mem.ALIGN_FRAMES - 1:120], atol=1e-5)
-    _, first = ClipMemory(feats, 20, 20, np.ones(LAYOUT.size, np.float32)).follow(context, first=True)
+    first, off_pace_first = first_step(first=True)
     np.testing.assert_allclose(first[0, pos] - feats[100, pos], 0.02 * (1 - 1 / mem.ALIGN_FRAMES), atol=1e-5)
+    monkeypatch.setattr(mem, "ALIGN_VELOCITY", False)
+    _, off_pace_before = first_step(window=1)
+    assert off_pace < 0.5 * off_pace_before and off_pace_first == pytest.approx(off_pace_before)
     offsets = mem.aligned_offsets(20, np.ones(LAYOUT.size), np.zeros(LAYOUT.size))
     assert np.all(offsets[:, LAYOUT.contacts] == 0) and np.all(np.diff(offsets[:, 0]) <= 0)
 

@@ -354,3 +354,27 @@ def test_a_foot_planted_on_a_slope_pitches_with_it():
         over = out[15, [heel, toe], 1] - slope(out[15, [heel, toe]]) - standing[:2]
         assert abs(over[0]) < 1e-6 and np.linalg.norm(out[15, toe] - out[15, heel]) == pytest.approx(length, abs=1e-5)
         assert (abs(over[1]) < toe_off) if given is not None else (over[1] < toe_off)
+
+
+def test_a_foot_under_the_floor_is_raised_by_its_own_leg_and_the_hips_stay():
+    """A walk sunk 4 cm into its floor: legs_out_of_floor raises each foot that goes under by its own leg, the knee
+    bending to reach (every bone keeps its length), so no heel or toe is more than a millimetre under the floor;
+    the hips and the upper body do not move, and neither does a leg whose foot is over the floor. A NaN
+    floor leaves the clip as it is."""
+    walk = walking_skeleton(90).astype(np.float64)
+    floor = float(walk[:, CONTACT_JOINTS, 1].min())
+    sunk = walk.copy()
+    sunk[..., 1] -= 0.04
+    out = fl.legs_out_of_floor(sunk, floor)
+    assert (floor - sunk[:, CONTACT_JOINTS, 1]).max() > 0.035
+    assert (floor - out[:, CONTACT_JOINTS, 1]).max() < 1e-3
+    legs = [j for leg in fl.LEGS for j in leg[1:]]
+    others = [j for j in range(out.shape[1]) if j not in legs]
+    np.testing.assert_array_equal(out[:, others], sunk[:, others])
+    assert np.abs(bone_lengths(out) - bone_lengths(sunk)).max() < 1e-6
+    for _hip, knee, ankle, toe in fl.LEGS:  # a foot clear of the floor, and for the lift's ease either side, stays
+        over = (sunk[:, [ankle, toe], 1] > floor).all(-1)
+        clear = np.convolve(over, np.ones(9), "same") == 9
+        assert clear.any()
+        np.testing.assert_allclose(out[clear][:, [knee, ankle, toe]], sunk[clear][:, [knee, ankle, toe]], atol=1e-9)
+    np.testing.assert_array_equal(fl.legs_out_of_floor(sunk[None], np.array([np.nan]))[0], sunk)
