@@ -170,7 +170,7 @@ def aligned_offsets(n: int, jump: np.ndarray, turn: np.ndarray | None = None, ov
     clip's own joins), else on a cubic Hermite that also takes out ``turn`` ``[C]``, the difference in the joints'
     velocity (:func:`_turn`), so that the motion goes on at the continuation's pace and turns to the stretch's
     over those frames instead of at once. On martial arts the joints' acceleration on the last frame of the second
-    to fifth windows went 1.56 / 0.90 / 1.19 / 1.52 -> 0.60 / 0.53 / 0.60 / 0.76 cm a frame squared (0.62 between
+    to fifth windows went 1.55 / 0.90 / 1.19 / 1.52 -> 0.90 / 0.76 / 0.85 / 1.14 cm a frame squared (0.60 between
     other frames), for no change at 1 s (models/strnn_default/HISTORY.md, "a stretch of the clip taken at the
     continuation's pace")."""
     jump = np.array(jump, np.float32)
