@@ -52,14 +52,6 @@ LONG_FROM, LONG_SHARE, LONG_SCALE, PLAYHEAD_TIE = 2, 0.9, 10.0, 0.1
 # held-out groups and the validation split (models/strnn_default/HISTORY.md, "a long extension no longer loops the
 # clip's last seconds"): 10 s. 1: only the stretch just followed.
 RECENT = 15
-# From LONG_FROM on a stretch is judged by the root's pace over the frames that follow it too: its mean ground speed
-# against the continuation's over its last MATCH_FRAMES, the difference in the model's spread of the root's
-# velocity, squared, times PACE_WEIGHT, added to the distance. Where a short clip runs out the continuation goes back
-# to the stretch most like its last frames, and a walk that starts from a stand went back to its start: every 3.3 s
-# the hips slowed to 0.4 of the walk's pace for half a second (the unseen subject's 006_03 read at Blender's 59.9988
-# fps). Chosen on the held-out groups (models/strnn_default/HISTORY.md, "a short walk that starts from a stand loops
-# its start"). 0: the pose alone.
-PACE_WEIGHT = 1.0
 # A clip too short to play on through (under play_frames: a raised hand of 1.5 s) offers no two stretches a window
 # apart, so from LONG_FROM on a continuation following it kept repeating one window of it for ever (the arms pumping
 # in a 0.67 s cycle at 0.2 to 0.8 x the take's speed). There the long windows follow the clip played on instead
@@ -94,9 +86,6 @@ class ClipMemory:
         self.ends = np.arange(first, len(self.feats) - n + 1)
         self.keys = np.stack([self.feats[e - MATCH_FRAMES:e, _CHANNELS] for e in self.ends]) / self.scale \
             if len(self.ends) else np.zeros((0, MATCH_FRAMES, len(_CHANNELS)), np.float32)
-        speed = np.linalg.norm(self.feats[:, LAYOUT.velocity], axis=-1)
-        self.pace = np.array([speed[e:e + n].mean() for e in self.ends], np.float32)  # the root's pace after each
-        self.pace_spread = float(np.linalg.norm(np.asarray(std, np.float32)[LAYOUT.velocity])) + 1e-9
 
     @cached_property
     def played_on(self) -> ClipMemory | None:
@@ -130,9 +119,6 @@ class ClipMemory:
             return 0.0, np.repeat(last[None], self.n, 0)
         probe = np.asarray(context[-MATCH_FRAMES:, _CHANNELS], np.float32) / self.scale
         distance = ((self.keys - probe) ** 2).mean((1, 2))
-        if long and PACE_WEIGHT:  # and by the pace of what follows it
-            now = float(np.linalg.norm(np.asarray(context[-MATCH_FRAMES:])[:, LAYOUT.velocity], axis=-1).mean())
-            distance = distance + PACE_WEIGHT * ((self.pace - now) / self.pace_spread) ** 2
         allowed = self._unfollowed(distance) if long and self.recent else distance  # not what was just followed
         best = int(np.argmin(allowed))
         # the playhead goes forward only, so it never loops: it is exempt from the rule above
