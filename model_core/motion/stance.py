@@ -91,6 +91,17 @@ def held_and_eased(x: np.ndarray, ease: int) -> np.ndarray:
     return spread(spread(x, np.max), np.mean)
 
 
+def lift_needed(lowest: np.ndarray, floor: float | np.ndarray, ease: int = GROUND_EASE) -> np.ndarray:
+    """How far ``[B, F]`` each frame must rise for its lowest point ``lowest`` ``[B, F]`` (Y up) not to be under
+    ``floor`` (a height, or one per clip ``[B]``; NaN: none), held ``ease`` frames either side and averaged over as
+    many (:func:`held_and_eased`), so that a lift eases in and out: :func:`ground`'s, and each leg's in
+    :func:`ops.footlock.legs_out_of_floor`."""
+    floors = np.broadcast_to(np.asarray(floor, np.float64), (len(lowest),))
+    need = np.maximum(0.0, floors[:, None] - lowest)
+    need[np.isnan(need)] = 0.0
+    return held_and_eased(need, ease)
+
+
 def ground(pos: np.ndarray, floor: float | np.ndarray, ease: int = GROUND_EASE, start: int = 0,
            ramp: int = 0) -> np.ndarray:
     """Joints ``[F, 21, 3]`` or ``[B, F, 21, 3]`` (Y up) lifted, frame by frame, so that the lowest heel or toe is
@@ -101,10 +112,7 @@ def ground(pos: np.ndarray, floor: float | np.ndarray, ease: int = GROUND_EASE, 
     pos = np.asarray(pos)
     single = pos.ndim == 3
     out = np.array(pos[None] if single else pos)
-    floors = np.broadcast_to(np.asarray(floor, np.float64), (len(out),))
-    lift = np.maximum(0.0, floors[:, None] - out[..., CONTACT_JOINTS, 1].min(-1))  # (B, F)
-    lift[np.isnan(lift)] = 0.0
-    lift = held_and_eased(lift, ease)
+    lift = lift_needed(out[..., CONTACT_JOINTS, 1].min(-1), floor, ease)  # (B, F)
     lift *= np.clip((np.arange(lift.shape[1]) - start + 1) / (ramp + 1), 0.0, 1.0)
     out[..., 1] += lift[..., None].astype(out.dtype)
     return out[0] if single else out

@@ -51,7 +51,7 @@ from ..motion.conventions import (
 )
 from ..motion.features import detect_contacts, facing, gaussian_smooth
 from ..motion.geometry import shortest_arc
-from ..motion.stance import GROUND_EASE, held_and_eased
+from ..motion.stance import GROUND_EASE, lift_needed
 from ..rig.rigs import leg_length
 from .normalise import fit_normalisation
 
@@ -421,11 +421,8 @@ def legs_out_of_floor(pos: np.ndarray, floor: float | np.ndarray, ease: int = GR
     pos = np.asarray(pos)
     single = pos.ndim == 3
     out = np.array(pos[None] if single else pos, np.float64)
-    floors = np.broadcast_to(np.asarray(floor, np.float64), (len(out),))
     for hip, knee, ankle, toe in LEGS:
-        need = np.maximum(0.0, floors[:, None] - np.minimum(out[..., ankle, UP_AXIS], out[..., toe, UP_AXIS]))
-        need[np.isnan(need)] = 0.0
-        need = held_and_eased(need, ease)
+        need = lift_needed(np.minimum(out[..., ankle, UP_AXIS], out[..., toe, UP_AXIS]), floor, ease)
         up = need > 1e-6  # only the frames that need it (the IK eases a nearly straight leg it is given)
         if not up.any():
             continue
