@@ -62,6 +62,11 @@ RECENT = 15
 # 2 s stand, all raised hands; the 4 others run). Chosen on the validation split's 17 clips under 2 s
 # (models/strnn_default/HISTORY.md, "a clip too short to play on is played back and forth").
 TRAVEL_SPEED = 0.3  # m / s (the long horizon's locomotion threshold)
+# A long continuation that travels does not go back to where the clip starts from a stand: its stretches before the
+# root first reaches START_SHARE x the clip's cruising speed (smoothed over START_SMOOTH frames) are left out of the
+# places it goes back to where the clip runs out (a 4.4 s walk from a stand, extended by 20 s, slowed to under half
+# its pace every 3.3 s, each time it went back to its first steps). None: no stretch is left out.
+START_SHARE, START_SMOOTH = 0.75, 5
 # Where played_on turns back or goes round, the motion is eased over EASE_FRAMES either side (_eased): a raised hand
 # cut while still rising turned back at once, a bounce up to 3.3 x as hard as any in its take; eased over 2 frames,
 # 1.1 x, the hands as fast as before (over 4: every turn softer than the take's, the hands' fastest 10 % slower).
@@ -119,7 +124,8 @@ class ClipMemory:
             return 0.0, np.repeat(last[None], self.n, 0)
         probe = np.asarray(context[-MATCH_FRAMES:, _CHANNELS], np.float32) / self.scale
         distance = ((self.keys - probe) ** 2).mean((1, 2))
-        allowed = self._unfollowed(distance) if long and self.recent else distance  # not what was just followed
+        pool = self._past_start_up(distance) if long and _travels(context) else distance
+        allowed = self._unfollowed(pool) if long and self.recent else pool  # not what was just followed
         best = int(np.argmin(allowed))
         # the playhead goes forward only, so it never loops: it is exempt from the rule above
         if long and self.playhead is not None and distance[self.playhead] <= distance[best] + PLAYHEAD_TIE:
@@ -135,6 +141,31 @@ class ClipMemory:
             return float(np.exp(-distance[best] / self.first_scale)) if self.first_scale else 0.0, frames
         share, scale = (LONG_SHARE, LONG_SCALE) if long else (SHARE, SCALE)
         return float(share * np.exp(-distance[best] / scale)), frames
+
+    @cached_property
+    def start_up(self) -> int:
+        """How many of the clip's first stretches are followed by its start from a stand: those that end before
+        its root's ground speed (over :data:`START_SMOOTH` frames) first reaches :data:`START_SHARE` x its cruising
+        speed (the median where it travels, over :data:`TRAVEL_SPEED`). 0 where the clip starts on the move or
+        travels for under a window."""
+        if START_SHARE is None or not len(self.ends):
+            return 0
+        speed = _ground_speed(self.feats)
+        k = min(START_SMOOTH, len(speed))
+        speed = np.convolve(speed, np.ones(k) / k, mode="valid")
+        moving = speed >= TRAVEL_SPEED
+        if moving.sum() < self.n:
+            return 0
+        cruising = np.flatnonzero(speed >= START_SHARE * float(np.median(speed[moving])))
+        return int(np.searchsorted(self.ends, cruising[0])) if len(cruising) else 0
+
+    def _past_start_up(self, distance: np.ndarray) -> np.ndarray:
+        """``distance`` with the stretches of the clip's :attr:`start_up` ruled out, where any other is left."""
+        if not 0 < self.start_up < len(distance):
+            return distance
+        out = distance.copy()
+        out[:self.start_up] = np.inf
+        return out
 
     def _unfollowed(self, distance: np.ndarray) -> np.ndarray:
         """``distance`` with the stretches followed in the last :data:`RECENT` windows and their neighbours ruled out;
@@ -192,6 +223,17 @@ def _turn(context: np.ndarray, stretch_end: np.ndarray) -> np.ndarray | None:
     step = np.asarray(context[-1], np.float32) - np.asarray(context[-2], np.float32)
     turn[LAYOUT.positions] = (step - (stretch_end[1] - stretch_end[0]))[LAYOUT.positions]
     return turn
+
+
+def _ground_speed(feats: np.ndarray) -> np.ndarray:
+    """The root's ground speed ``[F]`` (m / s on the learnt body) of raw features ``[F, C]``."""
+    return np.linalg.norm(np.asarray(feats)[:, LAYOUT.velocity], axis=-1) * MODEL_FPS
+
+
+def _travels(context: np.ndarray) -> bool:
+    """Whether a continuation ``[T, C]`` travels: its root's mean ground speed over its last :data:`MATCH_FRAMES`
+    frames at least :data:`TRAVEL_SPEED`."""
+    return float(_ground_speed(context[-MATCH_FRAMES:]).mean()) >= TRAVEL_SPEED
 
 
 def play_frames(m: int, n: int) -> int:

@@ -286,3 +286,62 @@ def test_a_clip_that_stands_is_played_back_and_forth_and_one_that_steps_round(mo
     np.testing.assert_allclose(again, walk[start + mem.ALIGN_FRAMES:49 - k], atol=1e-6)
     monkeypatch.setattr(mem, "EASE_FRAMES", 0)
     assert turn(played) < 0.75 * turn(mem.played_on(still, 200))  # turned sharply, not eased
+
+
+def _from_a_stand(start: int = 60, walking: int = 140) -> np.ndarray:
+    """Features of a clip that starts from a stand: ``start`` frames of the same steps at under half the pace
+    (0.6 m/s), then the walk at 1.3 m/s."""
+    slow = positions_to_features(walking_skeleton(start, speed=0.6))[0]
+    return np.concatenate([slow, walk_features(walking)])
+
+
+def test_a_travelling_continuation_does_not_go_back_to_the_clips_start_from_a_stand(monkeypatch):
+    """A clip that starts from a stand and then walks: its stretches before the root first reaches ``START_SHARE``
+    x its cruising speed are its start-up (here its 60 slow frames); a long continuation that walks goes back
+    anywhere but there where the clip runs out (with the rule off it went back to the slow start, as a 4.4 s walk
+    from a stand extended by 20 s slowed to under half its pace every 3.3 s), while a continuation that stands may
+    still take the clip's stand."""
+    feats = _from_a_stand()
+    clip = ClipMemory(feats, 20, 20, np.ones(LAYOUT.size, np.float32))
+    first_cruising = int(clip.ends[clip.start_up])
+    assert 55 <= first_cruising <= 64, first_cruising
+    ends = _followed(clip, feats[-40:], 24)
+    assert min(ends) >= first_cruising and len(set(ends)) > 3, ends
+    standing = ClipMemory(feats, 20, 20, np.ones(LAYOUT.size, np.float32))
+    at_rest = feats[:40].copy()
+    at_rest[:, LAYOUT.velocity] *= 0.3  # 0.18 m/s: under TRAVEL_SPEED
+    _followed(standing, at_rest, 1)
+    assert standing.ends[standing.last] < first_cruising  # at rest, the start is still where it matches
+    monkeypatch.setattr(mem, "START_SHARE", None)
+    before = ClipMemory(feats, 20, 20, np.ones(LAYOUT.size, np.float32))
+    assert before.start_up == 0 and min(_followed(before, feats[-40:], 24)) < first_cruising
+
+
+def test_a_clip_that_starts_on_the_move_or_never_travels_has_no_start_up():
+    """Only a clip that starts slower than ``START_SHARE`` x its cruising speed and then travels for a window has a
+    start-up to leave out: a walk throughout has none, and neither has a clip that stands throughout."""
+    walk = walk_features(200)
+    assert ClipMemory(walk, 20, 20, np.ones(LAYOUT.size, np.float32)).start_up == 0
+    still = walk.copy()
+    still[:, LAYOUT.velocity] = 0.002
+    assert ClipMemory(still, 20, 20, np.ones(LAYOUT.size, np.float32)).start_up == 0
+
+
+@pytest.mark.parametrize("fps", [60.0, 59.998798394426075])
+def test_an_unseen_actors_walk_from_a_stand_extended_by_20_s_keeps_its_pace(fps, mocap_root):
+    """The held-out CMU subject's 4.4 s walk that starts from a stand (006_03), extended by 20 s as Extend Clip does,
+    read at 60 fps and at the rate Blender's BVH import gave it: the hips never slow to under 0.7 x the clip's
+    cruising pace (the median of its walking part) in any 1/6 s, where going back to the clip's first steps each
+    time it ran out slowed them to under half (at the second rate; at 60 fps the clip went back elsewhere)."""
+    from model_core.ops.extend import clip_floor, extend_positions
+    from model_core.rig.rigs import leg_length, load_clip
+
+    take = mocap_root / "cmu" / "iclone" / "006_03.bvh"
+    if not take.is_file():
+        pytest.skip(f"{take} is not on this machine")
+    clip = np.asarray(load_clip(str(take), rate=fps), np.float64)
+    new = extend_positions(Engine.load(), clip[-40:], fps, 1200, memory=clip, floor=clip_floor(clip, fps))
+    unit = leg_length(clip) / 0.87
+    speed = lambda p: np.linalg.norm(p[10:, 0, [0, 2]] - p[:-10, 0, [0, 2]], axis=-1) * fps / 10 / unit  # noqa: E731
+    cruise = float(np.median(speed(clip)[speed(clip) > 0.3]))
+    assert speed(new)[120:].min() > 0.7 * cruise, (speed(new)[120:].min(), cruise)
