@@ -77,6 +77,15 @@ FLOOR_S = 3.0
 # walks that travel, and without it an in-place walk crept 0.4 to 2.2 m in 20 s and a run 4.6 m
 # (models/strnn_default/HISTORY.md, "A walk in place stays in place"). 0: off.
 IN_PLACE_S, IN_PLACE_SPEED, STEPPING_SPEED, IN_PLACE_SMOOTH_S = 2.0, 0.02, 0.3, 0.5
+# A clip that ends on a stalled frame: its last frame (nearly) repeats the one before while the body was moving (the
+# joints' last step under STALL_SHARE x their mean step over the STALL_FRAMES steps before, which moved at STALL_SPEED
+# m/s or more on the standard body, and the step before the last not stalled itself, so a hold of two frames or more
+# is a hold). 30 of the 43 takes of the CMU conversion in data/mocap/cmu/iclone that end on the move end so; extended
+# from that frame, the continuation starts from a body that stopped for a frame and the walk stumbles at the cut (the
+# hips at 0.2 to 0.4 x their pace for the first tenth of a second, back to it only after 0.3 s). Extend Clip goes on
+# from the frame before and, in the new action, puts the continuation's first frame in the stalled one's place
+# (models/strnn_default/HISTORY.md, "a take that ends on a repeated frame stumbled at the cut"). 0: off.
+STALL_SHARE, STALL_SPEED, STALL_FRAMES = 0.3, 0.1, 5
 _GROUND = list(GROUND_AXES)
 _FEET = [JOINT_INDEX["l_foot"], JOINT_INDEX["r_foot"]]
 
@@ -222,6 +231,19 @@ def extend_positions(engine, pos: np.ndarray, fps: float, frames: int, memory: n
     if _steps_in_place(looked):  # a walk in place goes on in place
         joined = np.concatenate([joined[:1], kept_in_place(looked, joined[1:])])
     return sample_at(joined, MODEL_FPS, np.arange(1, frames + 1) / fps)
+
+
+def stalled_end(pos: np.ndarray, fps: float) -> bool:
+    """Whether a clip ``[F, 21, 3]`` (scene units, ``fps``; in the order it is read, so the end is where it is
+    continued) ends on a stalled frame (:data:`STALL_SHARE`): its last frame nearly repeats the one before while the
+    body was moving. False for a clip of under ``STALL_FRAMES + 2`` frames."""
+    pos = np.asarray(pos, dtype=np.float64)
+    if STALL_SHARE <= 0 or len(pos) < STALL_FRAMES + 2:
+        return False
+    unit = leg_length(pos) / STANDARD_LEG_LENGTH
+    step = np.linalg.norm(np.diff(pos[-STALL_FRAMES - 2:], axis=0), axis=-1).mean(1) * fps / unit  # m/s, standard body
+    before = float(step[:-1].mean())
+    return before >= STALL_SPEED and step[-1] < STALL_SHARE * before and step[-2] >= 0.5 * float(step[:-2].mean())
 
 
 def eased_after_hold(new: np.ndarray, n: int, frames: int = SEAM_FRAMES) -> np.ndarray:

@@ -426,6 +426,21 @@ def written_paths(clip: Clip, root: str | None = None) -> set[str]:
 STEP_SECONDS, STEP_KEYS = 2.0, 6
 
 
+def keyed_every_frame(clip: Clip, first: int, last: int) -> bool:
+    """Whether every whole frame from ``first`` to ``last`` holds a key on each of the keyed bones' unmuted F-curves
+    (an action baked frame by frame, as imported motion capture is), not poses interpolated between keys."""
+    names = set(keyed_names(clip))
+    curves = [fc for (bone, _), by_index in rig_io.bone_channels(clip.channels.fcurves).items() if bone in names
+              for fc in by_index.values() if not fc.mute]
+    wanted = np.arange(first, last + 1)
+    for fc in curves:
+        co = np.empty(2 * len(fc.keyframe_points))
+        fc.keyframe_points.foreach_get("co", co)
+        if not np.isin(wanted, np.round(co[0::2])).all():
+            return False
+    return bool(curves)
+
+
 def key_grid(clip: Clip, first: float, last: float) -> tuple[int, np.ndarray]:
     """(step, keys): the frames ``[K]`` the keyed bones' poses are held from in frames ``first`` to ``last`` and their
     step (2 for animation on twos), where the bones' F-curves hold them on one grid of whole frames every ``step``

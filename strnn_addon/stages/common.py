@@ -212,10 +212,11 @@ def stance_record(pos) -> dict:
 
 def record_notes(action) -> list[str]:
     """The notes of a new action's record (its stance, pace, familiarity, held first window, what Follow the
-    Clip had to follow, where a ground mesh was under no foot and a floor that rose under the clip), in that order."""
+    Clip had to follow, where a ground mesh was under no foot, a floor that rose under the clip and a stalled frame
+    the new frames replaced), in that order."""
     record = action.get(RECORD, {})
     notes = [record.get(key, {}).get("note", "") for key in ("stance", "pace", "familiarity", "first_window",
-                                                            "follow_clip", "ground", "floor_rise")]
+                                                            "follow_clip", "ground", "floor_rise", "stalled_end")]
     return [str(note) for note in notes if note]
 
 

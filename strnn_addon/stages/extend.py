@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from ...model_core.motion.conventions import STANDARD_LEG_LENGTH, UP_AXIS
-from ...model_core.ops.extend import FLOOR_S, MEMORY_S, clip_floor, clip_in_place, floor_rise
+from ...model_core.ops.extend import FLOOR_S, MEMORY_S, STALL_FRAMES, clip_floor, clip_in_place, floor_rise, stalled_end
 from ...model_core.ops.footlock import SETTLE_PASSES
 from ...model_core.rig.rigs import leg_length
 from ...model_core.rig.solve import solve
@@ -57,6 +57,23 @@ def context_range(clip, context_frames: int, frames: int, end: int, step: int = 
     return end - (-1 if back else 1) * step * np.arange(n_ctx, dtype=np.float64)[::-1]
 
 
+def stalls(context, clip, edge: int, back: bool = False) -> bool:
+    """Whether the clip ends on a stalled frame at ``edge`` (:func:`extend.stalled_end`; ``back``: starts on one,
+    read backwards in time), judged on its last :data:`extend.STALL_FRAMES` + 2 frames up to ``edge``, where each of
+    them is keyed (motion baked frame by frame: a hand-keyed pass that eases into its last key means it)."""
+    span = STALL_FRAMES + 2
+    frames = edge + np.arange(span, dtype=np.float64)[::-1] if back else edge - np.arange(span, dtype=np.float64)[::-1]
+    if frames.min() < clip.first or frames.max() > clip.last:
+        return False
+    if not pipeline.keyed_every_frame(clip, int(frames.min()), int(frames.max())):
+        return False
+    order = np.argsort(frames)
+    read = pipeline.joint_positions(context, clip, frames[order])
+    pos = np.empty_like(read)
+    pos[order] = read
+    return stalled_end(pos, clip.fps)
+
+
 def memory_range(clip, ctx_frames: np.ndarray, seconds: float = MEMORY_S, step: int = 1,
                  back: bool = False) -> np.ndarray:
     """Scene frames ``[M]`` of the clip's own motion the continuation leans on (:data:`extend.MEMORY_S` seconds
@@ -95,6 +112,13 @@ def extend_steps(context, obj, *, frames: int = 120, context_frames: int = 0, fo
         clip.first, clip.last = min(clip.first, edge), max(clip.last, edge)
     # keys on twos: read at its keys (the one ``edge`` holds, or the first from it), continued on twos
     step, key = pipeline.key_step(clip, edge, back)
+    # an action that ends on a stalled frame (converted mocap often does) goes on from the frame before, the new
+    # frames' first in its place, so that the motion does not stop for a frame and stumble at the cut
+    at_end = edge == (clip.first if back else clip.last)  # the action's own end, or the playhead on it
+    stalled = edge if at_end and not cycled and step == 1 and stalls(context, clip, edge, back) else None
+    asked = frames
+    if stalled is not None:
+        edge, key, frames = edge - sign, edge - sign, frames + 1
     fps, count = clip.fps / step, -(-(frames + sign * (edge - key)) // step)  # the keys' rate, the new keys
     ctx_frames = context_range(clip, context_frames, frames, key, step, back)
     yield "read"
@@ -143,11 +167,18 @@ def extend_steps(context, obj, *, frames: int = 120, context_frames: int = 0, fo
     targets = pipeline.to_armature(clip, new_pos, arm_world)
     loc, rot = solve(clip.rig, clip.anchors, targets, ref_loc, ref_rot)
     record = made_by("Extend Clip", clip, engine_bridge.model_used(prefs(context)), key_step=step,
-                     frames=frames, context_frames=len(ctx_frames),
+                     frames=asked, context_frames=len(ctx_frames),
                      follow_clip_frames=len(mem_frames) if follow_clip else 0,
                      foot_lock=foot_lock, from_frame=from_frame, before_start=before_start or None)
     if surface is not None:
         record.update(ground_record(surface, bare, len(joined)))
+    if stalled is not None:
+        record["stalled_end"] = {"frame": int(stalled), "note": (
+            f"The action's {'first' if back else 'last'} frame ({stalled}) nearly repeats the one "
+            f"{'after' if back else 'before'} it while the body moves (a stalled frame, as converted motion capture "
+            f"often {'starts' if back else 'ends'}): the new frames go on from frame {edge} and the first of them "
+            "takes its place in the new action, so the motion does not stumble at the cut; the original action "
+            "keeps it")}
     if rise is not None:  # in cm for a body of the standard leg length, as the rule judges it
         cm = 100 * float(np.ptp(rise)) * STANDARD_LEG_LENGTH / leg_length(seen)
         record["floor_rise"] = {"cm": round(cm, 1), "note": (

@@ -793,3 +793,91 @@ def test_a_walk_up_a_ramp_is_extended_up_it_with_the_ramp_as_ground(real_model, 
     for hips, feet in got.values():  # feet: the lowest in the clip's last 10 frames, then each new second's
         assert np.abs(hips[90:] - hips[89]).max() < 0.05
         assert max(abs(f - feet[0]) for f in feet[1:]) < 0.03
+
+
+def _stall_last_frame(obj, last: int) -> None:
+    """Make the action's last frame repeat the one before, as converted motion capture often ends."""
+    for fc in fcurves_of(obj):
+        points = {int(round(p.co[0])): p for p in fc.keyframe_points}
+        if last in points and last - 1 in points:
+            points[last].co[1] = points[last - 1].co[1]
+            points[last].handle_left[1] = points[last].handle_right[1] = points[last].co[1]
+        fc.update()
+
+
+def test_an_action_that_ends_on_a_stalled_frame_is_continued_from_the_frame_before(fake_model, addon):
+    """A walk whose last frame repeats the one before (a stalled frame): Extend goes on from the frame before, the
+    first new frame taking the stalled one's place in the new action, so the hips walk on at their pace (the stand-in
+    model carries the last velocity on) where they stood still; the record and the report say so, the original
+    action keeps its keys and the new one ends where asked; the same with From Current Frame and the playhead on the
+    last frame. From a frame before the last, nothing stalls."""
+    common = importlib.import_module(addon.__name__ + ".strnn_addon.stages.common")
+    obj = mixamo_walk(90)
+    assert "stalled_end" not in (_extended(obj, 20) or {})
+    bpy.ops.wm.read_homefile(use_empty=True)
+    obj = mixamo_walk(90)
+    _stall_last_frame(obj, 90)
+    old, snapshot = action_of(obj), key_snapshot(obj)
+    take = evaluated_joints(addon, obj, np.arange(86, 91))
+    assert np.linalg.norm(take[-1] - take[-2], axis=-1).max() < 1e-4  # the take stalls on its last frame
+    record = _extended(obj, 20)
+    new = action_of(obj)
+    assert new is not old and old.use_fake_user and same_keys(snapshot, key_snapshot(obj, old))
+    assert new.frame_range[1] == 110 and record["settings"]["frames"] == 20
+    assert record["stalled_end"]["frame"] == 90 and "stalled frame" in common.report_note(new)
+    pos = evaluated_joints(addon, obj, np.arange(88, 111))
+    err = np.linalg.norm(pos[2:] - expected_constant_velocity(pos[:2], 21), axis=-1)
+    assert err.max() < 1e-3, err.max()
+    assert np.linalg.norm(pos[3, 0] - pos[2, 0]) > 0.5 * np.linalg.norm(pos[1, 0] - pos[0, 0])  # walks on
+    bpy.ops.wm.read_homefile(use_empty=True)
+    obj = mixamo_walk(90)
+    _stall_last_frame(obj, 90)
+    stalled_walk = action_of(obj)
+    for frame, stalls in ((90, True), (80, False)):
+        bpy.context.scene.frame_set(frame)
+        assert bpy.ops.strnn.extend_clip(frames=20, from_current=True) == {"FINISHED"}
+        assert ("stalled_end" in action_of(obj)["strnn"].to_dict()) == stalls
+        obj.animation_data.action = stalled_walk
+
+
+def _extended(obj, frames: int) -> dict:
+    """Extend ``obj``'s action by ``frames``; the new action's record."""
+    assert bpy.ops.strnn.extend_clip(frames=frames) == {"FINISHED"}
+    return action_of(obj)["strnn"].to_dict()
+
+
+def test_an_unseen_walk_that_ends_on_a_stalled_frame_does_not_stumble_at_the_cut(real_model, addon):
+    """The held-out CMU subject's walk 006_03 (60 fps), whose last frame repeats the one before, extended by 1 s: the
+    hips' step over the cut and the first new frames is never under 0.6 x their step over the take's last walking
+    frames, where the continuation of the stalled frame started at a fifth of it and took 0.3 s to walk again."""
+    mocap = find_mocap()
+    if mocap is None:
+        pytest.skip("needs the motion-capture data (data/mocap)")
+    obj = import_bvh(mocap / "cmu/iclone/006_03.bvh", global_scale=0.01, update_scene_fps=True)
+    last = int(action_of(obj).frame_range[1])
+    take = evaluated_joints(addon, obj, np.arange(last - 6, last + 1))
+    step = np.linalg.norm(np.diff(take[:, 0, :2], axis=0), axis=-1)
+    assert step[-1] < 0.3 * step[:-1].mean()  # the take stalls
+    record = _extended(obj, 60)
+    assert record["stalled_end"]["frame"] == last
+    pos = evaluated_joints(addon, obj, np.arange(last - 1, last + 12))
+    new_step = np.linalg.norm(np.diff(pos[:, 0, :2], axis=0), axis=-1)
+    assert new_step.min() > 0.6 * step[:-1].mean(), (new_step / step[:-1].mean()).round(2)
+
+
+def test_an_action_that_starts_on_a_stalled_frame_gets_a_lead_in_from_the_frame_after(fake_model, addon):
+    """Before the Start, where the action's first frame repeats the one after it: the lead-in goes on back from the
+    frame after, the first frame replaced in the new action by the lead-in's last, so the body comes in at its pace;
+    the new action starts where asked."""
+    obj = mixamo_walk(90)
+    for fc in fcurves_of(obj):  # frame 1 repeats frame 2
+        points = {int(round(p.co[0])): p for p in fc.keyframe_points}
+        if 1 in points and 2 in points:
+            points[1].co[1] = points[1].handle_left[1] = points[1].handle_right[1] = points[2].co[1]
+        fc.update()
+    assert bpy.ops.strnn.extend_clip(frames=20, before_start=True) == {"FINISHED"}
+    new = action_of(obj)
+    assert new["strnn"]["stalled_end"]["frame"] == 1 and new.frame_range[0] == -19
+    pos = evaluated_joints(addon, obj, np.arange(-19, 4))[::-1]  # frame 3 back to -19
+    err = np.linalg.norm(pos[2:] - expected_constant_velocity(pos[:2], 21), axis=-1)
+    assert err.max() < 1e-3, err.max()

@@ -10,7 +10,7 @@ from model_core.io.checkpoint import DEFAULT_MODEL, default_denoiser
 from model_core.motion.features import floor_height
 from model_core.motion.synthetic import walking_skeleton
 from model_core.ops.denoise import denoise_positions
-from model_core.ops.extend import extend_positions
+from model_core.ops.extend import extend_positions, stalled_end
 from model_core.ops.normalise import fit_normalisation, sample_at
 from model_core.ops.seam import blend_seam
 from model_core.rig.rigs import leg_length
@@ -597,3 +597,21 @@ def test_a_floor_that_rises_under_a_walk_is_read_from_its_standing_feet():
     assert floor_rise(flat, 30.0) is None
     lifted = flat + np.arange(90)[:, None, None] * np.array([0.0, 0.02, 0.0])
     assert floor_rise(lifted, 30.0) is None
+
+
+def test_a_clip_that_ends_on_a_repeated_frame_while_moving_ends_on_a_stalled_frame(mocap_root):
+    """``extend.stalled_end``: a walk whose last frame repeats the one before stalls; the walk itself does not, nor a
+    walk held for two frames or more (a hold), nor a clip at rest, nor one too short to tell. Read backwards, a walk
+    that starts on a repeated frame. Of the CMU conversion's takes at 60 fps, the two unseen walks that end so."""
+    from model_core.rig.rigs import load_clip
+
+    walk = walking_skeleton(60, fps=60.0)
+    stalled = np.concatenate([walk, walk[-1:]])
+    assert stalled_end(stalled, 60.0) and not stalled_end(walk, 60.0)
+    assert not stalled_end(np.concatenate([walk, walk[-1:], walk[-1:]]), 60.0)
+    assert not stalled_end(np.repeat(walk[:1], 20, 0), 60.0) and not stalled_end(stalled[-5:], 60.0)
+    assert stalled_end(np.concatenate([walk[:1], walk])[::-1], 60.0)
+    for take, stalls in (("006_01", False), ("006_03", True), ("006_07", True)):
+        path = mocap_root / "cmu" / "iclone" / f"{take}.bvh"
+        if path.is_file():
+            assert stalled_end(load_clip(str(path), rate=60.0), 60.0) == stalls, take
