@@ -24,6 +24,7 @@ from ...model_core.inference.steps import drive
 from ...model_core.io.checkpoint import CheckpointError
 from ...model_core.motion.conventions import UP_AXIS, yup_to_zup
 from ...model_core.ops import footlock
+from ...model_core.ops.extend import STALL_FRAMES, stalled_end
 from ...model_core.ops.pace import Pace, stride_period
 from ...model_core.rig.rigs import axis_name, standing_axis
 from .. import engine_bridge
@@ -208,6 +209,34 @@ def stance_record(pos) -> dict:
             "Import it again with Transform > Up set to the file's (Z for a Z-up file), or turn the armature "
             "object to stand")
     return {"stance": {"axis": label, "note": note}}
+
+
+def stalls(context, clip, edge: int, back: bool = False) -> bool:
+    """Whether the clip ends on a stalled frame at ``edge`` (:func:`extend.stalled_end`; ``back``: starts on one,
+    read backwards in time), judged on its last :data:`extend.STALL_FRAMES` + 2 frames up to ``edge``, where each of
+    them is keyed (motion baked frame by frame: a hand-keyed pass that eases into its last key means it)."""
+    span = STALL_FRAMES + 2
+    frames = edge + np.arange(span, dtype=np.float64)[::-1] if back else edge - np.arange(span, dtype=np.float64)[::-1]
+    if frames.min() < clip.first or frames.max() > clip.last:
+        return False
+    if not pipeline.keyed_every_frame(clip, int(frames.min()), int(frames.max())):
+        return False
+    order = np.argsort(frames)
+    read = pipeline.joint_positions(context, clip, frames[order])
+    pos = np.empty_like(read)
+    pos[order] = read
+    return stalled_end(pos, clip.fps)
+
+
+def stalled_record(stalled: int, edge: int, back: bool = False) -> dict:
+    """The record's ``stalled_end`` entry where the action's last frame ``stalled`` (``back``: its first) repeated the
+    one before and the new frames went on from ``edge`` instead, with the note the operator reports."""
+    return {"stalled_end": {"frame": int(stalled), "note": (
+        f"The action's {'first' if back else 'last'} frame ({stalled}) nearly repeats the one "
+        f"{'after' if back else 'before'} it while the body moves (a stalled frame, as converted motion capture "
+        f"often {'starts' if back else 'ends'}): the new frames go on from frame {edge} and the first of them "
+        "takes its place in the new action, so the motion does not stumble at the cut; the original action "
+        "keeps it")}}
 
 
 def record_notes(action) -> list[str]:

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from ...model_core.motion.conventions import STANDARD_LEG_LENGTH, UP_AXIS
-from ...model_core.ops.extend import FLOOR_S, MEMORY_S, STALL_FRAMES, clip_floor, clip_in_place, floor_rise, stalled_end
+from ...model_core.ops.extend import FLOOR_S, MEMORY_S, clip_floor, clip_in_place, floor_rise
 from ...model_core.ops.footlock import SETTLE_PASSES
 from ...model_core.rig.rigs import leg_length
 from ...model_core.rig.solve import solve
@@ -24,6 +24,8 @@ from .common import (
     pace_record,
     prefs,
     run,
+    stalled_record,
+    stalls,
     write_new,
 )
 
@@ -55,23 +57,6 @@ def context_range(clip, context_frames: int, frames: int, end: int, step: int = 
     if frames < 1:
         raise UserError("Frames to add must be at least 1")
     return end - (-1 if back else 1) * step * np.arange(n_ctx, dtype=np.float64)[::-1]
-
-
-def stalls(context, clip, edge: int, back: bool = False) -> bool:
-    """Whether the clip ends on a stalled frame at ``edge`` (:func:`extend.stalled_end`; ``back``: starts on one,
-    read backwards in time), judged on its last :data:`extend.STALL_FRAMES` + 2 frames up to ``edge``, where each of
-    them is keyed (motion baked frame by frame: a hand-keyed pass that eases into its last key means it)."""
-    span = STALL_FRAMES + 2
-    frames = edge + np.arange(span, dtype=np.float64)[::-1] if back else edge - np.arange(span, dtype=np.float64)[::-1]
-    if frames.min() < clip.first or frames.max() > clip.last:
-        return False
-    if not pipeline.keyed_every_frame(clip, int(frames.min()), int(frames.max())):
-        return False
-    order = np.argsort(frames)
-    read = pipeline.joint_positions(context, clip, frames[order])
-    pos = np.empty_like(read)
-    pos[order] = read
-    return stalled_end(pos, clip.fps)
 
 
 def memory_range(clip, ctx_frames: np.ndarray, seconds: float = MEMORY_S, step: int = 1,
@@ -173,12 +158,7 @@ def extend_steps(context, obj, *, frames: int = 120, context_frames: int = 0, fo
     if surface is not None:
         record.update(ground_record(surface, bare, len(joined)))
     if stalled is not None:
-        record["stalled_end"] = {"frame": int(stalled), "note": (
-            f"The action's {'first' if back else 'last'} frame ({stalled}) nearly repeats the one "
-            f"{'after' if back else 'before'} it while the body moves (a stalled frame, as converted motion capture "
-            f"often {'starts' if back else 'ends'}): the new frames go on from frame {edge} and the first of them "
-            "takes its place in the new action, so the motion does not stumble at the cut; the original action "
-            "keeps it")}
+        record.update(stalled_record(stalled, edge, back))
     if rise is not None:  # in cm for a body of the standard leg length, as the rule judges it
         cm = 100 * float(np.ptp(rise)) * STANDARD_LEG_LENGTH / leg_length(seen)
         record["floor_rise"] = {"cm": round(cm, 1), "note": (

@@ -17,7 +17,18 @@ from .. import engine_bridge
 from ..scene import anim, curves, cycles, pipeline
 from ..scene.ground import carried, find_ground, ground_record
 from ..scene.pipeline import UserError
-from .common import familiarity_record, lock, made_by, model_steps, pace_record, prefs, write_fresh, write_new
+from .common import (
+    familiarity_record,
+    lock,
+    made_by,
+    model_steps,
+    pace_record,
+    prefs,
+    stalled_record,
+    stalls,
+    write_fresh,
+    write_new,
+)
 
 
 def follow_curve_steps(context, obj, *, curve: str = "", frames: int = 0, speed: float = 0.0, foot_lock: bool = True,
@@ -36,17 +47,24 @@ def follow_curve_steps(context, obj, *, curve: str = "", frames: int = 0, speed:
     if np.linalg.norm(np.diff(points[:, [0, 2]], axis=0), axis=-1).sum() < 1e-6:
         raise UserError(f"The curve {curve_obj.name!r} has zero length on the ground: draw a path across the floor")
     yield "read"
+    stalled = None
     if clip.action is not None:
         need = pipeline.min_scene_frames(clip.fps)
         if clip.last - clip.first + 1 < need:
             raise UserError(f"The action {clip.action.name!r} has {clip.last - clip.first + 1} frames; Follow Curve "
                             f"needs at least {need} at {clip.fps:g} fps to continue it (or remove the action to "
                             "start from the model's own walk)")
-        ctx = np.arange(clip.last - need + 1, clip.last + 1, dtype=np.float64)
+        # an action that ends on a stalled frame (converted mocap often does) walks on from the frame before, the
+        # walk's first frame in its place, so that it does not start from rest
+        edge = clip.last
+        if clip.last - clip.first >= need and not cycles.repeats(clip) and stalls(context, clip, edge):
+            stalled, edge = edge, edge - 1
+        ctx = np.arange(edge - need + 1, edge + 1, dtype=np.float64)
         context_pos, rest = pipeline.joint_positions(context, clip, ctx), None
         held_loc, held_rot = pipeline.reference_pose(context, clip, ctx[-1:])
-        previous = pipeline.raw_rotations(clip, clip.last)
+        previous = pipeline.raw_rotations(clip, edge)
     else:
+        edge = None
         held_loc, held_rot = pipeline.reference_pose(context, clip, np.array([float(context.scene.frame_current)]))
         context_pos, rest, previous = None, pipeline.pose_joints(clip, held_loc, held_rot)[0], {}
     yield "model"
@@ -62,22 +80,24 @@ def follow_curve_steps(context, obj, *, curve: str = "", frames: int = 0, speed:
     new_pos = joined[known:]
     yield "solve"
     n = len(new_pos)
-    start = clip.last + 1 if clip.action is not None else context.scene.frame_start
+    start = edge + 1 if edge is not None else context.scene.frame_start
     new_frames = start + np.arange(n, dtype=np.float64)
     arm_world = pipeline.world_at(context, clip, new_frames)
     ref_loc, ref_rot = np.repeat(held_loc, n, 0), np.repeat(held_rot, n, 0)
-    root = pipeline.moving_root(context, clip, ctx, clip.last) if context_pos is not None else None
+    root = pipeline.moving_root(context, clip, ctx, edge) if context_pos is not None else None
     carry = None
     if root is not None:  # a game rig's root carries the travel: along the curve with the body
         carry = np.linalg.inv(arm_world) @ root.track(joined, known, clip.fps, surface)[1:]
         ref_loc, ref_rot = pipeline.root_carried(clip, root.bone, ref_loc, ref_rot, carry)
-        previous.update(pipeline.raw_rotations(clip, clip.last, [root.bone]))
+        previous.update(pipeline.raw_rotations(clip, edge, [root.bone]))
     targets = pipeline.to_armature(clip, new_pos, arm_world)
     loc, rot = solve(clip.rig, clip.anchors, targets, ref_loc, ref_rot)
     record = made_by("Follow Curve", clip, engine_bridge.model_used(prefs(context)), curve=curve_obj.name,
                      frames=n, speed=float(speed), foot_lock=foot_lock)
     if surface is not None:
         record.update(ground_record(surface, bare, len(joined)))
+    if stalled is not None:
+        record.update(stalled_record(stalled, edge))
     if root is not None:
         record["root_motion"] = {"bone": root.bone}
     if context_pos is not None:
@@ -90,7 +110,7 @@ def follow_curve_steps(context, obj, *, curve: str = "", frames: int = 0, speed:
         unrepeat = (lambda action: cycles.bake_cycles(anim.Channels(action, clip.obj.animation_data), [])) \
             if cycles.repeats(clip) else None
         # keys past a manual range's end go
-        return write_new(context, clip, "curve", new_frames, loc, rot, previous, (clip.last + 0.5, float("inf")),
+        return write_new(context, clip, "curve", new_frames, loc, rot, previous, (edge + 0.5, float("inf")),
                          record, scene_range=scene_range, first=unrepeat,
                          root=(root.bone, carry) if root is not None else None)
     return write_fresh(context, clip, f"{clip.obj.name}.curve", new_frames, loc, rot, record, scene_range)

@@ -400,3 +400,25 @@ def test_a_walk_up_or_down_stairs_along_a_curve_keeps_its_feet_out_of_the_treads
     over = feet[..., 2] - height(feet)
     print(way, "lowest heel and toe over the surface under them (m):", over.min(0).round(3))
     assert over.min() > -0.025, (over.min(0), np.argmin(over, 0))
+
+
+def test_a_walk_that_ends_on_a_repeated_frame_walks_on_along_the_curve_from_the_frame_before(addon, real_model,
+                                                                                          tmp_path):
+    """A walk whose last frame repeats the one before (as converted motion capture often ends): Follow Curve walks
+    on from the frame before, the walk's first frame taking the repeated one's place in the new action, so the hips
+    keep moving over it instead of standing still for a frame; the record says so; the original keeps its keys."""
+    walk = walking_skeleton(60)
+    walk = np.concatenate([walk, walk[-1:]])  # frame 61 repeats frame 60
+    obj = import_bvh(write_bvh(tmp_path / "walk.bvh", walk), update_scene_fps=True)
+    last = int(action_of(obj).frame_range[1])
+    take = evaluated_joints(addon, obj, np.arange(last - 5, last + 1))
+    pace = np.linalg.norm(np.diff(take[:-1, 0, :2], axis=0), axis=-1).mean()
+    assert np.linalg.norm(take[-1, 0] - take[-2, 0]) < 0.1 * pace
+    path = add_curve("poly", points=[tuple(take[-2, 0, :2]) + (0.0,),
+                                     tuple(take[-2, 0, :2] + 3.0 * (take[-2, 0, :2] - take[-5, 0, :2])
+                                           / np.linalg.norm(take[-2, 0, :2] - take[-5, 0, :2])) + (0.0,)])
+    bpy.context.view_layer.objects.active = obj
+    old, new = follow(curve=path.name, frames=30)
+    assert new["strnn"]["stalled_end"]["frame"] == last
+    hips = evaluated_joints(addon, obj, np.arange(last - 1, last + 3))[:, 0, :2]
+    assert np.linalg.norm(np.diff(hips, axis=0), axis=-1).min() > 0.5 * pace
