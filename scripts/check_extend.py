@@ -11,7 +11,9 @@ scripts/strnn_batch.py extend), measured on the BVH files it writes.
         against the clip's (a walk that still walks: 0.4 to 2.5 x), how far the feet swing past each other
         against the clip, the share of seconds that move (hips over 0.3 m/s) in which a foot comes within 3 cm of
         the clip's floor, the lowest foot's median height over that floor, the share of frames with both feet in
-        the air (the clip's beside it), and the hips' speed over the ground.
+        the air (the clip's beside it), and the hips' speed over the ground; and at the cut, the hips' slowest step
+        from the take's second-last frame over the first 0.1 s added against their step over the 5 frames before
+        (under 0.5: the walk stumbles at the cut).
 
 Examples:
   python scripts/check_extend.py cuts data/mocap/cmu/acrnn-dance/martial/*.bvh --at 600 1200 1800
@@ -48,6 +50,7 @@ from model_core.motion.features import floor_height
 from model_core.rig.rigs import RigError, canonical_clip
 
 WALK_BAND = (0.4, 2.5)  # a walk still walks: its joints' speed about the hips against the clip's
+SEAM_S = 0.1  # the hips' steps over the cut judged over the take's last step and this many seconds added
 FLOOR_S = 3.0  # the clip's floor: its last seconds' (a capture's floor can drift over a long take)
 MARK = ".check_extend"  # in each folder this script makes, which a later run may replace; no other folder is touched
 
@@ -160,13 +163,27 @@ def measure_walk(take: Path, extended: Path, last_s: float, fps: float | None = 
     hips = lambda p: float(np.linalg.norm(np.diff(p[:, ROOT][:, ground], axis=0), axis=-1).mean() * fps)
     ratio = lambda a, b: a / b if b > 1e-9 else float("nan")  # a clip standing stock-still has no pace to keep
     speed = ratio(limb_speed(last), limb_speed(clip))
-    return {"frames": len(ext) - len(clip), "speed_ratio": speed,
+    return {"frames": len(ext) - len(clip), "speed_ratio": speed, "seam_step_ratio": seam_step(clip, ext, fps),
             "feet_swing_ratio": ratio(feet_lead(last), feet_lead(clip)),
             "touch_fraction": feet.touch_fraction, "floor_offset_cm": feet.floor_offset_cm,
             "airborne_fraction": feet.airborne_fraction, "clip_airborne_fraction": airborne_fraction(clip, floor),
             "hips_m_per_s": hips(last), "clip_hips_m_per_s": hips(clip),
             "moves_on": bool(WALK_BAND[0] <= speed <= WALK_BAND[1]),
             "walks": bool(WALK_BAND[0] <= speed <= WALK_BAND[1] and feet.touch_fraction == 1)}
+
+
+def seam_step(clip: np.ndarray, ext: np.ndarray, fps: float) -> float | None:
+    """The hips' slowest step over the ground from the clip's ``[F, 21, 3]`` second-last frame over the first
+    :data:`SEAM_S` seconds of ``ext`` (the clip extended) against their mean step over the 5 before (a walk that
+    stumbles at the cut: well under 1); None where those moved under 0.1 m/s or the clip is too short."""
+    n, ground = len(clip), list(GROUND_AXES)
+    if n < 8:
+        return None
+    step = np.linalg.norm(np.diff(ext[:, ROOT][:, ground], axis=0), axis=-1)
+    pace = float(step[n - 7:n - 2].mean())
+    if pace * fps < 0.1:
+        return None
+    return float(step[n - 2:n - 1 + max(1, int(round(SEAM_S * fps)))].min() / pace)
 
 
 # ------------------------------------------------------------------------------------------ running
@@ -258,8 +275,13 @@ def print_walk(rows: list[dict], last_s: float):
         print(f"  {Path(r['take']).name} + {r['frames']}: speed {r['speed_ratio']:.2f} x, feet swing "
               f"{r['feet_swing_ratio']:.2f} x, seconds touching {touch}, lowest foot {r['floor_offset_cm']:.1f} cm "
               f"over the floor, both feet up {r['airborne_fraction']:.2f} (clip {r['clip_airborne_fraction']:.2f}), "
-              f"hips {r['hips_m_per_s']:.2f} m/s (clip {r['clip_hips_m_per_s']:.2f}): "
-              f"{verdict(r)}")
+              f"hips {r['hips_m_per_s']:.2f} m/s (clip {r['clip_hips_m_per_s']:.2f}), "
+              f"{seam_words(r.get('seam_step_ratio'))}: {verdict(r)}")
+
+
+def seam_words(ratio: float | None) -> str:
+    """The hips' slowest step over the cut in words (:func:`seam_step`)."""
+    return "at rest at the cut" if ratio is None else f"slowest step over the cut {ratio:.2f} x the take's"
 
 
 def verdict(row: dict) -> str:

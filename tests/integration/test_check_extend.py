@@ -121,3 +121,21 @@ def test_end_to_end_in_blender(tmp_path, extension, capsys):
     row = json.loads((tmp_path / "walk.json").read_text())["rows"][0]
     assert row["frames"] == 90 and row["walks"] and np.isfinite(row["speed_ratio"])
     assert walk.read_bytes() == before  # the take itself is never touched
+
+
+def test_a_walk_that_stumbles_at_the_cut_is_seen_there(tmp_path):
+    """The walk check's step over the cut: a walk that goes on at its pace steps as the take did (about 1 x); one
+    that stops for a frame where the take ends (a repeated last frame, extended from) is far under it; a clip at rest
+    at its end has no pace to keep there (None), and the report says so in words."""
+    walk = walking_skeleton(480)
+    take = write_bvh(tmp_path / "take.bvh", walk[:150])
+    on = check_extend.measure_walk(take, write_bvh(tmp_path / "on.bvh", walk), 5.0)
+    assert on["seam_step_ratio"] == pytest.approx(1.0, abs=0.1)
+    stumbles = np.concatenate([walk[:150], walk[149:150], walk[150:479]])  # frame 151 repeats frame 150
+    late = check_extend.measure_walk(take, write_bvh(tmp_path / "stumbles.bvh", stumbles), 5.0)
+    assert late["seam_step_ratio"] < 0.1 and late["walks"]  # the last 5 s walk: only the cut shows it
+    assert check_extend.seam_words(late["seam_step_ratio"]).startswith("slowest step over the cut 0.0")
+    standing = np.repeat(walk[:1], 150, axis=0)
+    rest = check_extend.measure_walk(write_bvh(tmp_path / "standing.bvh", standing),
+                                     write_bvh(tmp_path / "still.bvh", np.repeat(walk[:1], 300, axis=0)), 5.0)
+    assert rest["seam_step_ratio"] is None and check_extend.seam_words(None) == "at rest at the cut"
