@@ -175,7 +175,7 @@ def measure_walk(take: Path, extended: Path, last_s: float, fps: float | None = 
 def seam_step(clip: np.ndarray, ext: np.ndarray, fps: float) -> float | None:
     """The hips' slowest step over the ground from the clip's ``[F, 21, 3]`` second-last frame over the first
     :data:`SEAM_S` seconds of ``ext`` (the clip extended) against their mean step over the 5 before (a walk that
-    stumbles at the cut: well under 1); None where those moved under 0.1 m/s or the clip is too short."""
+    stumbles at the cut: under 0.5); None where those moved under 0.1 m/s or the clip is too short."""
     n, ground = len(clip), list(GROUND_AXES)
     if n < 8:
         return None

@@ -249,7 +249,7 @@ def stands(feats: np.ndarray) -> bool:
     hands, a bow). Such a clip too short to play on through is played back and forth, any other round
     (:func:`played_on`)."""
     feats = np.asarray(feats)
-    speed = float(np.linalg.norm(feats[:, LAYOUT.velocity], axis=1).mean()) * MODEL_FPS
+    speed = float(_ground_speed(feats).mean())
     return speed < TRAVEL_SPEED and float((feats[:, LAYOUT.contacts] > 0.5).all(-1).mean()) >= STANCE_SHARE
 
 

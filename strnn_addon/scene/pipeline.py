@@ -426,12 +426,17 @@ def written_paths(clip: Clip, root: str | None = None) -> set[str]:
 STEP_SECONDS, STEP_KEYS = 2.0, 6
 
 
-def keyed_every_frame(clip: Clip, first: int, last: int) -> bool:
-    """Whether every whole frame from ``first`` to ``last`` holds a key on each of the keyed bones' unmuted F-curves
-    (an action baked frame by frame, as imported motion capture is), not poses interpolated between keys."""
+def keyed_curves(clip: Clip) -> list:
+    """The unmuted F-curves of the bones that get keys (:func:`keyed_names`)."""
     names = set(keyed_names(clip))
-    curves = [fc for (bone, _), by_index in rig_io.bone_channels(clip.channels.fcurves).items() if bone in names
-              for fc in by_index.values() if not fc.mute]
+    return [fc for (bone, _), by_index in rig_io.bone_channels(clip.channels.fcurves).items() if bone in names
+            for fc in by_index.values() if not fc.mute]
+
+
+def keyed_every_frame(clip: Clip, first: int, last: int) -> bool:
+    """Whether every whole frame from ``first`` to ``last`` holds a key on each of :func:`keyed_curves` (an action
+    baked frame by frame, as imported motion capture is), not poses interpolated between keys."""
+    curves = keyed_curves(clip)
     wanted = np.arange(first, last + 1)
     for fc in curves:
         co = np.empty(2 * len(fc.keyframe_points))
@@ -448,14 +453,9 @@ def key_grid(clip: Clip, first: float, last: float) -> tuple[int, np.ndarray]:
     F-curves (its step and offset; keys anywhere). Else (1, no keys): keys on ones, other interpolation or modifiers,
     another spacing, or too few (:data:`STEP_KEYS`). The operations read such an action at those frames and key
     only them."""
-    names = set(keyed_names(clip))
     constant = bpy.types.Keyframe.bl_rna.properties["interpolation"].enum_items["CONSTANT"].value
     found, stepped = [], set()
-    curves = [fc for (bone, _), by_index in rig_io.bone_channels(clip.channels.fcurves).items() if bone in names
-              for fc in by_index.values()]
-    for fc in curves:
-        if fc.mute:
-            continue
+    for fc in keyed_curves(clip):
         if len(fc.modifiers):
             mod = fc.modifiers[0]
             if (len(fc.modifiers) > 1 or mod.type != "STEPPED" or mod.mute or mod.use_frame_start

@@ -215,17 +215,12 @@ def stalls(context, clip, edge: int, back: bool = False) -> bool:
     """Whether the clip ends on a stalled frame at ``edge`` (:func:`extend.stalled_end`; ``back``: starts on one,
     read backwards in time), judged on its last :data:`extend.STALL_FRAMES` + 2 frames up to ``edge``, where each of
     them is keyed (motion baked frame by frame: a hand-keyed pass that eases into its last key means it)."""
-    span = STALL_FRAMES + 2
-    frames = edge + np.arange(span, dtype=np.float64)[::-1] if back else edge - np.arange(span, dtype=np.float64)[::-1]
-    if frames.min() < clip.first or frames.max() > clip.last:
+    first = edge if back else edge - STALL_FRAMES - 1
+    last = first + STALL_FRAMES + 1
+    if first < clip.first or last > clip.last or not pipeline.keyed_every_frame(clip, first, last):
         return False
-    if not pipeline.keyed_every_frame(clip, int(frames.min()), int(frames.max())):
-        return False
-    order = np.argsort(frames)
-    read = pipeline.joint_positions(context, clip, frames[order])
-    pos = np.empty_like(read)
-    pos[order] = read
-    return stalled_end(pos, clip.fps)
+    pos = pipeline.joint_positions(context, clip, np.arange(first, last + 1, dtype=np.float64))
+    return stalled_end(pos[::-1] if back else pos, clip.fps)
 
 
 def stalled_record(stalled: int, edge: int, back: bool = False) -> dict:
