@@ -25,7 +25,7 @@ from ..rig.rigs import leg_length
 from .familiarity import momentum_shares
 from .normalise import fit_normalisation, model_frames_available, sample_at
 from .seam import SEAM_FRAMES
-from .skeleton import join_clip
+from .skeleton import join_clip, sampled_on_bones
 
 # Seconds of the clip before its end that Extend Clip reads as the clip's own motion, which long
 # continuations lean on (inference/memory.py): several strides of a walk, without reading a long take whole.
@@ -206,7 +206,8 @@ def extend_positions(engine, pos: np.ndarray, fps: float, frames: int, memory: n
     A long continuation that settles into a stance stands where it is (:func:`stance.settle_stances`), and no
     new frame's feet go under the floor the clip stands on (:func:`stance.ground`): ``floor`` (a height in the same
     space), by default :func:`clip_floor` of ``memory`` (else of ``pos``). Every new frame is on the clip's bones
-    (:func:`skeleton.join_clip`), which the seam, moving each joint by its own offset, would stretch.
+    (:func:`skeleton.join_clip`), which the seam, moving each joint by its own offset, would stretch, and so is
+    every frame between the model's at another rate than its (:func:`skeleton.sampled_on_bones`).
     Returns ``[frames, 21, 3]`` in the same space.
     """
     ctx, norm, model_ctx, momentum = _reading(engine, pos, fps, memory)
@@ -230,7 +231,7 @@ def extend_positions(engine, pos: np.ndarray, fps: float, frames: int, memory: n
     joined = join_clip(ctx, norm.to_user(new), momentum, **coast)
     if _steps_in_place(looked):  # a walk in place goes on in place
         joined = np.concatenate([joined[:1], kept_in_place(looked, joined[1:])])
-    return sample_at(joined, MODEL_FPS, np.arange(1, frames + 1) / fps)
+    return sampled_on_bones(joined, np.arange(1, frames + 1) * (MODEL_FPS / fps))  # at the scene's rate
 
 
 def stalled_end(pos: np.ndarray, fps: float) -> bool:

@@ -49,7 +49,7 @@ from ..motion.stance import planted_steps
 from .normalise import fit_normalisation, model_frames_available, sample_at
 from .paths import Path, Steering, control_signal, turning_path
 from .seam import SEAM_FRAMES, blend_seam
-from .skeleton import join_clip
+from .skeleton import join_clip, sampled_on_bones
 
 WALK_SPEED = 1.3  # m/s used when the seed barely moves (its own speed cannot steer anything)
 LEAD_IN = 0.3  # metres: a character farther than this from the path's start walks to it first
@@ -303,4 +303,4 @@ def follow_curve_positions_steps(follower: PathFollower, points: np.ndarray, cyc
         seq, first = join_clip(ctx, on_body_of(new, ctx[-1])), 1
     duration = (len(seq) - 1) / MODEL_FPS
     count = frames if frames is not None else int(math.floor(duration * fps + 1e-6)) + 1 - first
-    return sample_at(seq, MODEL_FPS, (np.arange(count) + first) / fps)
+    return sampled_on_bones(seq, (np.arange(count) + first) * (MODEL_FPS / fps))  # on the bones between frames

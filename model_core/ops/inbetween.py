@@ -25,13 +25,12 @@ import numpy as np
 
 from ..motion.conventions import MODEL_FPS
 from ..motion.features import root_and_local, wrap_angle, yaw_matrix
-from ..motion.geometry import interpolate_frames
 from . import gap_memory
 from .extend import MEMORY_S
 from .familiarity import momentum_shares
 from .normalise import fit_normalisation, model_frames_available, sample_at
 from .seam import blend_seam
-from .skeleton import knee_side, on_skeleton
+from .skeleton import knee_side, on_skeleton, sampled_on_bones
 from .transfer import bone_lengths
 
 # How many of the continuation's windows are the average of the release and its companion
@@ -265,4 +264,4 @@ def inbetween_positions(engine, before: np.ndarray, after: np.ndarray, fps: floa
     inner = inbetween(engine, norm.to_model(ctx), norm.to_model(tgt), n_model, memory)
     seq = np.concatenate([ctx[-1:], norm.to_user(inner), tgt[:1]])  # model frames 0 .. n_model + 1
     # the model's frames are spread evenly over the gap's duration, a little stretched to fit it
-    return interpolate_frames(seq, np.arange(1, frames + 1) / fps * (n_model + 1) / gap_s)
+    return sampled_on_bones(seq, np.arange(1, frames + 1) / fps * (n_model + 1) / gap_s)  # on the bones between

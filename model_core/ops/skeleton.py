@@ -12,7 +12,7 @@ import numpy as np
 
 from ..motion.conventions import PARENTS, ROOT
 from ..motion.features import body_lengths
-from ..motion.geometry import unit
+from ..motion.geometry import interpolate_frames, unit
 from .footlock import LEGS, body_forward, place_leg
 from .seam import blend_seam
 
@@ -69,6 +69,11 @@ def on_skeleton(frames: np.ndarray, start: np.ndarray, end: np.ndarray, knees: f
     frames = np.asarray(frames, np.float64)
     s = (np.arange(1, len(frames) + 1) / len(frames))[:, None]
     lengths = (1.0 - s) * start[None] + s * end[None]  # [N + 1, J]
+    return _on_lengths(frames, lengths, knees).astype(np.float32)
+
+
+def _on_lengths(frames: np.ndarray, lengths: np.ndarray, knees: float) -> np.ndarray:
+    """``frames`` ``[F, J, 3]`` on bones of ``lengths`` ``[F, J]`` (:func:`on_skeleton`'s work) -> float64."""
     out = np.empty_like(frames)
     out[:, ROOT] = frames[:, ROOT]
     for j in range(1, frames.shape[1]):  # parents first
@@ -80,7 +85,28 @@ def on_skeleton(frames: np.ndarray, start: np.ndarray, end: np.ndarray, knees: f
         out[:, _ANKLE] - out[:, _HIP], axis=-1))
     toe = ankle + unit(frames[:, _TOE] - frames[:, _ANKLE]) * lengths[:, _TOE, None]
     out[:, _KNEE], out[:, _ANKLE], out[:, _TOE] = knee, ankle, toe
-    return out.astype(np.float32)
+    return out
+
+
+def sampled_on_bones(seq: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """``seq`` ``[N, J, 3]`` (frames on a body's bones, at the model's rate) at fractional frame indices ``t``
+    ``[M]`` (clamped to the first and last) -> float64 ``[M, J, 3]``, every frame on the bones.
+
+    Between two frames, linear interpolation shortens each bone that turns (a shin swinging through a stride, up
+    to 1 cm at 60 fps), which a rig cannot follow: its solve keeps its bones, so the knee bends further and the
+    foot misses by as much on every frame between the model's, a shimmer in the legs at twice the model's rate.
+    So a frame between two is put back on the bones (:func:`on_skeleton`'s way: each bone its direction and the
+    two frames' lengths, the ankles where the interpolation has them, the knees bending the frames' way); a frame
+    on one of ``seq``'s is that frame."""
+    seq = np.asarray(seq, np.float64)
+    t = np.clip(np.asarray(t, np.float64), 0, len(seq) - 1)
+    out = interpolate_frames(seq, t)
+    between = np.abs(t - np.round(t)) > 1e-6
+    if between.any():
+        bones = np.linalg.norm(seq[:, 1:] - seq[:, PARENTS[1:]], axis=-1)
+        lengths = interpolate_frames(np.concatenate([np.zeros((len(seq), 1)), bones], 1), t[between])
+        out[between] = _on_lengths(out[between], lengths, knee_side(seq))
+    return out
 
 
 def on_clip_bones(frames: np.ndarray, clip: np.ndarray) -> np.ndarray:
