@@ -24,7 +24,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from ..motion.conventions import JOINTS, PARENT_NAMES
-from ..motion.geometry import nearest_rotation
+from ..motion.geometry import nearest_rotation, shortest_arc
 from .rigs import MMD_SPELLINGS, mmd_name, normalise_name
 from .solve import Rig, SolveError, placed as placed_in
 
@@ -422,3 +422,76 @@ def visual_local(rig: Rig, pose: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
                       pose[:, np.maximum(rig.parents, 0)])
     local = np.linalg.inv(parent @ rig.rel_rest) @ pose
     return local[..., :3, 3], nearest_rotation(local[..., :3, :3])  # drops scale and shear
+
+
+# An IK chain whose motion is this much shorter than its bones (a share of their length, the median over the frames)
+# is put on the motion's joints (:func:`chains_on_joints`); one within it is left as the solve has it.
+SHORT_CHAIN = 0.005
+
+
+def chains_on_joints(rig: Rig, anchors, pose: np.ndarray, ends: list[int], joints: np.ndarray) -> dict[int, np.ndarray]:
+    """Pose matrices ``{bone: [F, 4, 4]}`` (armature space) that put each IK chain ending on a bone of ``ends`` on
+    ``joints`` ``[F, 21, 3]``: the chain's two bones above the end (the thigh and the shin), the end (the foot) and
+    the bones below it (the toe), from ``pose`` ``[F, B, 4, 4]`` (the solve's), each bone whose head is a joint
+    moved there and turned (by the shortest arc) to point at the next joint down, the bones below the end carried
+    with it; ``anchors``: where the joints sit (:class:`solve.Anchors`).
+
+    The solve keeps the bones' lengths, but Blender's IK solver plays a chain that may stretch shorter than its
+    bones (Rigify's legs, ``ik_stretch`` 0.1: by 0.2 to 3 % as the knee bends), so the legs read off the rig, and
+    the motion made of them, are that much shorter, and the solve puts the ankle further along the leg (a walk's
+    feet up to 5 cm off, 1.5 cm under). An IK chain reaches its end wherever that is put, so the end goes on the
+    joint itself and the chain's bones point where the joints are. A chain whose motion is as long as its bones
+    (within :data:`SHORT_CHAIN`: an IK that does not stretch plays them so) is left as the solve has it, which then
+    puts the knee as well as the foot where the motion has them (a nearly straight leg's knee would move many times
+    as far as a foot put on a joint a millimetre off the bones' reach)."""
+    at_head = {int(b): j for j, (b, tail) in enumerate(zip(anchors.bone, anchors.tail))
+               if not tail and j not in anchors.between}
+    at_tail = {int(b): j for j, (b, tail) in enumerate(zip(anchors.bone, anchors.tail))
+               if tail and j not in anchors.between}
+    out: dict[int, np.ndarray] = {}
+
+    def next_joint(b: int) -> int | None:  # the joint a bone points at: its tail's, or the head's of a child's
+        if b in at_tail:
+            return at_tail[b]
+        kids = [k for k in range(len(rig.parents)) if rig.parents[k] == b and k in at_head]
+        return at_head[kids[0]] if len(kids) == 1 else None
+
+    def placed(b: int, m: np.ndarray) -> np.ndarray:
+        head = joints[:, at_head[b]]
+        toward = next_joint(b)
+        new = m.copy()
+        new[:, :3, 3] = head
+        if toward is not None:
+            turn = shortest_arc(m[:, :3, 1], joints[:, toward] - head)
+            new[:, :3, :3] = turn @ m[:, :3, :3]
+        return new
+
+    for end in ends:
+        if end not in at_head:
+            continue
+        knee = int(rig.parents[end])
+        hip = int(rig.parents[knee]) if knee >= 0 else -1
+        if hip < 0 or knee not in at_head or hip not in at_head or not _shorter(
+                rig, joints, [(hip, at_head[hip]), (knee, at_head[knee]), (end, at_head[end])]):
+            continue
+        for b in (hip, knee):
+            out[b] = placed(b, pose[:, b])
+        moved = placed(end, pose[:, end])
+        carry = moved @ np.linalg.inv(pose[:, end])
+        for b in range(len(rig.parents)):
+            if b != end and rig.is_ancestor(end, b):
+                out[b] = carry @ pose[:, b]
+        out[end] = moved
+    return out
+
+
+def _shorter(rig: Rig, joints: np.ndarray, chain: list[tuple[int, int]]) -> bool:
+    """Whether the motion's ``joints`` ``[F, 21, 3]`` make a chain of (bone, joint at its head) pairs, from the top,
+    shorter than the rig's bones by :data:`SHORT_CHAIN` or more, one bone or the other (the median over the
+    frames)."""
+    for (a, ja), (b, jb) in zip(chain, chain[1:]):
+        rest = float(np.linalg.norm(rig.rest[b, :3, 3] - rig.rest[a, :3, 3]))
+        now = float(np.median(np.linalg.norm(joints[:, jb] - joints[:, ja], axis=-1)))
+        if rest > 1e-9 and now < (1.0 - SHORT_CHAIN) * rest:
+            return True
+    return False

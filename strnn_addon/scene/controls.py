@@ -108,8 +108,14 @@ def _matrix(pb) -> np.ndarray:
 
 
 def _tail(pb, m: np.ndarray) -> np.ndarray:
-    """Where bone ``pb``'s tail is with pose matrix ``m`` (armature space)."""
-    return (m @ np.array([0.0, pb.bone.length, 0.0, 1.0]))[:3]
+    """Where bone ``pb``'s tail is with pose matrix ``m`` (armature space), the bone as long as it plays now (an IK
+    chain that may stretch plays shorter than its bones: a length no control sets)."""
+    return (m @ np.array([0.0, pb.length / max(_scale(m), 1e-12), 0.0, 1.0]))[:3]
+
+
+def _scale(m: np.ndarray) -> float:
+    """How much pose matrix ``m`` scales along its bone (its Y axis)."""
+    return float(np.linalg.norm(m[:3, 1]))
 
 
 def _waves(obj, chosen: list, update) -> list[list]:

@@ -25,7 +25,7 @@ from ...model_core.motion.conventions import (  # noqa: F401  (MIN_MODEL_FRAMES,
 from ...model_core.motion.features import facing
 from ...model_core.motion.geometry import nearest_rotation
 from ...model_core.ops.root_motion import carried_root
-from ...model_core.rig.controls import Control, ControlSet, visual_local
+from ...model_core.rig.controls import Control, ControlSet, chains_on_joints, visual_local
 from ...model_core.rig.rigs import leg_length
 from ...model_core.rig.solve import Anchors, Rig, anchor_positions, fk, solve, solved_bones
 from . import anim, controls, mapping, rig_io
@@ -245,8 +245,9 @@ def joint_positions(context, clip: Clip, frames: np.ndarray) -> np.ndarray:
 
 
 def solve_frames(context, clip: Clip, frames: np.ndarray, positions: np.ndarray,
-                 root: tuple[str, np.ndarray] | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """The rig's local pose ``loc`` ``[F, B, 3]``, ``rot`` ``[F, B, 3, 3]`` (float32) that puts its joints on
+                 root: tuple[str, np.ndarray] | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The rig's local pose ``loc`` ``[F, B, 3]``, ``rot`` ``[F, B, 3, 3]`` (float32), and the joints it was solved
+    for in armature space ``[F, 21, 3]`` (:func:`write_pose`'s ``joints``), that puts its joints on
     ``positions`` ``[F, 21, 3]`` (Y-up, scene units) at scene ``frames``, each frame starting from its own
     reference pose (:func:`reference_pose`; ``root``: (a root bone carrying the travel, its armature-space pose
     ``[F, 4, 4]`` there), :func:`root_carried`): read and solved :data:`CHUNK_FRAMES` frames at a time, so a
@@ -262,7 +263,7 @@ def solve_frames(context, clip: Clip, frames: np.ndarray, positions: np.ndarray,
         if root is not None:
             ref_loc, ref_rot = root_carried(clip, root[0], ref_loc, ref_rot, root[1][part])
         loc[part], rot[part] = solve(clip.rig, clip.anchors, targets[part], ref_loc, ref_rot)
-    return loc, rot
+    return loc, rot, targets
 
 
 def reference_pose(context, clip: Clip, frames: np.ndarray,
@@ -545,7 +546,8 @@ def leg_bones(clip: Clip) -> list[int]:
 
 def write_pose(context, clip: Clip, action, frames: np.ndarray, loc: np.ndarray, rot: np.ndarray,
                previous: dict, replace: tuple[float, float] | None, bones: list[int] | None = None,
-               follows: bool = False, interpolation: str = "", root: tuple[str, np.ndarray] | None = None) -> float:
+               follows: bool = False, interpolation: str = "", root: tuple[str, np.ndarray] | None = None,
+               joints: np.ndarray | None = None) -> float:
     """Key the solved rotations of mapped bones (and the hips bone's location) at ``frames``, and the rotation and
     location of a ``root`` bone carrying the travel ((name, its armature-space pose ``[F, 4, 4]``): :func:`moving_root`,
     already in ``loc``, ``rot`` on a plain rig); on a control rig, key its controls by a visual bake instead
@@ -555,11 +557,13 @@ def write_pose(context, clip: Clip, action, frames: np.ndarray, loc: np.ndarray,
     ``loc`` ``[F, B, 3]``, ``rot`` ``[F, B, 3, 3]``; ``previous`` {bone: raw channel values} keeps
     Euler angles and quaternion signs continuous with the keys before (``follows``: after, frames added before
     them); ``bones``: only these (default: all :func:`written_bones`); ``interpolation``: that of the keys of the
-    channels this makes (default: Linear; a channel the action has keeps that of its last key)."""
+    channels this makes (default: Linear; a channel the action has keeps that of its last key); ``joints``: the joints
+    ``[F, 21, 3]`` (armature space) ``loc``, ``rot`` were solved for, where an IK chain's end goes on a control rig
+    (:func:`write_controls`)."""
     channels = anim.Channels(action, clip.obj.animation_data, ensure=True)
     if clip.controls is not None:
         return write_controls(context, clip, channels, frames, loc, rot, previous, replace, bones, follows,
-                              interpolation, root)
+                              interpolation, root, joints)
     hips = int(clip.anchors.bone[JOINT_INDEX["hips"]])
     moved = clip.rig.names.index(root[0]) if root is not None else None
     for b in (written_bones(clip) if bones is None else bones) + ([moved] if moved is not None else []):
@@ -574,13 +578,17 @@ def write_pose(context, clip: Clip, action, frames: np.ndarray, loc: np.ndarray,
 def write_controls(context, clip: Clip, channels: anim.Channels, frames: np.ndarray, loc: np.ndarray,
                    rot: np.ndarray, previous: dict, replace: tuple[float, float] | None,
                    bones: list[int] | None, follows: bool = False, interpolation: str = "",
-                   root: tuple[str, np.ndarray] | None = None) -> float:
+                   root: tuple[str, np.ndarray] | None = None, joints: np.ndarray | None = None) -> float:
     """Key a control rig's controls (and switches) so that its joint skeleton takes the solved pose; a ``root``
-    control carrying the travel ((name, armature-space pose ``[F, 4, 4]``)) is set there first and keyed too."""
+    control carrying the travel ((name, armature-space pose ``[F, 4, 4]``)) is set there first and keyed too. Each
+    IK chain's end (a foot on its IK control) goes where ``joints`` (the joints solved for, armature space) put it
+    (:func:`_ends_on_joints`)."""
     pose = fk(clip.rig, loc, rot)
     chosen = keyed_controls(clip, bones)
     index = {n: b for b, n in enumerate(clip.rig.names)}
     targets = {c.drives: pose[:, index[c.drives]] for c in chosen}
+    if joints is not None:
+        _ends_on_joints(clip, chosen, pose, targets, joints)
     control_set = clip.controls
     if root is not None:  # the root control drives itself, to where it is carried; it goes first
         carrier = Control(root[0], root[0], True)
@@ -608,6 +616,19 @@ def write_controls(context, clip: Clip, channels: anim.Channels, frames: np.ndar
     edges = np.array([f for f in (frames[0] - 1, frames[-1] + 1) if clip.first <= f <= clip.last])
     controls.key_switches(channels, clip.obj, clip.controls, frames, edges)
     return baked.error
+
+
+def _ends_on_joints(clip: Clip, chosen: list, pose: np.ndarray, targets: dict, joints: np.ndarray) -> None:
+    """The targets of the bones of each IK chain whose end control is keyed (a leg in IK) put on ``joints`` ``[F, 21,
+    3]`` where the solve (``pose``) has them off: :func:`controls.chains_on_joints`."""
+    index = {n: b for b, n in enumerate(clip.rig.names)}
+    ends = [index[c.drives] for c in chosen if c.end]
+    if not ends:
+        return
+    placed = chains_on_joints(clip.rig, clip.anchors, pose, ends, joints)
+    for c in chosen:
+        if index[c.drives] in placed:
+            targets[c.drives] = placed[index[c.drives]]
 
 
 def _played(context, clip: Clip, frames: np.ndarray) -> tuple[np.ndarray, list[str], np.ndarray, np.ndarray] | None:

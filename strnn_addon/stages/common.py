@@ -262,20 +262,21 @@ def with_bake(record: dict, clip, error: float, frames) -> dict:
 
 
 def write_new(context, clip, suffix, frames, loc, rot, previous, replace, record: dict, bones=None,
-              scene_range: bool = True, follows: bool = False, shape=None, first=None, root=None):
+              scene_range: bool = True, follows: bool = False, shape=None, first=None, root=None, joints=None):
     """Create the new action, hand it to ``first`` (a change before the keys go in, e.g. baking its cycles), key it
     (``bones``: only these; ``follows``: ``previous`` is the key after the frames, which come before it), label it
     with ``record``, hand it to ``shape`` (a last change to the whole action, e.g. making it cyclic) and assign it
     (widening the scene's range to it with ``scene_range``; ``root``: a root bone carrying the travel, keyed too);
     on failure remove it again. An action on twos (``record``'s ``key_step``) gets Constant keys in the channels this
-    makes, as its own hold theirs."""
+    makes, as its own hold theirs. ``joints``: the joints ``loc``, ``rot`` were solved for
+    (:func:`pipeline.write_pose`)."""
     action = pipeline.new_action_from(clip, suffix)
     made = "CONSTANT" if record.get("key_step", 1) > 1 else ""
     try:
         if first is not None:
             first(action)
         error = pipeline.write_pose(context, clip, action, frames, loc, rot, previous, replace, bones, follows, made,
-                                    root)
+                                    root, joints)
         action[RECORD] = with_bake(record, clip, error, frames)
         if action.use_frame_range:  # a manual frame range the animator set: widened to hold the written frames
             action.frame_start = min(action.frame_start, float(frames[0]))
@@ -290,16 +291,17 @@ def write_new(context, clip, suffix, frames, loc, rot, previous, replace, record
 
 
 def write_fresh(context, clip, name: str, frames, loc, rot, record: dict, scene_range: bool = True,
-                interpolation: str = "", root=None):
+                interpolation: str = "", root=None, joints=None):
     """A new action ``name`` holding only the new frames (keys of ``interpolation``, default Linear: Constant for a
     source on twos; ``root``: a root bone carrying the travel, keyed too): keyed, labelled, assigned, the scene's
-    range widened (with ``scene_range``); an action the armature had is kept (fake user)."""
+    range widened (with ``scene_range``); an action the armature had is kept (fake user). ``joints``: the joints
+    ``loc``, ``rot`` were solved for (:func:`pipeline.write_pose`)."""
     action = bpy.data.actions.new(name)
     clip.first, clip.last = int(frames[0]), int(frames[-1])  # no static keys outside the new frames
     old = clip.obj.animation_data.action if clip.obj.animation_data else None
     try:
         error = pipeline.write_pose(context, clip, action, frames, loc, rot, {}, None, interpolation=interpolation,
-                                    root=root)
+                                    root=root, joints=joints)
         action[RECORD] = with_bake(record, clip, error, frames)
         anim.assign_action(clip.obj, action, None)
         ad = clip.obj.animation_data

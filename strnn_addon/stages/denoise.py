@@ -51,11 +51,11 @@ def denoise_steps(context, obj, *, frame_start: int | None = None, frame_end: in
     if foot_lock:
         clean = lock(clean, fps)
     yield "solve"
-    loc, rot = pipeline.solve_frames(context, clip, frames, clean)
+    loc, rot, joints = pipeline.solve_frames(context, clip, frames, clean)
     record = made_by("Denoise Action", clip, engine_bridge.model_used(prefs(context), "denoise"), key_step=step,
                      frame_start=a, frame_end=b, strength=float(strength), foot_lock=foot_lock,
                      only_selected=only_selected)
     record.update(familiarity_record(found, denoised=True))
     record.update(pace_record(context, clip))
     yield "write"  # every check and every read done: only the writing is left
-    return write_new(context, clip, "denoised", frames, loc, rot, previous, (a, b), record, bones=bones)
+    return write_new(context, clip, "denoised", frames, loc, rot, previous, (a, b), record, bones=bones, joints=joints)

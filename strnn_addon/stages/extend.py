@@ -184,4 +184,4 @@ def extend_steps(context, obj, *, frames: int = 120, context_frames: int = 0, fo
         if cycled else None
     return write_new(context, clip, "extended", new_frames, loc, rot, previous, replace, record,
                      scene_range=scene_range, follows=back, first=unrepeat,
-                     root=(root.bone, carry) if root is not None else None)
+                     root=(root.bone, carry) if root is not None else None, joints=targets)

@@ -49,7 +49,7 @@ def foot_lock_steps(context, obj, *, frame_start: int | None = None, frame_end: 
     locked = lock(pos, fps, contacts=contacts, fixed=~inside, blend=blend, lower_body=False,
                   passes=footlock.SETTLE_PASSES, ground=heights)
     yield "solve"
-    loc, rot = pipeline.solve_frames(context, clip, frames, locked)
+    loc, rot, joints = pipeline.solve_frames(context, clip, frames, locked)
     record = made_by("Foot Lock", clip, key_step=step, frame_start=a, frame_end=b, blend=float(blend),
                      only_selected=only_selected)
     if surface is not None:
@@ -57,4 +57,4 @@ def foot_lock_steps(context, obj, *, frame_start: int | None = None, frame_end: 
     record.update(pace_record(context, clip))
     yield "write"  # every check and every read done: only the writing is left
     return write_new(context, clip, "footlocked", frames[inside], loc[inside], rot[inside], previous, (a, b),
-                     record, bones=bones)
+                     record, bones=bones, joints=joints[inside])

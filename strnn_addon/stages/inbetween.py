@@ -131,7 +131,7 @@ def inbetween_steps(context, obj, *, frame_start: int | None = None, frame_end: 
         fixed[len(before):len(before) + len(gap)] = False
         new_pos = lock(seq, fps, fixed=fixed, passes=SETTLE_PASSES)[len(before):len(before) + len(gap)]
     yield "solve"
-    loc, rot = pipeline.solve_frames(context, clip, gap, new_pos)
+    loc, rot, joints = pipeline.solve_frames(context, clip, gap, new_pos)
     record = made_by("Fill Gap", clip, engine_bridge.model_used(prefs(context)), key_step=step,
                      frame_start=start, frame_end=end,
                      follow_take_frames=len(read_before) + len(read_after) if follow_take else 0, foot_lock=foot_lock)
@@ -140,4 +140,4 @@ def inbetween_steps(context, obj, *, frame_start: int | None = None, frame_end: 
                                                     fps)))
     record.update(pace_record(context, clip))
     yield "write"  # every check and every read done: only the writing is left
-    return write_new(context, clip, "filled", gap, loc, rot, previous, (start - 0.5, end + 0.5), record)
+    return write_new(context, clip, "filled", gap, loc, rot, previous, (start - 0.5, end + 0.5), record, joints=joints)

@@ -55,7 +55,7 @@ def loop_steps(context, obj, *, frame_start: int | None = None, frame_end: int |
     carry = None
     if root is not None:  # a game rig's root carries the travel: carried with the cycle (in place: it stays)
         carry = (root.bone, np.linalg.inv(pipeline.world_at(context, clip, written)) @ root.track(cycle, 1, fps))
-    loc, rot = pipeline.solve_frames(context, clip, written, cycle, carry)
+    loc, rot, joints = pipeline.solve_frames(context, clip, written, cycle, carry)
     record = made_by("Make Loop", clip, engine_bridge.model_used(prefs(context)), key_step=step,
                      frame_start=a, frame_end=b, blend=float(blend), match=match, in_place=in_place,
                      foot_lock=foot_lock)
@@ -70,5 +70,5 @@ def loop_steps(context, obj, *, frame_start: int | None = None, frame_end: int |
     yield "write"  # every check and every read done: only the writing is left
     made = pipeline.written_paths(clip, root.bone if root is not None else None)
     return write_new(context, clip, "loop", written, loc, rot, previous, (-np.inf, np.inf), record,
-                     scene_range=False, root=carry,
+                     scene_range=False, root=carry, joints=joints,
                      shape=lambda action: cycles.make_cyclic(clip, action, written, loop.blend, made))

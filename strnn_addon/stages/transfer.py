@@ -77,7 +77,8 @@ def transfer_steps(context, obj, *, source: str = "", foot_lock: bool = True, sc
     if root is not None:  # the root, where it stands now under the body, carried with it from the first frame on
         carry = np.linalg.inv(arm_world) @ root.track(new_pos, 1, src.fps / step, surface)
         ref_loc, ref_rot = pipeline.root_carried(target, root.bone, ref_loc, ref_rot, carry)
-    loc, rot = solve(target.rig, target.anchors, pipeline.to_armature(target, new_pos, arm_world), ref_loc, ref_rot)
+    joints = pipeline.to_armature(target, new_pos, arm_world)
+    loc, rot = solve(target.rig, target.anchors, joints, ref_loc, ref_rot)
     yield "write"
     record = made_by("Transfer Motion", src, key_step=step, source=src.obj.name, target=obj.name, foot_lock=foot_lock,
                      root_motion=root_motion or None)
@@ -86,7 +87,7 @@ def transfer_steps(context, obj, *, source: str = "", foot_lock: bool = True, sc
     if root is not None:
         record["root_motion"] = {"bone": root.bone}
     return write_fresh(context, target, f"{src.action.name}.transfer", frames, loc, rot, record, scene_range,
-                       "CONSTANT" if step > 1 else "", (root.bone, carry) if root is not None else None)
+                       "CONSTANT" if step > 1 else "", (root.bone, carry) if root is not None else None, joints)
 
 
 def _root_of(context, target) -> pipeline.Root:

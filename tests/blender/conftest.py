@@ -57,23 +57,60 @@ def fresh_scene(addon):
     bpy.ops.wm.read_homefile(use_empty=True)
 
 
+class ModelCalls:
+    """What the real model was asked and what it made, call by call: Extend's continuations (``extend``) and Denoise's
+    cleaned takes (``denoise``), each a dict of the input ``pos`` and the output ``out`` (model axes, Y-up, scene
+    units), ``fps`` and, for Extend, ``frames``; so a test checks what Blender plays against what the model made."""
+
+    def __init__(self, addon):
+        self._conventions = importlib.import_module(addon.__name__ + ".model_core.motion.conventions")
+        self.extend: list[dict] = []
+        self.denoise: list[dict] = []
+
+    def blender(self, pos: np.ndarray) -> np.ndarray:
+        """Model-axis positions in Blender's axes (Z up), as :func:`scenes.evaluated_joints` gives them."""
+        return self._conventions.yup_to_zup(np.asarray(pos, dtype=np.float64))
+
+    def extended(self, k: int = -1) -> np.ndarray:
+        """The ``k``-th continuation the model made (the last by default), in Blender's axes ``[frames, 21, 3]``."""
+        assert self.extend, "the model made no continuation"
+        return self.blender(self.extend[k]["out"])
+
+    def extension_after(self, last_pose: np.ndarray) -> np.ndarray:
+        """The continuation of the context that ends on ``last_pose`` ``[21, 3]`` (Blender's axes): of several
+        armatures extended at once, the one that continued that armature."""
+        ends = [np.abs(self.blender(call["pos"][-1]) - last_pose).max() for call in self.extend]
+        k = int(np.argmin(ends))
+        assert ends[k] < 1e-4, f"no continuation starts from that pose (nearest {ends[k]:.2e})"
+        return self.extended(k)
+
+    def denoised(self, k: int = -1) -> np.ndarray:
+        """The ``k``-th take the denoiser cleaned, in Blender's axes ``[F, 21, 3]``."""
+        assert self.denoise, "the model denoised nothing"
+        return self.blender(self.denoise[k]["out"])
+
+
 @pytest.fixture
-def fake_model(addon, monkeypatch):
-    """Swap the model calls for stand-ins: extend = the last pose gliding on at the hips'
-    last velocity (a rigid motion, so the solve can follow it exactly); denoise = identity."""
+def model_calls(addon, real_model, monkeypatch):
+    """The real model (the bundled release) with its calls recorded (:class:`ModelCalls`): each call runs the real
+    engine and its input and output are kept; nothing of the model is replaced."""
     bridge = importlib.import_module(addon.__name__ + ".strnn_addon.engine_bridge")
+    calls = ModelCalls(addon)
+    extend, denoise = bridge.run_extend, bridge.run_denoise
 
     def run_extend(prefs, pos, fps, frames, memory=None, floor=None):
-        step = pos[-1, 0] - pos[-2, 0]  # hips
-        return pos[-1] + step * np.arange(1, frames + 1)[:, None, None]
+        out = extend(prefs, pos, fps, frames, memory, floor)
+        calls.extend.append({"pos": np.array(pos), "out": np.array(out), "fps": fps, "frames": frames})
+        return out
 
     def run_denoise(prefs, pos, fps, strength):
-        return np.array(pos, dtype=np.float64)
-        yield  # a step generator, like the real one
+        out = yield from denoise(prefs, pos, fps, strength)
+        calls.denoise.append({"pos": np.array(pos), "out": np.array(out), "fps": fps, "strength": strength})
+        return out
 
     monkeypatch.setattr(bridge, "run_extend", run_extend)
     monkeypatch.setattr(bridge, "run_denoise", run_denoise)
-    return bridge
+    return calls
 
 
 @pytest.fixture

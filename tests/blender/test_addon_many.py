@@ -24,7 +24,6 @@ from scenes import (
     same_keys,
     walk_bvh,
 )
-from test_addon_extend import expected_constant_velocity
 
 RECORD = "strnn"
 
@@ -80,7 +79,7 @@ def unchanged(objs, before: dict) -> bool:
         now[o.name][0] is before[o.name][0] and same_keys(now[o.name][1], before[o.name][1]) for o in objs)
 
 
-def test_extend_continues_every_selected_armature_on_its_own_motion(tmp_path, fake_model, addon, capfd):
+def test_extend_continues_every_selected_armature_on_its_own_motion(tmp_path, model_calls, addon, capfd):
     objs = cast(tmp_path)
     lasts = {o.name: int(action_of(o).frame_range[1]) for o in objs}
     played = {o.name: evaluated_joints(addon, o, np.arange(lasts[o.name] - 1, lasts[o.name] + 1)) for o in objs}
@@ -94,8 +93,8 @@ def test_extend_continues_every_selected_armature_on_its_own_motion(tmp_path, fa
         assert same_keys(before[obj.name][1], key_snapshot(obj, old)), f"{obj.name}: its original action changed"
         assert new.frame_range[1] == lasts[obj.name] + 30
         assert new[RECORD]["source_action"] == old.name
-        # each continues its own last step (the stand-in model), where that armature stands
-        want = expected_constant_velocity(played[obj.name], 30)
+        # each plays the continuation the model made of its own motion, where that armature stands
+        want = model_calls.extension_after(played[obj.name][-1])
         got = evaluated_joints(addon, obj, np.arange(lasts[obj.name] + 1, lasts[obj.name] + 31))
         err = np.linalg.norm(got - want, axis=-1).max()
         assert err < 0.01, (obj.name, err)
@@ -103,7 +102,7 @@ def test_extend_continues_every_selected_armature_on_its_own_motion(tmp_path, fa
     assert bpy.context.scene.frame_end >= max(lasts.values()) + 30
 
 
-def test_only_the_active_armature_runs_when_it_is_the_only_one_selected(tmp_path, fake_model, addon):
+def test_only_the_active_armature_runs_when_it_is_the_only_one_selected(tmp_path, model_calls, addon):
     objs = cast(tmp_path)
     for obj in objs[1:]:
         obj.select_set(False)
@@ -113,7 +112,7 @@ def test_only_the_active_armature_runs_when_it_is_the_only_one_selected(tmp_path
     assert unchanged(objs[1:], {**before, "actions": sorted(a.name for a in bpy.data.actions)})
 
 
-def test_selected_armatures_the_operation_cannot_take_are_left_and_named(tmp_path, fake_model, addon, capfd):
+def test_selected_armatures_the_operation_cannot_take_are_left_and_named(tmp_path, model_calls, addon, capfd):
     objs = cast(tmp_path)
     sword, empty_rig = prop("Sword"), prop("Unkeyed", keyed=False)
     for obj in (sword, empty_rig):
@@ -131,7 +130,7 @@ def test_selected_armatures_the_operation_cannot_take_are_left_and_named(tmp_pat
     assert "WARNING" in summary.upper()
 
 
-def test_an_error_on_the_active_armature_changes_no_armature(tmp_path, fake_model, addon):
+def test_an_error_on_the_active_armature_changes_no_armature(tmp_path, model_calls, addon):
     objs = cast(tmp_path)
     sword = prop("Sword")
     for obj in objs:
@@ -143,7 +142,7 @@ def test_an_error_on_the_active_armature_changes_no_armature(tmp_path, fake_mode
     assert unchanged([*objs, sword], before)
 
 
-def test_stopping_part_way_changes_no_armature(tmp_path, fake_model, addon):
+def test_stopping_part_way_changes_no_armature(tmp_path, model_calls, addon):
     """What Esc does in the operator's modal: the work closed after every armature was read and computed, before
     the first is written, leaves all of them as they were; run to the end, it writes each."""
     objs = cast(tmp_path)
@@ -174,7 +173,7 @@ def test_stopping_part_way_changes_no_armature(tmp_path, fake_model, addon):
     ("foot_lock", {}, "footlocked"),
     ("inbetween", {"use_range": True, "frame_start": 24, "frame_end": 35}, "filled"),
 ])
-def test_other_operations_run_on_every_selected_armature(tmp_path, fake_model, addon, op, kw, suffix):
+def test_other_operations_run_on_every_selected_armature(tmp_path, model_calls, addon, op, kw, suffix):
     objs = walkers(tmp_path)
     before = snapshot(objs)
     assert getattr(bpy.ops.strnn, op)(**kw) == {"FINISHED"}
@@ -185,7 +184,7 @@ def test_other_operations_run_on_every_selected_armature(tmp_path, fake_model, a
         assert same_keys(before[obj.name][1], key_snapshot(obj, before[obj.name][0]))
 
 
-def test_in_pose_mode_every_armature_in_it_runs(tmp_path, fake_model, addon):
+def test_in_pose_mode_every_armature_in_it_runs(tmp_path, model_calls, addon):
     """Pose mode on several armatures at once (Blender's multi-object editing) takes them all."""
     objs = walkers(tmp_path, (60, 80))
     bpy.ops.object.mode_set(mode="POSE")
@@ -197,7 +196,7 @@ def test_in_pose_mode_every_armature_in_it_runs(tmp_path, fake_model, addon):
         assert action_of(obj) is not before[obj.name][0] and action_of(obj).frame_range[1] == last + 12
 
 
-def test_transfer_with_a_source_named_puts_its_motion_on_every_selected_armature(tmp_path, fake_model, addon):
+def test_transfer_with_a_source_named_puts_its_motion_on_every_selected_armature(tmp_path, model_calls, addon):
     """One take moved onto a cast: with Source named, each selected armature but the source gets the take's motion
     on its own proportions, from where it stands (here a Mixamo rig and a MakeHuman rig with no action yet, and the
     source itself selected too); without Source, three selected armatures do not say which is the source."""

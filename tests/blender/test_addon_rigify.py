@@ -84,10 +84,14 @@ def ik_rig(rigify_file):
     return obj
 
 
-# Limbs keyed on IK come within this of the solve at worst (cm): the generated rig's IK chains may stretch
-# (ik_stretch 0.1), and Blender's IK then plays a leg that reaches its foot about 1 % short, which moves the knee
-# 2 to 3.5 cm (the feet are where the solve puts them; README's picture: 2.6 cm at worst on an active walk).
-IK_CM = 4.0
+# Limbs keyed on IK come within this of the motion at worst (cm): the generated rig's IK chains may stretch
+# (ik_stretch 0.1), and Blender's IK then plays a leg 0.2 to 3 % shorter than its bones, the more bent the shorter;
+# the foot goes where the motion puts it (the chain's end is put on the joint), the knee where Blender's leg bends
+# (a real walk extended 10 s: 0.7 and 1.1 cm on average, 5.1 cm for a frame where the leg straightens, which Blender
+# plays longer than the bent legs the motion was read on).
+IK_CM = 5.5
+# ... and the feet, and every joint not on a knee (cm).
+IK_FEET_CM = 0.5
 IK_CONTROLS = {f"{b}.{side}" for b in ("foot_ik", "thigh_ik", "hand_ik", "upper_arm_ik") for side in "LR"}
 WALK = "bandai-namco/dataset-2/dataset-2_walk_normal_001.bvh"  # a real take where the data is unpacked
 
@@ -154,7 +158,7 @@ def test_auto_map_maps_the_org_bones_and_checks_them(rig, addon):
     assert rig.strnn_map.l_knee == "ORG-shin.L" and rig.strnn_map.hips == "ORG-spine"
 
 
-def test_extend_keys_the_controls_and_the_deform_bones_follow(rig, addon, fake_model):
+def test_extend_keys_the_controls_and_the_deform_bones_follow(rig, addon, model_calls):
     import importlib
 
     joints = importlib.import_module(addon.__name__ + ".model_core.motion.conventions").JOINT_INDEX
@@ -168,9 +172,8 @@ def test_extend_keys_the_controls_and_the_deform_bones_follow(rig, addon, fake_m
     assert {"torso", "thigh_fk.L", "shin_fk.R", "upper_arm_fk.L", "chest"} <= written
     record = new["strnn"].to_dict()
     assert record["controls"]["set"] == "rigify" and record["controls"]["max_error_cm"] < 1.0, record
-    # the deform bones follow the stand-in model (the last pose gliding on) within 1 cm
-    last = evaluated_joints(addon, rig, [59, 60])
-    want = last[-1] + (last[-1, 0] - last[-2, 0]) * np.arange(1, 31)[:, None, None]
+    # the deform bones follow the model within 1 cm
+    want = model_calls.extended()
     idx = [joints[j] for j in DEFORM_JOINTS.values()]
     err = np.linalg.norm(deform_heads(rig, range(61, 91)) - want[:, idx], axis=-1)
     assert err.max() < 0.01, err.max()
@@ -179,10 +182,10 @@ def test_extend_keys_the_controls_and_the_deform_bones_follow(rig, addon, fake_m
         assert rig.pose.bones[bone]["IK_FK"] == pytest.approx(1.0)
 
 
-def test_limbs_animated_in_ik_are_extended_on_their_ik_controls(ik_rig, addon, fake_model):
+def test_limbs_animated_in_ik_are_extended_on_their_ik_controls(ik_rig, addon, model_calls):
     """Legs animated in IK (the generated rig's default) are keyed on foot_ik, thigh_ik (turned only about its own
     axis, as its locks allow) and toe_ik, and stay in IK; the arms, animated in FK, on their FK controls. The feet
-    follow the model within 1.5 cm (the IK legs read a little shorter than the bones), the knees within IK_CM."""
+    follow the model within IK_FEET_CM (the IK chain's end is put on the ankle), the knees within IK_CM."""
     rig = ik_rig
     original = evaluated_joints(addon, rig, np.arange(1, 61))
     assert np.ptp(original[:, 0, 1]) > 1.0  # the body walks 1.2 m on its planted IK feet
@@ -199,17 +202,16 @@ def test_limbs_animated_in_ik_are_extended_on_their_ik_controls(ik_rig, addon, f
         turned = [fc for fc in fcurves_of(rig, new) if fc.data_path == f'pose.bones["thigh_ik.{side}"].rotation_euler'
                   and fc.array_index != 1]
         assert all(abs(k.co[1]) < 1e-6 for fc in turned for k in fc.keyframe_points)  # Y only, as its locks
-    # the deform bones follow the stand-in model (the last pose gliding on) within 1 cm
+    # the deform bones follow the model
     joints = addon_module(addon, "model_core.motion.conventions").JOINT_INDEX
-    last = evaluated_joints(addon, rig, [59, 60])
-    want = last[-1] + (last[-1, 0] - last[-2, 0]) * np.arange(1, 31)[:, None, None]
+    want = model_calls.extended()
     idx = [joints[j] for j in DEFORM_JOINTS.values()]
     err = np.linalg.norm(deform_heads(rig, range(61, 91)) - want[:, idx], axis=-1)
     knees = [k for k, name in enumerate(DEFORM_JOINTS) if name.startswith("DEF-shin")]
-    assert np.delete(err, knees, axis=1).max() < 0.015 and err.max() < IK_CM / 100, err.max(0)
+    assert np.delete(err, knees, axis=1).max() < IK_FEET_CM / 100 and err.max() < IK_CM / 100, err.max(0)
 
 
-def test_legs_in_ik_with_their_pole_on_are_keyed_on_the_pole(ik_rig, addon, fake_model):
+def test_legs_in_ik_with_their_pole_on_are_keyed_on_the_pole(ik_rig, addon, model_calls):
     """With a leg's Pole Vector on, its knee aims at thigh_ik_target: that is keyed (in front of the knee, in the
     leg's plane), not thigh_ik's turn."""
     rig = ik_rig
@@ -222,16 +224,16 @@ def test_legs_in_ik_with_their_pole_on_are_keyed_on_the_pole(ik_rig, addon, fake
     assert {"foot_ik.L", "thigh_ik_target.L", "thigh_ik_target.R", "toe_ik.R"} <= written
     assert not written & {"thigh_ik.L", "thigh_ik.R", "thigh_fk.L"}
     joints = addon_module(addon, "model_core.motion.conventions").JOINT_INDEX
-    last = evaluated_joints(addon, rig, [59, 60])
-    want = last[-1] + (last[-1, 0] - last[-2, 0]) * np.arange(1, 31)[:, None, None]
+    want = model_calls.extended()
     got = evaluated_joints(addon, rig, np.arange(61, 91))
     for side in "lr":
-        assert np.linalg.norm(got[:, joints[f"{side}_foot"]] - want[:, joints[f"{side}_foot"]], axis=-1).max() < 0.015
+        assert np.linalg.norm(got[:, joints[f"{side}_foot"]] - want[:, joints[f"{side}_foot"]], axis=-1).max() < \
+            IK_FEET_CM / 100
         assert np.linalg.norm(got[:, joints[f"{side}_knee"]] - want[:, joints[f"{side}_knee"]], axis=-1).max() < \
             IK_CM / 100
 
 
-def test_controls_from_preset_keeps_the_limbs_in_ik_and_an_edited_list_keys_them(ik_rig, addon, fake_model):
+def test_controls_from_preset_keeps_the_limbs_in_ik_and_an_edited_list_keys_them(ik_rig, addon, model_calls):
     """Controls from Preset lists the IK controls too, each with its role and its limb's switch, so a list edited
     from it still keys the legs animated in IK on foot_ik and thigh_ik; a list whose limb has lost its IK end is
     refused with what to fix, and nothing changes."""
@@ -494,3 +496,7 @@ def test_follow_curve_from_the_rigs_rest_pose_walks_with_its_feet_on_the_floor(r
           np.round(100 * np.percentile(lowest, [50, 95]), 2))
     assert abs(np.median(lowest)) < 0.01 and np.percentile(lowest, 95) < 0.03 and lowest.min() > -0.03
     assert np.linalg.norm(joints[-1, 0, :2] - joints[0, 0, :2]) > 2.0  # it walks
+
+
+
+

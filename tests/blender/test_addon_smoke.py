@@ -10,7 +10,7 @@ def test_registered(addon):
     assert bpy.context.preferences.addons[addon.__name__].preferences.model_folder == ""
 
 
-def test_auto_map_then_extend(tmp_path, fake_model):
+def test_auto_map_then_extend(tmp_path, model_calls):
     obj = import_bvh(walk_bvh(tmp_path))
     assert bpy.ops.strnn.auto_map() == {"FINISHED"}
     before = key_snapshot(obj)
@@ -27,13 +27,13 @@ def test_auto_map_then_extend(tmp_path, fake_model):
     assert action_of(obj).name == "walk.extended.002.denoised"
 
 
-def test_invoke_without_a_window_runs_at_once(tmp_path, fake_model):
+def test_invoke_without_a_window_runs_at_once(tmp_path, model_calls):
     obj = import_bvh(walk_bvh(tmp_path))
     assert bpy.ops.strnn.denoise_action("INVOKE_DEFAULT") == {"FINISHED"}
     assert action_of(obj).name == "walk.denoised"
 
 
-def test_scene_range_is_widened_only_when_asked_and_reported(tmp_path, fake_model, addon):
+def test_scene_range_is_widened_only_when_asked_and_reported(tmp_path, model_calls, addon):
     import importlib
 
     operators = importlib.import_module(addon.__name__ + ".strnn_addon.operators")

@@ -16,15 +16,19 @@ from model_core.ops.seam import blend_seam
 from model_core.rig.rigs import leg_length
 
 
-class GlideEngine:
-    """A stand-in engine: extends by gliding the last pose on. Records its input."""
+class SeenEngine:
+    """The bundled engine, which records what its ``extend`` is given (the context in model space, ``settle``,
+    ``floor``) and runs it."""
 
-    m = 20
+    def __init__(self):
+        self._engine = Engine.load()
+
+    def __getattr__(self, name):
+        return getattr(self._engine, name)
 
     def extend(self, pos, frames, settle=False, floor=None, **kw):
         self.seen, self.settle, self.floor = pos, settle, floor
-        step = pos[-1, 0] - pos[-2, 0]
-        return pos[-1] + step * np.arange(1, frames + 1)[:, None, None]
+        return self._engine.extend(pos, frames, settle=settle, floor=floor, **kw)
 
 
 def test_normalisation_round_trip():
@@ -46,7 +50,7 @@ def test_extend_at_scene_rates(fps):
     n = int(2 * fps)
     walk = walking_skeleton(n + 1, fps=fps) * 100.0  # centimetres; its last frame is the truth to come
     pos = walk[:n]
-    engine = GlideEngine()
+    engine = SeenEngine()
     out = extend_positions(engine, pos, fps, frames=int(fps))
     assert out.shape == (int(fps), 21, 3)
     assert len(engine.seen) >= 20 and abs(leg_length(engine.seen) - 0.87) < 1e-3  # model space
@@ -67,7 +71,7 @@ def test_the_floor_extend_keeps_the_feet_out_of_is_the_clips_before_a_jump_not_t
     which would float the continuation at the jump's height; a floor given is taken as it is."""
     walk = walking_skeleton(90)  # metres, legs of the standard length: model units up to the ground
     walk[-20:, :, 1] += 0.3
-    engine = GlideEngine()
+    engine = SeenEngine()
     extend_positions(engine, walk[-20:], 30.0, 10, memory=walk)
     assert engine.floor == pytest.approx(-0.3, abs=0.01)
     extend_positions(engine, walk[-20:], 30.0, 10)  # the context alone: it is all there is

@@ -222,3 +222,42 @@ def test_a_twist_bone_in_line_and_a_bone_at_its_joint_keep_their_pose_however_ne
     way = lambda p: (p[:, j_elbow] - p[:, j_arm]) / np.linalg.norm(p[:, j_elbow] - p[:, j_arm], axis=-1)[:, None]  # noqa: E731
     assert np.abs(got[:, j_arm] - targets[:, j_arm]).max() < 1e-6
     np.testing.assert_allclose(way(got), way(targets), atol=1e-6)  # the elbow on the way to its target, never behind
+
+
+def test_ik_chains_are_put_on_joints_from_legs_played_shorter_than_their_bones(rig_and_motion):
+    """Legs Blender's IK plays 2 % shorter than their bones (a chain that may stretch), and motion made on them: the
+    solve keeps the bones, so its ankles land further along the legs (more than 1 cm off); the IK chains put on the
+    joints (:func:`controls.chains_on_joints`) have each hip, knee, ankle and toe where the motion has it and each
+    bone of the chain pointing at the next joint, the bones below the ankle carried with the foot. Motion on legs
+    as long as the bones (an IK that does not stretch) is left as the solve has it."""
+    from model_core.motion.conventions import JOINT_INDEX
+    from model_core.rig.controls import chains_on_joints
+
+    rig, anchors, loc, rot = rig_and_motion
+    played = anchor_positions(rig, anchors, fk(rig, loc, rot))
+    legs = {side: [JOINT_INDEX[f"{side}_{j}"] for j in ("upleg", "knee", "foot", "toe")] for side in "lr"}
+    short = played.copy()
+    for hip, knee, ankle, toe in legs.values():  # the legs 2 % shorter from the hip down, the toes carried
+        for j, parent in ((knee, hip), (ankle, knee)):
+            short[:, j] = short[:, parent] + 0.98 * (played[:, j] - played[:, parent]) \
+                + (short[:, parent] - played[:, parent])
+        short[:, toe] = short[:, ankle] + played[:, toe] - played[:, ankle]
+    pose = fk(rig, *solve(rig, anchors, short, loc, rot))
+    solved = anchor_positions(rig, anchors, pose)
+    ankles = [legs[s][2] for s in "lr"]
+    assert np.linalg.norm(solved[:, ankles] - short[:, ankles], axis=-1).max() > 0.01
+    ends = [int(anchors.bone[j]) for j in ankles]
+    assert chains_on_joints(rig, anchors, fk(rig, loc, rot), ends, played) == {}
+    placed = chains_on_joints(rig, anchors, pose, ends, short)
+    for hip, knee, ankle, toe in legs.values():
+        chain = [int(anchors.bone[j]) for j in (hip, knee, ankle)]
+        assert set(chain) <= set(placed)
+        for b, joint, toward in zip(chain, (hip, knee, ankle), (knee, ankle, toe)):
+            np.testing.assert_allclose(placed[b][:, :3, 3], short[:, joint], atol=1e-9)
+            aim = short[:, toward] - short[:, joint]
+            cos = np.sum(placed[b][:, :3, 1] * aim, -1) / np.linalg.norm(aim, axis=-1)
+            assert cos.min() > 1 - 1e-9
+        below = [b for b in range(len(rig.parents)) if b != chain[2] and rig.is_ancestor(chain[2], b)]
+        for b in below:  # carried with the foot: the same transform relative to it as in the solve
+            np.testing.assert_allclose(np.linalg.inv(placed[chain[2]]) @ placed[b],
+                                       np.linalg.inv(pose[:, chain[2]]) @ pose[:, b], atol=1e-9)
