@@ -58,14 +58,17 @@ def fresh_scene(addon):
 
 
 class ModelCalls:
-    """What the real model was asked and what it made, call by call: Extend's continuations (``extend``) and Denoise's
-    cleaned takes (``denoise``), each a dict of the input ``pos`` and the output ``out`` (model axes, Y-up, scene
+    """What the real model was asked and what it made, call by call: Extend's continuations (``extend``), Denoise's
+    cleaned takes (``denoise``), Fill Gap's in-betweens (``inbetween``) and Follow Curve's walks (``follow``), each a
+    dict of what went in (``pos``: the context, where there is one) and the output ``out`` (model axes, Y-up, scene
     units), ``fps`` and, for Extend, ``frames``; so a test checks what Blender plays against what the model made."""
 
     def __init__(self, addon):
         self._conventions = importlib.import_module(addon.__name__ + ".model_core.motion.conventions")
         self.extend: list[dict] = []
         self.denoise: list[dict] = []
+        self.inbetween: list[dict] = []
+        self.follow: list[dict] = []
 
     def blender(self, pos: np.ndarray) -> np.ndarray:
         """Model-axis positions in Blender's axes (Z up), as :func:`scenes.evaluated_joints` gives them."""
@@ -96,7 +99,8 @@ def model_calls(addon, real_model, monkeypatch):
     engine and its input and output are kept; nothing of the model is replaced."""
     bridge = importlib.import_module(addon.__name__ + ".strnn_addon.engine_bridge")
     calls = ModelCalls(addon)
-    extend, denoise = bridge.run_extend, bridge.run_denoise
+    extend, denoise, inbetween, follow = bridge.run_extend, bridge.run_denoise, bridge.run_inbetween, \
+        bridge.run_follow_curve
 
     def run_extend(prefs, pos, fps, frames, memory=None, floor=None):
         out = extend(prefs, pos, fps, frames, memory, floor)
@@ -108,8 +112,20 @@ def model_calls(addon, real_model, monkeypatch):
         calls.denoise.append({"pos": np.array(pos), "out": np.array(out), "fps": fps, "strength": strength})
         return out
 
+    def run_inbetween(prefs, before, after, fps, frames, follow_take=True):
+        out = inbetween(prefs, before, after, fps, frames, follow_take)
+        calls.inbetween.append({"pos": np.array(before), "out": np.array(out), "fps": fps})
+        return out
+
+    def run_follow_curve(prefs, points, cyclic, fps, frames, speed, context=None, rest=None):
+        out = yield from follow(prefs, points, cyclic, fps, frames, speed, context, rest)
+        calls.follow.append({"pos": None if context is None else np.array(context), "out": np.array(out), "fps": fps})
+        return out
+
     monkeypatch.setattr(bridge, "run_extend", run_extend)
     monkeypatch.setattr(bridge, "run_denoise", run_denoise)
+    monkeypatch.setattr(bridge, "run_inbetween", run_inbetween)
+    monkeypatch.setattr(bridge, "run_follow_curve", run_follow_curve)
     return calls
 
 

@@ -205,3 +205,17 @@ def test_a_gap_in_an_action_on_twos_is_found_past_its_holds_and_filled_on_twos(a
     usual, filled = moved[1:40:2].max(), moved[41:70:2]  # onto each key before the hole, and in it (to 71)
     print(f"per key in the hole: {filled.min():.4f} to {filled.max():.4f} against {usual:.4f} before it")
     assert filled.max() < 2.0 * usual and filled.min() > 0.2 * usual
+
+
+@pytest.mark.parametrize("fps", [24, 30, 60])
+def test_the_gap_plays_where_the_model_put_it_at_any_scene_rate(model_calls, addon, fps):
+    """Frames 41-60 of a walk filled (Foot Lock off) at 24, 30 and 60 fps: Blender plays every joint of the gap within
+    0.5 cm of where the model put it, the frames between the model's own included (most of them at 24 and 60 fps)."""
+    from scenes import mixamo_walk
+
+    obj = mixamo_walk(90)
+    bpy.context.scene.render.fps = fps
+    assert bpy.ops.strnn.inbetween(use_range=True, frame_start=41, frame_end=60, foot_lock=False) == {"FINISHED"}
+    made = model_calls.blender(model_calls.inbetween[-1]["out"])
+    err = np.linalg.norm(evaluated_joints(addon, obj, np.arange(41, 61)) - made, axis=-1)
+    assert err.max() < 0.005, err.max()
