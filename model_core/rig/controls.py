@@ -438,12 +438,12 @@ def chains_on_joints(rig: Rig, anchors, pose: np.ndarray, ends: list[int], joint
 
     The solve keeps the bones' lengths, but Blender's IK solver plays a chain that may stretch shorter than its
     bones (Rigify's legs, ``ik_stretch`` 0.1: by 0.2 to 3 % as the knee bends), so the legs read off the rig, and
-    the motion made of them, are that much shorter, and the solve puts the ankle further along the leg (a walk's
-    feet up to 5 cm off, 1.5 cm under). An IK chain reaches its end wherever that is put, so the end goes on the
-    joint itself and the chain's bones point where the joints are. A chain whose motion is as long as its bones
-    (within :data:`SHORT_CHAIN`: an IK that does not stretch plays them so) is left as the solve has it, which then
-    puts the knee as well as the foot where the motion has them (a nearly straight leg's knee would move many times
-    as far as a foot put on a joint a millimetre off the bones' reach)."""
+    the motion made of them, are that much shorter, and the solve puts the ankle further along the leg (a real
+    walk's ankles 0.9 cm from the motion's on average, 0.8 cm under them). An IK chain reaches its end wherever
+    that is put, so the end goes on the joint itself and the chain's bones point where the joints are. A chain
+    whose motion is as long as its bones (within :data:`SHORT_CHAIN`: an IK that does not stretch plays them so) is
+    left as the solve has it, which then puts the knee as well as the foot where the motion has them (a nearly
+    straight leg's knee would move many times as far as a foot put on a joint a millimetre off the bones' reach)."""
     at_head = {int(b): j for j, (b, tail) in enumerate(zip(anchors.bone, anchors.tail))
                if not tail and j not in anchors.between}
     at_tail = {int(b): j for j, (b, tail) in enumerate(zip(anchors.bone, anchors.tail))

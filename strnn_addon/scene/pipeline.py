@@ -580,9 +580,9 @@ def write_controls(context, clip: Clip, channels: anim.Channels, frames: np.ndar
                    bones: list[int] | None, follows: bool = False, interpolation: str = "",
                    root: tuple[str, np.ndarray] | None = None, joints: np.ndarray | None = None) -> float:
     """Key a control rig's controls (and switches) so that its joint skeleton takes the solved pose; a ``root``
-    control carrying the travel ((name, armature-space pose ``[F, 4, 4]``)) is set there first and keyed too. Each
-    IK chain's end (a foot on its IK control) goes where ``joints`` (the joints solved for, armature space) put it
-    (:func:`_ends_on_joints`)."""
+    control carrying the travel ((name, armature-space pose ``[F, 4, 4]``)) is set there first and keyed too. An IK
+    chain Blender plays shorter than its bones has its end (a foot on its IK control) where ``joints`` (the joints
+    solved for, armature space) put it (:func:`_ends_on_joints`)."""
     pose = fk(clip.rig, loc, rot)
     chosen = keyed_controls(clip, bones)
     index = {n: b for b, n in enumerate(clip.rig.names)}
