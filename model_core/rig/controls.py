@@ -426,7 +426,7 @@ def visual_local(rig: Rig, pose: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 # An IK chain whose motion is this much shorter than its bones (a share of their length, the median over the frames)
 # is put on the motion's joints (:func:`chains_on_joints`); one within it is left as the solve has it.
-SHORT_CHAIN = 0.005
+SHORT_CHAIN = 0.001
 
 
 def chains_on_joints(rig: Rig, anchors, pose: np.ndarray, ends: list[int], joints: np.ndarray) -> dict[int, np.ndarray]:
