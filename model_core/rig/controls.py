@@ -23,10 +23,10 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from ..motion.conventions import JOINTS, PARENT_NAMES
+from ..motion.conventions import JOINT_INDEX, JOINTS, PARENT_NAMES
 from ..motion.geometry import nearest_rotation, shortest_arc
 from .rigs import MMD_SPELLINGS, mmd_name, normalise_name
-from .solve import Rig, SolveError, placed as placed_in
+from .solve import Anchors, Rig, SolveError, placed as placed_in
 
 
 @dataclass(frozen=True)
@@ -429,12 +429,13 @@ def visual_local(rig: Rig, pose: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 SHORT_CHAIN = 0.001
 
 
-def chains_on_joints(rig: Rig, anchors, pose: np.ndarray, ends: list[int], joints: np.ndarray) -> dict[int, np.ndarray]:
+def chains_on_joints(rig: Rig, anchors: Anchors, pose: np.ndarray, ends: list[int],
+                     joints: np.ndarray) -> dict[int, np.ndarray]:
     """Pose matrices ``{bone: [F, 4, 4]}`` (armature space) that put each IK chain ending on a bone of ``ends`` on
     ``joints`` ``[F, 21, 3]``: the chain's two bones above the end (the thigh and the shin), the end (the foot) and
     the bones below it (the toe), from ``pose`` ``[F, B, 4, 4]`` (the solve's), each bone whose head is a joint
     moved there and turned (by the shortest arc) to point at the next joint down, the bones below the end carried
-    with it; ``anchors``: where the joints sit (:class:`solve.Anchors`).
+    with it; ``anchors``: where the joints sit.
 
     The solve keeps the bones' lengths, but Blender's IK solver plays a chain that may stretch shorter than its
     bones (Rigify's legs, ``ik_stretch`` 0.1: by 0.2 to 3 % as the knee bends), so the legs read off the rig, and
@@ -444,8 +445,7 @@ def chains_on_joints(rig: Rig, anchors, pose: np.ndarray, ends: list[int], joint
     whose motion is as long as its bones (within :data:`SHORT_CHAIN`: an IK that does not stretch plays them so) is
     left as the solve has it, which then puts the knee as well as the foot where the motion has them (a nearly
     straight leg's knee would move many times as far as a foot put on a joint a millimetre off the bones' reach)."""
-    at_head = {int(b): j for j, (b, tail) in enumerate(zip(anchors.bone, anchors.tail))
-               if not tail and j not in anchors.between}
+    at_head = {b: JOINT_INDEX[name] for b, name in anchors.on_bones().items()}
     at_tail = {int(b): j for j, (b, tail) in enumerate(zip(anchors.bone, anchors.tail))
                if tail and j not in anchors.between}
     out: dict[int, np.ndarray] = {}

@@ -588,7 +588,7 @@ def write_controls(context, clip: Clip, channels: anim.Channels, frames: np.ndar
     index = {n: b for b, n in enumerate(clip.rig.names)}
     targets = {c.drives: pose[:, index[c.drives]] for c in chosen}
     if joints is not None:
-        _ends_on_joints(clip, chosen, pose, targets, joints)
+        _ends_on_joints(clip, chosen, index, pose, targets, joints)
     control_set = clip.controls
     if root is not None:  # the root control drives itself, to where it is carried; it goes first
         carrier = Control(root[0], root[0], True)
@@ -618,10 +618,10 @@ def write_controls(context, clip: Clip, channels: anim.Channels, frames: np.ndar
     return baked.error
 
 
-def _ends_on_joints(clip: Clip, chosen: list, pose: np.ndarray, targets: dict, joints: np.ndarray) -> None:
+def _ends_on_joints(clip: Clip, chosen: list, index: dict[str, int], pose: np.ndarray, targets: dict,
+                    joints: np.ndarray) -> None:
     """The targets of the bones of each IK chain whose end control is keyed (a leg in IK) put on ``joints`` ``[F, 21,
-    3]`` where the solve (``pose``) has them off: :func:`controls.chains_on_joints`."""
-    index = {n: b for b, n in enumerate(clip.rig.names)}
+    3]`` where the solve (``pose``) has them off: :func:`controls.chains_on_joints` (``index``: {bone name: bone})."""
     ends = [index[c.drives] for c in chosen if c.end]
     if not ends:
         return

@@ -411,18 +411,25 @@ def retargeted(addon, source, rest: np.ndarray, frames) -> np.ndarray:
     return conventions.yup_to_zup(transfer.retarget(src, conventions.zup_to_yup(rest)))
 
 
-def follow_from_rest(addon, obj, frames: int):
-    """``obj`` (no action: it stands as it is) walked along a winding NURBS path by Follow Curve: (the new action, its
-    joints ``[F, 21, 3]``, each frame's lowest heel or toe over the floor ``obj`` stood on ``[F]``)."""
-    from model_core.motion.conventions import CONTACT_JOINTS
-
-    floor = float(evaluated_joints(addon, obj, [1])[0, CONTACT_JOINTS, 2].min())
+def winding_path(obj):
+    """A winding NURBS path (Blender's primitive, 3 times its size) added to the scene, ``obj`` then the only selected
+    and the active object, as Follow Curve runs on it: the path."""
     bpy.ops.curve.primitive_nurbs_path_add()
     path = bpy.context.active_object
     path.scale = (3.0, 3.0, 3.0)
     for other in bpy.context.view_layer.objects:
         other.select_set(other is obj)
     bpy.context.view_layer.objects.active = obj
+    return path
+
+
+def follow_from_rest(addon, obj, frames: int):
+    """``obj`` (no action: it stands as it is) walked along a winding NURBS path by Follow Curve: (the new action, its
+    joints ``[F, 21, 3]``, each frame's lowest heel or toe over the floor ``obj`` stood on ``[F]``)."""
+    from model_core.motion.conventions import CONTACT_JOINTS
+
+    floor = float(evaluated_joints(addon, obj, [1])[0, CONTACT_JOINTS, 2].min())
+    path = winding_path(obj)
     assert bpy.ops.strnn.follow_curve(curve=path.name, frames=frames) == {"FINISHED"}
     new = action_of(obj)
     joints = evaluated_joints(addon, obj, np.arange(int(new.frame_range[0]), int(new.frame_range[1]) + 1))

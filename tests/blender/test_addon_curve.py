@@ -428,16 +428,11 @@ def test_a_walk_that_ends_on_a_repeated_frame_walks_on_along_the_curve_from_the_
 def test_the_walk_along_the_curve_plays_where_the_model_put_it_at_any_scene_rate(model_calls, addon, fps):
     """A walk walked on along a curve for 60 frames (Foot Lock off) at 24, 30 and 60 fps: Blender plays every joint
     within 1.5 cm of where the model put it (the pelvis, which the walk carries as the clip's, within 1.3 cm)."""
-    from scenes import mixamo_walk
+    from scenes import mixamo_walk, winding_path
 
     obj = mixamo_walk(90)
     bpy.context.scene.render.fps = fps
-    bpy.ops.curve.primitive_nurbs_path_add()
-    path = bpy.context.active_object
-    path.scale = (3.0, 3.0, 3.0)
-    for other in bpy.context.view_layer.objects:
-        other.select_set(other is obj)
-    bpy.context.view_layer.objects.active = obj
+    path = winding_path(obj)
     assert bpy.ops.strnn.follow_curve(curve=path.name, frames=60, foot_lock=False) == {"FINISHED"}
     made = model_calls.blender(model_calls.follow[-1]["out"])
     err = np.linalg.norm(evaluated_joints(addon, obj, np.arange(91, 151)) - made, axis=-1)
