@@ -17,8 +17,9 @@ Glossary
   torso joints below and above it.
 
 The solve keeps the rig's bone lengths: only the root bone (the one mapped to the
-hips) moves; every other mapped bone is rotated so that it points at its canonical
-children. A bone with several canonical children (hips, chest) takes the rotation that
+hips, or where that is connected to its parent the bone above that carries it) moves;
+every other mapped bone is rotated so that it points at its canonical children.
+A bone with several canonical children (hips, chest) takes the rotation that
 best fits all of them (body planes: hips and shoulders, by a Kabsch fit); a bone with
 one child swings from its reference pose by the shortest arc, and upper legs and upper
 arms then twist about their own axis so the knee and elbow planes follow the targets.
@@ -88,9 +89,12 @@ class Rig:
     parents: np.ndarray
     rest: np.ndarray
     lengths: np.ndarray
+    connected: np.ndarray | None = None  # bool [B]: heads on their parent's tail (Blender's ``use_connect``)
 
     def __post_init__(self):
         self.parents = np.asarray(self.parents, dtype=np.int64)
+        self.connected = (np.zeros(len(self.parents), bool) if self.connected is None
+                          else np.asarray(self.connected, bool) & (self.parents >= 0))
         self.rest = np.array(self.rest, dtype=np.float64)
         self.rest[:, :3, :3] = nearest_rotation(self.rest[:, :3, :3])
         self.lengths = np.asarray(self.lengths, dtype=np.float64)
@@ -176,7 +180,10 @@ def compose(loc: np.ndarray, rot: np.ndarray) -> np.ndarray:
 
 def fk(rig: Rig, loc: np.ndarray, rot: np.ndarray, scale: np.ndarray | None = None) -> np.ndarray:
     """Pose matrices ``[F, B, 4, 4]`` (armature space) from local ``loc`` ``[F, B, 3]``,
-    ``rot`` ``[F, B, 3, 3]`` and optional ``scale`` ``[F, B, 3]``."""
+    ``rot`` ``[F, B, 3, 3]`` and optional ``scale`` ``[F, B, 3]``. A connected bone's location is left out, as
+    Blender leaves it out (its head stays on its parent's tail)."""
+    if rig.connected.any():
+        loc = np.where(rig.connected[:, None], 0.0, loc)
     basis = compose(loc, rot * scale[..., None, :] if scale is not None else rot)
     out = np.empty(basis.shape)
     for b, p in enumerate(rig.parents):
@@ -321,6 +328,34 @@ def _aim_bridge(ref: tuple, b: int, joints: list[int], head: np.ndarray, base_ro
     return shortest_arc(np.einsum("fij,fj->fi", base_rot, u[:, 0]), t[:, 0]) @ base_rot
 
 
+def hips_carrier(rig: Rig, hips: int) -> int | None:
+    """The bone that moves the ``hips`` bone where that is connected to its parent (its location does nothing: a
+    BVH whose root is a bone on the floor with the hips its only child, as Character Creator's ``RL_BoneRoot``, imports
+    so): the nearest bone above it that is not connected; None where the hips bone moves itself."""
+    if not rig.connected[hips]:
+        return None
+    b = hips
+    while rig.connected[b]:
+        b = int(rig.parents[b])
+    return b
+
+
+def _carry(rig: Rig, pose: np.ndarray, loc: np.ndarray, carrier: int, b: int, base: np.ndarray,
+           move: np.ndarray) -> np.ndarray:
+    """Move bone ``carrier`` by ``move`` ``[F, 3]`` (armature space) in ``loc`` and, with it, the pose matrices of it
+    and of the bones below it solved so far (those before ``b``); returns ``base`` ``[F, 4, 4]`` (bone ``b``'s, below
+    the carrier) moved as far."""
+    p = int(rig.parents[carrier])
+    above = np.broadcast_to(rig.rel_rest[carrier] if p < 0 else pose[:, p] @ rig.rel_rest[carrier], base.shape)
+    loc[:, carrier] += np.einsum("fji,fj->fi", above[:, :3, :3], move)
+    for k in range(carrier, b):
+        if rig.is_ancestor(carrier, k):
+            pose[:, k, :3, 3] += move
+    base = np.array(base)
+    base[:, :3, 3] += move
+    return base
+
+
 def solve(rig: Rig, anchors: Anchors, targets: np.ndarray, ref_loc: np.ndarray,
           ref_rot: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Local bone transforms that put the rig's canonical joints on ``targets``.
@@ -328,7 +363,8 @@ def solve(rig: Rig, anchors: Anchors, targets: np.ndarray, ref_loc: np.ndarray,
     ``targets``: ``[F, 21, 3]`` armature space. ``ref_loc`` ``[F, B, 3]`` and ``ref_rot``
     ``[F, B, 3, 3]``: the reference local pose (the original frames, or the pose to hold):
     unmapped bones keep it, mapped bones swing from it. Returns local ``loc`` ``[F, B, 3]``
-    (only the hips bone's changes) and ``rot`` ``[F, B, 3, 3]``.
+    (only the hips bone's changes, or where that is connected its carrier's: :func:`hips_carrier`) and ``rot``
+    ``[F, B, 3, 3]``.
     """
     targets = np.asarray(targets, dtype=np.float64)
     joint_at = anchors.on_bones()
@@ -341,13 +377,18 @@ def solve(rig: Rig, anchors: Anchors, targets: np.ndarray, ref_loc: np.ndarray,
     ref_pose = fk(rig, ref_loc, ref_rot)
     ref = (ref_pose, anchor_positions(rig, anchors, ref_pose))
     hips = int(anchors.bone[JOINT_INDEX["hips"]])
+    carrier = hips_carrier(rig, hips)
     loc, rot = np.array(ref_loc, dtype=np.float64), ref_rot.copy()
     pose = np.empty(ref_pose.shape)
     for b, p in enumerate(rig.parents):
         base = rig.rel_rest[b] if p < 0 else pose[:, p] @ rig.rel_rest[b]  # (F, 4, 4) or (4, 4)
         base = np.broadcast_to(base, pose[:, b].shape)
         r_base, t_base = base[:, :3, :3], base[:, :3, 3]
-        if b == hips:
+        if b == hips and carrier is not None:  # connected: the bone above that can move takes it to the target
+            loc[:, b] = 0.0
+            base = _carry(rig, pose, loc, carrier, b, base, targets[:, JOINT_INDEX["hips"]] - t_base)
+            t_base = base[:, :3, 3]
+        elif b == hips:
             loc[:, b] = np.einsum("fji,fj->fi", r_base, targets[:, JOINT_INDEX["hips"]] - t_base)
         head = t_base + np.einsum("fij,fj->fi", r_base, loc[:, b])
         base_rot = r_base @ rot[:, b]
@@ -356,7 +397,10 @@ def solve(rig: Rig, anchors: Anchors, targets: np.ndarray, ref_loc: np.ndarray,
             rot[:, b] = np.swapaxes(r_base, -1, -2) @ g
             if b == hips and anchors.tail[JOINT_INDEX["hips"]]:  # the hips at the tail: the head goes where that
                 head = targets[:, JOINT_INDEX["hips"]] - g[:, :, 1] * rig.lengths[b]  # puts the tail on its target
-                loc[:, b] = np.einsum("fji,fj->fi", r_base, head - t_base)
+                if carrier is not None:
+                    base = _carry(rig, pose, loc, carrier, b, base, head - t_base)
+                else:
+                    loc[:, b] = np.einsum("fji,fj->fi", r_base, head - t_base)
         elif b in bridges and not _in_line(rig, anchors, b, bridges[b]):  # an unmapped bone just above joints (a
             g = _aim_bridge(ref, b, bridges[b], head, base_rot, targets)  # clavicle, a pelvis): aim it at them
             rot[:, b] = np.swapaxes(r_base, -1, -2) @ g

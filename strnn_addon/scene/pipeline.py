@@ -27,7 +27,7 @@ from ...model_core.motion.geometry import nearest_rotation
 from ...model_core.ops.root_motion import carried_root
 from ...model_core.rig.controls import Control, ControlSet, chains_on_joints, visual_local
 from ...model_core.rig.rigs import leg_length
-from ...model_core.rig.solve import Anchors, Rig, anchor_positions, fk, solve, solved_bones
+from ...model_core.rig.solve import Anchors, Rig, anchor_positions, fk, hips_carrier, solve, solved_bones
 from . import anim, controls, mapping, rig_io
 
 
@@ -167,13 +167,22 @@ def rig_of(obj) -> tuple[Rig, Anchors, dict, ControlSet | None]:
                         "Animation > Bake Action), and run it again")
     if found is None:
         written, hips = [rig.names[b] for b in solved_bones(rig, anchors)], bone_map["hips"][0]
-        check_not_driven(obj, written, hips)
+        mover = rig.names[located(rig, anchors)]  # the bone keyed with the hips' place
+        check_not_driven(obj, written + ([mover] if mover != hips else []), mover)
         # keys set by solving alone would land elsewhere (bones that do not simply follow their parents), or blend
         # with NLA strips under the action: bake them, each written bone its own control
         if rig_io.own_inheritance(obj, written) or layered:
             found = ControlSet(OWN_BONES, [Control(name, name, name == hips) for name in written])
             anchors, bone_map, rig = mapping.resolve(obj, rig, joint_skeleton=True)
     return rig, anchors, bone_map, found
+
+
+def located(rig: Rig, anchors: Anchors) -> int:
+    """The bone that the hips' place is keyed on: the hips bone, or where that is connected to its parent (its
+    location does nothing in Blender) the bone above that carries it (:func:`solve.hips_carrier`)."""
+    hips = int(anchors.bone[JOINT_INDEX["hips"]])
+    carrier = hips_carrier(rig, hips)
+    return hips if carrier is None else carrier
 
 
 # Constraints that set a bone's transform outright (keys on the bone would not show); limits and the like pass.
@@ -406,19 +415,18 @@ def keyed_names(clip: Clip) -> list[str]:
 
 
 def written_paths(clip: Clip, root: str | None = None) -> set[str]:
-    """The F-curve data paths :func:`write_pose` keys: each written bone's rotation and the hips bone's location
-    (and a ``root`` bone's rotation and location); on a control rig its controls' rotations, and the locations of
-    those that move."""
+    """The F-curve data paths :func:`write_pose` keys: each written bone's rotation and the location of the bone
+    the hips' place is keyed on (:func:`located`), and a ``root`` bone's rotation and location; on a control rig its
+    controls' rotations, and the locations of those that move."""
     carried = ({_bone_path(root, rig_io.rotation_property(clip.obj.pose.bones[root])), _bone_path(root, "location")}
                if root is not None else set())
     if clip.controls is not None:
         return carried | {_bone_path(c.bone, prop) for c in keyed_controls(clip)
                           for prop in (rig_io.rotation_property(clip.obj.pose.bones[c.bone]),)
                           + (("location",) if c.location else ())}
-    hips = int(clip.anchors.bone[JOINT_INDEX["hips"]])
     paths = {_bone_path(clip.rig.names[b], rig_io.rotation_property(clip.obj.pose.bones[clip.rig.names[b]]))
              for b in written_bones(clip)}
-    return carried | paths | {_bone_path(clip.rig.names[hips], "location")}
+    return carried | paths | {_bone_path(clip.rig.names[located(clip.rig, clip.anchors)], "location")}
 
 
 # Keys on twos (threes, ...) held by Constant interpolation, the stepped look of hand-drawn-style animation: at least
@@ -548,11 +556,11 @@ def write_pose(context, clip: Clip, action, frames: np.ndarray, loc: np.ndarray,
                previous: dict, replace: tuple[float, float] | None, bones: list[int] | None = None,
                follows: bool = False, interpolation: str = "", root: tuple[str, np.ndarray] | None = None,
                joints: np.ndarray | None = None) -> float:
-    """Key the solved rotations of mapped bones (and the hips bone's location) at ``frames``, and the rotation and
-    location of a ``root`` bone carrying the travel ((name, its armature-space pose ``[F, 4, 4]``): :func:`moving_root`,
-    already in ``loc``, ``rot`` on a plain rig); on a control rig, key its controls by a visual bake instead
-    (:func:`write_controls`). Returns how far (armature units) a written bone ends up from the solve at worst (0 when
-    keyed directly).
+    """Key the solved rotations of mapped bones (and the hips' place: :func:`located`) at ``frames``, and the rotation
+    and location of a ``root`` bone carrying the travel ((name, its armature-space pose ``[F, 4, 4]``):
+    :func:`moving_root`, already in ``loc``, ``rot`` on a plain rig); on a control rig, key its controls by a visual
+    bake instead (:func:`write_controls`). Returns how far (armature units) a written bone ends up from the solve at
+    worst (0 when keyed directly).
 
     ``loc`` ``[F, B, 3]``, ``rot`` ``[F, B, 3, 3]``; ``previous`` {bone: raw channel values} keeps
     Euler angles and quaternion signs continuous with the keys before (``follows``: after, frames added before
@@ -564,13 +572,16 @@ def write_pose(context, clip: Clip, action, frames: np.ndarray, loc: np.ndarray,
     if clip.controls is not None:
         return write_controls(context, clip, channels, frames, loc, rot, previous, replace, bones, follows,
                               interpolation, root, joints)
-    hips = int(clip.anchors.bone[JOINT_INDEX["hips"]])
+    placed = located(clip.rig, clip.anchors)  # the hips bone, or the bone that carries it
     moved = clip.rig.names.index(root[0]) if root is not None else None
-    for b in (written_bones(clip) if bones is None else bones) + ([moved] if moved is not None else []):
+    turned = (written_bones(clip) if bones is None else bones) + ([moved] if moved is not None else [])
+    hips_written = int(clip.anchors.bone[JOINT_INDEX["hips"]]) in turned
+    for b in turned + ([placed] if hips_written and placed not in turned else []):
         pb = clip.obj.pose.bones[clip.rig.names[b]]
-        prop, values = encode_rotation(pb.rotation_mode, rot[:, b], previous.get(pb.name), follows)
-        _key_property(clip, channels, pb, prop, frames, values, replace, interpolation=interpolation)
-        if b in (hips, moved):
+        if b in turned:
+            prop, values = encode_rotation(pb.rotation_mode, rot[:, b], previous.get(pb.name), follows)
+            _key_property(clip, channels, pb, prop, frames, values, replace, interpolation=interpolation)
+        if b in (placed, moved):
             _key_property(clip, channels, pb, "location", frames, loc[:, b], replace, interpolation=interpolation)
     return 0.0
 

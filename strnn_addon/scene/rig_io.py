@@ -34,6 +34,7 @@ def read_rig(obj) -> Rig:
     lengths = np.empty(n, dtype=np.float32)
     bones.foreach_get("length", lengths)
     names = [b.name for b in bones]
+    connected = np.array([b.use_connect for b in bones], dtype=bool)  # heads on their parents' tails
     parent_name = [b.parent.name if b.parent else None for b in bones]
     order, placed = [], set()
     while len(order) < n:  # parents first, keeping Blender's order otherwise
@@ -43,7 +44,7 @@ def read_rig(obj) -> Rig:
                 placed.add(names[i])
     index = {names[i]: k for k, i in enumerate(order)}
     parents = [index[parent_name[i]] if parent_name[i] else -1 for i in order]
-    return Rig([names[i] for i in order], np.array(parents), rest[order], lengths[order])
+    return Rig([names[i] for i in order], np.array(parents), rest[order], lengths[order], connected[order])
 
 
 class KeyCache:

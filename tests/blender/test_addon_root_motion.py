@@ -284,3 +284,50 @@ def test_a_root_carried_over_a_ground_rides_it_with_the_body(addon, tmp_path):
     print(f"root over the ramp under it: {100 * np.abs(roots[:, 2] - under).max():.2f} cm at most")
     assert np.abs(roots[:, 2] - under).max() < 0.05, np.abs(roots[:, 2] - under).max()
     assert np.linalg.norm(roots[:, :2] - joints[:, 0, :2], axis=-1).max() < 0.15  # under the body
+
+
+def connected_root_bvh(folder, frames: int = 90):
+    """A walk written as Character Creator writes a take (``RL_BoneRoot`` on the floor, position channels only, with
+    the hips its one child 0.9 m up): Blender's importer puts the root's tail on the hips and connects them."""
+    from scenes import walk_bvh
+
+    head, motion = walk_bvh(folder, frames=frames).read_text().split("MOTION")
+    lines = head.splitlines()
+    at = next(i for i, line in enumerate(lines) if line.startswith("ROOT"))
+    offset = np.array(lines[at + 2].split()[1:], float) + [0.0, 0.9, 0.0]
+    lines[at:at + 4] = ["ROOT RL_BoneRoot", "{", "  OFFSET 0.0 0.0 0.0", "  CHANNELS 3 Xposition Yposition Zposition",
+                        "  JOINT " + lines[at].split()[1], "  {", "  OFFSET {:.6f} {:.6f} {:.6f}".format(*offset),
+                        "  CHANNELS 3 " + " ".join(lines[at + 3].split()[5:])]
+    lines.insert(len(lines), "}")
+    header, values = motion.strip().split("\n", 2)[:2], motion.strip().split("\n", 2)[2].splitlines()
+    rows = [np.array(v.split(), float) for v in values]
+    out = [" ".join(f"{x:.6f}" for x in np.r_[r[:3] - [0.0, 0.9, 0.0], r[3:]]) for r in rows]
+    path = folder / "rooted.bvh"
+    path.write_text("\n".join(lines) + "\nMOTION\n" + "\n".join(header + out) + "\n")
+    return path
+
+
+@pytest.mark.parametrize("operation", ["extend", "denoise", "fill_gap"])
+def test_hips_connected_to_a_root_bone_play_where_the_model_put_them(addon, model_calls, tmp_path, operation):
+    """A take whose root is a bone on the floor with the hips its one child (Character Creator's and iClone's BVH)
+    imports with the hips connected to the root, where Blender leaves the hips' location out: Extend played a real
+    take of that kind up to 4 cm from the model's (the root carried smoothly under the body, the hips' sway and bob
+    lost with it). The root now takes the hips' place, and every joint plays where the model put it."""
+    from scenes import import_bvh
+
+    obj = import_bvh(connected_root_bvh(tmp_path), update_scene_fps=True, update_scene_duration=True)
+    assert obj.data.bones["Hips"].use_connect and obj.data.bones["Hips"].parent.name == "RL_BoneRoot"
+    last = int(action_of(obj).frame_range[1])
+    if operation == "extend":
+        assert bpy.ops.strnn.extend_clip(frames=40) == {"FINISHED"}
+        frames, made = np.arange(last + 1, last + 41), model_calls.extended()
+    elif operation == "denoise":
+        assert bpy.ops.strnn.denoise_action() == {"FINISHED"}
+        frames, made = np.arange(1, last + 1), model_calls.denoised()
+    else:
+        assert bpy.ops.strnn.inbetween(use_range=True, frame_start=41, frame_end=60, foot_lock=False) == {"FINISHED"}
+        frames, made = np.arange(41, 61), model_calls.blender(model_calls.inbetween[-1]["out"])
+    err = np.linalg.norm(evaluated_joints(addon, obj, frames) - made, axis=-1)
+    assert err.max() < 0.005, (err.max(), np.unravel_index(err.argmax(), err.shape))
+    keyed = {fc.data_path for fc in fcurves_of(obj) if fc.data_path.endswith("location")}
+    assert 'pose.bones["RL_BoneRoot"].location' in keyed and 'pose.bones["Hips"].location' not in keyed

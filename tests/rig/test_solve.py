@@ -164,6 +164,36 @@ def test_hips_at_the_tail_of_a_bone_pointing_down_from_the_waist_are_solved_exac
     assert np.allclose(loc2[:, 0], loc[:, 0]) and np.allclose(rot2[:, 0], rot[:, 0])  # the same pose, not another
 
 
+def test_hips_connected_to_a_root_bone_are_placed_by_moving_the_root(rig_and_motion):
+    """A BVH whose root is a bone on the floor with the hips its only child (Character Creator's ``RL_BoneRoot``)
+    imports with the hips bone connected to it, and Blender leaves a connected bone's location out: the hips stayed
+    on the root's tail, so the whole body played up to 4 cm from the model's. The solve puts the hips' place on the
+    root (turned and tilted in its rest and in the held pose) and leaves the hips bone's location at zero."""
+    rig, anchors, loc, rot = rig_and_motion
+    mapping = {j: (rig.names[b], bool(t)) for j, b, t in zip(JOINTS, anchors.bone, anchors.tail)}
+    hips = rig.names.index(mapping["hips"][0])
+    floor = np.eye(4)
+    floor[:3, :3] = rotvec_to_matrix(np.array([0.2, 0.7, 0.0]))
+    floor[:3, 3] = rig.rest[hips, :3, 3] * [1.0, 0.0, 1.0]  # on the floor under the hips
+    names = ["Root"] + rig.names
+    parents = np.r_[-1, np.where(rig.parents < 0, 0, rig.parents + 1)]
+    connected = np.arange(len(names)) == hips + 1  # the hips bone, on the root's tail
+    rooted = Rig(names, parents, np.concatenate([floor[None], rig.rest]), np.r_[0.5, rig.lengths], connected)
+    targets = anchor_positions(rig, anchors, fk(rig, loc, rot))
+    n = len(targets)
+    held_loc = np.concatenate([np.zeros((n, 1, 3)), np.repeat(loc[:1], n, 0)], 1)
+    held_rot = np.concatenate([np.repeat(rotvec_to_matrix(np.array([0.0, 0.4, 0.1]))[None, None], n, 0),
+                               np.repeat(rot[:1], n, 0)], 1)
+    on_root = Anchors.from_map(rooted, mapping)
+    loc2, rot2 = solve(rooted, on_root, targets, held_loc, held_rot)
+    got = anchor_positions(rooted, on_root, fk(rooted, loc2, rot2))
+    assert np.linalg.norm(got - targets, axis=-1).max() < 1e-6
+    assert np.abs(loc2[:, hips + 1]).max() == 0.0  # nothing keyed where Blender would leave it out
+    assert np.allclose(rot2[:, 0], held_rot[:, 0])  # the root moves, and keeps its turn
+    unconnected = Rig(names, parents, rooted.rest, rooted.lengths)
+    assert np.abs(solve(unconnected, on_root, targets, held_loc, held_rot)[0][:, 0]).max() == 0.0  # else the hips
+
+
 def test_rest_matrices_that_are_rotations_only_to_rounding_solve_without_growing_down_a_chain(rig_and_motion):
     """Blender gives a bone pointing straight down (a leg, an MMD model's lower body) a rest matrix that is a rotation
     only to about 1e-4. Each bone's turn is read from its parent's, so such an error used to grow about three times a
