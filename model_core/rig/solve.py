@@ -40,6 +40,7 @@ _PLANE_TWIST = {"l_upleg": ("l_knee", "l_foot"), "r_upleg": ("r_knee", "r_foot")
                 "l_arm": ("l_elbow", "l_wrist"), "r_arm": ("r_elbow", "r_wrist")}
 # Plane normals shorter than this (sine of the bend angle) give no twist; full twist above _TWIST_FULL.
 _TWIST_NONE, _TWIST_FULL = 0.05, 0.25
+_REACH_GIVE = 2.0  # a knee or elbow moves at most this many times as far as its limb's end would miss
 _IN_LINE = 1e-3  # the sine (and, for a head at the joint, the share of the way) under which a bone is in line
 CHILDREN = {j: tuple(c for c in JOINTS if PARENT_NAMES[c] == j) for j in JOINTS}
 
@@ -227,6 +228,39 @@ def _twist(g: np.ndarray, axis: np.ndarray, n_local: np.ndarray, n_target: np.nd
     return rotvec_to_matrix(axis * (angle * weight)[:, None]) @ g
 
 
+def _reaching(targets: np.ndarray, joint: str, head: np.ndarray) -> np.ndarray:
+    """``targets`` with the middle joint of the limb from ``joint`` (a knee, an elbow; :data:`_PLANE_TWIST`) moved where
+    the limb, from its root joint at ``head`` ``[F, 3]`` (where the rig has it, which a pelvis or chest shaped unlike
+    the motion's puts off its target), reaches its end joint on the targets' own lengths (two-bone IK, bending the
+    way the targets bend). Aimed at the middle joint's own target from elsewhere, the limb missed its end by about as
+    far as its root was off (a foot 0.6 cm from the motion's on a CMU take's pelvis). A nearly straight limb would
+    bend far to take up a little (a knee 4.7 cm for a leg 0.5 cm shorter), so the middle joint moves at most
+    :data:`_REACH_GIVE` times as far as the end would have missed; a limb the targets hold straight, or that
+    cannot reach, keeps its targets."""
+    mid, end = (JOINT_INDEX[n] for n in _PLANE_TWIST[joint])
+    root = JOINT_INDEX[joint]
+    l1 = np.linalg.norm(targets[:, mid] - targets[:, root], axis=-1)
+    l2 = np.linalg.norm(targets[:, end] - targets[:, mid], axis=-1)
+    to_end = targets[:, end] - head
+    d = np.linalg.norm(to_end, axis=-1)
+    axis = to_end / np.maximum(d, 1e-12)[:, None]
+    bend = targets[:, mid] - head
+    bend = bend - axis * np.sum(bend * axis, -1, keepdims=True)
+    side = np.linalg.norm(bend, axis=-1)
+    along = (l1 ** 2 - l2 ** 2 + d ** 2) / (2.0 * np.maximum(d, 1e-12))
+    height = np.sqrt(np.maximum(l1 ** 2 - along ** 2, 0.0))
+    reached = head + axis * along[:, None] + bend / np.maximum(side, 1e-12)[:, None] * height[:, None]
+    # where the end lands aimed at the middle joint's target, and how far the middle joint would move
+    knee = head + unit(targets[:, mid] - head) * l1[:, None]
+    miss = np.linalg.norm(knee + unit(targets[:, end] - knee) * l2[:, None] - targets[:, end], axis=-1)
+    move = np.linalg.norm(reached - targets[:, mid], axis=-1)
+    share = np.minimum(1.0, _REACH_GIVE * miss / np.maximum(move, 1e-12))
+    ok = (side > _IN_LINE * l1) & (d < l1 + l2) & (d > np.abs(l1 - l2))
+    out = targets.copy()
+    out[ok, mid] += share[ok, None] * (reached - targets[:, mid])[ok]
+    return out
+
+
 def _plane(p0: np.ndarray, p1: np.ndarray, p2: np.ndarray) -> np.ndarray:
     """Normal of the bend at ``p1`` ``[F, 3]``, length = sine of the bend angle."""
     return np.cross(unit(p1 - p0), unit(p2 - p1))
@@ -393,7 +427,8 @@ def solve(rig: Rig, anchors: Anchors, targets: np.ndarray, ref_loc: np.ndarray,
         head = t_base + np.einsum("fij,fj->fi", r_base, loc[:, b])
         base_rot = r_base @ rot[:, b]
         if b in joint_at:
-            g = _aim(rig, anchors, joint_at[b], ref, head, base_rot, targets)
+            aimed = _reaching(targets, joint_at[b], head) if joint_at[b] in _PLANE_TWIST else targets
+            g = _aim(rig, anchors, joint_at[b], ref, head, base_rot, aimed)
             rot[:, b] = np.swapaxes(r_base, -1, -2) @ g
             if b == hips and anchors.tail[JOINT_INDEX["hips"]]:  # the hips at the tail: the head goes where that
                 head = targets[:, JOINT_INDEX["hips"]] - g[:, :, 1] * rig.lengths[b]  # puts the tail on its target

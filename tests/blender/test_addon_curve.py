@@ -11,6 +11,7 @@ import pytest
 from scenes import action_of, addon_module, evaluated_joints, import_bvh, key_snapshot, mixamo_bones, same_keys
 
 from model_core.io.bvh_export import write_bvh
+from model_core.motion.conventions import JOINT_INDEX
 from model_core.motion.synthetic import walking_skeleton
 from model_core.ops.follow import LEAD_IN
 
@@ -426,8 +427,10 @@ def test_a_walk_that_ends_on_a_repeated_frame_walks_on_along_the_curve_from_the_
 
 @pytest.mark.parametrize("fps", [24, 30, 60])
 def test_the_walk_along_the_curve_plays_where_the_model_put_it_at_any_scene_rate(model_calls, addon, fps):
-    """A walk walked on along a curve for 60 frames (Foot Lock off) at 24, 30 and 60 fps: Blender plays every joint
-    within 1.5 cm of where the model put it (the pelvis, which the walk carries as the clip's, within 1.3 cm)."""
+    """A walk walked on along a curve for 60 frames (Foot Lock off) at 24, 30 and 60 fps: Blender plays the feet and
+    toes within 0.5 cm of where the model put them (0.4 at worst; 0.7 before the rig's knees bent to reach them) and
+    every other joint within 1.75 cm (the pelvis, which the walk carries as the clip's, within 1.3 cm, and the knees,
+    which take up the difference, 1.5)."""
     from scenes import mixamo_walk, winding_path
 
     obj = mixamo_walk(90)
@@ -436,4 +439,5 @@ def test_the_walk_along_the_curve_plays_where_the_model_put_it_at_any_scene_rate
     assert bpy.ops.strnn.follow_curve(curve=path.name, frames=60, foot_lock=False) == {"FINISHED"}
     made = model_calls.blender(model_calls.follow[-1]["out"])
     err = np.linalg.norm(evaluated_joints(addon, obj, np.arange(91, 151)) - made, axis=-1)
-    assert err.max() < 0.015, err.max()
+    feet = [JOINT_INDEX[j] for j in ("l_foot", "l_toe", "r_foot", "r_toe")]
+    assert err[:, feet].max() < 0.005 and err.max() < 0.0175, err.max(0).round(4)
