@@ -228,19 +228,20 @@ def _twist(g: np.ndarray, axis: np.ndarray, n_local: np.ndarray, n_target: np.nd
     return rotvec_to_matrix(axis * (angle * weight)[:, None]) @ g
 
 
-def _reaching(targets: np.ndarray, joint: str, head: np.ndarray) -> np.ndarray:
+def _reaching(targets: np.ndarray, joint: str, head: np.ndarray, ref_anchor: np.ndarray) -> np.ndarray:
     """``targets`` with the middle joint of the limb from ``joint`` (a knee, an elbow; :data:`_PLANE_TWIST`) moved where
-    the limb, from its root joint at ``head`` ``[F, 3]`` (where the rig has it, which a pelvis or chest shaped unlike
-    the motion's puts off its target), reaches its end joint on the targets' own lengths (two-bone IK, bending the
-    way the targets bend). Aimed at the middle joint's own target from elsewhere, the limb missed its end by about as
-    far as its root was off (a foot 0.6 cm from the motion's on a CMU take's pelvis). A nearly straight limb would
-    bend far to take up a little (a knee 4.7 cm for a leg 0.5 cm shorter), so the middle joint moves at most
-    :data:`_REACH_GIVE` times as far as the end would have missed; a limb the targets hold straight, or that
-    cannot reach, keeps its targets."""
+    the limb, from its root joint at ``head`` ``[F, 3]`` (where the rig has it), reaches its end joint on the rig's own
+    lengths (its reference pose's joints ``ref_anchor`` ``[F, 21, 3]``): two-bone IK, bending the way the targets bend.
+    Aimed at the middle joint's own target, the limb missed its end by about as far as its root was off (a pelvis or
+    chest shaped unlike the motion's: a foot 0.6 cm from the motion's on a CMU take's pelvis) or as its lengths
+    differ from the rig's (Denoise moving a knee and not the foot: a clean take's foot played 1 cm off). A nearly
+    straight limb would bend far to take up a little (a knee 4.7 cm for a leg 0.5 cm shorter), so the middle joint
+    moves at most :data:`_REACH_GIVE` times as far as the end would have missed; a limb the targets hold straight, or
+    that cannot reach, keeps its targets."""
     mid, end = (JOINT_INDEX[n] for n in _PLANE_TWIST[joint])
     root = JOINT_INDEX[joint]
-    l1 = np.linalg.norm(targets[:, mid] - targets[:, root], axis=-1)
-    l2 = np.linalg.norm(targets[:, end] - targets[:, mid], axis=-1)
+    l1 = np.linalg.norm(ref_anchor[:, mid] - ref_anchor[:, root], axis=-1)
+    l2 = np.linalg.norm(ref_anchor[:, end] - ref_anchor[:, mid], axis=-1)
     to_end = targets[:, end] - head
     d = np.linalg.norm(to_end, axis=-1)
     axis = to_end / np.maximum(d, 1e-12)[:, None]
@@ -427,7 +428,7 @@ def solve(rig: Rig, anchors: Anchors, targets: np.ndarray, ref_loc: np.ndarray,
         head = t_base + np.einsum("fij,fj->fi", r_base, loc[:, b])
         base_rot = r_base @ rot[:, b]
         if b in joint_at:
-            aimed = _reaching(targets, joint_at[b], head) if joint_at[b] in _PLANE_TWIST else targets
+            aimed = _reaching(targets, joint_at[b], head, ref[1]) if joint_at[b] in _PLANE_TWIST else targets
             g = _aim(rig, anchors, joint_at[b], ref, head, base_rot, aimed)
             rot[:, b] = np.swapaxes(r_base, -1, -2) @ g
             if b == hips and anchors.tail[JOINT_INDEX["hips"]]:  # the hips at the tail: the head goes where that

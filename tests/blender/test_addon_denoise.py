@@ -101,7 +101,9 @@ def test_range_and_unmapped_bones(model_calls, addon):
     assert np.linalg.norm(change, axis=-1).mean() > 0.005  # the denoiser changes the jittery walk
     # the share of the denoiser's change each frame of the range plays
     share = np.sum((now - was) * change, axis=(1, 2)) / np.sum(change * change, axis=(1, 2))
-    assert np.all(np.abs(share[6:14] - 1.0) < 0.05), share  # the middle: what the denoiser made
+    # the middle: what the denoiser made (within 8 %: the knees and elbows bend on the rig's bones to put the feet and
+    # hands where the denoiser did, solve._reaching)
+    assert np.all(np.abs(share[6:14] - 1.0) < 0.08), share
     assert np.all(np.diff(share[:6]) > 0.05) and np.all(np.diff(share[14:]) < -0.05), share  # faded in and out
     assert share[0] < 0.5 and share[-1] < 0.5, share
     old_keys, new_keys = key_snapshot(obj, old), key_snapshot(obj, new)
