@@ -170,9 +170,10 @@ def rig_of(obj) -> tuple[Rig, Anchors, dict, ControlSet | None]:
         mover = rig.names[located(rig, anchors)]  # the bone keyed with the hips' place
         check_not_driven(obj, written + ([mover] if mover != hips else []), mover)
         # keys set by solving alone would land elsewhere (bones that do not simply follow their parents), or blend
-        # with NLA strips under the action: bake them, each written bone its own control
+        # with NLA strips under the action: bake them, each written bone its own control, the hips moved by theirs
+        # where they can move (connected to a root, the root carries them: _hips_on_root)
         if rig_io.own_inheritance(obj, written) or layered:
-            found = ControlSet(OWN_BONES, [Control(name, name, name == hips) for name in written])
+            found = ControlSet(OWN_BONES, [Control(name, name, name == hips == mover) for name in written])
             anchors, bone_map, rig = mapping.resolve(obj, rig, joint_skeleton=True)
     return rig, anchors, bone_map, found
 
@@ -603,8 +604,9 @@ def write_controls(context, clip: Clip, channels: anim.Channels, frames: np.ndar
     control_set = clip.controls
     if root is not None:  # the root control drives itself, to where it is carried; it goes first
         carrier = Control(root[0], root[0], True)
-        chosen, targets[root[0]] = [carrier] + chosen, np.asarray(root[1], np.float64)
+        chosen, targets[root[0]] = [carrier] + chosen, np.array(root[1], np.float64)
         control_set = replace_set(control_set, controls=[carrier] + list(control_set.controls))
+        _hips_on_root(clip, targets, root[0])
     # where NLA strips show through, a channel the action lacks takes the pose as played on its other frames: read
     # before the bake turns any bone, and only if such a channel will be made
     lacking = clip.layered and any(
@@ -627,6 +629,19 @@ def write_controls(context, clip: Clip, channels: anim.Channels, frames: np.ndar
     edges = np.array([f for f in (frames[0] - 1, frames[-1] + 1) if clip.first <= f <= clip.last])
     controls.key_switches(channels, clip.obj, clip.controls, frames, edges)
     return baked.error
+
+
+def _hips_on_root(clip: Clip, targets: dict, root: str) -> None:
+    """Where the hips bone is connected to the ``root`` bone (a Character Creator take baked by controls, each bone
+    its own), the root's target moved by as far as the hips would miss theirs: Blender leaves a connected bone's
+    location out, so its head goes where the root puts it (:func:`located` for a plain rig)."""
+    hips = clip.rig.names[int(clip.anchors.bone[JOINT_INDEX["hips"]])]
+    bone = clip.obj.data.bones.get(hips)
+    if bone is None or not bone.use_connect or bone.parent is None or bone.parent.name != root or hips not in targets:
+        return
+    rest = np.linalg.inv(np.array(bone.parent.matrix_local)) @ np.array(bone.matrix_local)
+    head = targets[root] @ rest[:, 3]  # [F, 4]: where the hips' head goes with the root at its target
+    targets[root][:, :3, 3] += targets[hips][:, :3, 3] - head[:, :3]
 
 
 def _ends_on_joints(clip: Clip, chosen: list, index: dict[str, int], pose: np.ndarray, targets: dict,
