@@ -16,7 +16,7 @@ from __future__ import annotations
 import re
 
 from ..motion.conventions import JOINTS, PARENT_NAMES
-from .rigs import RIG_FAMILIES, normalise_name
+from .rigs import RIG_FAMILIES, normalise_name, shared_prefix, without_prefix
 from .solve import placed
 
 Mapping = dict[str, tuple[str, bool]]
@@ -28,8 +28,9 @@ _WORDS: dict[str, tuple[str, ...]] = {
     "upleg": ("upleg", "upperleg", "thigh", "legupper", "thighbend", "hip"),
     "knee": ("leg", "lowerleg", "shin", "calf", "knee", "leglower"),
     "foot": ("foot", "ankle"), "toe": ("toebase", "toe", "toes", "ball"),
-    "arm": ("arm", "upperarm", "uparm", "armupper", "shldr", "shldrbend", "shoulder"),
-    "elbow": ("forearm", "lowerarm", "elbow", "armlower", "forearmbend"), "wrist": ("hand", "wrist", "fist", "palm"),
+    "arm": ("arm", "upperarm", "uparm", "uarm", "armupper", "shldr", "shldrbend", "shoulder"),
+    "elbow": ("forearm", "lowerarm", "elbow", "armlower", "forearmbend", "farm"),
+    "wrist": ("hand", "wrist", "fist", "palm"),
     "fingertip": ("handmiddle4", "middle4", "handmiddle3end", "middle3", "fmiddle03", "middlefinger3"),
 }
 _SUFFIX = re.compile(r"^(?P<base>.+?)[._\-\s](?P<side>l|r|left|right)(?:[._]\d+)?$")
@@ -37,7 +38,9 @@ _PREFIX = re.compile(r"^(?P<side>left|right|l|r)[._\-\s]?(?P<base>.+)$")
 _INFIX = re.compile(r"^(?P<pre>.+?)[._\-\s](?P<side>l|r|left|right)[._\-\s](?P<base>.+)$")
 # A centre marker: VRoid's ``J_Bip_C_Neck``, Auto-Rig Pro's ``neck.x``, AdvancedSkeleton's (Maya) ``Neck_M``.
 _CENTRE = re.compile(r"^(?:.+?[._\-\s]c[._\-\s](?P<base>.+)|(?P<suffixed>.+?)(?:[._]x|_m))$")
-_CAMEL = re.compile(r"^(?:[^:|]*[:|])?(?P<side>[lrLR])(?=[A-Z][a-z])(?P<base>.+)$")
+# A side letter before a capital: ``lThigh``, ``LShoulder``, and OptiTrack Motive's ``LUArm`` / ``LFArm`` (upper and
+# fore arm, the word after the letter itself abbreviated).
+_CAMEL = re.compile(r"^(?:[^:|]*[:|])?(?P<side>[lrLR])(?=[A-Z]{1,2}[a-z])(?P<base>.+)$")
 _LEAVES = ("fingertip", "toe")  # joints a hand's or foot's tail can stand in for
 _STRIP = re.compile(r"^(def|org|mch|bip\d*|b|cc_base)[._\-\s]+")
 
@@ -241,6 +244,19 @@ def auto_map(names: list[str], parents: list[int]) -> tuple[str, Mapping]:
     Returns (rig family or ``"generic"``, mapping); joints that could not be found are absent
     (see :func:`missing`). Finger tips and toes fall back to the hand's and foot's tail.
     """
+    family, mapping = _mapped(names, parents)
+    prefix = shared_prefix(names)
+    if prefix and missing(mapping):  # every bone named after its character or take (Character1_Hips): read without it
+        bare = without_prefix(names, prefix)
+        bare_family, bare_mapping = _mapped(bare, parents)
+        if len(missing(bare_mapping)) < len(missing(mapping)):
+            original = dict(zip(bare, names))
+            family, mapping = bare_family, {j: (original[b], tail) for j, (b, tail) in bare_mapping.items()}
+    return family, mapping
+
+
+def _mapped(names: list[str], parents: list[int]) -> tuple[str, Mapping]:
+    """:func:`auto_map` of the names as they are."""
     family, mapping = _family_map(names)
     if any(j not in mapping and not j.endswith(_LEAVES) for j in JOINTS):
         family = "generic"  # the family's names left body joints open

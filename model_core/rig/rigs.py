@@ -177,6 +177,37 @@ def normalise_name(name: str) -> str:
     return re.split(r"[:|]", name)[-1].lower()
 
 
+# A prefix every bone of a skeleton carries (MotionBuilder's ``Character1_Hips``, OptiTrack Motive's ``Skeleton_Hip``,
+# a character's name in a game export) ends in one of these; all but at most this share of the bones carry it (a root
+# or a reference bone added later may not).
+_PREFIX_ENDS = "_:|.- "
+_UNPREFIXED_SHARE = 0.1
+_PREFIX_MIN_BONES = 8
+
+
+def shared_prefix(names: list[str]) -> str:
+    """The longest prefix ending in a separator that all (but at most :data:`_UNPREFIXED_SHARE`) of ``names`` start
+    with, leaving something after it in each: ``"Character1_"`` of MotionBuilder's ``Character1_Hips``,
+    ``Character1_LeftUpLeg``, ...; ``""`` where there is none (or under :data:`_PREFIX_MIN_BONES` names)."""
+    if len(names) < _PREFIX_MIN_BONES:
+        return ""
+    need = len(names) - int(_UNPREFIXED_SHARE * len(names))
+    best = ""
+    for name in names:
+        for end, char in enumerate(name[:-1], 1):
+            candidate = name[:end]
+            if char not in _PREFIX_ENDS or len(candidate) <= len(best):
+                continue
+            if sum(n.startswith(candidate) and len(n) > end for n in names) >= need:
+                best = candidate
+    return best
+
+
+def without_prefix(names: list[str], prefix: str) -> list[str]:
+    """``names`` with ``prefix`` taken off those that carry it (:func:`shared_prefix`)."""
+    return [n[len(prefix):] if prefix and n.startswith(prefix) else n for n in names]
+
+
 def _match(family: dict[str, list[str]], names: list[str]) -> tuple[dict[str, str | None], list[str]]:
     lookup = {normalise_name(n): n for n in names}
     found: dict[str, str | None] = {}
@@ -222,6 +253,16 @@ def detect_rig(names: list[str], source: str = "skeleton", parents=None, offsets
             return generic
         if len(missing_generic) < len(missing):
             fam, missing = "generic", missing_generic
+    prefix = shared_prefix(names)
+    if prefix:  # every bone named after its character or take: read without that
+        try:
+            rig = detect_rig(without_prefix(names, prefix), source, parents, offsets)
+        except RigError:
+            pass
+        else:
+            original = dict(zip(without_prefix(names, prefix), names))
+            return RigMap(rig.family, {j: None if b is None else original[b] for j, b in rig.sources.items()},
+                          rig.between)
     raise RigError(
         f"{source}: unknown rig; closest family is {fam!r} but these canonical joints were not found: "
         f"{', '.join(missing) or 'none'}{hierarchy}. Known families: {', '.join(RIG_FAMILIES)}, and any "

@@ -188,6 +188,18 @@ def walk_and_its_error(addon, obj, folder):
     return source, frames, np.linalg.norm(evaluated_joints(addon, obj, frames) - want, axis=-1)
 
 
+def extended_walk(addon, obj, frames: int) -> tuple[float, float]:
+    """Extend Clip on ``obj``'s walk by ``frames``: (the joints' step at the seam against the largest of the 29
+    before it, their mean step after the seam against before it)."""
+    obj.select_set(True)
+    bpy.context.view_layer.objects.active = obj
+    last = int(action_of(obj).frame_range[1])
+    assert bpy.ops.strnn.extend_clip(frames=frames) == {"FINISHED"}
+    pos = evaluated_joints(addon, obj, np.arange(last - 29, last + frames + 1))
+    step = np.linalg.norm(np.diff(pos, axis=0), axis=-1).mean(-1)
+    return step[29] / step[:29].max(), step[30:].mean() / step[:29].mean()
+
+
 @pytest.mark.parametrize("kind", sorted(FEWER_TORSO_BONES))
 def test_motion_moved_onto_a_rig_with_fewer_torso_bones_follows_and_extends(addon, real_model, tmp_path, kind):
     """A walk moved onto such a rig puts its every joint where the source's motion on the rig's proportions
@@ -199,13 +211,7 @@ def test_motion_moved_onto_a_rig_with_fewer_torso_bones_follows_and_extends(addo
     print(kind, "transfer, mean cm per joint:", np.round(100 * err, 2))
     assert err[own].max() < 0.015 and err.max() < 0.02  # metres; a placed joint lies on its neighbours' line
     bpy.data.objects.remove(source)
-    obj.select_set(True)
-    bpy.context.view_layer.objects.active = obj
-    last = int(action_of(obj).frame_range[1])
-    assert bpy.ops.strnn.extend_clip(frames=90) == {"FINISHED"}
-    pos = evaluated_joints(addon, obj, np.arange(last - 29, last + 91))
-    step = np.linalg.norm(np.diff(pos, axis=0), axis=-1).mean(-1)
-    seam, speed = step[29] / step[:29].max(), step[30:].mean() / step[:29].mean()
+    seam, speed = extended_walk(addon, obj, 90)
     print(kind, f"extend: seam {seam:.2f}, speed {speed:.2f}")
     assert seam < 1.5 and 0.6 < speed < 1.6
 
@@ -289,3 +295,50 @@ def test_a_walk_moved_onto_limbs_of_bend_and_twist_bones_or_numbered_segments_la
     _, _, err = walk_and_its_error(addon, obj, tmp_path)
     print(kind, "transfer, mean cm per joint:", np.round(100 * err.mean(0), 2))
     assert err.mean(0).max() < 0.006 and err.max() < 0.01  # metres
+
+
+MOTIVE_NAMES = {"Hips": "Hip", "Spine": "Ab", "Spine2": "Chest", "Shoulder": "Shoulder", "Arm": "UArm",
+                "ForeArm": "FArm", "Hand": "Hand", "UpLeg": "Thigh", "Leg": "Shin", "Foot": "Foot", "ToeBase": "Toe"}
+
+
+def motive_bones(prefix: str = "Skeleton_") -> list[tuple]:
+    """(name, parent, head, tail) of an OptiTrack Motive skeleton as it exports one (the asset's name before every
+    bone): Hip, Ab, Chest, Neck, Head; the clavicle LShoulder, the upper and fore arm LUArm and LFArm; no fingers."""
+    fingers = [f"{side}HandMiddle{k}" for side in ("Left", "Right") for k in (1, 2, 3, 4)]
+    bones = fewer_torso_bones(("Spine1", *fingers))
+
+    def name(n):
+        if not n:
+            return n
+        side = next((s for s in ("Left", "Right") if n.startswith(s)), "")
+        return prefix + side[:1] + MOTIVE_NAMES.get(n[len(side):], n[len(side):])
+
+    return [(name(n), name(p), h, t) for n, p, h, t in bones]
+
+
+def motionbuilder_bones() -> list[tuple]:
+    """:func:`mixamo_bones` as MotionBuilder names a character's: ``Character1_`` before every bone."""
+    return [(n.replace("mixamorig:", "Character1_"), p and p.replace("mixamorig:", "Character1_"), h, t)
+            for n, p, h, t in mixamo_bones()]
+
+
+@pytest.mark.parametrize("kind", ["motive", "motionbuilder"])
+def test_a_rig_named_as_a_capture_system_names_it_maps_takes_a_walk_and_extends(addon, real_model, tmp_path, kind):
+    """An OptiTrack Motive skeleton (LUArm, LFArm after the clavicle LShoulder, every bone after its asset:
+    Skeleton_Hip) and a MotionBuilder character (Character1_Hips, ...) map fully, a walk moved onto them lands every
+    joint where the walk on their proportions has it, and Extend walks it on."""
+    obj = build_armature("Capture", motive_bones() if kind == "motive" else motionbuilder_bones())
+    found = auto_map(obj)
+    assert all(found.values()), found
+    want = ({"hips": "Skeleton_Hip", "spine": "Skeleton_Ab", "l_arm": "Skeleton_LUArm", "r_elbow": "Skeleton_RFArm",
+             "l_knee": "Skeleton_LShin"} if kind == "motive" else
+            {"hips": "Character1_Hips", "spine1": "Character1_Spine2", "l_arm": "Character1_LeftArm",
+             "r_fingertip": "Character1_RightHandMiddle4"})
+    assert {j: found[j] for j in want} == want
+    source, _, err = walk_and_its_error(addon, obj, tmp_path)
+    print(kind, "transfer, mean cm per joint:", np.round(100 * err.mean(0), 2))
+    assert err.mean(0).max() < 0.006 and err.max() < 0.015  # metres
+    bpy.data.objects.remove(source)
+    seam, speed = extended_walk(addon, obj, 60)
+    print(kind, f"extend: seam {seam:.2f}, speed {speed:.2f}")
+    assert seam < 1.5 and 0.6 < speed < 1.6

@@ -6,7 +6,7 @@ import pytest
 
 from model_core.motion.conventions import JOINTS
 from model_core.rig.bonemap import auto_map, missing, placed, split_side
-from model_core.rig.rigs import MMD_ENGLISH, MMD_SPELLINGS, mmd_name
+from model_core.rig.rigs import MMD_ENGLISH, MMD_SPELLINGS, mmd_name, shared_prefix
 
 
 @pytest.mark.parametrize("name, want", [
@@ -15,7 +15,8 @@ from model_core.rig.rigs import MMD_ENGLISH, MMD_SPELLINGS, mmd_name
     ("LHipJoint", ("l", "hipjoint")), ("upperarm_l", ("l", "upperarm")), ("L_Foot", ("l", "foot")),
     ("Root", (None, "root")), ("spine_01", (None, "spine01")), ("ball_r", ("r", "ball")),
     ("J_Bip_C_Neck", (None, "neck")), ("J_Bip_L_UpperLeg", ("l", "upperleg")), ("neck.x", (None, "neck")),
-    ("upperleg01.L", ("l", "upperleg01")),
+    ("upperleg01.L", ("l", "upperleg01")), ("LUArm", ("l", "uarm")), ("RFArm", ("r", "farm")),
+    ("LShoulder", ("l", "shoulder")), ("Reference", (None, "reference")),
 ])
 def test_split_side(name, want):
     assert split_side(name) == want
@@ -297,3 +298,51 @@ def test_an_mmd_model_without_a_second_upper_body_places_the_chest_and_keeps_the
     _, mapping = auto_map(names, parents)
     assert not missing(mapping) and "spine1" not in mapping  # placed between the spine and the neck
     assert mapping["hips"] == ("下半身", True) and mapping["spine"] == ("上半身", False)
+
+
+# OptiTrack Motive's skeleton: Hip, Ab, Chest; the clavicle LShoulder, the upper and fore arm LUArm and LFArm.
+MOTIVE = [("Hip", None), ("Ab", "Hip"), ("Chest", "Ab"), ("Neck", "Chest"), ("Head", "Neck")] + _sided(
+    [("{S}Shoulder", "Chest"), ("{S}UArm", "{S}Shoulder"), ("{S}FArm", "{S}UArm"), ("{S}Hand", "{S}FArm"),
+     ("{S}Thigh", "Hip"), ("{S}Shin", "{S}Thigh"), ("{S}Foot", "{S}Shin"), ("{S}Toe", "{S}Foot")], "LR")
+MIXAMO_PLAIN = [("Hips", None), ("Spine", "Hips"), ("Spine1", "Spine"), ("Spine2", "Spine1"), ("Neck", "Spine2"),
+                ("Head", "Neck")] + _sided(
+    [("{S}Shoulder", "Spine2"), ("{S}Arm", "{S}Shoulder"), ("{S}ForeArm", "{S}Arm"), ("{S}Hand", "{S}ForeArm"),
+     ("{S}UpLeg", "Hips"), ("{S}Leg", "{S}UpLeg"), ("{S}Foot", "{S}Leg"), ("{S}ToeBase", "{S}Foot")],
+    ("Left", "Right"))
+
+
+def _prefixed(tree, prefix, unprefixed=()):
+    return [(n if n in unprefixed else prefix + n, p and (p if p in unprefixed else prefix + p)) for n, p in tree]
+
+
+@pytest.mark.parametrize("tree, want", [
+    (MOTIVE, {"hips": "Hip", "spine": "Ab", "spine1": "Chest", "l_arm": "LUArm", "l_elbow": "LFArm",
+              "r_wrist": "RHand", "l_upleg": "LThigh", "r_knee": "RShin", "l_toe": "LFoot"}),
+    (_prefixed(MOTIVE, "Skeleton_"), {"hips": "Skeleton_Hip", "l_arm": "Skeleton_LUArm",
+                                      "r_elbow": "Skeleton_RFArm", "l_upleg": "Skeleton_LThigh"}),
+    (_prefixed(MIXAMO_PLAIN, "Character1_"), {"hips": "Character1_Hips", "spine1": "Character1_Spine2",
+                                              "l_arm": "Character1_LeftArm", "r_toe": "Character1_RightToeBase"}),
+    # a reference bone under the hips' chain added without the character's name
+    ([("Reference", None)] + _prefixed([(n, p or "Reference") for n, p in MIXAMO_PLAIN], "Character1_",
+                                       ("Reference",)),
+     {"hips": "Character1_Hips", "l_knee": "Character1_LeftLeg"}),
+], ids=["motive", "motive_asset_prefix", "motionbuilder_character_prefix", "prefix_and_a_bare_reference_bone"])
+def test_capture_system_names_and_a_character_prefix_map_fully(tree, want):
+    """OptiTrack Motive abbreviates its arm bones after the side letter (LUArm, LFArm) and hangs them from a
+    clavicle named LShoulder; MotionBuilder names every bone of a character after it (Character1_Hips), Motive after
+    its asset (Skeleton_Hip): the prefix all bones share is read past, the map keeps the bones' own names."""
+    _, mapping = auto_map(*_tree(tree))
+    assert not missing(mapping)
+    assert {j: mapping[j][0] for j in want} == want
+
+
+def test_the_prefix_every_bone_shares_is_found_and_no_other():
+    names = lambda tree: [n for n, _ in tree]
+    assert shared_prefix(names(_prefixed(MIXAMO_PLAIN, "Character1_"))) == "Character1_"
+    assert shared_prefix(names(_prefixed(MOTIVE, "Take 001:Skeleton_"))) == "Take 001:Skeleton_"
+    assert shared_prefix(["Reference"] + names(_prefixed(MIXAMO_PLAIN, "Character1_"))) == "Character1_"
+    assert shared_prefix(names(MIXAMO_PLAIN)) == ""  # LeftArm, LeftHand, ... share "Left" but no separator after it
+    assert shared_prefix(names(VROID)) == "J_Bip_"  # found, but VRoid maps as it is, so it is never read past
+    assert shared_prefix(["Character1_Hips", "Character1_Spine", "Character1_Head"]) == ""  # too few to tell
+    half = names(MIXAMO_PLAIN)[:10] + names(_prefixed(MIXAMO_PLAIN, "Character1_"))[10:]
+    assert shared_prefix(half) == ""
