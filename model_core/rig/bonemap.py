@@ -16,7 +16,7 @@ from __future__ import annotations
 import re
 
 from ..motion.conventions import JOINTS, PARENT_NAMES
-from .rigs import RIG_FAMILIES, normalise_name, shared_prefix, without_prefix
+from .rigs import RIG_FAMILIES, bare_names, normalise_name
 from .solve import placed
 
 Mapping = dict[str, tuple[str, bool]]
@@ -245,9 +245,9 @@ def auto_map(names: list[str], parents: list[int]) -> tuple[str, Mapping]:
     (see :func:`missing`). Finger tips and toes fall back to the hand's and foot's tail.
     """
     family, mapping = _mapped(names, parents)
-    prefix = shared_prefix(names)
-    if prefix and missing(mapping):  # every bone named after its character or take (Character1_Hips): read without it
-        bare = without_prefix(names, prefix)
+    bare = bare_names(names)
+    if missing(mapping) and bare != names and len(set(bare)) == len(bare):
+        # every bone named after its character or take (Character1_Hips), or Maya's Hips_jnt: read past that
         bare_family, bare_mapping = _mapped(bare, parents)
         if len(missing(bare_mapping)) < len(missing(mapping)):
             original = dict(zip(bare, names))

@@ -178,34 +178,62 @@ def normalise_name(name: str) -> str:
 
 
 # A prefix every bone of a skeleton carries (MotionBuilder's ``Character1_Hips``, OptiTrack Motive's ``Skeleton_Hip``,
-# a character's name in a game export) ends in one of these; all but at most this share of the bones carry it (a root
-# or a reference bone added later may not).
-_PREFIX_ENDS = "_:|.- "
+# a character's name in a game export) ends in one of these, a suffix (Maya's ``_jnt``, ``_JNT``, ``_bind``) starts
+# with one; all but at most this share of the bones carry it (a root or a reference bone added later may not).
+_AFFIX_EDGES = "_:|.- "
 _UNPREFIXED_SHARE = 0.1
 _PREFIX_MIN_BONES = 8
+
+
+def _shared(names: list[str], cuts) -> str:
+    """The longest of the affixes ``cuts(name)`` yields that all but :data:`_UNPREFIXED_SHARE` of ``names`` carry
+    with something left beside it, or ``""`` (also under :data:`_PREFIX_MIN_BONES` names)."""
+    if len(names) < _PREFIX_MIN_BONES:
+        return ""
+    need = len(names) - int(_UNPREFIXED_SHARE * len(names))
+    best = ""
+    for name in names:
+        for affix, carries in cuts(name):
+            if len(affix) > len(best) and sum(carries(n) for n in names) >= need:
+                best = affix
+    return best
 
 
 def shared_prefix(names: list[str]) -> str:
     """The longest prefix ending in a separator that all (but at most :data:`_UNPREFIXED_SHARE`) of ``names`` start
     with, leaving something after it in each: ``"Character1_"`` of MotionBuilder's ``Character1_Hips``,
     ``Character1_LeftUpLeg``, ...; ``""`` where there is none (or under :data:`_PREFIX_MIN_BONES` names)."""
-    if len(names) < _PREFIX_MIN_BONES:
-        return ""
-    need = len(names) - int(_UNPREFIXED_SHARE * len(names))
-    best = ""
-    for name in names:
-        for end, char in enumerate(name[:-1], 1):
-            candidate = name[:end]
-            if char not in _PREFIX_ENDS or len(candidate) <= len(best):
-                continue
-            if sum(n.startswith(candidate) and len(n) > end for n in names) >= need:
-                best = candidate
-    return best
+    def cuts(name):
+        for end in range(1, len(name)):
+            if name[end - 1] in _AFFIX_EDGES:
+                yield name[:end], lambda n, a=name[:end]: n.startswith(a) and len(n) > len(a)
+    return _shared(names, cuts)
 
 
-def without_prefix(names: list[str], prefix: str) -> list[str]:
-    """``names`` with ``prefix`` taken off those that carry it (:func:`shared_prefix`)."""
-    return [n[len(prefix):] if prefix and n.startswith(prefix) else n for n in names]
+def shared_suffix(names: list[str]) -> str:
+    """:func:`shared_prefix` at the other end: the longest suffix starting with a separator (Maya's ``_jnt`` of
+    ``Hips_jnt``, ``thigh_l_jnt``, ...)."""
+    def cuts(name):
+        for start in range(1, len(name)):
+            if name[start] in _AFFIX_EDGES:
+                yield name[start:], lambda n, a=name[start:]: n.endswith(a) and len(n) > len(a)
+    return _shared(names, cuts)
+
+
+def bare_names(names: list[str]) -> list[str]:
+    """``names`` without the prefix and the suffix they share (:func:`shared_prefix`, :func:`shared_suffix`), where
+    a bone carries them; ``names`` as they are where they share neither. A BVH End Site's name (its joint's with
+    ``_end``) is read as its joint's."""
+    given = set(names)
+    end = [n.endswith("_end") and n[:-4] in given for n in names]
+    own = [n for n, e in zip(names, end) if not e]
+    prefix, suffix = shared_prefix(own), shared_suffix(own)
+
+    def bare(n):
+        n = n[len(prefix):] if prefix and n.startswith(prefix) else n
+        return n[:-len(suffix)] if suffix and n.endswith(suffix) and len(n) > len(suffix) else n
+
+    return [bare(n[:-4]) + "_end" if e else bare(n) for n, e in zip(names, end)]
 
 
 def _match(family: dict[str, list[str]], names: list[str]) -> tuple[dict[str, str | None], list[str]]:
@@ -253,14 +281,14 @@ def detect_rig(names: list[str], source: str = "skeleton", parents=None, offsets
             return generic
         if len(missing_generic) < len(missing):
             fam, missing = "generic", missing_generic
-    prefix = shared_prefix(names)
-    if prefix:  # every bone named after its character or take: read without that
+    bare = bare_names(names)
+    if bare != names and len(set(bare)) == len(bare):  # every bone named after its character (or _jnt): read past it
         try:
-            rig = detect_rig(without_prefix(names, prefix), source, parents, offsets)
+            rig = detect_rig(bare, source, parents, offsets)
         except RigError:
             pass
         else:
-            original = dict(zip(without_prefix(names, prefix), names))
+            original = dict(zip(bare, names))
             return RigMap(rig.family, {j: None if b is None else original[b] for j, b in rig.sources.items()},
                           rig.between)
     raise RigError(

@@ -316,24 +316,28 @@ def motive_bones(prefix: str = "Skeleton_") -> list[tuple]:
     return [(name(n), name(p), h, t) for n, p, h, t in bones]
 
 
-def motionbuilder_bones() -> list[tuple]:
-    """:func:`mixamo_bones` as MotionBuilder names a character's: ``Character1_`` before every bone."""
-    return [(n.replace("mixamorig:", "Character1_"), p and p.replace("mixamorig:", "Character1_"), h, t)
-            for n, p, h, t in mixamo_bones()]
+def affixed_bones(prefix: str, suffix: str = "") -> list[tuple]:
+    """:func:`mixamo_bones` with ``prefix`` (MotionBuilder's ``Character1_``) and ``suffix`` (Maya's ``_jnt``) on
+    every bone's name in place of ``mixamorig:``."""
+    name = lambda n: n and prefix + n.split(":")[1] + suffix
+    return [(name(n), name(p), h, t) for n, p, h, t in mixamo_bones()]
 
 
-@pytest.mark.parametrize("kind", ["motive", "motionbuilder"])
+@pytest.mark.parametrize("kind", ["motive", "motionbuilder", "maya_jnt"])
 def test_a_rig_named_as_a_capture_system_names_it_maps_takes_a_walk_and_extends(addon, real_model, tmp_path, kind):
     """An OptiTrack Motive skeleton (LUArm, LFArm after the clavicle LShoulder, every bone after its asset:
-    Skeleton_Hip) and a MotionBuilder character (Character1_Hips, ...) map fully, a walk moved onto them lands every
-    joint where the walk on their proportions has it, and Extend walks it on."""
-    obj = build_armature("Capture", motive_bones() if kind == "motive" else motionbuilder_bones())
+    Skeleton_Hip), a MotionBuilder character (Character1_Hips, ...) and a Maya rig (Hips_jnt, ...) map fully, a walk
+    moved onto them lands every joint where the walk on their proportions has it, and Extend walks it on."""
+    bones = {"motive": motive_bones, "motionbuilder": lambda: affixed_bones("Character1_"),
+             "maya_jnt": lambda: affixed_bones("", "_jnt")}[kind]()
+    obj = build_armature("Capture", bones)
     found = auto_map(obj)
     assert all(found.values()), found
-    want = ({"hips": "Skeleton_Hip", "spine": "Skeleton_Ab", "l_arm": "Skeleton_LUArm", "r_elbow": "Skeleton_RFArm",
-             "l_knee": "Skeleton_LShin"} if kind == "motive" else
-            {"hips": "Character1_Hips", "spine1": "Character1_Spine2", "l_arm": "Character1_LeftArm",
-             "r_fingertip": "Character1_RightHandMiddle4"})
+    want = {"motive": {"hips": "Skeleton_Hip", "spine": "Skeleton_Ab", "l_arm": "Skeleton_LUArm",
+                       "r_elbow": "Skeleton_RFArm", "l_knee": "Skeleton_LShin"},
+            "motionbuilder": {"hips": "Character1_Hips", "spine1": "Character1_Spine2", "l_arm": "Character1_LeftArm",
+                              "r_fingertip": "Character1_RightHandMiddle4"},
+            "maya_jnt": {"hips": "Hips_jnt", "l_upleg": "LeftUpLeg_jnt", "r_wrist": "RightHand_jnt"}}[kind]
     assert {j: found[j] for j in want} == want
     source, _, err = walk_and_its_error(addon, obj, tmp_path)
     print(kind, "transfer, mean cm per joint:", np.round(100 * err.mean(0), 2))

@@ -6,7 +6,7 @@ import pytest
 
 from model_core.motion.conventions import JOINTS
 from model_core.rig.bonemap import auto_map, missing, placed, split_side
-from model_core.rig.rigs import MMD_ENGLISH, MMD_SPELLINGS, mmd_name, shared_prefix
+from model_core.rig.rigs import MMD_ENGLISH, MMD_SPELLINGS, bare_names, mmd_name, shared_prefix, shared_suffix
 
 
 @pytest.mark.parametrize("name, want", [
@@ -311,6 +311,14 @@ MIXAMO_PLAIN = [("Hips", None), ("Spine", "Hips"), ("Spine1", "Spine"), ("Spine2
     ("Left", "Right"))
 
 
+UNREAL_NAMES = [("pelvis", None), ("spine_01", "pelvis"), ("spine_02", "spine_01"), ("spine_03", "spine_02"),
+                ("neck_01", "spine_03"), ("head", "neck_01")] + [
+    (f"{bone}_{s}", parent.format(s=s)) for s in "lr" for bone, parent in (
+        ("clavicle", "spine_03"), ("upperarm", "clavicle_{s}"), ("lowerarm", "upperarm_{s}"),
+        ("hand", "lowerarm_{s}"), ("thigh", "pelvis"), ("calf", "thigh_{s}"), ("foot", "calf_{s}"),
+        ("ball", "foot_{s}"))]
+
+
 def _prefixed(tree, prefix, unprefixed=()):
     return [(n if n in unprefixed else prefix + n, p and (p if p in unprefixed else prefix + p)) for n, p in tree]
 
@@ -326,11 +334,17 @@ def _prefixed(tree, prefix, unprefixed=()):
     ([("Reference", None)] + _prefixed([(n, p or "Reference") for n, p in MIXAMO_PLAIN], "Character1_",
                                        ("Reference",)),
      {"hips": "Character1_Hips", "l_knee": "Character1_LeftLeg"}),
-], ids=["motive", "motive_asset_prefix", "motionbuilder_character_prefix", "prefix_and_a_bare_reference_bone"])
+    ([(n + "_jnt", p and p + "_jnt") for n, p in UNREAL_NAMES],
+     {"hips": "pelvis_jnt", "l_upleg": "thigh_l_jnt", "r_arm": "upperarm_r_jnt", "l_toe": "ball_l_jnt"}),
+    ([(f"rig:{n}_JNT", p and f"rig:{p}_JNT") for n, p in MIXAMO_PLAIN],
+     {"hips": "rig:Hips_JNT", "l_knee": "rig:LeftLeg_JNT"}),
+], ids=["motive", "motive_asset_prefix", "motionbuilder_character_prefix", "prefix_and_a_bare_reference_bone",
+        "maya_jnt_suffix", "namespace_and_suffix"])
 def test_capture_system_names_and_a_character_prefix_map_fully(tree, want):
     """OptiTrack Motive abbreviates its arm bones after the side letter (LUArm, LFArm) and hangs them from a
     clavicle named LShoulder; MotionBuilder names every bone of a character after it (Character1_Hips), Motive after
-    its asset (Skeleton_Hip): the prefix all bones share is read past, the map keeps the bones' own names."""
+    its asset (Skeleton_Hip), Maya rigs end each joint in _jnt or _JNT: the prefix and the suffix all bones share
+    are read past, the map keeps the bones' own names."""
     _, mapping = auto_map(*_tree(tree))
     assert not missing(mapping)
     assert {j: mapping[j][0] for j in want} == want
@@ -346,3 +360,7 @@ def test_the_prefix_every_bone_shares_is_found_and_no_other():
     assert shared_prefix(["Character1_Hips", "Character1_Spine", "Character1_Head"]) == ""  # too few to tell
     half = names(MIXAMO_PLAIN)[:10] + names(_prefixed(MIXAMO_PLAIN, "Character1_"))[10:]
     assert shared_prefix(half) == ""
+    assert shared_suffix([n + "_jnt" for n in names(UNREAL_NAMES)]) == "_jnt"  # not thigh_l_jnt's "_l_jnt"
+    assert shared_suffix(names(UNREAL_NAMES)) == ""
+    assert shared_suffix(["thigh.L", "shin.L", "foot.L", "thigh.R", "shin.R", "foot.R", "spine", "head"]) == ""
+    assert bare_names([f"rig:{n}_JNT" for n in names(MIXAMO_PLAIN)]) == names(MIXAMO_PLAIN)

@@ -124,20 +124,23 @@ def test_a_take_named_as_another_library_names_it_reads_as_the_same_motion(tmp_p
     assert np.linalg.norm(got - want, axis=-1).max() < (0.05 if naming == "smpl" else 1e-6)
 
 
-@pytest.mark.parametrize("naming, prefix", [(None, "Character1_"), ("motive", "Skeleton_"),
-                                            ("unreal", "Take 001:hero_")])
-def test_a_take_whose_joints_carry_a_characters_name_reads_as_the_same_motion(tmp_path, naming, prefix):
+@pytest.mark.parametrize("naming, prefix, suffix", [(None, "Character1_", ""), ("motive", "Skeleton_", ""),
+                                                    ("unreal", "Take 001:hero_", ""), ("unreal", "", "_jnt"),
+                                                    (None, "", "_JNT")])
+def test_a_take_whose_joints_carry_a_characters_name_reads_as_the_same_motion(tmp_path, naming, prefix, suffix):
     """MotionBuilder names each joint after its character (Character1_Hips), OptiTrack Motive after its asset
-    (Skeleton_Hip): the prefix all the joints share is read past, whatever naming follows it."""
+    (Skeleton_Hip), Maya rigs end them in _jnt: the prefix or suffix all the joints share is read past, whatever
+    naming it wraps."""
     take = write_bvh(tmp_path / "walk.bvh", walking_skeleton(30))
     named = _renamed(take, naming) if naming else take
     prefixed = tmp_path / "prefixed.bvh"
-    prefixed.write_text(re.sub(r"(ROOT|JOINT) (\S+)", lambda m: f"{m[1]} {prefix}{m[2]}", named.read_text()))
+    prefixed.write_text(re.sub(r"(ROOT|JOINT) (\S+)", lambda m: f"{m[1]} {prefix}{m[2]}{suffix}",
+                               named.read_text()))
     np.testing.assert_allclose(load_clip(prefixed), load_clip(take), atol=1e-6)
     if naming is None:  # a whole family's names behind the prefix are that family's, names alone
         names = re.findall(r"(?:ROOT|JOINT) (\S+)", prefixed.read_text())
         rig = detect_rig(names)
-        assert rig.family == "mixamo" and rig.sources["l_upleg"] == "Character1_LeftUpLeg"
+        assert rig.family == "mixamo" and rig.sources["l_upleg"] == f"{prefix}LeftUpLeg{suffix}"
 
 
 def test_a_real_take_named_as_lafan1_names_it_reads_as_the_same_motion(mocap_root, smallest_bvh, tmp_path):
