@@ -25,11 +25,11 @@ Mapping = dict[str, tuple[str, bool]]
 # Genesis 3 and 8 split limbs into Bend and Twist bones (lThighBend, lShldrBend): the joint is the Bend's head.
 _WORDS: dict[str, tuple[str, ...]] = {
     "hips": ("hips", "hip", "pelvis"), "head": ("head",), "neck": ("neck", "neck1", "neck01"),
-    "upleg": ("upleg", "upperleg", "thigh", "legupper", "thighbend", "hip"),
-    "knee": ("leg", "lowerleg", "shin", "calf", "knee", "leglower"),
+    "upleg": ("upleg", "upperleg", "thigh", "legupper", "thighbend", "thighstretch", "hip"),
+    "knee": ("leg", "lowerleg", "shin", "calf", "knee", "leglower", "legstretch"),
     "foot": ("foot", "ankle"), "toe": ("toebase", "toe", "toes", "ball"),
-    "arm": ("arm", "upperarm", "uparm", "uarm", "armupper", "shldr", "shldrbend", "shoulder"),
-    "elbow": ("forearm", "lowerarm", "elbow", "armlower", "forearmbend", "farm"),
+    "arm": ("arm", "upperarm", "uparm", "uarm", "armupper", "shldr", "shldrbend", "armstretch", "shoulder"),
+    "elbow": ("forearm", "lowerarm", "elbow", "armlower", "forearmbend", "farm", "forearmstretch"),
     "wrist": ("hand", "wrist", "fist", "palm"),
     "fingertip": ("handmiddle4", "middle4", "handmiddle3end", "middle3", "fmiddle03", "middlefinger3"),
 }

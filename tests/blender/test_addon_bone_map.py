@@ -299,11 +299,18 @@ def test_a_walk_moved_onto_limbs_of_bend_and_twist_bones_or_numbered_segments_la
 
 MOTIVE_NAMES = {"Hips": "Hip", "Spine": "Ab", "Spine2": "Chest", "Shoulder": "Shoulder", "Arm": "UArm",
                 "ForeArm": "FArm", "Hand": "Hand", "UpLeg": "Thigh", "Leg": "Shin", "Foot": "Foot", "ToeBase": "Toe"}
+# Auto-Rig Pro's exported skeleton (what its Export FBX writes, and a game rig made from it): the pelvis is root.x,
+# the limbs' deforming bones are the *_stretch ones.
+ARP_EXPORT_NAMES = {"Hips": "root.x", "Spine": "spine_01.x", "Spine2": "spine_03.x", "Neck": "neck.x", "Head": "head.x",
+                    "Shoulder": "shoulder.{s}", "Arm": "arm_stretch.{s}", "ForeArm": "forearm_stretch.{s}",
+                    "Hand": "hand.{s}", "UpLeg": "thigh_stretch.{s}", "Leg": "leg_stretch.{s}", "Foot": "foot.{s}",
+                    "ToeBase": "toes_01.{s}"}
 
 
-def motive_bones(prefix: str = "Skeleton_") -> list[tuple]:
-    """(name, parent, head, tail) of an OptiTrack Motive skeleton as it exports one (the asset's name before every
-    bone): Hip, Ab, Chest, Neck, Head; the clavicle LShoulder, the upper and fore arm LUArm and LFArm; no fingers."""
+def renamed_bones(names: dict, sides=("L", "R"), prefix: str = "") -> list[tuple]:
+    """(name, parent, head, tail) of :func:`mixamo_bones` with one spine bone fewer and no fingers, each bone named
+    as ``names`` says (``{s}``: the side, as ``sides`` spells it; otherwise the side before the name), ``prefix``
+    before every name."""
     fingers = [f"{side}HandMiddle{k}" for side in ("Left", "Right") for k in (1, 2, 3, 4)]
     bones = fewer_torso_bones(("Spine1", *fingers))
 
@@ -311,7 +318,9 @@ def motive_bones(prefix: str = "Skeleton_") -> list[tuple]:
         if not n:
             return n
         side = next((s for s in ("Left", "Right") if n.startswith(s)), "")
-        return prefix + side[:1] + MOTIVE_NAMES.get(n[len(side):], n[len(side):])
+        spelt = sides[("Left", "Right").index(side)] if side else ""
+        word = names.get(n[len(side):], n[len(side):])
+        return prefix + (word.format(s=spelt.lower()) if "{s}" in word else spelt + word)
 
     return [(name(n), name(p), h, t) for n, p, h, t in bones]
 
@@ -323,12 +332,15 @@ def affixed_bones(prefix: str, suffix: str = "") -> list[tuple]:
     return [(name(n), name(p), h, t) for n, p, h, t in mixamo_bones()]
 
 
-@pytest.mark.parametrize("kind", ["motive", "motionbuilder", "maya_jnt"])
+@pytest.mark.parametrize("kind", ["motive", "arp_export", "motionbuilder", "maya_jnt"])
 def test_a_rig_named_as_a_capture_system_names_it_maps_takes_a_walk_and_extends(addon, real_model, tmp_path, kind):
     """An OptiTrack Motive skeleton (LUArm, LFArm after the clavicle LShoulder, every bone after its asset:
-    Skeleton_Hip), a MotionBuilder character (Character1_Hips, ...) and a Maya rig (Hips_jnt, ...) map fully, a walk
-    moved onto them lands every joint where the walk on their proportions has it, and Extend walks it on."""
-    bones = {"motive": motive_bones, "motionbuilder": lambda: affixed_bones("Character1_"),
+    Skeleton_Hip), Auto-Rig Pro's exported skeleton (root.x, thigh_stretch.l), a MotionBuilder character
+    (Character1_Hips, ...) and a Maya rig (Hips_jnt, ...) map fully, a walk moved onto them lands every joint where
+    the walk on their proportions has it, and Extend walks it on."""
+    bones = {"motive": lambda: renamed_bones(MOTIVE_NAMES, prefix="Skeleton_"),
+             "arp_export": lambda: renamed_bones(ARP_EXPORT_NAMES),
+             "motionbuilder": lambda: affixed_bones("Character1_"),
              "maya_jnt": lambda: affixed_bones("", "_jnt")}[kind]()
     obj = build_armature("Capture", bones)
     found = auto_map(obj)
@@ -337,7 +349,9 @@ def test_a_rig_named_as_a_capture_system_names_it_maps_takes_a_walk_and_extends(
                        "r_elbow": "Skeleton_RFArm", "l_knee": "Skeleton_LShin"},
             "motionbuilder": {"hips": "Character1_Hips", "spine1": "Character1_Spine2", "l_arm": "Character1_LeftArm",
                               "r_fingertip": "Character1_RightHandMiddle4"},
-            "maya_jnt": {"hips": "Hips_jnt", "l_upleg": "LeftUpLeg_jnt", "r_wrist": "RightHand_jnt"}}[kind]
+            "maya_jnt": {"hips": "Hips_jnt", "l_upleg": "LeftUpLeg_jnt", "r_wrist": "RightHand_jnt"},
+            "arp_export": {"hips": "root.x", "spine": "spine_01.x", "l_upleg": "thigh_stretch.l",
+                           "r_knee": "leg_stretch.r", "l_arm": "arm_stretch.l", "r_elbow": "forearm_stretch.r"}}[kind]
     assert {j: found[j] for j in want} == want
     source, _, err = walk_and_its_error(addon, obj, tmp_path)
     print(kind, "transfer, mean cm per joint:", np.round(100 * err.mean(0), 2))

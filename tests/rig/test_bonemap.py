@@ -319,6 +319,29 @@ UNREAL_NAMES = [("pelvis", None), ("spine_01", "pelvis"), ("spine_02", "spine_01
         ("ball", "foot_{s}"))]
 
 
+# Auto-Rig Pro's exported skeleton: the pelvis root.x, the limbs' deforming *_stretch bones beside their *_twist ones.
+ARP_EXPORT = [("root.x", None), ("spine_01.x", "root.x"), ("spine_02.x", "spine_01.x"), ("spine_03.x", "spine_02.x"),
+              ("neck.x", "spine_03.x"), ("head.x", "neck.x")] + [
+    (bone.format(s=s), parent and parent.format(s=s)) for s in "lr" for bone, parent in (
+        ("shoulder.{s}", "spine_03.x"), ("arm_stretch.{s}", "shoulder.{s}"), ("arm_twist.{s}", "shoulder.{s}"),
+        ("forearm_stretch.{s}", "arm_stretch.{s}"), ("forearm_twist.{s}", "forearm_stretch.{s}"),
+        ("hand.{s}", "forearm_stretch.{s}"), ("thigh_stretch.{s}", "root.x"), ("thigh_twist.{s}", "root.x"),
+        ("leg_stretch.{s}", "thigh_stretch.{s}"), ("leg_twist.{s}", "thigh_stretch.{s}"),
+        ("foot.{s}", "leg_stretch.{s}"), ("toes_01.{s}", "foot.{s}"))]
+# Unreal's Manny: twist bones beside each limb bone, IK bones under the root, fingers from metacarpals.
+UE5_MANNY = [("root", None), ("pelvis", "root"), ("spine_01", "pelvis"), ("spine_02", "spine_01"),
+             ("spine_03", "spine_02"), ("spine_04", "spine_03"), ("spine_05", "spine_04"), ("neck_01", "spine_05"),
+             ("neck_02", "neck_01"), ("head", "neck_02"), ("ik_foot_root", "root"), ("ik_foot_l", "ik_foot_root"),
+             ("ik_foot_r", "ik_foot_root"), ("ik_hand_root", "root"), ("ik_hand_gun", "ik_hand_root"),
+             ("ik_hand_l", "ik_hand_gun"), ("ik_hand_r", "ik_hand_gun")] + [
+    (bone.format(s=s), parent.format(s=s)) for s in "lr" for bone, parent in (
+        ("clavicle_{s}", "spine_05"), ("upperarm_{s}", "clavicle_{s}"), ("upperarm_twist_01_{s}", "upperarm_{s}"),
+        ("lowerarm_{s}", "upperarm_{s}"), ("lowerarm_twist_01_{s}", "lowerarm_{s}"), ("hand_{s}", "lowerarm_{s}"),
+        ("middle_metacarpal_{s}", "hand_{s}"), ("middle_01_{s}", "middle_metacarpal_{s}"),
+        ("thigh_{s}", "pelvis"), ("thigh_twist_01_{s}", "thigh_{s}"), ("calf_{s}", "thigh_{s}"),
+        ("calf_twist_01_{s}", "calf_{s}"), ("foot_{s}", "calf_{s}"), ("ball_{s}", "foot_{s}"))]
+
+
 def _prefixed(tree, prefix, unprefixed=()):
     return [(n if n in unprefixed else prefix + n, p and (p if p in unprefixed else prefix + p)) for n, p in tree]
 
@@ -338,13 +361,19 @@ def _prefixed(tree, prefix, unprefixed=()):
      {"hips": "pelvis_jnt", "l_upleg": "thigh_l_jnt", "r_arm": "upperarm_r_jnt", "l_toe": "ball_l_jnt"}),
     ([(f"rig:{n}_JNT", p and f"rig:{p}_JNT") for n, p in MIXAMO_PLAIN],
      {"hips": "rig:Hips_JNT", "l_knee": "rig:LeftLeg_JNT"}),
+    (ARP_EXPORT, {"hips": "root.x", "spine": "spine_01.x", "spine1": "spine_03.x", "l_upleg": "thigh_stretch.l",
+                  "r_knee": "leg_stretch.r", "l_arm": "arm_stretch.l", "r_elbow": "forearm_stretch.r",
+                  "l_toe": "toes_01.l"}),
+    (UE5_MANNY, {"hips": "pelvis", "spine1": "spine_05", "l_upleg": "thigh_l", "r_knee": "calf_r", "l_foot": "foot_l",
+                 "r_arm": "upperarm_r", "l_elbow": "lowerarm_l", "r_wrist": "hand_r"}),
 ], ids=["motive", "motive_asset_prefix", "motionbuilder_character_prefix", "prefix_and_a_bare_reference_bone",
-        "maya_jnt_suffix", "namespace_and_suffix"])
+        "maya_jnt_suffix", "namespace_and_suffix", "auto_rig_pro_export", "ue5_manny_with_ik_and_twist_bones"])
 def test_capture_system_names_and_a_character_prefix_map_fully(tree, want):
     """OptiTrack Motive abbreviates its arm bones after the side letter (LUArm, LFArm) and hangs them from a
     clavicle named LShoulder; MotionBuilder names every bone of a character after it (Character1_Hips), Motive after
     its asset (Skeleton_Hip), Maya rigs end each joint in _jnt or _JNT: the prefix and the suffix all bones share
-    are read past, the map keeps the bones' own names."""
+    are read past, the map keeps the bones' own names. Auto-Rig Pro's exported skeleton deforms its limbs with
+    *_stretch bones (thigh_stretch.l) under the pelvis root.x; Unreal's Manny has IK and twist bones besides."""
     _, mapping = auto_map(*_tree(tree))
     assert not missing(mapping)
     assert {j: mapping[j][0] for j in want} == want
