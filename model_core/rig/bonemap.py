@@ -216,6 +216,25 @@ def _proximal_first(names: list[str], parents: list[int], mapping: Mapping) -> N
                 mapping.setdefault(f"{side}_{leaf}", (bone, leaf == "fingertip"))
 
 
+def _ball_of_the_foot(names: list[str], parents: list[int], mapping: Mapping) -> None:
+    """Where the mapped toe has another toe-word bone above it and below the foot (Synty's ``Ankle_L``, ``Ball_L``,
+    ``Toes_L``), the toe joint is the one nearest the foot: the ball of the foot, where the model's toe joint is, not
+    the tips of the toes. In place."""
+    parsed = [split_side(n) for n in names]
+    idx = {n: i for i, n in enumerate(names)}
+    for side in "lr":
+        (toe, tail), (foot, _) = mapping.get(f"{side}_toe", ("", True)), mapping.get(f"{side}_foot", ("", True))
+        if tail or not foot:
+            continue
+        b, nearest = parents[idx[toe]], None
+        while b >= 0 and b != idx[foot]:
+            if parsed[b][0] == side and parsed[b][1] in _WORDS["toe"]:
+                nearest = b
+            b = parents[b]
+        if nearest is not None and b == idx[foot]:
+            mapping[f"{side}_toe"] = (names[nearest], False)
+
+
 def _arms_meet(names: list[str], parents: list[int], mapping: Mapping) -> int:
     """The bone where the mapped arms meet (-1 if none), or the one below it where that is the mapped neck (3ds
     Max's Biped hangs its arms from the neck)."""
@@ -264,6 +283,7 @@ def _mapped(names: list[str], parents: list[int]) -> tuple[str, Mapping]:
         _by_words(names, mapping)
         _shoulder_segments(names, parents, mapping)
         _proximal_first(names, parents, mapping)
+        _ball_of_the_foot(names, parents, mapping)
         chest_where_the_arms_meet(names, parents, mapping)  # before the spine is read off the path below it
         _by_hierarchy(names, parents, mapping)
     chest_where_the_arms_meet(names, parents, mapping)  # a whole family's chest too

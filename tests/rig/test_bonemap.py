@@ -342,6 +342,14 @@ UE5_MANNY = [("root", None), ("pelvis", "root"), ("spine_01", "pelvis"), ("spine
         ("calf_twist_01_{s}", "calf_{s}"), ("foot_{s}", "calf_{s}"), ("ball_{s}", "foot_{s}"))]
 
 
+# Synty's POLYGON characters: the clavicle, then Shoulder_L (the upper arm) and Elbow_L; Ankle_L, Ball_L, Toes_L.
+SYNTY = [("Root", None), ("Hips", "Root"), ("Spine_01", "Hips"), ("Spine_02", "Spine_01"), ("Spine_03", "Spine_02"),
+         ("Neck", "Spine_03"), ("Head", "Neck")] + _sided(
+    [("Clavicle_{S}", "Spine_03"), ("Shoulder_{S}", "Clavicle_{S}"), ("Elbow_{S}", "Shoulder_{S}"),
+     ("Hand_{S}", "Elbow_{S}"), ("UpperLeg_{S}", "Hips"), ("LowerLeg_{S}", "UpperLeg_{S}"),
+     ("Ankle_{S}", "LowerLeg_{S}"), ("Ball_{S}", "Ankle_{S}"), ("Toes_{S}", "Ball_{S}")], "LR")
+
+
 def _prefixed(tree, prefix, unprefixed=()):
     return [(n if n in unprefixed else prefix + n, p and (p if p in unprefixed else prefix + p)) for n, p in tree]
 
@@ -366,14 +374,18 @@ def _prefixed(tree, prefix, unprefixed=()):
                   "l_toe": "toes_01.l"}),
     (UE5_MANNY, {"hips": "pelvis", "spine1": "spine_05", "l_upleg": "thigh_l", "r_knee": "calf_r", "l_foot": "foot_l",
                  "r_arm": "upperarm_r", "l_elbow": "lowerarm_l", "r_wrist": "hand_r"}),
+    (SYNTY, {"hips": "Hips", "spine1": "Spine_03", "l_arm": "Shoulder_L", "r_elbow": "Elbow_R", "l_foot": "Ankle_L",
+             "l_toe": "Ball_L", "r_toe": "Ball_R"}),
 ], ids=["motive", "motive_asset_prefix", "motionbuilder_character_prefix", "prefix_and_a_bare_reference_bone",
-        "maya_jnt_suffix", "namespace_and_suffix", "auto_rig_pro_export", "ue5_manny_with_ik_and_twist_bones"])
+        "maya_jnt_suffix", "namespace_and_suffix", "auto_rig_pro_export", "ue5_manny_with_ik_and_twist_bones",
+        "synty_ball_and_toes"])
 def test_capture_system_names_and_a_character_prefix_map_fully(tree, want):
     """OptiTrack Motive abbreviates its arm bones after the side letter (LUArm, LFArm) and hangs them from a
     clavicle named LShoulder; MotionBuilder names every bone of a character after it (Character1_Hips), Motive after
     its asset (Skeleton_Hip), Maya rigs end each joint in _jnt or _JNT: the prefix and the suffix all bones share
     are read past, the map keeps the bones' own names. Auto-Rig Pro's exported skeleton deforms its limbs with
-    *_stretch bones (thigh_stretch.l) under the pelvis root.x; Unreal's Manny has IK and twist bones besides."""
+    *_stretch bones (thigh_stretch.l) under the pelvis root.x; Unreal's Manny has IK and twist bones besides; Synty's
+    toe joint is the ball of the foot (Ball_L), above the tips (Toes_L)."""
     _, mapping = auto_map(*_tree(tree))
     assert not missing(mapping)
     assert {j: mapping[j][0] for j in want} == want
