@@ -264,8 +264,8 @@ def auto_map(names: list[str], parents: list[int]) -> tuple[str, Mapping]:
     (see :func:`missing`). Finger tips and toes fall back to the hand's and foot's tail.
     """
     family, mapping = _mapped(names, parents)
-    bare = bare_names(names)
-    if missing(mapping) and bare != names and len(set(bare)) == len(bare):
+    bare = bare_names(names) if missing(mapping) else names
+    if bare != names and len(set(bare)) == len(bare):
         # every bone named after its character or take (Character1_Hips), or Maya's Hips_jnt: read past that
         bare_family, bare_mapping = _mapped(bare, parents)
         if len(missing(bare_mapping)) < len(missing(mapping)):
