@@ -15,6 +15,8 @@ from __future__ import annotations
 
 import re
 
+import numpy as np
+
 from ..motion.conventions import JOINTS, PARENT_NAMES
 from .rigs import RIG_FAMILIES, bare_names, normalise_name
 from .solve import placed
@@ -235,6 +237,71 @@ def _ball_of_the_foot(names: list[str], parents: list[int], mapping: Mapping) ->
             mapping[f"{side}_toe"] = (names[nearest], False)
 
 
+_MIDDLE_FINGER = re.compile(r"^(?:hand|finger|f)?(?:middle|mid)(?:finger)?(?:\d+|proximal|intermediate|distal)?$")
+
+
+def _middle_finger_tip(names: list[str], parents: list[int], wrist: int, side: str) -> int:
+    """The last bone of the middle finger below bone ``wrist`` on ``side`` (``middle_03_l``, ``LeftMiddleDistal``,
+    ``lMid3``), or -1: the deepest of the bones below the wrist that a middle-finger word names."""
+    best, depth = -1, 0
+    for b, name in enumerate(names):
+        s, base = split_side(name)
+        if s != side or not _MIDDLE_FINGER.match(base):
+            continue
+        k, d = b, 0
+        while k >= 0 and k != wrist:
+            k, d = parents[k], d + 1
+        if k == wrist and d > depth:
+            best, depth = b, d
+    return best
+
+
+def _finger_tip_on_the_middle_finger(names: list[str], parents: list[int], mapping: Mapping) -> None:
+    """A finger tip no word names sits at the head of the middle finger's last bone where the hand has one (Unreal's
+    ``middle_03_l``, Unity's ``LeftMiddleDistal``, Daz's ``lMid3``), rather than at the hand's tail: a bone's head
+    is where the joint is in any file, where its tail is only where the bone's own axis points, which an FBX from
+    Maya or Unreal imported without Automatic Bone Orientation turns across the bone (the hands came out turned a
+    quarter turn). In place."""
+    idx = {n: i for i, n in enumerate(names)}
+    for side in "lr":
+        joint, wrist = f"{side}_fingertip", mapping.get(f"{side}_wrist", ("", True))
+        if joint in mapping or wrist[1] or not wrist[0]:
+            continue
+        tip = _middle_finger_tip(names, parents, idx[wrist[0]], side)
+        if tip >= 0:
+            mapping[joint] = (names[tip], False)
+
+
+def heads_where_tails_point_across(mapping: Mapping, names: list[str], parents: list[int], heads: np.ndarray,
+                                   tails: np.ndarray, limit_deg: float = 60.0) -> Mapping:
+    """``mapping`` with each finger tip or toe that sits at a bone's tail moved where the tail does not continue the
+    limb: an FBX from Maya or Unreal imported without Automatic Bone Orientation points every bone's tail across
+    it, and a tail more than ``limit_deg`` off the line from the bone's parent's head to its head is no finger tip
+    or toe. The bone's own head takes its place where it is a finger's or a toe's (below the wrist or the foot), the
+    middle finger's last head where the tail is the hand's; otherwise the tail stays (nothing else marks the
+    tip). ``heads``, ``tails`` ``[B, 3]`` at rest, in ``names``' order."""
+    out = dict(mapping)
+    idx = {n: i for i, n in enumerate(names)}
+    for joint in JOINTS:
+        if not joint.endswith(_LEAVES) or joint not in out or not out[joint][1]:
+            continue
+        b = idx.get(out[joint][0], -1)
+        if b < 0 or parents[b] < 0:
+            continue
+        along, way = tails[b] - heads[b], heads[b] - heads[parents[b]]
+        norms = np.linalg.norm(along) * np.linalg.norm(way)
+        if norms < 1e-12 or np.dot(along, way) >= np.cos(np.radians(limit_deg)) * norms:
+            continue
+        parent_joint = PARENT_NAMES[joint]
+        if out.get(parent_joint, ("", False))[0] != names[b]:  # the tail of a finger's or a toe's own bone
+            out[joint] = (names[b], False)
+        elif joint.endswith("fingertip"):
+            tip = _middle_finger_tip(names, parents, b, joint[0])
+            if tip >= 0:
+                out[joint] = (names[tip], False)
+    return out
+
+
 def _arms_meet(names: list[str], parents: list[int], mapping: Mapping) -> int:
     """The bone where the mapped arms meet (-1 if none), or the one below it where that is the mapped neck (3ds
     Max's Biped hangs its arms from the neck)."""
@@ -284,6 +351,7 @@ def _mapped(names: list[str], parents: list[int]) -> tuple[str, Mapping]:
         _shoulder_segments(names, parents, mapping)
         _proximal_first(names, parents, mapping)
         _ball_of_the_foot(names, parents, mapping)
+        _finger_tip_on_the_middle_finger(names, parents, mapping)
         chest_where_the_arms_meet(names, parents, mapping)  # before the spine is read off the path below it
         _by_hierarchy(names, parents, mapping)
     chest_where_the_arms_meet(names, parents, mapping)  # a whole family's chest too

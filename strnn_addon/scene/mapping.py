@@ -7,6 +7,8 @@ from there until the map is stored again.
 
 from __future__ import annotations
 
+import numpy as np
+
 from ...model_core.motion.conventions import JOINTS
 from ...model_core.rig import bonemap, controls
 from ...model_core.rig.solve import Anchors, Rig, SolveError
@@ -42,12 +44,16 @@ def store_map(obj, mapping: bonemap.Mapping, family: str = "") -> None:
 
 
 def auto_map(obj) -> tuple[str, bonemap.Mapping]:
-    """(family, mapping) guessed from armature object ``obj``'s bone names and hierarchy."""
+    """(family, mapping) guessed from armature object ``obj``'s bone names and hierarchy, a finger tip or toe at a
+    bone's tail only where that tail continues the limb (:func:`bonemap.heads_where_tails_point_across`)."""
     bones = obj.data.bones
     names = [b.name for b in bones]
     index = {n: i for i, n in enumerate(names)}
     parents = [index[b.parent.name] if b.parent else -1 for b in bones]
-    return bonemap.auto_map(names, parents)
+    family, mapping = bonemap.auto_map(names, parents)
+    heads = np.array([b.head_local for b in bones], dtype=np.float64).reshape(-1, 3)
+    tails = np.array([b.tail_local for b in bones], dtype=np.float64).reshape(-1, 3)
+    return family, bonemap.heads_where_tails_point_across(mapping, names, parents, heads, tails)
 
 
 def effective_map(obj) -> bonemap.Mapping:

@@ -360,3 +360,64 @@ def test_a_rig_named_as_a_capture_system_names_it_maps_takes_a_walk_and_extends(
     seam, speed = extended_walk(addon, obj, 60)
     print(kind, f"extend: seam {seam:.2f}, speed {speed:.2f}")
     assert seam < 1.5 and 0.6 < speed < 1.6
+
+
+UNREAL_NAMES = {"Hips": "pelvis", "Spine": "spine_01", "Spine1": "spine_02", "Spine2": "spine_03", "Neck": "neck_01",
+                "Head": "head", "Shoulder": "clavicle", "Arm": "upperarm", "ForeArm": "lowerarm", "Hand": "hand",
+                "HandMiddle1": "middle_01", "HandMiddle2": "middle_02", "HandMiddle3": "middle_03", "UpLeg": "thigh",
+                "Leg": "calf", "Foot": "foot", "ToeBase": "ball"}
+
+
+def fingered_bones(naming: str, across: bool) -> list[tuple]:
+    """:func:`mixamo_bones` without the finger tips' bones (LeftHandMiddle4), named as Unreal names them (``unreal``:
+    middle_01_l to middle_03_l) or as Mixamo does (``mixamo``); with ``across``, every bone's tail points across the
+    bone, as an FBX from Maya or Unreal comes in without Automatic Bone Orientation."""
+    out = []
+    for n, p, h, t in mixamo_bones():
+        if n.endswith("HandMiddle4"):
+            continue
+
+        def name(x):
+            if not x or naming == "mixamo":
+                return x
+            x = x.split(":")[1]
+            side = next((s for s in ("Left", "Right") if x.startswith(s)), "")
+            return UNREAL_NAMES[x[len(side):]] + (f"_{side[0].lower()}" if side else "")
+
+        h, t = np.asarray(h, float), np.asarray(t, float)
+        if across:
+            d = t - h
+            side = np.cross(d, (0.0, 0.0, 1.0) if abs(d[2]) < 0.9 * np.linalg.norm(d) else (1.0, 0.0, 0.0))
+            t = h + side / np.linalg.norm(side) * np.linalg.norm(d)
+        out.append((name(n), name(p), tuple(h), tuple(t)))
+    return out
+
+
+@pytest.mark.parametrize("naming", ["unreal", "mixamo"])
+def test_a_rig_whose_bones_point_across_themselves_plays_its_hands_as_one_whose_bones_point_along(addon, tmp_path,
+                                                                                                   naming):
+    """An FBX from Maya or Unreal imported without Automatic Bone Orientation points every bone's tail across the
+    bone. A finger tip read at a tail (the hand's, for Unreal's middle_01_l to middle_03_l; the last finger bone's,
+    for Mixamo's names without LeftHandMiddle4) turned each hand a quarter turn under a walk moved onto the rig; now
+    the finger tip is the middle finger's last head (Mixamo's tail where it continues the finger), and the fingers
+    point as they do on the same rig with its tails along its bones."""
+    fingers = {"unreal": ("hand_{s}", "middle_01_{s}"), "mixamo": ("mixamorig:{S}Hand", "mixamorig:{S}HandMiddle1")}
+    played = {}
+    for across in (False, True):
+        for o in list(bpy.data.objects):
+            bpy.data.objects.remove(o)
+        obj = build_armature("Character", fingered_bones(naming, across))
+        found = auto_map(obj)
+        assert found["l_fingertip"] == ("middle_03_l" if naming == "unreal" else "mixamorig:LeftHandMiddle3")
+        # a tail along its bone is where the finger ends, and is kept
+        assert obj.strnn_map.l_fingertip_tail == (naming == "mixamo" and not across)
+        _, frames = walk_onto(obj, tmp_path)
+        scene, out = bpy.context.scene, []
+        for f in frames[::10]:
+            scene.frame_set(int(f))
+            out.append([[np.array(obj.matrix_world @ obj.pose.bones[b.format(s=s, S=S)].head) for b in fingers[naming]]
+                        for s, S in (("l", "Left"), ("r", "Right"))])
+        played[across] = np.array(out)  # [F, side, (hand, finger), 3]
+    along, across = (played[k][:, :, 1] - played[k][:, :, 0] for k in (False, True))
+    cos = (along * across).sum(-1) / np.linalg.norm(along, axis=-1) / np.linalg.norm(across, axis=-1)
+    assert np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))).max() < 1.0

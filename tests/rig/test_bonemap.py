@@ -2,10 +2,11 @@
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 
 from model_core.motion.conventions import JOINTS
-from model_core.rig.bonemap import auto_map, missing, placed, split_side
+from model_core.rig.bonemap import auto_map, heads_where_tails_point_across, missing, placed, split_side
 from model_core.rig.rigs import MMD_ENGLISH, MMD_SPELLINGS, bare_names, mmd_name, shared_prefix, shared_suffix
 
 
@@ -405,3 +406,53 @@ def test_the_prefix_every_bone_shares_is_found_and_no_other():
     assert shared_suffix(names(UNREAL_NAMES)) == ""
     assert shared_suffix(["thigh.L", "shin.L", "foot.L", "thigh.R", "shin.R", "foot.R", "spine", "head"]) == ""
     assert bare_names([f"rig:{n}_JNT" for n in names(MIXAMO_PLAIN)]) == names(MIXAMO_PLAIN)
+
+
+def _hand(tail_across: bool, fingers: bool):
+    """An arm (names, parents, heads, tails): upperarm_l, lowerarm_l, hand_l and, with ``fingers``, middle_01_l to
+    middle_03_l, along +X; each tail along its bone or, with ``tail_across``, across it (+Y)."""
+    names = ["upperarm_l", "lowerarm_l", "hand_l"] + (["middle_01_l", "middle_02_l", "middle_03_l"] if fingers else [])
+    parents = list(range(-1, len(names) - 1))
+    heads = np.array([[0.3 * i if i < 3 else 0.6 + 0.04 * (i - 2), 0.0, 0.0] for i in range(len(names))])
+    step = np.array([0.0, 0.05, 0.0]) if tail_across else np.array([0.05, 0.0, 0.0])
+    return names, parents, heads, heads + step
+
+
+def test_a_finger_tip_at_a_tail_that_points_across_the_bone_moves_to_a_head():
+    """An FBX from Maya or Unreal imported without Automatic Bone Orientation points each bone's tail across it: a
+    finger tip there is no finger tip. The last finger bone's own head takes its place, or, for the hand's tail, the
+    middle finger's last head; with no finger bone the tail stays; a tail along the limb is left as it is."""
+    names, parents, heads, tails = _hand(True, True)
+    mapping = {"l_wrist": ("hand_l", False), "l_fingertip": ("middle_03_l", True)}
+    fixed = heads_where_tails_point_across(mapping, names, parents, heads, tails)
+    assert fixed["l_fingertip"] == ("middle_03_l", False) and fixed["l_wrist"] == ("hand_l", False)
+    hand_tail = {"l_wrist": ("hand_l", False), "l_fingertip": ("hand_l", True)}
+    assert heads_where_tails_point_across(hand_tail, names, parents, heads, tails)["l_fingertip"] == ("middle_03_l",
+                                                                                                      False)
+    names, parents, heads, tails = _hand(True, False)
+    assert heads_where_tails_point_across(hand_tail, names, parents, heads, tails) == hand_tail
+    names, parents, heads, tails = _hand(False, True)
+    assert heads_where_tails_point_across(mapping, names, parents, heads, tails) == mapping
+    assert heads_where_tails_point_across(hand_tail, names, parents, heads, tails) == hand_tail
+
+
+@pytest.mark.parametrize("tree, tip", [
+    (UE5_MANNY + [(f"middle_0{k}_{s}", f"middle_0{k - 1}_{s}") for s in "lr" for k in (2, 3)], "middle_03"),
+    ([(n, p) for n, p in MIXAMO_PLAIN] + [(f"{S}HandMiddle{k}", f"{S}Hand" if k == 1 else f"{S}HandMiddle{k - 1}")
+                                          for S in ("Left", "Right") for k in (1, 2, 3)], None),
+    (MIXAMO_PLAIN + [
+        (f"{S}MiddleProximal", f"{S}Hand") for S in ("Left", "Right")] + [
+        (f"{S}MiddleIntermediate", f"{S}MiddleProximal") for S in ("Left", "Right")] + [
+        (f"{S}MiddleDistal", f"{S}MiddleIntermediate") for S in ("Left", "Right")], "MiddleDistal"),
+], ids=["unreal_middle_03", "mixamo_without_the_tip_bone", "unity_middle_distal"])
+def test_a_finger_tip_no_word_names_is_the_middle_fingers_last_head(tree, tip):
+    """Unreal's middle_01_l to middle_03_l, Unity's LeftMiddleProximal to LeftMiddleDistal: the finger tip is the
+    last one's head, not the hand's tail; Mixamo's family without its LeftHandMiddle4 keeps its own reading (the
+    third bone's tail, which :func:`heads_where_tails_point_across` checks against the rig's geometry)."""
+    _, mapping = auto_map(*_tree(tree))
+    if tip == "middle_03":
+        assert mapping["l_fingertip"] == ("middle_03_l", False) and mapping["r_fingertip"] == ("middle_03_r", False)
+    elif tip is None:
+        assert mapping["l_fingertip"] == ("LeftHandMiddle3", True)
+    else:
+        assert mapping["l_fingertip"] == ("LeftMiddleDistal", False)
