@@ -510,6 +510,15 @@ class STRNN_OT_auto_map(bpy.types.Operator):
             keyed += (f"; it has no {' or '.join(joint_label(j) for j in placed)} bone, so "
                       f"{'that joint is' if len(placed) == 1 else 'those joints are'} placed between "
                       f"{joint_label(below)} and {joint_label(above)}")
+        across = mapping.tails_across(obj, found)
+        if across:  # a hand or a foot with no finger or toe bone, its tail turned across it (an FBX import's)
+            bones = ", ".join(f"{joint_label(j)} ({found[j][0]!r})" for j in across)
+            self.report({"WARNING"}, f"Mapped {mapped} joints ({family} rig){keyed}; but these sit at a bone's "
+                                     f"tail that points across the bone: {bones} (an FBX imported without Automatic "
+                                     "Bone Orientation?), so the hand or foot would turn to put them there: re-import "
+                                     "with Automatic Bone Orientation on, or pick a finger or toe bone for them in "
+                                     "the Bone Map panel")
+            return {"FINISHED"}
         self.report({"INFO"}, f"Mapped {mapped} joints ({family} rig){keyed}")
         return {"FINISHED"}
 

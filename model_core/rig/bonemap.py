@@ -282,16 +282,8 @@ def heads_where_tails_point_across(mapping: Mapping, names: list[str], parents: 
     tip). ``heads``, ``tails`` ``[B, 3]`` at rest, in ``names``' order."""
     out = dict(mapping)
     idx = {n: i for i, n in enumerate(names)}
-    for joint in JOINTS:
-        if not joint.endswith(_LEAVES) or joint not in out or not out[joint][1]:
-            continue
-        b = idx.get(out[joint][0], -1)
-        if b < 0 or parents[b] < 0:
-            continue
-        along, way = tails[b] - heads[b], heads[b] - heads[parents[b]]
-        norms = np.linalg.norm(along) * np.linalg.norm(way)
-        if norms < 1e-12 or np.dot(along, way) >= np.cos(np.radians(limit_deg)) * norms:
-            continue
+    for joint in tails_across(mapping, names, parents, heads, tails, limit_deg):
+        b = idx[out[joint][0]]
         parent_joint = PARENT_NAMES[joint]
         if out.get(parent_joint, ("", False))[0] != names[b]:  # the tail of a finger's or a toe's own bone
             out[joint] = (names[b], False)
@@ -299,6 +291,25 @@ def heads_where_tails_point_across(mapping: Mapping, names: list[str], parents: 
             tip = _middle_finger_tip(names, parents, b, joint[0])
             if tip >= 0:
                 out[joint] = (names[tip], False)
+    return out
+
+
+def tails_across(mapping: Mapping, names: list[str], parents: list[int], heads: np.ndarray, tails: np.ndarray,
+                 limit_deg: float = 60.0) -> list[str]:
+    """The finger tips and toes of ``mapping`` at a bone's tail that points more than ``limit_deg`` off the line from
+    the bone's parent's head to its head (:func:`heads_where_tails_point_across`)."""
+    idx = {n: i for i, n in enumerate(names)}
+    out = []
+    for joint in JOINTS:
+        if not joint.endswith(_LEAVES) or joint not in mapping or not mapping[joint][1]:
+            continue
+        b = idx.get(mapping[joint][0], -1)
+        if b < 0 or parents[b] < 0:
+            continue
+        along, way = tails[b] - heads[b], heads[b] - heads[parents[b]]
+        norms = np.linalg.norm(along) * np.linalg.norm(way)
+        if norms > 1e-12 and np.dot(along, way) < np.cos(np.radians(limit_deg)) * norms:
+            out.append(joint)
     return out
 
 

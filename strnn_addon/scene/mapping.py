@@ -46,14 +46,27 @@ def store_map(obj, mapping: bonemap.Mapping, family: str = "") -> None:
 def auto_map(obj) -> tuple[str, bonemap.Mapping]:
     """(family, mapping) guessed from armature object ``obj``'s bone names and hierarchy, a finger tip or toe at a
     bone's tail only where that tail continues the limb (:func:`bonemap.heads_where_tails_point_across`)."""
+    names, parents, heads, tails = _rest_bones(obj)
+    family, mapping = bonemap.auto_map(names, parents)
+    return family, bonemap.heads_where_tails_point_across(mapping, names, parents, heads, tails)
+
+
+def _rest_bones(obj) -> tuple[list[str], list[int], np.ndarray, np.ndarray]:
+    """(names, parent indices, rest heads ``[B, 3]``, rest tails ``[B, 3]``) of armature object ``obj``'s bones."""
     bones = obj.data.bones
     names = [b.name for b in bones]
     index = {n: i for i, n in enumerate(names)}
     parents = [index[b.parent.name] if b.parent else -1 for b in bones]
-    family, mapping = bonemap.auto_map(names, parents)
     heads = np.array([b.head_local for b in bones], dtype=np.float64).reshape(-1, 3)
     tails = np.array([b.tail_local for b in bones], dtype=np.float64).reshape(-1, 3)
-    return family, bonemap.heads_where_tails_point_across(mapping, names, parents, heads, tails)
+    return names, parents, heads, tails
+
+
+def tails_across(obj, mapping: bonemap.Mapping) -> list[str]:
+    """The finger tips and toes ``mapping`` puts at a tail of ``obj``'s that points across its bone (nothing else on
+    the rig marks them: :func:`bonemap.tails_across`)."""
+    names, parents, heads, tails = _rest_bones(obj)
+    return bonemap.tails_across(mapping, names, parents, heads, tails)
 
 
 def effective_map(obj) -> bonemap.Mapping:

@@ -368,13 +368,13 @@ UNREAL_NAMES = {"Hips": "pelvis", "Spine": "spine_01", "Spine1": "spine_02", "Sp
                 "Leg": "calf", "Foot": "foot", "ToeBase": "ball"}
 
 
-def fingered_bones(naming: str, across: bool) -> list[tuple]:
+def fingered_bones(naming: str, across: bool, fingers: bool = True) -> list[tuple]:
     """:func:`mixamo_bones` without the finger tips' bones (LeftHandMiddle4), named as Unreal names them (``unreal``:
     middle_01_l to middle_03_l) or as Mixamo does (``mixamo``); with ``across``, every bone's tail points across the
     bone, as an FBX from Maya or Unreal comes in without Automatic Bone Orientation."""
     out = []
     for n, p, h, t in mixamo_bones():
-        if n.endswith("HandMiddle4"):
+        if n.endswith("HandMiddle4") or (not fingers and "HandMiddle" in n):
             continue
 
         def name(x):
@@ -421,3 +421,19 @@ def test_a_rig_whose_bones_point_across_themselves_plays_its_hands_as_one_whose_
     along, across = (played[k][:, :, 1] - played[k][:, :, 0] for k in (False, True))
     cos = (along * across).sum(-1) / np.linalg.norm(along, axis=-1) / np.linalg.norm(across, axis=-1)
     assert np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))).max() < 1.0
+
+
+def test_a_hand_with_no_finger_bone_whose_tail_points_across_it_is_reported_with_the_fix(addon, capfd):
+    """With no finger bone, nothing on such a rig marks where the fingers go: Auto-Map says so and how to fix it (a
+    rig whose tails continue its bones says nothing of it)."""
+    for across in (False, True):
+        obj = build_armature("Game", fingered_bones("unreal", across, fingers=False))
+        capfd.readouterr()
+        found = auto_map(obj)
+        out = capfd.readouterr().out
+        assert found["l_fingertip"] == "hand_l" and obj.strnn_map.l_fingertip_tail
+        said = "tail that points across the bone: Left Fingertip ('hand_l'), Right Fingertip ('hand_r')" in out
+        assert said == across, out
+        if across:
+            assert "re-import with Automatic Bone Orientation on, or pick a finger or toe bone for them" in out
+        bpy.data.objects.remove(obj)
