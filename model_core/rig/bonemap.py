@@ -275,7 +275,7 @@ def _finger_tip_on_the_middle_finger(names: list[str], parents: list[int], mappi
 def heads_where_tails_point_across(mapping: Mapping, names: list[str], parents: list[int], heads: np.ndarray,
                                    tails: np.ndarray, limit_deg: float = 60.0) -> Mapping:
     """``mapping`` with each finger tip or toe that sits at a bone's tail moved where the tail does not continue the
-    limb: an FBX from Maya or Unreal imported without Automatic Bone Orientation points every bone's tail across
+    limb: an FBX from Maya or Unreal imported without Automatic Bone Orientation can point a bone's tail across
     it, and a tail more than ``limit_deg`` off the line from the bone's parent's head to its head is no finger tip
     or toe. The bone's own head takes its place where it is a finger's or a toe's (below the wrist or the foot), the
     middle finger's last head where the tail is the hand's; otherwise the tail stays (nothing else marks the

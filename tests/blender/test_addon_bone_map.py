@@ -396,7 +396,7 @@ def fingered_bones(naming: str, across: bool, fingers: bool = True) -> list[tupl
 @pytest.mark.parametrize("naming", ["unreal", "mixamo"])
 def test_a_rig_whose_bones_point_across_themselves_plays_its_hands_as_one_whose_bones_point_along(addon, tmp_path,
                                                                                                    naming):
-    """An FBX from Maya or Unreal imported without Automatic Bone Orientation points every bone's tail across the
+    """An FBX from Maya or Unreal imported without Automatic Bone Orientation can point each bone's tail across the
     bone. A finger tip read at a tail (the hand's, for Unreal's middle_01_l to middle_03_l; the last finger bone's,
     for Mixamo's names without LeftHandMiddle4) turned each hand a quarter turn under a walk moved onto the rig; now
     the finger tip is the middle finger's last head (Mixamo's tail where it continues the finger), and the fingers
