@@ -18,7 +18,8 @@ import re
 import numpy as np
 
 from ..motion.conventions import JOINTS, PARENT_NAMES
-from .rigs import RIG_FAMILIES, bare_names, normalise_name
+from .names import bare_names
+from .rigs import RIG_FAMILIES, normalise_name
 from .solve import placed
 
 Mapping = dict[str, tuple[str, bool]]

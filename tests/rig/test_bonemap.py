@@ -7,7 +7,8 @@ import pytest
 
 from model_core.motion.conventions import JOINTS
 from model_core.rig.bonemap import auto_map, heads_where_tails_point_across, missing, placed, split_side
-from model_core.rig.rigs import MMD_ENGLISH, MMD_SPELLINGS, bare_names, mmd_name, shared_prefix, shared_suffix
+from model_core.rig.names import bare_names, shared_prefix, shared_suffix
+from model_core.rig.rigs import MMD_ENGLISH, MMD_SPELLINGS, mmd_name
 
 
 @pytest.mark.parametrize("name, want", [
