@@ -511,13 +511,17 @@ class STRNN_OT_auto_map(bpy.types.Operator):
                       f"{'that joint is' if len(placed) == 1 else 'those joints are'} placed between "
                       f"{joint_label(below)} and {joint_label(above)}")
         across = mapping.tails_across(obj, found)
-        if across:  # a hand or a foot with no finger or toe bone, its tail turned across it (an FBX import's)
-            bones = ", ".join(f"{joint_label(j)} ({found[j][0]!r})" for j in across)
+        if any(j.endswith("fingertip") for j in across):  # solve.tips_along_the_limb
+            keyed += ("; its hands have no finger bone and their tails point across them, so the finger tips are "
+                      "taken along the forearms")
+        toes = [j for j in across if j.endswith("toe")]
+        if toes:  # a foot with no toe bone, its tail turned across it (an FBX import's)
+            bones = ", ".join(f"{joint_label(j)} ({found[j][0]!r})" for j in toes)
             self.report({"WARNING"}, f"Mapped {mapped} joints ({family} rig){keyed}; but these sit at a bone's "
                                      f"tail that points across the bone: {bones} (an FBX imported without Automatic "
-                                     "Bone Orientation?), so the hand or foot would turn to put them there: re-import "
-                                     "with Automatic Bone Orientation on, or pick a finger or toe bone for them in "
-                                     "the Bone Map panel")
+                                     "Bone Orientation?), so the foot would turn to put them there: re-import with "
+                                     "Automatic Bone Orientation on, or pick a toe bone for them in the Bone Map "
+                                     "panel")
             return {"FINISHED"}
         self.report({"INFO"}, f"Mapped {mapped} joints ({family} rig){keyed}")
         return {"FINISHED"}

@@ -412,7 +412,7 @@ def joint_rig(rig: Rig, mapping: dict[str, tuple[str, bool]]) -> Rig:
             above = x
     new = {b: k for k, b in enumerate(order)}
     parents = np.array([new[parent_of[b]] if parent_of[b] >= 0 else -1 for b in order])
-    return Rig([rig.names[b] for b in order], parents, rig.rest[order], rig.lengths[order])
+    return Rig([rig.names[b] for b in order], parents, rig.rest[order], rig.lengths[order], tails=rig.tails[order])
 
 
 def visual_local(rig: Rig, pose: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -461,8 +461,9 @@ def chains_on_joints(rig: Rig, anchors: Anchors, pose: np.ndarray, ends: list[in
         toward = next_joint(b)
         new = m.copy()
         new[:, :3, 3] = head
-        if toward is not None:
-            turn = shortest_arc(m[:, :3, 1], joints[:, toward] - head)
+        if toward is not None:  # the bone's tail (where a joint sits at it: :attr:`Rig.tails`) towards the joint
+            tail = rig.tails[b] / max(float(np.linalg.norm(rig.tails[b])), 1e-12) if b in at_tail else (0.0, 1.0, 0.0)
+            turn = shortest_arc(m[:, :3, :3] @ np.asarray(tail), joints[:, toward] - head)
             new[:, :3, :3] = turn @ m[:, :3, :3]
         return new
 

@@ -19,9 +19,7 @@ from ..io.bvh import Bvh, BvhError, forward_kinematics, read_bvh, resample
 from ..motion.conventions import JOINT_INDEX, JOINTS, MODEL_FPS, PARENT_NAMES, STANDARD_LEG_LENGTH, UP_AXIS
 from ..motion.geometry import shortest_arc
 from .names import bare_names
-
-# Hand length (wrist to middle finger tip) as a fraction of the forearm's.
-_HAND_TO_FOREARM = 0.73
+from .solve import HAND_TO_FOREARM
 
 
 def _sided(template: dict[str, list[str]], left: tuple[str, str], right: tuple[str, str]):
@@ -303,7 +301,7 @@ def canonical_positions(bvh: Bvh, rig: RigMap | None = None) -> np.ndarray:
             continue  # placed once its neighbours are read
         wrist = bvh.index(rig.sources[joint.replace("fingertip", "wrist")])
         rest_dir = bvh.offsets[wrist]  # rest frames align with the world, so this is the hand's axis too
-        tip = rest_dir * _HAND_TO_FOREARM
+        tip = rest_dir * HAND_TO_FOREARM
         out[:, j] = gpos[:, wrist] + np.einsum("fij,j->fi", grot[:, wrist], tip)
     for joint, (below, above, share) in rig.between.items():
         out[:, JOINT_INDEX[joint]] = (1.0 - share) * out[:, JOINT_INDEX[below]] + share * out[:, JOINT_INDEX[above]]

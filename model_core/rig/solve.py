@@ -91,6 +91,9 @@ class Rig:
     rest: np.ndarray
     lengths: np.ndarray
     connected: np.ndarray | None = None  # bool [B]: heads on their parent's tail (Blender's ``use_connect``)
+    # [B, 3]: where a joint at each bone's tail sits, in the bone's rest frame; None: the tail, ``lengths`` along
+    # its Y axis (:func:`tips_along_the_limb` moves a hand's that points across it)
+    tails: np.ndarray | None = None
 
     def __post_init__(self):
         self.parents = np.asarray(self.parents, dtype=np.int64)
@@ -99,6 +102,10 @@ class Rig:
         self.rest = np.array(self.rest, dtype=np.float64)
         self.rest[:, :3, :3] = nearest_rotation(self.rest[:, :3, :3])
         self.lengths = np.asarray(self.lengths, dtype=np.float64)
+        if self.tails is None:
+            self.tails = np.zeros((len(self.lengths), 3))
+            self.tails[:, 1] = self.lengths
+        self.tails = np.asarray(self.tails, dtype=np.float64)
         for b, p in enumerate(self.parents):
             if p >= b:
                 raise SolveError(f"bone {self.names[b]!r} comes before its parent; order bones parents first")
@@ -170,6 +177,37 @@ class Anchors:
                 if (not self.tail[j] or PARENT_NAMES[name] is None) and j not in self.between}
 
 
+# Hand length (wrist to middle finger tip) as a fraction of the forearm's.
+HAND_TO_FOREARM = 0.73
+# A hand's tail more than this far off the line of its forearm is no finger tip: an FBX from Maya or Unreal imported
+# without Automatic Bone Orientation can point a bone's tail across it, and Blender's BVH importer stands a bone that
+# ends in a zero-length End Site (a Bandai take's hands) straight up.
+ACROSS_DEG = 60.0
+
+
+def tips_along_the_limb(rig: Rig, anchors: Anchors) -> Rig:
+    """``rig`` with each finger tip that sits at a hand's tail pointing across the hand (:data:`ACROSS_DEG` off the
+    forearm's line at rest) put along the forearm's line instead, :data:`HAND_TO_FOREARM` of its length past the
+    wrist, turning with the hand (:attr:`Rig.tails`): where the hand has no finger bone, that is where its fingers
+    go, as a BVH file's estimated finger tip (:func:`rigs.canonical_positions`). Read off a Bandai take imported by
+    Blender, the hands' tails had moved every hand moved onto a rig a quarter turn off its forearm."""
+    tails = rig.tails.copy()
+    for side in "lr":
+        j, w, e = (JOINT_INDEX[f"{side}_{k}"] for k in ("fingertip", "wrist", "elbow"))
+        hand, arm = int(anchors.bone[w]), int(anchors.bone[e])
+        if not anchors.tail[j] or int(anchors.bone[j]) != hand or anchors.tail[w] or anchors.tail[e]:
+            continue
+        forearm = rig.rest[hand, :3, 3] - rig.rest[arm, :3, 3]
+        along = rig.rest[hand, :3, :3] @ rig.tails[hand]
+        norms = float(np.linalg.norm(forearm) * np.linalg.norm(along))
+        if norms < 1e-12 or float(np.dot(forearm, along)) >= np.cos(np.radians(ACROSS_DEG)) * norms:
+            continue
+        tails[hand] = rig.rest[hand, :3, :3].T @ (forearm * HAND_TO_FOREARM)
+    if np.array_equal(tails, rig.tails):
+        return rig
+    return Rig(rig.names, rig.parents, rig.rest, rig.lengths, rig.connected, tails)
+
+
 def compose(loc: np.ndarray, rot: np.ndarray) -> np.ndarray:
     """Homogeneous matrices ``[..., 4, 4]`` from locations ``[..., 3]`` and rotations ``[..., 3, 3]``."""
     m = np.zeros(rot.shape[:-2] + (4, 4))
@@ -197,7 +235,7 @@ def anchor_positions(rig: Rig, anchors: Anchors, pose: np.ndarray) -> np.ndarray
     """Canonical joint positions ``[F, 21, 3]`` from pose matrices ``[F, B, 4, 4]``."""
     m = pose[:, anchors.bone]  # (F, 21, 4, 4)
     offset = np.zeros((len(anchors.bone), 4))
-    offset[:, 1] = np.where(anchors.tail, rig.lengths[anchors.bone], 0.0)
+    offset[:, :3] = np.where(anchors.tail[:, None], rig.tails[anchors.bone], 0.0)
     offset[:, 3] = 1.0
     out = np.einsum("fjab,jb->fja", m, offset)[..., :3]
     for j, (below, above, share) in anchors.between.items():
@@ -283,7 +321,7 @@ def _aim(rig: Rig, anchors: Anchors, joint: str, ref: tuple, head: np.ndarray, b
     u = to_local(ref_anchor[:, kids])
     t = targets[:, kids] - head[:, None]
     if anchors.tail[JOINT_INDEX[joint]]:  # the hips at the bone's tail: the children about it
-        u = u - np.array([0.0, rig.lengths[b], 0.0])
+        u = u - rig.tails[b]
         t = targets[:, kids] - targets[:, [JOINT_INDEX[joint]]]
     if len(kids) > 1:
         weights = np.array([2.0] + [1.0] * (len(kids) - 1))  # the torso child first: keep the spine aimed
@@ -342,7 +380,7 @@ def _in_line(rig: Rig, anchors: Anchors, b: int, joints: list[int]) -> bool:
         return False
     j = joints[0]
     c, top = int(anchors.bone[j]), int(anchors.bone[JOINT_INDEX[PARENT_NAMES[JOINTS[j]]]])
-    joint = rig.rest[c, :3, 3] + (rig.rest[c, :3, 1] * rig.lengths[c] if anchors.tail[j] else 0.0)
+    joint = rig.rest[c, :3, 3] + (rig.rest[c, :3, :3] @ rig.tails[c] if anchors.tail[j] else 0.0)
     to_joint, along = joint - rig.rest[b, :3, 3], joint - rig.rest[top, :3, 3]
     size, reach = max(float(np.linalg.norm(along)), 1e-12), float(np.linalg.norm(to_joint))
     if reach < _IN_LINE * size:
@@ -432,7 +470,7 @@ def solve(rig: Rig, anchors: Anchors, targets: np.ndarray, ref_loc: np.ndarray,
             g = _aim(rig, anchors, joint_at[b], ref, head, base_rot, aimed)
             rot[:, b] = np.swapaxes(r_base, -1, -2) @ g
             if b == hips and anchors.tail[JOINT_INDEX["hips"]]:  # the hips at the tail: the head goes where that
-                head = targets[:, JOINT_INDEX["hips"]] - g[:, :, 1] * rig.lengths[b]  # puts the tail on its target
+                head = targets[:, JOINT_INDEX["hips"]] - g @ rig.tails[b]  # puts the tail on its target
                 if carrier is not None:
                     base = _carry(rig, pose, loc, carrier, b, base, head - t_base)
                 else:

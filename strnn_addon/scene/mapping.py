@@ -11,7 +11,7 @@ import numpy as np
 
 from ...model_core.motion.conventions import JOINTS
 from ...model_core.rig import bonemap, controls
-from ...model_core.rig.solve import Anchors, Rig, SolveError
+from ...model_core.rig.solve import Anchors, Rig, SolveError, tips_along_the_limb
 from ..props import TAIL_JOINTS, joint_label
 
 
@@ -95,6 +95,7 @@ def resolve(obj, rig: Rig, joint_skeleton: bool = False) -> tuple[Anchors, bonem
     try:
         if joint_skeleton:
             rig = controls.joint_rig(rig, mapping)
-        return Anchors.from_map(rig, mapping), mapping, rig
+        anchors = Anchors.from_map(rig, mapping)
+        return anchors, mapping, tips_along_the_limb(rig, anchors)  # a hand's tail across it is no finger tip
     except SolveError as e:
         raise MapError(f"Bone map does not fit the hierarchy: {e}; fix it in STRNN > Bone Map") from e

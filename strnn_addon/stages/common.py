@@ -28,8 +28,8 @@ from ...model_core.ops.extend import STALL_FRAMES, stalled_end
 from ...model_core.ops.pace import Pace, stride_period
 from ...model_core.rig.rigs import axis_name, standing_axis
 from .. import engine_bridge
-from ..props import preferences
-from ..scene import anim, pipeline
+from ..props import joint_label, preferences
+from ..scene import anim, mapping, pipeline
 from ..scene.pipeline import UserError
 
 STAGES = ("read", "model", "solve", "write")
@@ -121,7 +121,24 @@ def made_by(operation: str, clip, model: str = "", key_step: int = 1, **settings
     if key_step > 1:
         record["key_step"] = key_step
     record["settings"] = {k: v for k, v in settings.items() if v is not None}
+    record |= bone_map_record(clip)
     return record
+
+
+def bone_map_record(clip) -> dict:
+    """The record's ``bone_map`` entry where a toe of the clip's map sits at a tail that points across its bone (an
+    FBX imported without Automatic Bone Orientation, a foot with no toe bone: nothing else on the rig marks it,
+    :func:`mapping.tails_across`; a hand's finger tip there is taken along the forearm,
+    :func:`solve.tips_along_the_limb`): the foot turns to put that tail where the model's toe goes. Empty
+    otherwise."""
+    toes = [j for j in mapping.tails_across(clip.obj, clip.mapping) if j.endswith("toe")]
+    if not toes:
+        return {}
+    tips = " and ".join(f"the {joint_label(j)} at the tail of {clip.mapping[j][0]!r}" for j in toes)
+    return {"bone_map": {"tails_across": toes, "note": (
+        f"The bone map puts {tips}, a tail that points across its bone (an FBX imported without Automatic Bone "
+        "Orientation?), so the foot turns to put that tail where the model's toe goes: re-import with Automatic "
+        "Bone Orientation on, or pick a toe bone in STRNN > Bone Map")}}
 
 
 def familiarity_record(found, denoised: bool = False) -> dict:
@@ -235,12 +252,13 @@ def stalled_record(stalled: int, edge: int, back: bool = False) -> dict:
 
 
 def record_notes(action) -> list[str]:
-    """The notes of a new action's record (its stance, pace, familiarity, held first window, what Follow the
-    Clip had to follow, where a ground mesh was under no foot, a floor that rose under the clip and a stalled frame
-    the new frames replaced), in that order."""
+    """The notes of a new action's record (a toe at a tail across its bone, its stance, pace,
+    familiarity, held first window, what Follow the Clip had to follow, where a ground mesh was under no foot, a floor
+    that rose under the clip and a stalled frame the new frames replaced), in that order."""
     record = action.get(RECORD, {})
-    notes = [record.get(key, {}).get("note", "") for key in ("stance", "pace", "familiarity", "first_window",
-                                                            "follow_clip", "ground", "floor_rise", "stalled_end")]
+    notes = [record.get(key, {}).get("note", "") for key in ("bone_map", "stance", "pace", "familiarity",
+                                                            "first_window", "follow_clip", "ground", "floor_rise",
+                                                            "stalled_end")]
     return [str(note) for note in notes if note]
 
 

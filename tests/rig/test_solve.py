@@ -8,12 +8,22 @@ import pytest
 from model_core.io.bvh import local_transforms, read_bvh
 from model_core.io.bvh_export import write_bvh
 from model_core.motion import rotations
-from model_core.motion.conventions import JOINTS
+from model_core.motion.conventions import JOINT_INDEX, JOINTS
 from model_core.motion.geometry import rotvec_to_matrix
 from model_core.motion.synthetic import walking_skeleton
 from model_core.rig.controls import joint_rig
 from model_core.rig.rigs import detect_rig
-from model_core.rig.solve import Anchors, Rig, SolveError, anchor_positions, fk, solve, solved_bones
+from model_core.rig.solve import (
+    HAND_TO_FOREARM,
+    Anchors,
+    Rig,
+    SolveError,
+    anchor_positions,
+    fk,
+    solve,
+    solved_bones,
+    tips_along_the_limb,
+)
 
 
 @pytest.fixture(scope="module")
@@ -338,3 +348,26 @@ def test_ik_chains_are_put_on_joints_from_legs_played_shorter_than_their_bones(r
         for b in below:  # carried with the foot: the same transform relative to it as in the solve
             np.testing.assert_allclose(np.linalg.inv(placed[chain[2]]) @ placed[b],
                                        np.linalg.inv(pose[:, chain[2]]) @ pose[:, b], atol=1e-9)
+
+
+def test_a_finger_tip_at_a_hand_tail_across_the_forearm_is_taken_along_the_forearm(rig_and_motion):
+    """A finger tip at the hand's tail, which points up, across the arms held out to the sides (as Blender's BVH
+    importer stands a bone that ends in a zero-length End Site): the finger tip goes along the
+    forearm's line, HAND_TO_FOREARM of its length past the wrist, and turns with the hand; the solve is as exact
+    with it; a tail along the forearm is left as it is."""
+    rig, anchors, loc, rot = rig_and_motion
+    mapping = {j: (rig.names[b], bool(t)) for j, b, t in zip(JOINTS, anchors.bone, anchors.tail)}
+    for side in "lr":  # the finger tips at the hands' tails, which point up (the rest frames are the world's)
+        mapping[f"{side}_fingertip"] = (mapping[f"{side}_wrist"][0], True)
+    anchors = Anchors.from_map(rig, mapping)
+    moved = tips_along_the_limb(rig, anchors)
+    at_rest = anchor_positions(moved, anchors, fk(moved, np.zeros_like(loc[:1]), np.eye(3)[None, None].repeat(
+        len(rig.names), 1)))[0]
+    for side in "lr":
+        tip, wrist, elbow = (at_rest[JOINT_INDEX[f"{side}_{k}"]] for k in ("fingertip", "wrist", "elbow"))
+        np.testing.assert_allclose(tip - wrist, (wrist - elbow) * HAND_TO_FOREARM, atol=1e-9)
+    targets = anchor_positions(moved, anchors, fk(moved, loc, rot))
+    assert not np.allclose(targets, anchor_positions(rig, anchors, fk(rig, loc, rot)))  # the tips moved
+    loc2, rot2 = solve(moved, anchors, targets, loc, rot)
+    assert np.allclose(rot2, rot, atol=1e-8) and np.allclose(loc2, loc, atol=1e-8)
+    assert tips_along_the_limb(moved, anchors) is moved
