@@ -368,13 +368,13 @@ UNREAL_NAMES = {"Hips": "pelvis", "Spine": "spine_01", "Spine1": "spine_02", "Sp
                 "Leg": "calf", "Foot": "foot", "ToeBase": "ball"}
 
 
-def fingered_bones(naming: str, across: bool, fingers: bool = True) -> list[tuple]:
+def fingered_bones(naming: str, across: bool, fingers: bool = True, toes: bool = True) -> list[tuple]:
     """:func:`mixamo_bones` without the finger tips' bones (LeftHandMiddle4), named as Unreal names them (``unreal``:
     middle_01_l to middle_03_l) or as Mixamo does (``mixamo``); with ``across``, every bone's tail points across the
     bone, as an FBX from Maya or Unreal comes in without Automatic Bone Orientation."""
     out = []
     for n, p, h, t in mixamo_bones():
-        if n.endswith("HandMiddle4") or (not fingers and "HandMiddle" in n):
+        if n.endswith("HandMiddle4") or (not fingers and "HandMiddle" in n) or (not toes and "ToeBase" in n):
             continue
 
         def name(x):
@@ -474,3 +474,25 @@ def test_a_bvh_hand_that_ends_in_a_zero_length_end_site_keeps_its_turn_on_the_ri
     for got in (hand_angles(evaluated_joints(addon, source, frames[::5])),
                 hand_angles(evaluated_joints(addon, obj, frames[::5]))):
         assert np.abs(np.median(got, axis=1) - want).max() < 3.0, (np.median(got, axis=1), want)
+
+
+def test_a_foot_with_no_toe_bone_whose_tail_points_across_it_is_named_with_the_fix(addon, tmp_path, capfd):
+    """Nothing on such a foot marks where the toes are (the foot is not in line with the shin to go by): Auto-Map
+    warns with the fix, and so do the reports of the operations on it and the records of the actions they make."""
+    obj = build_armature("Game", fingered_bones("unreal", True, toes=False))
+    capfd.readouterr()
+    found = auto_map(obj)
+    out = capfd.readouterr().out
+    assert found["l_toe"] == "foot_l" and obj.strnn_map.l_toe_tail
+    assert "tail that points across the bone: Left Toe ('foot_l'), Right Toe ('foot_r')" in out, out
+    assert "re-import with Automatic Bone Orientation on, or pick a toe bone" in out
+    source, _ = walk_onto(obj, tmp_path)  # Transfer Motion
+    bpy.data.objects.remove(source)
+    bpy.ops.object.select_all(action="DESELECT")
+    obj.select_set(True)
+    bpy.context.view_layer.objects.active = obj
+    capfd.readouterr()
+    assert bpy.ops.strnn.extend_clip(frames=30) == {"FINISHED"}
+    out = capfd.readouterr().out
+    assert action_of(obj)["strnn"]["bone_map"]["tails_across"] == ["l_toe", "r_toe"]
+    assert "The bone map puts the Left Toe at the tail of 'foot_l' and the Right Toe at the tail of 'foot_r'" in out
