@@ -189,8 +189,8 @@ def tips_along_the_limb(rig: Rig, anchors: Anchors) -> Rig:
     """``rig`` with each finger tip that sits at a hand's tail pointing across the hand (:data:`ACROSS_DEG` off the
     forearm's line at rest) put along the forearm's line instead, :data:`HAND_TO_FOREARM` of its length past the
     wrist, turning with the hand (:attr:`Rig.tails`): where the hand has no finger bone, that is where its fingers
-    go, as a BVH file's estimated finger tip (:func:`rigs.canonical_positions`). Read off a Bandai take imported by
-    Blender, the hands' tails had moved every hand moved onto a rig a quarter turn off its forearm."""
+    go, as a BVH file's estimated finger tip (:func:`rigs.canonical_positions`). Read at those tails, every hand of
+    a Bandai take imported by Blender and moved onto a rig was held a quarter turn off its forearm."""
     tails = rig.tails.copy()
     for side in "lr":
         j, w, e = (JOINT_INDEX[f"{side}_{k}"] for k in ("fingertip", "wrist", "elbow"))
