@@ -20,7 +20,7 @@ import numpy as np
 from ..motion.conventions import JOINTS, PARENT_NAMES
 from .names import bare_names
 from .rigs import RIG_FAMILIES, normalise_name
-from .solve import placed
+from .solve import ACROSS_DEG, placed, points_across
 
 Mapping = dict[str, tuple[str, bool]]
 
@@ -274,7 +274,7 @@ def _finger_tip_on_the_middle_finger(names: list[str], parents: list[int], mappi
 
 
 def heads_where_tails_point_across(mapping: Mapping, names: list[str], parents: list[int], heads: np.ndarray,
-                                   tails: np.ndarray, limit_deg: float = 60.0) -> Mapping:
+                                   tails: np.ndarray, limit_deg: float = ACROSS_DEG) -> Mapping:
     """``mapping`` with each finger tip or toe that sits at a bone's tail moved where the tail does not continue the
     limb: an FBX from Maya or Unreal imported without Automatic Bone Orientation can point a bone's tail across
     it, and a tail more than ``limit_deg`` off the line from the bone's parent's head to its head is no finger tip
@@ -296,7 +296,7 @@ def heads_where_tails_point_across(mapping: Mapping, names: list[str], parents: 
 
 
 def tails_across(mapping: Mapping, names: list[str], parents: list[int], heads: np.ndarray, tails: np.ndarray,
-                 limit_deg: float = 60.0) -> list[str]:
+                 limit_deg: float = ACROSS_DEG) -> list[str]:
     """The finger tips and toes of ``mapping`` at a bone's tail that points more than ``limit_deg`` off the line from
     the bone's parent's head to its head (:func:`heads_where_tails_point_across`)."""
     idx = {n: i for i, n in enumerate(names)}
@@ -307,9 +307,7 @@ def tails_across(mapping: Mapping, names: list[str], parents: list[int], heads: 
         b = idx.get(mapping[joint][0], -1)
         if b < 0 or parents[b] < 0:
             continue
-        along, way = tails[b] - heads[b], heads[b] - heads[parents[b]]
-        norms = np.linalg.norm(along) * np.linalg.norm(way)
-        if norms > 1e-12 and np.dot(along, way) < np.cos(np.radians(limit_deg)) * norms:
+        if points_across(tails[b] - heads[b], heads[b] - heads[parents[b]], limit_deg):
             out.append(joint)
     return out
 

@@ -185,6 +185,13 @@ HAND_TO_FOREARM = 0.73
 ACROSS_DEG = 60.0
 
 
+def points_across(along: np.ndarray, way: np.ndarray, limit_deg: float = ACROSS_DEG) -> bool:
+    """Whether a bone's tail direction ``along`` ``[3]`` is more than ``limit_deg`` off the limb's line ``way`` ``[3]``
+    (False where either has no length)."""
+    norms = float(np.linalg.norm(along) * np.linalg.norm(way))
+    return norms > 1e-12 and float(np.dot(along, way)) < np.cos(np.radians(limit_deg)) * norms
+
+
 def tips_along_the_limb(rig: Rig, anchors: Anchors) -> Rig:
     """``rig`` with each finger tip that sits at a hand's tail pointing across the hand (:data:`ACROSS_DEG` off the
     forearm's line at rest) put along the forearm's line instead, :data:`HAND_TO_FOREARM` of its length past the
@@ -198,11 +205,8 @@ def tips_along_the_limb(rig: Rig, anchors: Anchors) -> Rig:
         if not anchors.tail[j] or int(anchors.bone[j]) != hand or anchors.tail[w] or anchors.tail[e]:
             continue
         forearm = rig.rest[hand, :3, 3] - rig.rest[arm, :3, 3]
-        along = rig.rest[hand, :3, :3] @ rig.tails[hand]
-        norms = float(np.linalg.norm(forearm) * np.linalg.norm(along))
-        if norms < 1e-12 or float(np.dot(forearm, along)) >= np.cos(np.radians(ACROSS_DEG)) * norms:
-            continue
-        tails[hand] = rig.rest[hand, :3, :3].T @ (forearm * HAND_TO_FOREARM)
+        if points_across(rig.rest[hand, :3, :3] @ rig.tails[hand], forearm):
+            tails[hand] = rig.rest[hand, :3, :3].T @ (forearm * HAND_TO_FOREARM)
     if np.array_equal(tails, rig.tails):
         return rig
     return Rig(rig.names, rig.parents, rig.rest, rig.lengths, rig.connected, tails)
