@@ -44,13 +44,15 @@ _CENTRE = re.compile(r"^(?:.+?[._\-\s]c[._\-\s](?P<base>.+)|(?P<suffixed>.+?)(?:
 # A side letter before a capital: ``lThigh``, ``LShoulder``, and OptiTrack Motive's ``LUArm`` / ``LFArm`` (upper and
 # fore arm, the word after the letter itself abbreviated).
 _CAMEL = re.compile(r"^(?:[^:|]*[:|])?(?P<side>[lrLR])(?=[A-Z]{1,2}[a-z])(?P<base>.+)$")
+# A side word glued after a word: the Second Life skeleton's ``mHipLeft``, Avastar's ``ShoulderRight``.
+_CAMEL_SUFFIX = re.compile(r"^(?:[^:|]*[:|])?(?P<base>.*[a-z0-9])(?P<side>Left|Right)$")
 _LEAVES = ("fingertip", "toe")  # joints a hand's or foot's tail can stand in for
 _STRIP = re.compile(r"^(def|org|mch|bip\d*|b|cc_base)[._\-\s]+")
 
 
 def split_side(name: str) -> tuple[str | None, str]:
     """(``"l"``, ``"r"`` or None, base word) of a bone name: ``"thigh.L"`` -> (``"l"``, ``"thigh"``)."""
-    camel = _CAMEL.match(name)
+    camel, camel_suffix = _CAMEL.match(name), _CAMEL_SUFFIX.match(name)
     low = normalise_name(name)
     side, base = None, low
     for pattern in (_SUFFIX, _INFIX):
@@ -64,6 +66,8 @@ def split_side(name: str) -> tuple[str | None, str]:
             side, base = m["side"][0], m["base"]
         elif camel:
             side, base = camel["side"].lower(), camel["base"].lower()
+        elif camel_suffix:
+            side, base = camel_suffix["side"][0].lower(), camel_suffix["base"].lower()
         elif m and low[1:2] in "._- ":
             side, base = m["side"], m["base"]
         else:
@@ -121,6 +125,24 @@ def _by_words(names: list[str], mapping: Mapping) -> None:
         if hit:
             mapping[joint] = (hit, False)
             used.add(hit)
+
+
+def _leg_above_the_knee(names: list[str], parents: list[int], mapping: Mapping) -> None:
+    """A knee read at a ``leg`` bone with a knee-word bone below it on the same side and no thigh found (the names
+    Cats gives a VRChat avatar: ``Left leg``, ``Left knee``, ``Left ankle``, as MMD's ``leg_L``, ``knee_L``): the
+    ``leg`` is the thigh and the bone below it the knee. ``leg`` alone is Mixamo's shin (``LeftUpLeg``,
+    ``LeftLeg``), which no knee-word bone hangs below. In place."""
+    parsed = [split_side(n) for n in names]
+    idx = {n: i for i, n in enumerate(names)}
+    for side in "lr":
+        knee = mapping.get(f"{side}_knee")
+        if f"{side}_upleg" in mapping or knee is None or knee[1] or parsed[idx[knee[0]]][1] != "leg":
+            continue
+        below = [i for i, (s, b) in enumerate(parsed) if s == side and b in _WORDS["knee"] and b != "leg"
+                 and is_below(parents, i, idx[knee[0]])]
+        if below:
+            nearest = min(below, key=lambda i: len(_chain(parents, i)))
+            mapping[f"{side}_upleg"], mapping[f"{side}_knee"] = knee, (names[nearest], False)
 
 
 def _shoulder_segments(names: list[str], parents: list[int], mapping: Mapping) -> None:
@@ -203,7 +225,8 @@ def is_below(parents: list[int], a: int, b: int) -> bool:
 def _proximal_first(names: list[str], parents: list[int], mapping: Mapping) -> None:
     """Where a joint took a distal word (``L_Foot``) and a bone of the proximal word (``L_Ankle``) lies above
     it on the same side, the joint is the proximal bone and the distal one is the leaf below it: the toe at its
-    head, the finger tip at its tail. In place."""
+    head (also where a toe-word bone hangs below it: the Second Life skeleton's ``AnkleLeft`` > ``FootLeft``, the
+    ball of the foot, > ``ToeLeft``), the finger tip at its tail. In place."""
     parsed = [split_side(n) for n in names]
     idx = {n: i for i, n in enumerate(names)}
     for side in "lr":
@@ -217,16 +240,27 @@ def _proximal_first(names: list[str], parents: list[int], mapping: Mapping) -> N
             if above:
                 mapping[joint] = (names[above[-1]], False)
                 mapping.setdefault(f"{side}_{leaf}", (bone, leaf == "fingertip"))
+                further = mapping[f"{side}_{leaf}"]
+                if leaf == "toe" and not further[1] and is_below(parents, idx[further[0]], idx[bone]):
+                    mapping[f"{side}_{leaf}"] = (bone, False)  # the ball of the foot, not the toe's tip below it
 
 
 def _ball_of_the_foot(names: list[str], parents: list[int], mapping: Mapping) -> None:
     """Where the mapped toe has another toe-word bone above it and below the foot (Synty's ``Ankle_L``, ``Ball_L``,
     ``Toes_L``), the toe joint is the one nearest the foot: the ball of the foot, where the model's toe joint is, not
-    the tips of the toes. In place."""
+    the tips of the toes. A toe a family put at the foot's tail (a BVH End Site's name, ``lFoot_end``) is the head of
+    the toe-word bone nearest below the foot where the rig has one (Daz's ``lFoot`` > ``lMetatarsals`` > ``lToe``):
+    a head is where the joint is, a tail only where the bone points. In place."""
     parsed = [split_side(n) for n in names]
     idx = {n: i for i, n in enumerate(names)}
     for side in "lr":
         (toe, tail), (foot, _) = mapping.get(f"{side}_toe", ("", True)), mapping.get(f"{side}_foot", ("", True))
+        if tail and foot and toe == foot:
+            below = [i for i, (s, b) in enumerate(parsed) if s == side and b in _WORDS["toe"]
+                     and is_below(parents, i, idx[foot])]
+            if below:
+                mapping[f"{side}_toe"] = (names[min(below, key=lambda i: len(_chain(parents, i)))], False)
+            continue
         if tail or not foot:
             continue
         b, nearest = parents[idx[toe]], None
@@ -359,6 +393,7 @@ def _mapped(names: list[str], parents: list[int]) -> tuple[str, Mapping]:
     if len(mapping) < len(JOINTS):
         _by_words(names, mapping)
         _shoulder_segments(names, parents, mapping)
+        _leg_above_the_knee(names, parents, mapping)
         _proximal_first(names, parents, mapping)
         _ball_of_the_foot(names, parents, mapping)
         _finger_tip_on_the_middle_finger(names, parents, mapping)

@@ -146,6 +146,15 @@ RIG_FAMILIES: dict[str, dict[str, list[str]]] = {
     # the bones to: read only where every body joint is found (``bonemap.WHOLE_ONLY``), as other rigs' ``leg`` is the
     # shin.
     "mmd_english": _mmd_family(("english",)),
+    # The Second Life (and OpenSimulator) avatar skeleton, Bento's included: ``mPelvis`` > ``mTorso`` > ``mChest``,
+    # ``mHipLeft`` > ``mKneeLeft`` > ``mAnkleLeft`` > ``mFootLeft`` (the ball of the foot) > ``mToeLeft``;
+    # ``mCollarLeft`` > ``mShoulderLeft`` (the upper arm) > ``mElbowLeft`` > ``mWristLeft``.
+    "second_life": _sided({
+        "hips": ["mPelvis"], "spine": ["mTorso"], "spine1": ["mChest"], "neck": ["mNeck"], "head": ["mHead"],
+        "{s}_upleg": ["mHip{S}"], "{s}_knee": ["mKnee{S}"], "{s}_foot": ["mAnkle{S}"], "{s}_toe": ["mFoot{S}"],
+        "{s}_arm": ["mShoulder{S}"], "{s}_elbow": ["mElbow{S}"], "{s}_wrist": ["mWrist{S}"],
+        "{s}_fingertip": ["mHandMiddle3{S}_end", "mHandMiddle3{S}"],
+    }, ("Left", ""), ("Right", "")),
     "rigify_deform": _sided({
         "hips": ["DEF-spine"], "spine": ["DEF-spine.001"], "spine1": ["DEF-spine.003"],
         "neck": ["DEF-spine.004"], "head": ["DEF-spine.006"],

@@ -307,10 +307,19 @@ ARP_EXPORT_NAMES = {"Hips": "root.x", "Spine": "spine_01.x", "Spine2": "spine_03
                     "ToeBase": "toes_01.{s}"}
 
 
+# The Second Life avatar skeleton (the side glued after the word; mShoulderLeft is the upper arm, mFootLeft the ball
+# of the foot) and a VRChat avatar as the Cats plugin names it ("Left leg" is the thigh, above "Left knee").
+SECOND_LIFE_NAMES = {"Hips": "mPelvis", "Spine": "mTorso", "Spine2": "mChest", "Neck": "mNeck", "Head": "mHead",
+                     "Shoulder": "mCollar{S}", "Arm": "mShoulder{S}", "ForeArm": "mElbow{S}", "Hand": "mWrist{S}",
+                     "UpLeg": "mHip{S}", "Leg": "mKnee{S}", "Foot": "mAnkle{S}", "ToeBase": "mFoot{S}"}
+CATS_NAMES = {"Spine2": "Chest", "Shoulder": "{S} shoulder", "Arm": "{S} arm", "ForeArm": "{S} elbow",
+              "Hand": "{S} wrist", "UpLeg": "{S} leg", "Leg": "{S} knee", "Foot": "{S} ankle", "ToeBase": "{S} toe"}
+
+
 def renamed_bones(names: dict, sides=("L", "R"), prefix: str = "") -> list[tuple]:
     """(name, parent, head, tail) of :func:`mixamo_bones` with one spine bone fewer and no fingers, each bone named
-    as ``names`` says (``{s}``: the side, as ``sides`` spells it; otherwise the side before the name), ``prefix``
-    before every name."""
+    as ``names`` says (``{s}``: the side, as ``sides`` spells it, in lower case, ``{S}`` as spelt; otherwise the side
+    before the name), ``prefix`` before every name."""
     fingers = [f"{side}HandMiddle{k}" for side in ("Left", "Right") for k in (1, 2, 3, 4)]
     bones = fewer_torso_bones(("Spine1", *fingers))
 
@@ -320,7 +329,7 @@ def renamed_bones(names: dict, sides=("L", "R"), prefix: str = "") -> list[tuple
         side = next((s for s in ("Left", "Right") if n.startswith(s)), "")
         spelt = sides[("Left", "Right").index(side)] if side else ""
         word = names.get(n[len(side):], n[len(side):])
-        return prefix + (word.format(s=spelt.lower()) if "{s}" in word else spelt + word)
+        return prefix + (word.format(s=spelt.lower(), S=spelt) if "{" in word else spelt + word)
 
     return [(name(n), name(p), h, t) for n, p, h, t in bones]
 
@@ -332,16 +341,19 @@ def affixed_bones(prefix: str, suffix: str = "") -> list[tuple]:
     return [(name(n), name(p), h, t) for n, p, h, t in mixamo_bones()]
 
 
-@pytest.mark.parametrize("kind", ["motive", "arp_export", "motionbuilder", "maya_jnt"])
+@pytest.mark.parametrize("kind", ["motive", "arp_export", "motionbuilder", "maya_jnt", "second_life", "cats"])
 def test_a_rig_named_as_a_capture_system_names_it_maps_takes_a_walk_and_extends(addon, real_model, tmp_path, kind):
     """An OptiTrack Motive skeleton (LUArm, LFArm after the clavicle LShoulder, every bone after its asset:
     Skeleton_Hip), Auto-Rig Pro's exported skeleton (root.x, thigh_stretch.l), a MotionBuilder character
-    (Character1_Hips, ...) and a Maya rig (Hips_jnt, ...) map fully, a walk moved onto them lands every joint where
+    (Character1_Hips, ...), a Maya rig (Hips_jnt, ...), the Second Life skeleton (mHipLeft) and a VRChat avatar named
+    by Cats (Left leg, Left knee) map fully, a walk moved onto them lands every joint where
     the walk on their proportions has it, and Extend walks it on."""
     bones = {"motive": lambda: renamed_bones(MOTIVE_NAMES, prefix="Skeleton_"),
              "arp_export": lambda: renamed_bones(ARP_EXPORT_NAMES),
              "motionbuilder": lambda: affixed_bones("Character1_"),
-             "maya_jnt": lambda: affixed_bones("", "_jnt")}[kind]()
+             "maya_jnt": lambda: affixed_bones("", "_jnt"),
+             "second_life": lambda: renamed_bones(SECOND_LIFE_NAMES, sides=("Left", "Right")),
+             "cats": lambda: renamed_bones(CATS_NAMES, sides=("Left", "Right"))}[kind]()
     obj = build_armature("Capture", bones)
     found = auto_map(obj)
     assert all(found.values()), found
@@ -350,6 +362,11 @@ def test_a_rig_named_as_a_capture_system_names_it_maps_takes_a_walk_and_extends(
             "motionbuilder": {"hips": "Character1_Hips", "spine1": "Character1_Spine2", "l_arm": "Character1_LeftArm",
                               "r_fingertip": "Character1_RightHandMiddle4"},
             "maya_jnt": {"hips": "Hips_jnt", "l_upleg": "LeftUpLeg_jnt", "r_wrist": "RightHand_jnt"},
+            "second_life": {"hips": "mPelvis", "spine": "mTorso", "l_upleg": "mHipLeft", "r_knee": "mKneeRight",
+                            "l_foot": "mAnkleLeft", "r_toe": "mFootRight", "l_arm": "mShoulderLeft",
+                            "r_wrist": "mWristRight"},
+            "cats": {"l_upleg": "Left leg", "l_knee": "Left knee", "r_upleg": "Right leg", "r_knee": "Right knee",
+                     "l_foot": "Left ankle", "r_toe": "Right toe", "l_arm": "Left arm", "r_elbow": "Right elbow"},
             "arp_export": {"hips": "root.x", "spine": "spine_01.x", "l_upleg": "thigh_stretch.l",
                            "r_knee": "leg_stretch.r", "l_arm": "arm_stretch.l", "r_elbow": "forearm_stretch.r"}}[kind]
     assert {j: found[j] for j in want} == want

@@ -18,7 +18,8 @@ from model_core.rig.rigs import MMD_ENGLISH, MMD_SPELLINGS, mmd_name
     ("Root", (None, "root")), ("spine_01", (None, "spine01")), ("ball_r", ("r", "ball")),
     ("J_Bip_C_Neck", (None, "neck")), ("J_Bip_L_UpperLeg", ("l", "upperleg")), ("neck.x", (None, "neck")),
     ("upperleg01.L", ("l", "upperleg01")), ("LUArm", ("l", "uarm")), ("RFArm", ("r", "farm")),
-    ("LShoulder", ("l", "shoulder")), ("Reference", (None, "reference")),
+    ("LShoulder", ("l", "shoulder")), ("Reference", (None, "reference")), ("HipLeft", ("l", "hip")),
+    ("mShoulderRight", ("r", "mshoulder")), ("Left knee", ("l", "knee")), ("mHandMiddle3Left", ("l", "mhandmiddle3")),
 ])
 def test_split_side(name, want):
     assert split_side(name) == want
@@ -352,13 +353,43 @@ SYNTY = [("Root", None), ("Hips", "Root"), ("Spine_01", "Hips"), ("Spine_02", "S
      ("Ankle_{S}", "LowerLeg_{S}"), ("Ball_{S}", "Ankle_{S}"), ("Toes_{S}", "Ball_{S}")], "LR")
 
 
+# The Second Life avatar skeleton with Bento's extra spine and finger bones: the side a word glued after the bone's
+# (mHipLeft), the ball of the foot mFootLeft above the toe's tip mToeLeft. Avastar's control bones drop the m.
+BENTO = [("mPelvis", None), ("mSpine1", "mPelvis"), ("mSpine2", "mSpine1"), ("mTorso", "mSpine2"),
+         ("mSpine3", "mTorso"), ("mSpine4", "mSpine3"), ("mChest", "mSpine4"), ("mNeck", "mChest"),
+         ("mHead", "mNeck")] + _sided(
+    [("mCollar{S}", "mChest"), ("mShoulder{S}", "mCollar{S}"), ("mElbow{S}", "mShoulder{S}"),
+     ("mWrist{S}", "mElbow{S}"), ("mHandMiddle1{S}", "mWrist{S}"), ("mHandMiddle2{S}", "mHandMiddle1{S}"),
+     ("mHandMiddle3{S}", "mHandMiddle2{S}"), ("mHip{S}", "mPelvis"), ("mKnee{S}", "mHip{S}"),
+     ("mAnkle{S}", "mKnee{S}"), ("mFoot{S}", "mAnkle{S}"), ("mToe{S}", "mFoot{S}")], ("Left", "Right"))
+AVASTAR = [("COG", None), ("Pelvis", "COG"), ("Torso", "Pelvis"), ("Chest", "Torso"), ("Neck", "Chest"),
+           ("Head", "Neck")] + _sided(
+    [("Collar{S}", "Chest"), ("Shoulder{S}", "Collar{S}"), ("Elbow{S}", "Shoulder{S}"), ("Wrist{S}", "Elbow{S}"),
+     ("Hip{S}", "Pelvis"), ("Knee{S}", "Hip{S}"), ("Ankle{S}", "Knee{S}"), ("Foot{S}", "Ankle{S}"),
+     ("Toe{S}", "Foot{S}")], ("Left", "Right"))
+# A VRChat avatar as the Cats plugin names it (MMD's words in English, the side first): "Left leg" is the thigh.
+CATS = [("Hips", None), ("Spine", "Hips"), ("Chest", "Spine"), ("Upper Chest", "Chest"), ("Neck", "Upper Chest"),
+        ("Head", "Neck")] + _sided(
+    [("{S} shoulder", "Upper Chest"), ("{S} arm", "{S} shoulder"), ("{S} elbow", "{S} arm"),
+     ("{S} wrist", "{S} elbow"), ("{S} leg", "Hips"), ("{S} knee", "{S} leg"), ("{S} ankle", "{S} knee"),
+     ("{S} toe", "{S} ankle")], ("Left", "Right"))
+# Daz Genesis 8: the foot, then the metatarsals, then the toes' bone at the ball of the foot.
+GENESIS8 = [("hip", None), ("pelvis", "hip"), ("abdomenLower", "hip"), ("abdomenUpper", "abdomenLower"),
+            ("chestLower", "abdomenUpper"), ("chestUpper", "chestLower"), ("neckLower", "chestUpper"),
+            ("neckUpper", "neckLower"), ("head", "neckUpper")] + _sided(
+    [("{S}Collar", "chestUpper"), ("{S}ShldrBend", "{S}Collar"), ("{S}ShldrTwist", "{S}ShldrBend"),
+     ("{S}ForearmBend", "{S}ShldrTwist"), ("{S}ForearmTwist", "{S}ForearmBend"), ("{S}Hand", "{S}ForearmTwist"),
+     ("{S}ThighBend", "pelvis"), ("{S}ThighTwist", "{S}ThighBend"), ("{S}Shin", "{S}ThighTwist"),
+     ("{S}Foot", "{S}Shin"), ("{S}Metatarsals", "{S}Foot"), ("{S}Toe", "{S}Metatarsals")], "lr")
+
+
 def _prefixed(tree, prefix, unprefixed=()):
     return [(n if n in unprefixed else prefix + n, p and (p if p in unprefixed else prefix + p)) for n, p in tree]
 
 
 @pytest.mark.parametrize("tree, want", [
     (MOTIVE, {"hips": "Hip", "spine": "Ab", "spine1": "Chest", "l_arm": "LUArm", "l_elbow": "LFArm",
-              "r_wrist": "RHand", "l_upleg": "LThigh", "r_knee": "RShin", "l_toe": "LFoot"}),
+              "r_wrist": "RHand", "l_upleg": "LThigh", "r_knee": "RShin", "l_toe": "LToe"}),
     (_prefixed(MOTIVE, "Skeleton_"), {"hips": "Skeleton_Hip", "l_arm": "Skeleton_LUArm",
                                       "r_elbow": "Skeleton_RFArm", "l_upleg": "Skeleton_LThigh"}),
     (_prefixed(MIXAMO_PLAIN, "Character1_"), {"hips": "Character1_Hips", "spine1": "Character1_Spine2",
@@ -378,16 +409,29 @@ def _prefixed(tree, prefix, unprefixed=()):
                  "r_arm": "upperarm_r", "l_elbow": "lowerarm_l", "r_wrist": "hand_r"}),
     (SYNTY, {"hips": "Hips", "spine1": "Spine_03", "l_arm": "Shoulder_L", "r_elbow": "Elbow_R", "l_foot": "Ankle_L",
              "l_toe": "Ball_L", "r_toe": "Ball_R"}),
+    (BENTO, {"hips": "mPelvis", "spine": "mTorso", "spine1": "mChest", "l_upleg": "mHipLeft", "r_knee": "mKneeRight",
+             "l_foot": "mAnkleLeft", "l_toe": "mFootLeft", "r_arm": "mShoulderRight", "l_elbow": "mElbowLeft",
+             "r_wrist": "mWristRight"}),
+    (AVASTAR, {"hips": "Pelvis", "spine": "Torso", "spine1": "Chest", "l_upleg": "HipLeft", "r_knee": "KneeRight",
+               "l_foot": "AnkleLeft", "r_toe": "FootRight", "l_arm": "ShoulderLeft", "r_elbow": "ElbowRight",
+               "l_wrist": "WristLeft"}),
+    (CATS, {"hips": "Hips", "spine1": "Upper Chest", "l_upleg": "Left leg", "l_knee": "Left knee",
+            "r_upleg": "Right leg", "r_knee": "Right knee", "r_foot": "Right ankle", "l_toe": "Left toe",
+            "l_arm": "Left arm", "r_elbow": "Right elbow"}),
+    (GENESIS8, {"hips": "hip", "spine1": "chestUpper", "l_upleg": "lThighBend", "r_knee": "rShin", "l_foot": "lFoot",
+                "l_toe": "lToe", "r_toe": "rToe", "l_arm": "lShldrBend", "r_elbow": "rForearmBend"}),
 ], ids=["motive", "motive_asset_prefix", "motionbuilder_character_prefix", "prefix_and_a_bare_reference_bone",
         "maya_jnt_suffix", "namespace_and_suffix", "auto_rig_pro_export", "ue5_manny_with_ik_and_twist_bones",
-        "synty_ball_and_toes"])
+        "synty_ball_and_toes", "second_life_bento", "avastar_controls", "cats_vrchat", "daz_genesis8_metatarsals"])
 def test_capture_system_names_and_a_character_prefix_map_fully(tree, want):
     """OptiTrack Motive abbreviates its arm bones after the side letter (LUArm, LFArm) and hangs them from a
     clavicle named LShoulder; MotionBuilder names every bone of a character after it (Character1_Hips), Motive after
     its asset (Skeleton_Hip), Maya rigs end each joint in _jnt or _JNT: the prefix and the suffix all bones share
     are read past, the map keeps the bones' own names. Auto-Rig Pro's exported skeleton deforms its limbs with
     *_stretch bones (thigh_stretch.l) under the pelvis root.x; Unreal's Manny has IK and twist bones besides; Synty's
-    toe joint is the ball of the foot (Ball_L), above the tips (Toes_L)."""
+    toe joint is the ball of the foot (Ball_L), above the tips (Toes_L). The Second Life skeleton glues its side
+    after the word (mHipLeft; Avastar's controls HipLeft), its ball of the foot is mFootLeft; Cats names a VRChat
+    avatar's thigh "Left leg" above "Left knee"; Daz's toes' bone hangs below the metatarsals."""
     _, mapping = auto_map(*_tree(tree))
     assert not missing(mapping)
     assert {j: mapping[j][0] for j in want} == want
