@@ -20,7 +20,7 @@ import numpy as np
 from ..motion.conventions import JOINTS, PARENT_NAMES
 from .names import bare_names
 from .rigs import RIG_FAMILIES, normalise_name
-from .solve import ACROSS_DEG, placed, points_across
+from .solve import ACROSS_DEG, placed, points_across, rest_forward, toe_across
 
 Mapping = dict[str, tuple[str, bool]]
 
@@ -331,9 +331,15 @@ def heads_where_tails_point_across(mapping: Mapping, names: list[str], parents: 
 
 def tails_across(mapping: Mapping, names: list[str], parents: list[int], heads: np.ndarray, tails: np.ndarray,
                  limit_deg: float = ACROSS_DEG) -> list[str]:
-    """The finger tips and toes of ``mapping`` at a bone's tail that points more than ``limit_deg`` off the line from
-    the bone's parent's head to its head (:func:`heads_where_tails_point_across`)."""
+    """The finger tips and toes of ``mapping`` at a bone's tail that points across the limb
+    (:func:`heads_where_tails_point_across`): a finger tip's more than ``limit_deg`` off the line from the bone's
+    parent's head to its head; a toe's at a foot's tail, off the way the body faces (:func:`solve.toe_across`;
+    the shin's line where the map gives no thighs, hips and head to tell it by), a toe's own bone's, off its line."""
     idx = {n: i for i, n in enumerate(names)}
+    at = lambda j: (tails if mapping[j][1] else heads)[idx[mapping[j][0]]]
+    body = None
+    if all(j in mapping and mapping[j][0] in idx for j in ("l_upleg", "r_upleg", "hips", "head")):
+        body = rest_forward(*(at(j) for j in ("l_upleg", "r_upleg", "hips", "head")))
     out = []
     for joint in JOINTS:
         if not joint.endswith(_LEAVES) or joint not in mapping or not mapping[joint][1]:
@@ -341,7 +347,11 @@ def tails_across(mapping: Mapping, names: list[str], parents: list[int], heads: 
         b = idx.get(mapping[joint][0], -1)
         if b < 0 or parents[b] < 0:
             continue
-        if points_across(tails[b] - heads[b], heads[b] - heads[parents[b]], limit_deg):
+        on_foot = joint.endswith("toe") and mapping.get(PARENT_NAMES[joint], ("", True)) == (names[b], False)
+        if on_foot and body is not None:
+            if toe_across(tails[b] - heads[b], body[0]):
+                out.append(joint)
+        elif points_across(tails[b] - heads[b], heads[b] - heads[parents[b]], limit_deg):
             out.append(joint)
     return out
 

@@ -22,7 +22,7 @@ import numpy as np
 
 from ...model_core.inference.steps import drive
 from ...model_core.io.checkpoint import CheckpointError
-from ...model_core.motion.conventions import UP_AXIS, yup_to_zup
+from ...model_core.motion.conventions import PARENT_NAMES, UP_AXIS, yup_to_zup
 from ...model_core.ops import footlock
 from ...model_core.ops.extend import STALL_FRAMES, stalled_end
 from ...model_core.ops.pace import Pace, stride_period
@@ -126,12 +126,12 @@ def made_by(operation: str, clip, model: str = "", key_step: int = 1, **settings
 
 
 def bone_map_record(clip) -> dict:
-    """The record's ``bone_map`` entry where a toe of the clip's map sits at a tail that points across its bone (an
-    FBX imported without Automatic Bone Orientation, a foot with no toe bone: nothing else on the rig marks it,
-    :func:`mapping.tails_across`; a hand's finger tip there is taken along the forearm,
-    :func:`solve.tips_along_the_limb`): the foot turns to put that tail where the model's toe goes. Empty
-    otherwise."""
-    toes = [j for j in mapping.tails_across(clip.obj, clip.mapping) if j.endswith("toe")]
+    """The record's ``bone_map`` entry where a toe of the clip's map sits at the tail of a toe bone that points across
+    it (picked in the map on an FBX imported without Automatic Bone Orientation, :func:`mapping.tails_across`): the
+    foot turns to put that tail where the model's toe goes. A foot's own tail across it (a foot with no toe bone) and
+    a hand's are placed where the toes and fingers go (:func:`solve.tips_along_the_limb`). Empty otherwise."""
+    toes = [j for j in mapping.tails_across(clip.obj, clip.mapping)
+            if j.endswith("toe") and clip.mapping[j][0] != clip.mapping[PARENT_NAMES[j]][0]]
     if not toes:
         return {}
     tips = " and ".join(f"the {joint_label(j)} at the tail of {clip.mapping[j][0]!r}" for j in toes)

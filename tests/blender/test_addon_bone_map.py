@@ -493,23 +493,53 @@ def test_a_bvh_hand_that_ends_in_a_zero_length_end_site_keeps_its_turn_on_the_ri
         assert np.abs(np.median(got, axis=1) - want).max() < 3.0, (np.median(got, axis=1), want)
 
 
-def test_a_foot_with_no_toe_bone_whose_tail_points_across_it_is_named_with_the_fix(addon, tmp_path, capfd):
-    """Nothing on such a foot marks where the toes are (the foot is not in line with the shin to go by): Auto-Map
-    warns with the fix, and so do the reports of the operations on it and the records of the actions they make."""
-    obj = build_armature("Game", fingered_bones("unreal", True, toes=False))
-    capfd.readouterr()
-    found = auto_map(obj)
-    out = capfd.readouterr().out
-    assert found["l_toe"] == "foot_l" and obj.strnn_map.l_toe_tail
-    assert "tail that points across the bone: Left Toe ('foot_l'), Right Toe ('foot_r')" in out, out
-    assert "re-import with Automatic Bone Orientation on, or pick a toe bone" in out
-    source, _ = walk_onto(obj, tmp_path)  # Transfer Motion
-    bpy.data.objects.remove(source)
-    bpy.ops.object.select_all(action="DESELECT")
-    obj.select_set(True)
-    bpy.context.view_layer.objects.active = obj
-    capfd.readouterr()
-    assert bpy.ops.strnn.extend_clip(frames=30) == {"FINISHED"}
-    out = capfd.readouterr().out
-    assert action_of(obj)["strnn"]["bone_map"]["tails_across"] == ["l_toe", "r_toe"]
-    assert "The bone map puts the Left Toe at the tail of 'foot_l' and the Right Toe at the tail of 'foot_r'" in out
+def toe_ways(addon, obj, bones: list[tuple], frames) -> np.ndarray:
+    """Each foot's way from its ankle to where its toes are at rest, carried by the foot bone as played at ``frames``:
+    ``[2, F, 3]`` unit (left, right). Where the toes are is the foot's tail in the rig built with its tails along its
+    bones (``bones``' ``foot_l`` of :func:`fingered_bones` with ``across`` off), so a foot turned on its bone's axis
+    shows, whatever tail the rig has."""
+    rig_io = addon_module(addon, "strnn_addon.scene.rig_io")
+    pipeline = addon_module(addon, "strnn_addon.scene.pipeline")
+    rig = pipeline.prepare_any(bpy.context, obj).rig
+    pose, _ = rig_io.pose_matrices_evaluated(bpy.context, obj, rig, np.asarray(frames, dtype=np.float64))
+    out = []
+    for s in "lr":
+        b = rig.names.index(f"foot_{s}")
+        toe = np.r_[next(t for n, _, _, t in bones if n == f"foot_{s}"), 1.0]
+        carried = pose[:, b] @ np.linalg.inv(rig.rest[b]) @ toe
+        way = carried[:, :3] - pose[:, b, :3, 3]
+        out.append(way / np.linalg.norm(way, axis=-1, keepdims=True))
+    return np.array(out)
+
+
+def test_a_foot_with_no_toe_bone_whose_tail_points_across_it_takes_its_toe_forward_of_the_ankle(addon, tmp_path,
+                                                                                                capfd):
+    """With no toe bone, nothing on such a foot marks where the toes are: the toe is placed forward of the ankle, the
+    way the body faces (Auto-Map says so), and a walk moved onto the rig and extended turns its feet as the same rig
+    with its tails along its bones does (read at the tail, the foot turned a quarter turn about the shin). A foot
+    whose tail points along it, forward, is read at its tail as it is: 70 degrees off the shin's line, it used to be
+    named as across."""
+    ways = {}
+    along = fingered_bones("unreal", False, toes=False)
+    for across in (False, True):
+        for o in list(bpy.data.objects):
+            bpy.data.objects.remove(o)
+        obj = build_armature("Game", fingered_bones("unreal", across, toes=False))
+        capfd.readouterr()
+        found = auto_map(obj)
+        out = capfd.readouterr().out
+        assert found["l_toe"] == "foot_l" and obj.strnn_map.l_toe_tail
+        said = "its feet have no toe bone and their tails point across them, so the toes are placed forward" in out
+        assert said == across and "tail that points across the bone" not in out, out
+        source, frames = walk_onto(obj, tmp_path)
+        assert "bone_map" not in action_of(obj)["strnn"]
+        bpy.data.objects.remove(source)
+        last = int(frames[-1])
+        obj.select_set(True)
+        bpy.context.view_layer.objects.active = obj
+        assert bpy.ops.strnn.extend_clip(frames=30) == {"FINISHED"}
+        assert "bone_map" not in action_of(obj)["strnn"]
+        ways[across] = toe_ways(addon, obj, along, np.arange(int(frames[0]), last + 31, 3))
+    apart = np.degrees(np.arccos(np.clip((ways[True] * ways[False]).sum(-1), -1.0, 1.0)))
+    print("feet apart, degrees: mean", apart.mean(1).round(2), "max", apart.max(1).round(2))
+    assert apart.max() < 5.0

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from model_core.motion.conventions import JOINTS
-from model_core.rig.bonemap import auto_map, heads_where_tails_point_across, missing, placed, split_side
+from model_core.rig.bonemap import auto_map, heads_where_tails_point_across, missing, placed, split_side, tails_across
 from model_core.rig.names import bare_names, shared_prefix, shared_suffix
 from model_core.rig.rigs import MMD_ENGLISH, MMD_SPELLINGS, mmd_name
 
@@ -501,3 +501,30 @@ def test_a_finger_tip_no_word_names_is_the_middle_fingers_last_head(tree, tip):
         assert mapping["l_fingertip"] == ("LeftHandMiddle3", True)
     else:
         assert mapping["l_fingertip"] == ("LeftMiddleDistal", False)
+
+
+@pytest.mark.parametrize("tail, across", [((0.0, -0.14, -0.05), False), ((0.0, -0.10, -0.10), False),
+                                          ((0.14, 0.0, 0.0), True), ((0.0, 0.0, 0.14), True),
+                                          ((0.0, 0.14, 0.0), True)],
+                         ids=["forward_and_down", "down_at_45", "sideways", "up", "backwards"])
+def test_a_foot_tail_is_across_where_it_points_off_the_way_the_body_faces(tail, across):
+    """A toe at a foot's tail (a foot with no toe bone) is across where the tail points off the way the body faces
+    (Blender's -Y for a rig made facing the front view: across the thighs crossed with up the spine), not off the
+    shin's line: a foot pointing forward and a little down, 70 degrees off its shin, is a foot as it should be."""
+    tree = [("pelvis", None), ("spine", "pelvis"), ("head", "spine")] + [
+        (f"{b}_{s}", p if p == "pelvis" else f"{p}_{s}") for s in "lr"
+        for b, p in (("thigh", "pelvis"), ("calf", "thigh"), ("foot", "calf"))]
+    names, parents = _tree(tree)
+    x = {"l": 0.1, "r": -0.1}
+    at = {"pelvis": (0, 0, 0.95), "spine": (0, 0, 1.2), "head": (0, 0, 1.6)}
+    for s in "lr":
+        at |= {f"thigh_{s}": (x[s], 0, 0.9), f"calf_{s}": (x[s], 0, 0.5), f"foot_{s}": (x[s], 0, 0.08)}
+    heads = np.array([at[n] for n in names], dtype=float)
+    tails = heads + np.array([(0, 0, 0.1)] * len(names))
+    for s in "lr":
+        tails[names.index(f"foot_{s}")] = heads[names.index(f"foot_{s}")] + np.array(tail)
+    mapping = {"hips": ("pelvis", False), "spine": ("spine", False), "head": ("head", False)}
+    for s in "lr":
+        mapping |= {f"{s}_upleg": (f"thigh_{s}", False), f"{s}_knee": (f"calf_{s}", False),
+                    f"{s}_foot": (f"foot_{s}", False), f"{s}_toe": (f"foot_{s}", True)}
+    assert tails_across(mapping, names, parents, heads, tails) == (["l_toe", "r_toe"] if across else [])

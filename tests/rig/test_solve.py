@@ -14,12 +14,15 @@ from model_core.motion.synthetic import walking_skeleton
 from model_core.rig.controls import joint_rig
 from model_core.rig.rigs import detect_rig
 from model_core.rig.solve import (
+    FOOT_DROP,
+    FOOT_FORWARD,
     HAND_TO_FOREARM,
     Anchors,
     Rig,
     SolveError,
     anchor_positions,
     fk,
+    rest_forward,
     solve,
     solved_bones,
     tips_along_the_limb,
@@ -371,3 +374,28 @@ def test_a_finger_tip_at_a_hand_tail_across_the_forearm_is_taken_along_the_forea
     loc2, rot2 = solve(moved, anchors, targets, loc, rot)
     assert np.allclose(rot2, rot, atol=1e-8) and np.allclose(loc2, loc, atol=1e-8)
     assert tips_along_the_limb(moved, anchors) is moved
+
+
+def test_a_toe_at_a_foot_tail_across_the_way_the_body_faces_is_placed_forward_of_the_ankle(rig_and_motion):
+    """A toe at the foot's tail, which points up (the rest frames are the world's; a foot with no toe bone, imported
+    without Automatic Bone Orientation): the toe goes FOOT_FORWARD of the shin's length forward of the ankle, the way
+    the body faces (+Z in the model's axes, from the thighs and the spine), and FOOT_DROP down, and turns with the
+    foot; the solve is as exact with it. A foot's tail pointing forward is left as it is."""
+    rig, anchors, loc, rot = rig_and_motion
+    mapping = {j: (rig.names[b], bool(t)) for j, b, t in zip(JOINTS, anchors.bone, anchors.tail)}
+    for side in "lr":
+        mapping[f"{side}_toe"] = (mapping[f"{side}_foot"][0], True)
+    anchors = Anchors.from_map(rig, mapping)
+    moved = tips_along_the_limb(rig, anchors)
+    still = np.zeros_like(loc[:1]), np.eye(3)[None, None].repeat(len(rig.names), 1)
+    at_rest = anchor_positions(moved, anchors, fk(moved, *still))[0]
+    forward, up = rest_forward(*(at_rest[JOINT_INDEX[j]] for j in ("l_upleg", "r_upleg", "hips", "head")))
+    np.testing.assert_allclose(forward, [0.0, 0.0, 1.0], atol=1e-9)
+    for side in "lr":
+        toe, ankle, knee = (at_rest[JOINT_INDEX[f"{side}_{k}"]] for k in ("toe", "foot", "knee"))
+        shin = np.linalg.norm(ankle - knee)
+        np.testing.assert_allclose(toe - ankle, (forward * FOOT_FORWARD - up * FOOT_DROP) * shin, atol=1e-9)
+    targets = anchor_positions(moved, anchors, fk(moved, loc, rot))
+    loc2, rot2 = solve(moved, anchors, targets, loc, rot)
+    assert np.allclose(rot2, rot, atol=1e-8) and np.allclose(loc2, loc, atol=1e-8)
+    assert tips_along_the_limb(moved, anchors) is moved  # the tails now point forward: left as they are
