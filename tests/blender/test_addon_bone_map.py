@@ -452,6 +452,17 @@ def hand_angles(joints: np.ndarray) -> np.ndarray:
     return np.array(out)
 
 
+def game_rig_mapped(capfd, across: bool, **parts):
+    """The only object in the scene an Unreal-named rig of :func:`fingered_bones` (``across``, ``parts``), auto-mapped:
+    (the rig, its map, what Auto-Map said)."""
+    for o in list(bpy.data.objects):
+        bpy.data.objects.remove(o)
+    obj = build_armature("Game", fingered_bones("unreal", across, **parts))
+    capfd.readouterr()
+    found = auto_map(obj)
+    return obj, found, capfd.readouterr().out
+
+
 def test_a_hand_with_no_finger_bone_whose_tail_points_across_it_takes_its_finger_tip_along_the_forearm(
         addon, tmp_path, capfd):
     """With no finger bone, nothing on such a rig marks where the fingers go: the finger tip is taken along the
@@ -459,12 +470,7 @@ def test_a_hand_with_no_finger_bone_whose_tail_points_across_it_takes_its_finger
     forearms as the same rig with its tails along its bones does (it was a quarter turn)."""
     played = {}
     for across in (False, True):
-        for o in list(bpy.data.objects):
-            bpy.data.objects.remove(o)
-        obj = build_armature("Game", fingered_bones("unreal", across, fingers=False))
-        capfd.readouterr()
-        found = auto_map(obj)
-        out = capfd.readouterr().out
+        obj, found, out = game_rig_mapped(capfd, across, fingers=False)
         assert found["l_fingertip"] == "hand_l" and obj.strnn_map.l_fingertip_tail
         said = "its hands have no finger bone and their tails point across them, so the finger tips are taken" in out
         assert said == across, out
@@ -522,12 +528,7 @@ def test_a_foot_with_no_toe_bone_whose_tail_points_across_it_takes_its_toe_forwa
     ways = {}
     along = fingered_bones("unreal", False, toes=False)
     for across in (False, True):
-        for o in list(bpy.data.objects):
-            bpy.data.objects.remove(o)
-        obj = build_armature("Game", fingered_bones("unreal", across, toes=False))
-        capfd.readouterr()
-        found = auto_map(obj)
-        out = capfd.readouterr().out
+        obj, found, out = game_rig_mapped(capfd, across, toes=False)
         assert found["l_toe"] == "foot_l" and obj.strnn_map.l_toe_tail
         said = "its feet have no toe bone and their tails point across them, so the toes are placed forward" in out
         assert said == across and "tail that points across the bone" not in out, out
