@@ -20,7 +20,7 @@ import numpy as np
 from ..motion.conventions import JOINTS, PARENT_NAMES
 from .names import bare_names
 from .rigs import RIG_FAMILIES, normalise_name
-from .solve import ACROSS_DEG, placed, points_across, rest_forward, toe_across
+from .solve import ACROSS_DEG, facing_and_up, placed, points_across, toe_across
 
 Mapping = dict[str, tuple[str, bool]]
 
@@ -339,7 +339,7 @@ def tails_across(mapping: Mapping, names: list[str], parents: list[int], heads: 
     at = lambda j: (tails if mapping[j][1] else heads)[idx[mapping[j][0]]]
     body = None
     if all(j in mapping and mapping[j][0] in idx for j in ("l_upleg", "r_upleg", "hips", "head")):
-        body = rest_forward(*(at(j) for j in ("l_upleg", "r_upleg", "hips", "head")))
+        body = facing_and_up(*(at(j) for j in ("l_upleg", "r_upleg", "hips", "head")))
     out = []
     for joint in JOINTS:
         if not joint.endswith(_LEAVES) or joint not in mapping or not mapping[joint][1]:

@@ -197,9 +197,9 @@ def points_across(along: np.ndarray, way: np.ndarray, limit_deg: float = ACROSS_
 FOOT_FORWARD, FOOT_DROP = 0.33, 0.12
 
 
-def rest_forward(left_thigh: np.ndarray, right_thigh: np.ndarray, hips: np.ndarray, head: np.ndarray):
-    """(the way a body faces, the way up its spine), unit ``[3]`` each, from its thighs' heads (across the hips,
-    right to left), its hips and its head at rest: Blender's -Y for a character made facing the front view (+Z in
+def facing_and_up(left_thigh: np.ndarray, right_thigh: np.ndarray, hips: np.ndarray, head: np.ndarray):
+    """(the way a body faces, the way up its spine made square to that), unit ``[3]`` each, from its thighs' heads
+    (across the hips, right to left), its hips and its head at rest: Blender's -Y for a character made facing the front view (+Z in
     the model's axes); None where the two lines have no length or lie along each other."""
     across, up = left_thigh - right_thigh, head - hips
     forward = np.cross(across, up)
@@ -219,9 +219,9 @@ def toe_across(along: np.ndarray, forward: np.ndarray) -> bool:
 
 
 def _rest_body(rig: Rig, anchors: Anchors):
-    """:func:`rest_forward` of the rig's mapped thighs, hips and head at rest."""
+    """:func:`facing_and_up` of the rig's mapped thighs, hips and head at rest."""
     at = anchor_positions(rig, anchors, rig.rest[None])[0]
-    return rest_forward(*(at[JOINT_INDEX[j]] for j in ("l_upleg", "r_upleg", "hips", "head")))
+    return facing_and_up(*(at[JOINT_INDEX[j]] for j in ("l_upleg", "r_upleg", "hips", "head")))
 
 
 def tips_along_the_limb(rig: Rig, anchors: Anchors) -> Rig:

@@ -21,8 +21,8 @@ from model_core.rig.solve import (
     Rig,
     SolveError,
     anchor_positions,
+    facing_and_up,
     fk,
-    rest_forward,
     solve,
     solved_bones,
     tips_along_the_limb,
@@ -389,7 +389,7 @@ def test_a_toe_at_a_foot_tail_across_the_way_the_body_faces_is_placed_forward_of
     moved = tips_along_the_limb(rig, anchors)
     still = np.zeros_like(loc[:1]), np.eye(3)[None, None].repeat(len(rig.names), 1)
     at_rest = anchor_positions(moved, anchors, fk(moved, *still))[0]
-    forward, up = rest_forward(*(at_rest[JOINT_INDEX[j]] for j in ("l_upleg", "r_upleg", "hips", "head")))
+    forward, up = facing_and_up(*(at_rest[JOINT_INDEX[j]] for j in ("l_upleg", "r_upleg", "hips", "head")))
     np.testing.assert_allclose(forward, [0.0, 0.0, 1.0], atol=1e-9)
     for side in "lr":
         toe, ankle, knee = (at_rest[JOINT_INDEX[f"{side}_{k}"]] for k in ("toe", "foot", "knee"))
