@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import bpy
 
-from ..model_core.motion.conventions import PARENT_NAMES
 from ..model_core.ops.loop import UNWOUND_LOCK_DEG
 from . import props as options
 from .props import joint_label
@@ -515,10 +514,10 @@ class STRNN_OT_auto_map(bpy.types.Operator):
         if any(j.endswith("fingertip") for j in across):  # solve.tips_along_the_limb
             keyed += ("; its hands have no finger bone and their tails point across them, so the finger tips are "
                       "taken along the forearms")
-        if any(j.endswith("toe") and found[j][0] == found[PARENT_NAMES[j]][0] for j in across):
+        if any(mapping.bonemap.at_the_foot_tail(found, j) for j in across):
             keyed += ("; its feet have no toe bone and their tails point across them, so the toes are placed forward "
                       "of the ankles, the way the body faces")  # solve.tips_along_the_limb
-        toes = [j for j in across if j.endswith("toe") and found[j][0] != found[PARENT_NAMES[j]][0]]
+        toes = [j for j in across if j.endswith("toe") and not mapping.bonemap.at_the_foot_tail(found, j)]
         if toes:  # a toe bone's tail picked in the map, turned across it (an FBX import's)
             bones = ", ".join(f"{joint_label(j)} ({found[j][0]!r})" for j in toes)
             self.report({"WARNING"}, f"Mapped {mapped} joints ({family} rig){keyed}; but these sit at a bone's "

@@ -329,6 +329,12 @@ def heads_where_tails_point_across(mapping: Mapping, names: list[str], parents: 
     return out
 
 
+def at_the_foot_tail(mapping: Mapping, joint: str) -> bool:
+    """Whether ``joint`` is a toe ``mapping`` puts at its foot bone's own tail (a foot with no toe bone)."""
+    return (joint.endswith("toe") and joint in mapping and mapping[joint][1]
+            and mapping.get(PARENT_NAMES[joint], ("", True)) == (mapping[joint][0], False))
+
+
 def tails_across(mapping: Mapping, names: list[str], parents: list[int], heads: np.ndarray, tails: np.ndarray,
                  limit_deg: float = ACROSS_DEG) -> list[str]:
     """The finger tips and toes of ``mapping`` at a bone's tail that points across the limb
@@ -347,8 +353,7 @@ def tails_across(mapping: Mapping, names: list[str], parents: list[int], heads: 
         b = idx.get(mapping[joint][0], -1)
         if b < 0 or parents[b] < 0:
             continue
-        on_foot = joint.endswith("toe") and mapping.get(PARENT_NAMES[joint], ("", True)) == (names[b], False)
-        if on_foot and body is not None:
+        if at_the_foot_tail(mapping, joint) and body is not None:
             if toe_across(tails[b] - heads[b], body[0]):
                 out.append(joint)
         elif points_across(tails[b] - heads[b], heads[b] - heads[parents[b]], limit_deg):

@@ -199,8 +199,8 @@ FOOT_FORWARD, FOOT_DROP = 0.33, 0.12
 
 def facing_and_up(left_thigh: np.ndarray, right_thigh: np.ndarray, hips: np.ndarray, head: np.ndarray):
     """(the way a body faces, the way up its spine made square to that), unit ``[3]`` each, from its thighs' heads
-    (across the hips, right to left), its hips and its head at rest: Blender's -Y for a character made facing the front view (+Z in
-    the model's axes); None where the two lines have no length or lie along each other."""
+    (across the hips, right to left), its hips and its head at rest: Blender's -Y for a character made facing the
+    front view (+Z in the model's axes); None where the two lines have no length or lie along each other."""
     across, up = left_thigh - right_thigh, head - hips
     forward = np.cross(across, up)
     size = float(np.linalg.norm(forward))

@@ -22,7 +22,7 @@ import numpy as np
 
 from ...model_core.inference.steps import drive
 from ...model_core.io.checkpoint import CheckpointError
-from ...model_core.motion.conventions import PARENT_NAMES, UP_AXIS, yup_to_zup
+from ...model_core.motion.conventions import UP_AXIS, yup_to_zup
 from ...model_core.ops import footlock
 from ...model_core.ops.extend import STALL_FRAMES, stalled_end
 from ...model_core.ops.pace import Pace, stride_period
@@ -131,7 +131,7 @@ def bone_map_record(clip) -> dict:
     foot turns to put that tail where the model's toe goes. A foot's own tail across it (a foot with no toe bone) and
     a hand's are placed where the toes and fingers go (:func:`solve.tips_along_the_limb`). Empty otherwise."""
     toes = [j for j in mapping.tails_across(clip.obj, clip.mapping)
-            if j.endswith("toe") and clip.mapping[j][0] != clip.mapping[PARENT_NAMES[j]][0]]
+            if j.endswith("toe") and not mapping.bonemap.at_the_foot_tail(clip.mapping, j)]
     if not toes:
         return {}
     tips = " and ".join(f"the {joint_label(j)} at the tail of {clip.mapping[j][0]!r}" for j in toes)
