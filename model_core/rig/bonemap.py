@@ -340,12 +340,10 @@ def tails_across(mapping: Mapping, names: list[str], parents: list[int], heads: 
     """The finger tips and toes of ``mapping`` at a bone's tail that points across the limb
     (:func:`heads_where_tails_point_across`): a finger tip's more than ``limit_deg`` off the line from the bone's
     parent's head to its head; a toe's at a foot's tail, off the way the body faces (:func:`solve.toe_across`;
-    the shin's line where the map gives no thighs, hips and head to tell it by), a toe's own bone's, off its line."""
+    the shin's line where the map gives no legs, hips and head to tell it by), a toe's own bone's, off its line."""
     idx = {n: i for i, n in enumerate(names)}
-    at = lambda j: (tails if mapping[j][1] else heads)[idx[mapping[j][0]]]
-    body = None
-    if all(j in mapping and mapping[j][0] in idx for j in ("l_upleg", "r_upleg", "hips", "head")):
-        body = facing_and_up(*(at(j) for j in ("l_upleg", "r_upleg", "hips", "head")))
+    body = facing_and_up({j: (tails if tail else heads)[idx[bone]] for j, (bone, tail) in mapping.items()
+                          if bone in idx})
     out = []
     for joint in JOINTS:
         if not joint.endswith(_LEAVES) or joint not in mapping or not mapping[joint][1]:

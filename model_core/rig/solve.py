@@ -197,11 +197,17 @@ def points_across(along: np.ndarray, way: np.ndarray, limit_deg: float = ACROSS_
 FOOT_FORWARD, FOOT_DROP = 0.33, 0.12
 
 
-def facing_and_up(left_thigh: np.ndarray, right_thigh: np.ndarray, hips: np.ndarray, head: np.ndarray):
-    """(the way a body faces, the way up its spine made square to that), unit ``[3]`` each, from its thighs' heads
-    (across the hips, right to left), its hips and its head at rest: Blender's -Y for a character made facing the
-    front view (+Z in the model's axes); None where the two lines have no length or lie along each other."""
-    across, up = left_thigh - right_thigh, head - hips
+def facing_and_up(at: dict[str, np.ndarray]):
+    """(the way a body faces, the way up its spine made square to that), unit ``[3]`` each, from canonical joints at
+    rest ``{joint: [3]}``: across the body from right to left (the mean of the thighs', knees' and ankles' each side
+    has; a rig whose thighs both start at the middle of its hips has its knees apart), crossed with up from the hips to
+    the head. Blender's -Y for a character made facing the front view (+Z in the model's axes); None where the map
+    gives neither line or they lie along each other."""
+    legs = [k for k in ("upleg", "knee", "foot") if f"l_{k}" in at and f"r_{k}" in at]
+    if not legs or "hips" not in at or "head" not in at:
+        return None
+    across = np.mean([at[f"l_{k}"] - at[f"r_{k}"] for k in legs], axis=0)
+    up = at["head"] - at["hips"]
     forward = np.cross(across, up)
     size = float(np.linalg.norm(forward))
     if size < 1e-6 * max(float(np.linalg.norm(across) * np.linalg.norm(up)), 1e-12):
@@ -219,9 +225,8 @@ def toe_across(along: np.ndarray, forward: np.ndarray) -> bool:
 
 
 def _rest_body(rig: Rig, anchors: Anchors):
-    """:func:`facing_and_up` of the rig's mapped thighs, hips and head at rest."""
-    at = anchor_positions(rig, anchors, rig.rest[None])[0]
-    return facing_and_up(*(at[JOINT_INDEX[j]] for j in ("l_upleg", "r_upleg", "hips", "head")))
+    """:func:`facing_and_up` of the rig's canonical joints at rest."""
+    return facing_and_up(dict(zip(JOINTS, anchor_positions(rig, anchors, rig.rest[None])[0])))
 
 
 def tips_along_the_limb(rig: Rig, anchors: Anchors) -> Rig:

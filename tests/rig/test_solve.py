@@ -379,7 +379,7 @@ def test_a_finger_tip_at_a_hand_tail_across_the_forearm_is_taken_along_the_forea
 def test_a_toe_at_a_foot_tail_across_the_way_the_body_faces_is_placed_forward_of_the_ankle(rig_and_motion):
     """A toe at the foot's tail, which points up (the rest frames are the world's; a foot with no toe bone, imported
     without Automatic Bone Orientation): the toe goes FOOT_FORWARD of the shin's length forward of the ankle, the way
-    the body faces (+Z in the model's axes, from the thighs and the spine), and FOOT_DROP down, and turns with the
+    the body faces (+Z in the model's axes, from the legs and the spine), and FOOT_DROP down, and turns with the
     foot; the solve is as exact with it. A foot's tail pointing forward is left as it is."""
     rig, anchors, loc, rot = rig_and_motion
     mapping = {j: (rig.names[b], bool(t)) for j, b, t in zip(JOINTS, anchors.bone, anchors.tail)}
@@ -389,7 +389,7 @@ def test_a_toe_at_a_foot_tail_across_the_way_the_body_faces_is_placed_forward_of
     moved = tips_along_the_limb(rig, anchors)
     still = np.zeros_like(loc[:1]), np.eye(3)[None, None].repeat(len(rig.names), 1)
     at_rest = anchor_positions(moved, anchors, fk(moved, *still))[0]
-    forward, up = facing_and_up(*(at_rest[JOINT_INDEX[j]] for j in ("l_upleg", "r_upleg", "hips", "head")))
+    forward, up = facing_and_up(dict(zip(JOINTS, at_rest)))
     np.testing.assert_allclose(forward, [0.0, 0.0, 1.0], atol=1e-9)
     for side in "lr":
         toe, ankle, knee = (at_rest[JOINT_INDEX[f"{side}_{k}"]] for k in ("toe", "foot", "knee"))
@@ -399,3 +399,17 @@ def test_a_toe_at_a_foot_tail_across_the_way_the_body_faces_is_placed_forward_of
     loc2, rot2 = solve(moved, anchors, targets, loc, rot)
     assert np.allclose(rot2, rot, atol=1e-8) and np.allclose(loc2, loc, atol=1e-8)
     assert tips_along_the_limb(moved, anchors) is moved  # the tails now point forward: left as they are
+
+
+def test_the_way_a_body_faces_is_read_from_its_legs_and_spine():
+    """Across the legs crossed with up the spine: Blender's -Y for a character made facing the front view, also where
+    both thighs start at the middle of the hips (the knees and ankles apart); none without legs apart or a spine."""
+    at = {"hips": np.array([0.0, 0.0, 1.0]), "head": np.array([0.0, 0.0, 1.7])}
+    for s, x in (("l", 0.1), ("r", -0.1)):
+        at |= {f"{s}_upleg": np.array([0.0, 0.0, 0.95]), f"{s}_knee": np.array([x, 0.0, 0.5]),
+               f"{s}_foot": np.array([x, 0.0, 0.1])}
+    forward, up = facing_and_up(at)
+    np.testing.assert_allclose(forward, [0.0, -1.0, 0.0], atol=1e-9)
+    assert abs(float(np.dot(forward, up))) < 1e-12 and up[2] > 0.99
+    assert facing_and_up({j: p for j, p in at.items() if j != "head"}) is None
+    assert facing_and_up({j: p for j, p in at.items() if not j.endswith(("knee", "foot"))}) is None
