@@ -2,7 +2,7 @@
 
 The first :func:`process_file` of a worker process starts Blender (the ``bpy`` module) with factory
 settings in a user folder of its own and installs and enables the extension zip; every file then
-starts from Blender's factory startup file, is imported (Blender's BVH importer, or the .blend is
+starts from Blender's factory startup file, is imported (Blender's BVH or FBX importer, or the .blend is
 opened), has the extension's operator run on its armature, and its result is written atomically.
 It never raises: a failure becomes a one-line reason in the result. :func:`install_extension` is
 also used by the README pictures, which install the extension the same way.
@@ -206,11 +206,17 @@ def run_file(bpy, job: dict) -> list[str]:
     src, dst = Path(job["input"]), Path(job["output"])
     target = None
     if job["operator"] == "transfer_motion":
-        if src.suffix.lower() != ".bvh":
-            raise BatchError("transfer takes BVH takes; a .blend is a target (--target), not a take")
+        if src.suffix.lower() not in (".bvh", ".fbx"):
+            raise BatchError("transfer takes BVH or FBX takes; a .blend is a target (--target), not a take")
         target = open_target(bpy, job)
     axes = ("-Z", "Y")
-    if src.suffix.lower() == ".bvh":
+    there = set(bpy.data.objects)
+    if src.suffix.lower() == ".fbx":
+        try:  # as File > Import > FBX does it: the scene takes the file's frame rate
+            bpy.ops.import_scene.fbx(filepath=str(src))
+        except RuntimeError as e:
+            raise BatchError(f"Blender's FBX importer could not read it: {blender_error(e)}") from None
+    elif src.suffix.lower() == ".bvh":
         axes = file_axes(check_bvh_text(src))
         with without_byte_order_mark(src) as readable:
             try:
@@ -223,6 +229,12 @@ def run_file(bpy, job: dict) -> list[str]:
             bpy.ops.wm.open_mainfile(filepath=str(src), load_ui=False)
         except RuntimeError as e:
             raise BatchError(f"Blender could not open it: {blender_error(e)}") from None
+    if src.suffix.lower() != ".blend":  # the imported armature (an FBX's animated one first) is what runs
+        brought = sorted((o for o in set(bpy.data.objects) - there if o.type == "ARMATURE"),
+                         key=lambda o: (not (o.animation_data and o.animation_data.action), o.name))
+        if not brought:
+            raise BatchError("the file has no armature")
+        bpy.context.view_layer.objects.active = brought[0]
     obj = pick_armature(bpy, bool(job.get("every_armature")) and target is None)
     view_layer = bpy.context.view_layer
     for other in view_layer.objects:
@@ -258,8 +270,9 @@ def run_file(bpy, job: dict) -> list[str]:
         getattr(bpy.ops.strnn, job["operator"])(**kwargs)
     except RuntimeError as e:
         raise BatchError(f"strnn.{job['operator']} refused: {blender_error(e)}") from None
-    if source is not None:
-        bpy.data.objects.remove(source)  # the result file holds the character alone
+    if source is not None:  # the result file holds the character alone: what the take brought goes
+        for brought in set(bpy.data.objects) - there:
+            bpy.data.objects.remove(brought)
     action = obj.animation_data.action if obj.animation_data else None
     if action is None:
         raise BatchError(f"strnn.{job['operator']} left the armature without an action")
@@ -282,6 +295,8 @@ def run_file(bpy, job: dict) -> list[str]:
                 to_file_axes(bpy, obj, *axes)
             bpy.ops.export_anim.bvh(filepath=str(tmp), frame_start=start, frame_end=end,
                                     check_existing=False)
+        elif dst.suffix.lower() == ".fbx":
+            export_fbx(bpy, obj, tmp)
         else:
             bpy.ops.wm.save_as_mainfile(filepath=str(tmp), copy=True, compress=True)
     except RuntimeError as e:
@@ -289,6 +304,25 @@ def run_file(bpy, job: dict) -> list[str]:
         raise BatchError(f"Blender could not write {dst.name}: {blender_error(e)}") from None
     os.replace(tmp, dst)
     return notes
+
+
+def export_fbx(bpy, obj, path: Path) -> None:
+    """Write ``obj`` and the meshes it deforms (or that hang from it) to an FBX at ``path`` with Blender's exporter,
+    its active action the file's one take (named as the action; the worker's other actions, the input's own among
+    them, are dropped first: the exporter writes a take for every action), every frame keyed (no curve
+    simplification) and no leaf bones added, so that it imports again as it was written. (The exporter's take of the
+    scene instead of the actions imports one frame late.)"""
+    keep = {obj} | {o for o in bpy.data.objects if o.type == "MESH" and (
+        o.parent is obj or any(m.type == "ARMATURE" and m.object is obj for m in o.modifiers))}
+    for action in [a for a in bpy.data.actions if a is not obj.animation_data.action]:
+        bpy.data.actions.remove(action)
+    for o in bpy.context.view_layer.objects:
+        o.select_set(o in keep)
+    bpy.context.view_layer.objects.active = obj
+    bpy.ops.export_scene.fbx(filepath=str(path), check_existing=False, use_selection=True,
+                             object_types={"ARMATURE", "MESH"}, add_leaf_bones=False, bake_anim=True,
+                             bake_anim_use_all_actions=True, bake_anim_use_nla_strips=False,
+                             bake_anim_force_startend_keying=True, bake_anim_simplify_factor=0.0)
 
 
 def every_armature(bpy, obj) -> list:
@@ -350,6 +384,12 @@ def start_blender(job: dict):
     if "bpy" not in _STARTED:
         user_dir = Path(job["user_dir"])
         os.environ["BLENDER_USER_RESOURCES"] = str(user_dir / "user")  # keep the user's own Blender untouched
+        # Blender's own temporary folder (blender_*) inside the user folder too, so that a worker killed at a
+        # timeout or an interrupt leaves nothing behind when the batch removes that folder
+        scratch = user_dir / "tmp"
+        scratch.mkdir(parents=True, exist_ok=True)
+        os.environ["TMPDIR"] = str(scratch)
+        tempfile.tempdir = None  # read again from TMPDIR
         # a parent that imported bpy passes on Blender's scripts/modules in sys.path, whose pure-Python
         # bpy package would shadow the bpy module itself
         sys.path[:] = [p for p in sys.path if not (Path(p or ".") / "bpy" / "__init__.py").is_file()]

@@ -1,4 +1,4 @@
-"""Run the STRNN Motion extension headless over many BVH / .blend files, one Blender (bpy) per file.
+"""Run the STRNN Motion extension headless over many BVH / FBX / .blend files, one Blender (bpy) per file.
 
     python scripts/strnn_batch.py extend   --frames 120 data/clips/ --out out/batch
     python scripts/strnn_batch.py denoise  --strength 0.8 a.bvh b.bvh --jobs 4
@@ -11,13 +11,14 @@
 Each input file runs in its own worker process (``--jobs N`` at a time) that imports the ``bpy``
 module, resets to factory settings, installs and enables the built extension zip (built once
 here with scripts/build_extension.py into dist/ unless dist/ is up to date, or ``--extension``),
-imports the file with Blender's own BVH importer (a .blend is opened), runs the extension's real
+imports the file with Blender's own BVH or FBX importer (a .blend is opened), runs the extension's real
 operator (strnn.extend_clip, strnn.inbetween, strnn.denoise_action, strnn.foot_lock,
-strnn.make_loop, strnn.follow_curve) on the armature, and writes the result with Blender's own BVH exporter (or
-saves a .blend) as ``OUT/NAME.<command>.bvh``. Folders are searched recursively for *.bvh and *.blend; their
+strnn.make_loop, strnn.follow_curve) on the armature, and writes the result with Blender's own BVH or FBX
+exporter (or saves a .blend) as ``OUT/NAME.<command>.bvh`` (``.fbx``: the file's armature and meshes, the new
+action its one take). Folders are searched recursively for *.bvh, *.fbx and *.blend; their
 sub-folders are kept under OUT. An input is never overwritten unless ``--in-place``. ``transfer``
-opens the character .blend (--target) instead, imports each take beside its rig, runs
-strnn.transfer_motion from the take onto the rig, removes the take and saves a copy of the .blend.
+opens the character .blend (--target) instead, imports each take (BVH or FBX) beside its rig, runs
+strnn.transfer_motion from the take onto the rig, removes what the take brought and saves a copy of the .blend.
 
 One progress line per finished file, then a summary table (file, status, seconds, and the reason a
 file failed or the notes the operator's report warns of for one that did: motion unlike what the model
@@ -53,7 +54,7 @@ else:  # run by path from a checkout
 from model_core.io.files import unwritable, write_json  # noqa: E402  (model_core never imports bpy)
 from model_core.ops import options as opts  # noqa: E402
 
-EXTENSIONS = (".bvh", ".blend")
+EXTENSIONS = (".bvh", ".fbx", ".blend")
 PATHS = ("line", "circle", "s_curve", "figure_eight")
 SOURCES = ("strnn_addon", "model_core", "models", "blender_manifest.toml", "__init__.py")
 
@@ -66,12 +67,12 @@ def build_parser() -> argparse.ArgumentParser:
     common = argparse.ArgumentParser(add_help=False)
     io = common.add_argument_group("inputs and outputs")
     io.add_argument("inputs", nargs="+", type=Path, metavar="PATH",
-                    help="BVH or .blend files, or folders searched recursively for them")
+                    help="BVH, FBX or .blend files, or folders searched recursively for them")
     io.add_argument("--out", type=Path, default=Path("out"), metavar="DIR",
-                    help="output folder (default: ./out); results are named NAME.<command>.bvh (or .blend)")
-    io.add_argument("--format", choices=("auto", "bvh", "blend"), default="auto",
-                    help="what to write: a BVH (Blender's exporter) or a .blend; auto (default): "
-                         "the input's own format")
+                    help="output folder (default: ./out); results are named NAME.<command>.bvh (.fbx, .blend)")
+    io.add_argument("--format", choices=("auto", "bvh", "fbx", "blend"), default="auto",
+                    help="what to write: a BVH or an FBX (Blender's exporters; an FBX with the file's meshes, the "
+                         "new action its one take) or a .blend; auto (default): the input's own format")
     io.add_argument("--in-place", action="store_true",
                     help="overwrite each input with its result instead of writing to --out "
                          "(the output format is then the input's)")
@@ -260,8 +261,9 @@ def check_args(parser, args) -> None:
         parser.error("--in-place is not for transfer: the results go beside the takes in --out")
     if args.every_armature and args.command in ("transfer", "follow"):
         parser.error(f"--every-armature is not for {args.command}: it moves one character at a time")
-    if args.every_armature and args.format == "bvh":
-        parser.error("--every-armature writes .blend results (a BVH file holds one armature): drop --format bvh")
+    if args.every_armature and args.format in ("bvh", "fbx"):
+        parser.error(f"--every-armature writes .blend results (a {args.format.upper()} file here holds one "
+                     f"armature's take): drop --format {args.format}")
     if args.keys_per_second is not None and not 0.0 < args.keys_per_second <= 1000.0:
         parser.error("--keys-per-second must be over 0 (frames a second, e.g. 60)")
     if args.extension is not None and not args.extension.is_file():
@@ -291,11 +293,11 @@ def collect(inputs: list[Path]) -> tuple[list[tuple[Path, Path]], list[tuple[str
         if item.is_dir():
             files = sorted(p for p in item.rglob("*") if p.suffix.lower() in EXTENSIONS and p.is_file())
             if not files:
-                problems.append((str(item), "folder holds no .bvh or .blend file"))
+                problems.append((str(item), "folder holds no .bvh, .fbx or .blend file"))
             pairs = [(p, p.relative_to(item)) for p in files]
         elif item.is_file():
             if item.suffix.lower() not in EXTENSIONS:
-                problems.append((str(item), f"not a .bvh or .blend file ({item.suffix or 'no extension'})"))
+                problems.append((str(item), f"not a .bvh, .fbx or .blend file ({item.suffix or 'no extension'})"))
                 continue
             pairs = [(item, Path(item.name))]
         else:

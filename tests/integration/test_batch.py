@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 import re
 import signal
 import subprocess
@@ -422,10 +423,12 @@ def test_interrupting_a_batch_stops_cleanly(tmp_path, extension, sig, code):
     did not, no temporary or partial file is left, and nothing is written afterwards."""
     takes = [write_bvh(tmp_path / f"walk{i}.bvh", walking_skeleton(40)) for i in range(24)]
     out, report = tmp_path / "out", tmp_path / "report.json"
-    before = {p.name for p in Path(tempfile.gettempdir()).glob("strnn_batch_*")}
+    scratch = tmp_path / "tmp"  # the batch's own temporary folder: other tests running beside it make theirs
+    scratch.mkdir()
     proc = subprocess.Popen([sys.executable, str(REPO / "scripts" / "strnn_batch.py"), "extend", "--frames", "5",
                              *map(str, takes), "--out", str(out), "--report", str(report), "--extension",
-                             str(extension)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                             str(extension)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            env=os.environ | {"TMPDIR": str(scratch)})
     first = proc.stdout.readline()  # the first file's progress line
     assert "walk" in first, first
     proc.send_signal(sig)  # the workers, started, take a fraction of a second per file: most files are left
@@ -436,7 +439,7 @@ def test_interrupting_a_batch_stops_cleanly(tmp_path, extension, sig, code):
     done = json.loads(report.read_text())
     assert done["interrupted"] and done["processed"] >= 1
     assert sorted(p.name for p in out.rglob("*") if ".tmp" in p.name) == []
-    assert {p.name for p in Path(tempfile.gettempdir()).glob("strnn_batch_*")} <= before
+    assert list(scratch.iterdir()) == []  # the workers' folders, Blender's own temporary ones in them, removed
     written = sorted(p.name for p in out.rglob("*.bvh"))
     time.sleep(3.0)
     assert sorted(p.name for p in out.rglob("*.bvh")) == written  # no worker writes after the batch exited
@@ -495,3 +498,96 @@ arm = next(o for o in bpy.data.objects if o.type == "ARMATURE")
 print(json.dumps(arm.animation_data.action["strnn"]["ground"].to_dict()))
 """)
     assert got == {"object": "Floor", "frames_without": 0}
+
+
+FBX_READ = """
+def read_fbx(path):
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    bpy.ops.import_scene.fbx(filepath=path)
+    arms = [o for o in bpy.data.objects if o.type == "ARMATURE"]
+    arm = arms[0]
+    first, last = (int(round(f)) for f in arm.animation_data.action.frame_range)
+    heads = []
+    for f in range(first, last + 1):
+        bpy.context.scene.frame_set(f)
+        heads.append([list(arm.matrix_world @ b.head) for b in arm.pose.bones])
+    return {"armatures": len(arms), "meshes": sorted(o.name for o in bpy.data.objects if o.type == "MESH"),
+            "bones": sorted(b.name for b in arm.data.bones), "fps": bpy.context.scene.render.fps,
+            "first": first, "heads": heads}
+"""
+
+
+def test_fbx_takes_are_extended_into_fbx_and_moved_onto_a_character(tmp_path, extension, capsys):
+    """An FBX (Blender's exporter: a 30 fps walk on its armature, a mesh skinned to it) is read with Blender's FBX
+    importer and written back as FBX: the armature and its mesh, no bone added, the take's own frames where they
+    were and the new ones after them, at the take's frame rate. As a take it moves onto a character .blend, which
+    keeps nothing the FBX brought. A broken FBX is a failure with its reason."""
+    clip = write_bvh(tmp_path / "walk.bvh", walking_skeleton(60))
+    take = tmp_path / "takes" / "walk.fbx"
+    take.parent.mkdir()
+    run_bpy(f"""
+bpy.ops.wm.read_factory_settings(use_empty=True)
+bpy.ops.import_anim.bvh(filepath={str(clip)!r}, update_scene_fps=True, update_scene_duration=True)
+arm = bpy.context.active_object
+bpy.ops.mesh.primitive_cube_add(size=0.3, location=(0, 0, 1))
+body = bpy.context.active_object
+body.name = "Body"
+body.modifiers.new("Armature", "ARMATURE").object = arm
+body.parent = arm
+bpy.ops.export_scene.fbx(filepath={str(take)!r})
+print(json.dumps(0))
+""")
+    (tmp_path / "takes" / "broken.fbx").write_bytes(take.read_bytes()[:300])
+    out = tmp_path / "out"
+    code = strnn_batch.main(["extend", "--frames", "20", str(tmp_path / "takes"), "--out", str(out),
+                             "--extension", str(extension)])
+    err = capsys.readouterr().err
+    assert code == 1 and "broken.fbx" in err and "FBX importer could not read it" in err, err
+    assert sorted(p.name for p in out.iterdir()) == ["walk.extend.fbx"]
+    got = run_bpy(FBX_READ + f"""
+print(json.dumps({{"take": read_fbx({str(take)!r}), "extended": read_fbx({str(out / "walk.extend.fbx")!r})}}))
+""")
+    before, after = got["take"], got["extended"]
+    assert after["armatures"] == 1 and after["meshes"] == ["Body"] and after["bones"] == before["bones"]
+    assert after["fps"] == before["fps"] == 30 and after["first"] == before["first"]
+    heads, new = np.array(before["heads"]), np.array(after["heads"])
+    assert len(new) == len(heads) + 20
+    assert np.abs(new[:len(heads)] - heads).max() < 1e-3  # the take's own frames, as they were
+    step = np.linalg.norm(np.diff(new, axis=0), axis=-1).mean(-1)
+    assert 0.5 < step[len(heads):].mean() / step[:len(heads) - 1].mean() < 1.6  # walking on, not frozen
+    hero = tmp_path / "hero.blend"
+    run_bpy(f"""
+bpy.ops.wm.read_factory_settings(use_empty=True)
+bpy.ops.import_anim.bvh(filepath={str(write_bvh(tmp_path / "small.bvh", walking_skeleton(2) * 0.8))!r})
+rig = bpy.context.active_object
+rig.name = "Hero"
+rig.animation_data_clear()
+bpy.ops.wm.save_as_mainfile(filepath={str(hero)!r})
+print(json.dumps(0))
+""")
+    code = strnn_batch.main(["transfer", "--target", str(hero), str(take), "--out", str(out),
+                             "--extension", str(extension)])
+    assert code == 0, capsys.readouterr().err
+    got = run_bpy(f"""
+bpy.ops.wm.open_mainfile(filepath={str(out / "walk.transfer.blend")!r})
+rig = bpy.data.objects["Hero"]
+action = rig.animation_data.action
+print(json.dumps({{"objects": sorted(o.name for o in bpy.data.objects), "record": action["strnn"]["operation"],
+                  "frames": int(action.frame_range[1] - action.frame_range[0]) + 1}}))
+""")
+    assert got["objects"] == ["Hero"] and got["record"] == "Transfer Motion" and got["frames"] == 60, got
+
+
+def test_a_finished_batch_leaves_no_temporary_folder(tmp_path, extension, monkeypatch):
+    """The workers' user folders go when the batch ends, with the temporary folders Blender makes in them (a
+    worker ends without Blender's own clean-up, which left a blender_* folder in the system's temporary folder per
+    worker and run)."""
+    scratch = tmp_path / "tmp"
+    scratch.mkdir()
+    monkeypatch.setenv("TMPDIR", str(scratch))
+    monkeypatch.setattr(tempfile, "tempdir", None)
+    takes = [write_bvh(tmp_path / f"walk{i}.bvh", walking_skeleton(40)) for i in range(2)]
+    code = strnn_batch.main(["extend", "--frames", "5", "--jobs", "2", *map(str, takes), "--out",
+                             str(tmp_path / "out"), "--extension", str(extension)])
+    assert code == 0 and len(list((tmp_path / "out").glob("*.bvh"))) == 2
+    assert list(scratch.iterdir()) == []
