@@ -187,9 +187,13 @@ def clear_keys(obj, start: int, end: int) -> None:
 
 
 def open_target(bpy, job: dict):
-    """For ``transfer``: open the character .blend and return its rig (``--rig``, or the one to pick)."""
+    """For ``transfer``: open the character .blend (or import the character FBX into Blender's factory startup
+    file) and return its rig (``--rig``, or the one to pick)."""
     try:
-        bpy.ops.wm.open_mainfile(filepath=job["target"], load_ui=False)
+        if job["target"].lower().endswith(".fbx"):
+            bpy.ops.import_scene.fbx(filepath=job["target"])
+        else:
+            bpy.ops.wm.open_mainfile(filepath=job["target"], load_ui=False)
     except RuntimeError as e:
         raise BatchError(f"Blender could not open --target {job['target']}: {blender_error(e)}") from None
     if job["rig"]:

@@ -7,6 +7,7 @@
     python scripts/strnn_batch.py loop     --range 60 120 walk.bvh --no-travel
     python scripts/strnn_batch.py follow   --path figure_eight --frames 300 walk.bvh
     python scripts/strnn_batch.py transfer --target hero.blend data/clips/ --out out/hero
+    python scripts/strnn_batch.py transfer --target hero.fbx takes/ --out out/hero   # FBX results
 
 Each input file runs in its own worker process (``--jobs N`` at a time) that imports the ``bpy``
 module, resets to factory settings, installs and enables the built extension zip (built once
@@ -17,8 +18,9 @@ strnn.make_loop, strnn.follow_curve) on the armature, and writes the result with
 exporter (or saves a .blend) as ``OUT/NAME.<command>.bvh`` (``.fbx``: the file's armature and meshes, the new
 action its one take). Folders are searched recursively for *.bvh, *.fbx and *.blend; their
 sub-folders are kept under OUT. An input is never overwritten unless ``--in-place``. ``transfer``
-opens the character .blend (--target) instead, imports each take (BVH or FBX) beside its rig, runs
-strnn.transfer_motion from the take onto the rig, removes what the take brought and saves a copy of the .blend.
+opens the character .blend (--target; an FBX character is imported) instead, imports each take (BVH or FBX)
+beside its rig, runs strnn.transfer_motion from the take onto the rig, removes what the take brought and saves a
+copy of the .blend (an FBX of the character, for an FBX character).
 
 One progress line per finished file, then a summary table (file, status, seconds, and the reason a
 file failed or the notes the operator's report warns of for one that did: motion unlike what the model
@@ -177,11 +179,12 @@ def build_parser() -> argparse.ArgumentParser:
     foot_lock_flag(p, "follow_curve")
     ground_flag(p, "the walk goes up and down with it, feet locked on it")
     p = sub.add_parser("transfer", parents=[common], help="move each take onto a character "
-                       "(strnn.transfer_motion)", description="Move the motion of each BVH take onto the rig of "
-                       "a character .blend (its proportions, feet on the floor), one new action per take, saved "
-                       "as a copy of that .blend (or, with --format bvh, the rig exported as BVH).")
-    p.add_argument("--target", type=Path, required=True, metavar="RIG.blend",
-                   help="the .blend holding the character's armature (never changed; each result is a copy)")
+                       "(strnn.transfer_motion)", description="Move the motion of each BVH or FBX take onto the "
+                       "rig of a character .blend or FBX (its proportions, feet on the floor), one new action per "
+                       "take, saved as a copy of that .blend, or for an FBX character as an FBX of it with the new "
+                       "action its take (--format: bvh, the rig exported as BVH; fbx or blend).")
+    p.add_argument("--target", type=Path, required=True, metavar="RIG.blend|RIG.fbx",
+                   help="the .blend or FBX holding the character's armature (never changed; each result is a copy)")
     p.add_argument("--rig", default="", metavar="NAME",
                    help="the armature object in --target to put the motion on (default: its active armature, "
                         "or its only one)")
@@ -255,8 +258,9 @@ def check_args(parser, args) -> None:
         parser.error("--range START END: END must come after START")
     if args.command == "follow" and (args.frames < 0 or args.speed < 0):
         parser.error("--frames and --speed must not be negative")
-    if args.command == "transfer" and (args.target.suffix.lower() != ".blend" or not args.target.is_file()):
-        parser.error(f"--target {args.target}: not a .blend file")
+    if args.command == "transfer" and (args.target.suffix.lower() not in (".blend", ".fbx")
+                                       or not args.target.is_file()):
+        parser.error(f"--target {args.target}: not a .blend or .fbx file")
     if args.command == "transfer" and args.in_place:
         parser.error("--in-place is not for transfer: the results go beside the takes in --out")
     if args.every_armature and args.command in ("transfer", "follow"):
@@ -313,7 +317,9 @@ def collect(inputs: list[Path]) -> tuple[list[tuple[Path, Path]], list[tuple[str
 def output_path(path: Path, rel: Path, args) -> Path:
     if args.in_place:
         return path
-    own = "blend" if args.command == "transfer" else path.suffix.lower().lstrip(".")  # a transfer: the character
+    own = path.suffix.lower().lstrip(".")
+    if args.command == "transfer":  # the character's format
+        own = "fbx" if args.target.suffix.lower() == ".fbx" else "blend"
     fmt = args.format if args.format != "auto" else own
     return args.out / rel.parent / f"{rel.stem}.{args.command}.{fmt}"
 

@@ -414,7 +414,7 @@ print(json.dumps({{"armatures": [o.name for o in bpy.data.objects if o.type == "
     assert got["armatures"] == ["Hero"] and got["record"] == "Transfer Motion" and got["frames"] == 60
     with pytest.raises(SystemExit):
         strnn_batch.main(["transfer", "--target", str(clip), str(clip)])
-    assert "not a .blend file" in capsys.readouterr().err
+    assert "not a .blend or .fbx file" in capsys.readouterr().err
 
 
 @pytest.mark.parametrize("sig, code", [(signal.SIGINT, 130), (signal.SIGTERM, 143)], ids=["ctrl-c", "sigterm"])
@@ -521,7 +521,8 @@ def test_fbx_takes_are_extended_into_fbx_and_moved_onto_a_character(tmp_path, ex
     """An FBX (Blender's exporter: a 30 fps walk on its armature, a mesh skinned to it) is read with Blender's FBX
     importer and written back as FBX: the armature and its mesh, no bone added, the take's own frames where they
     were and the new ones after them, at the take's frame rate. As a take it moves onto a character .blend, which
-    keeps nothing the FBX brought. A broken FBX is a failure with its reason."""
+    keeps nothing the FBX brought, and onto a character FBX, whose results are FBX files of it (its rig, its mesh,
+    the take its motion). A broken FBX is a failure with its reason."""
     clip = write_bvh(tmp_path / "walk.bvh", walking_skeleton(60))
     take = tmp_path / "takes" / "walk.fbx"
     take.parent.mkdir()
@@ -576,6 +577,30 @@ print(json.dumps({{"objects": sorted(o.name for o in bpy.data.objects), "record"
                   "frames": int(action.frame_range[1] - action.frame_range[0]) + 1}}))
 """)
     assert got["objects"] == ["Hero"] and got["record"] == "Transfer Motion" and got["frames"] == 60, got
+    hero_fbx = tmp_path / "hero.fbx"  # a character given as FBX (a rig with its mesh): the results are FBX too
+    run_bpy(f"""
+bpy.ops.wm.open_mainfile(filepath={str(hero)!r})
+rig = bpy.data.objects["Hero"]
+bpy.ops.mesh.primitive_cube_add(size=0.3, location=(0, 0, 1))
+skin = bpy.context.active_object
+skin.name = "Skin"
+skin.modifiers.new("Armature", "ARMATURE").object = rig
+skin.parent = rig
+bpy.ops.export_scene.fbx(filepath={str(hero_fbx)!r}, add_leaf_bones=False)
+print(json.dumps(0))
+""")
+    before = hero_fbx.read_bytes()
+    code = strnn_batch.main(["transfer", "--target", str(hero_fbx), str(take), "--out", str(out / "fbx"),
+                             "--extension", str(extension)])
+    assert code == 0, capsys.readouterr().err
+    assert hero_fbx.read_bytes() == before and sorted(p.name for p in (out / "fbx").iterdir()) == ["walk.transfer.fbx"]
+    got = run_bpy(FBX_READ + f"""
+print(json.dumps({{"moved": read_fbx({str(out / "fbx" / "walk.transfer.fbx")!r})}}))
+""")
+    moved = got["moved"]
+    assert moved["armatures"] == 1 and moved["meshes"] == ["Skin"] and len(moved["heads"]) == 60, moved["meshes"]
+    travel = np.linalg.norm(np.array(moved["heads"])[-1, 0, :2] - np.array(moved["heads"])[0, 0, :2])
+    assert travel > 0.5  # the hero walks (the take's 60 frames of walking, on its shorter legs)
 
 
 def test_a_finished_batch_leaves_no_temporary_folder(tmp_path, extension, monkeypatch):
