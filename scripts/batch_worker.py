@@ -311,20 +311,25 @@ def run_file(bpy, job: dict) -> list[str]:
 
 
 def export_fbx(bpy, obj, path: Path) -> None:
-    """Write ``obj`` and the meshes it deforms (or that hang from it) to an FBX at ``path`` with Blender's exporter,
+    """Write ``obj``, the objects it hangs from (a root null) and the meshes it deforms (or that hang from it) to an
+    FBX at ``path`` with Blender's exporter,
     its active action the file's one take (named as the action; the worker's other actions, the input's own among
     them, are dropped first: the exporter writes a take for every action), every frame keyed (no curve
     simplification) and no leaf bones added, so that it imports again as it was written. (The exporter's take of the
     scene instead of the actions imports one frame late.)"""
     keep = {obj} | {o for o in bpy.data.objects if o.type == "MESH" and (
         o.parent is obj or any(m.type == "ARMATURE" and m.object is obj for m in o.modifiers))}
+    above = obj.parent
+    while above is not None:
+        keep.add(above)
+        above = above.parent
     for action in [a for a in bpy.data.actions if a is not obj.animation_data.action]:
         bpy.data.actions.remove(action)
     for o in bpy.context.view_layer.objects:
         o.select_set(o in keep)
     bpy.context.view_layer.objects.active = obj
     bpy.ops.export_scene.fbx(filepath=str(path), check_existing=False, use_selection=True,
-                             object_types={"ARMATURE", "MESH"}, add_leaf_bones=False, bake_anim=True,
+                             object_types={"ARMATURE", "MESH", "EMPTY"}, add_leaf_bones=False, bake_anim=True,
                              bake_anim_use_all_actions=True, bake_anim_use_nla_strips=False,
                              bake_anim_force_startend_keying=True, bake_anim_simplify_factor=0.0)
 

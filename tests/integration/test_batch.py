@@ -513,16 +513,17 @@ def read_fbx(path):
         heads.append([list(arm.matrix_world @ b.head) for b in arm.pose.bones])
     return {"armatures": len(arms), "meshes": sorted(o.name for o in bpy.data.objects if o.type == "MESH"),
             "bones": sorted(b.name for b in arm.data.bones), "fps": bpy.context.scene.render.fps,
+            "parent": arm.parent.name if arm.parent else None,
             "first": first, "heads": heads}
 """
 
 
 def test_fbx_takes_are_extended_into_fbx_and_moved_onto_a_character(tmp_path, extension, capsys):
-    """An FBX (Blender's exporter: a 30 fps walk on its armature, a mesh skinned to it) is read with Blender's FBX
-    importer and written back as FBX: the armature and its mesh, no bone added, the take's own frames where they
-    were and the new ones after them, at the take's frame rate. As a take it moves onto a character .blend, which
-    keeps nothing the FBX brought, and onto a character FBX, whose results are FBX files of it (its rig, its mesh,
-    the take its motion). A broken FBX is a failure with its reason."""
+    """An FBX (Blender's exporter: a 30 fps walk on its armature under a root null, a mesh skinned to it) is read
+    with Blender's FBX importer and written back as FBX: the armature under its null and its mesh, no bone added,
+    the take's own frames where they were and the new ones after them, at the take's frame rate. As a take it moves
+    onto a character .blend, which keeps nothing the FBX brought, and onto a character FBX, whose results are FBX
+    files of it (its rig, its mesh, the take its motion). A broken FBX is a failure with its reason."""
     clip = write_bvh(tmp_path / "walk.bvh", walking_skeleton(60))
     take = tmp_path / "takes" / "walk.fbx"
     take.parent.mkdir()
@@ -530,6 +531,10 @@ def test_fbx_takes_are_extended_into_fbx_and_moved_onto_a_character(tmp_path, ex
 bpy.ops.wm.read_factory_settings(use_empty=True)
 bpy.ops.import_anim.bvh(filepath={str(clip)!r}, update_scene_fps=True, update_scene_duration=True)
 arm = bpy.context.active_object
+null = bpy.data.objects.new("Null", None)  # a root null above the armature, as Maya and MotionBuilder write it
+bpy.context.scene.collection.objects.link(null)
+null.location, null.rotation_euler = (1.0, 2.0, 0.0), (0.0, 0.0, 0.5)
+arm.parent = null
 bpy.ops.mesh.primitive_cube_add(size=0.3, location=(0, 0, 1))
 body = bpy.context.active_object
 body.name = "Body"
@@ -550,6 +555,7 @@ print(json.dumps({{"take": read_fbx({str(take)!r}), "extended": read_fbx({str(ou
 """)
     before, after = got["take"], got["extended"]
     assert after["armatures"] == 1 and after["meshes"] == ["Body"] and after["bones"] == before["bones"]
+    assert after["parent"] == before["parent"] == "Null"
     assert after["fps"] == before["fps"] == 30 and after["first"] == before["first"]
     heads, new = np.array(before["heads"]), np.array(after["heads"])
     assert len(new) == len(heads) + 20
