@@ -622,3 +622,24 @@ def test_a_finished_batch_leaves_no_temporary_folder(tmp_path, extension, monkey
                              str(tmp_path / "out"), "--extension", str(extension)])
     assert code == 0 and len(list((tmp_path / "out").glob("*.bvh"))) == 2
     assert list(scratch.iterdir()) == []
+
+
+def test_fbx_inputs_are_found_and_named_and_a_crowd_is_no_fbx(tmp_path, capsys):
+    """Folders give up their FBX files beside BVH and .blend ones (any case of the suffix), an FBX's result is an FBX
+    by default (a transfer's is the character's format), and --every-armature, whose result holds every character,
+    refuses --format fbx as it does bvh."""
+    (tmp_path / "takes" / "sub").mkdir(parents=True)
+    for name in ("a.bvh", "sub/b.FBX", "c.blend", "notes.txt"):
+        (tmp_path / "takes" / name).write_bytes(b"")
+    found, problems = strnn_batch.collect([tmp_path / "takes"])
+    assert sorted(str(rel) for _, rel in found) == ["a.bvh", "c.blend", "sub/b.FBX"] and problems == []
+    parse = strnn_batch.build_parser().parse_args
+    fbx = tmp_path / "takes" / "sub" / "b.FBX"
+    assert strnn_batch.output_path(fbx, Path("sub/b.FBX"), parse(["extend", str(fbx)])).name == "b.extend.fbx"
+    hero = tmp_path / "hero.fbx"
+    hero.write_bytes(b"")
+    args = parse(["transfer", "--target", str(hero), str(fbx)])
+    assert strnn_batch.output_path(fbx, Path("b.FBX"), args).name == "b.transfer.fbx"
+    with pytest.raises(SystemExit):
+        strnn_batch.main(["extend", "--every-armature", "--format", "fbx", str(tmp_path / "takes" / "c.blend")])
+    assert "--every-armature writes .blend results" in capsys.readouterr().err
