@@ -320,6 +320,8 @@ def output_path(path: Path, rel: Path, args) -> Path:
     own = path.suffix.lower().lstrip(".")
     if args.command == "transfer":  # the character's format
         own = "fbx" if args.target.suffix.lower() == ".fbx" else "blend"
+    elif args.every_armature:  # every character of the file, which a BVH or an FBX result would not hold
+        own = "blend"
     fmt = args.format if args.format != "auto" else own
     return args.out / rel.parent / f"{rel.stem}.{args.command}.{fmt}"
 

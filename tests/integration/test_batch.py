@@ -523,7 +523,8 @@ def test_fbx_takes_are_extended_into_fbx_and_moved_onto_a_character(tmp_path, ex
     with Blender's FBX importer and written back as FBX: the armature under its null and its mesh, no bone added,
     the take's own frames where they were and the new ones after them, at the take's frame rate. As a take it moves
     onto a character .blend, which keeps nothing the FBX brought, and onto a character FBX, whose results are FBX
-    files of it (its rig, its mesh, the take its motion). A broken FBX is a failure with its reason."""
+    files of it (its rig, its mesh, the take its motion). A broken FBX is a failure with its reason, and so is an FBX
+    of two walkers run on in place with --every-armature (its file would keep one), left as it was."""
     clip = write_bvh(tmp_path / "walk.bvh", walking_skeleton(60))
     take = tmp_path / "takes" / "walk.fbx"
     take.parent.mkdir()
@@ -562,6 +563,20 @@ print(json.dumps({{"take": read_fbx({str(take)!r}), "extended": read_fbx({str(ou
     assert np.abs(new[:len(heads)] - heads).max() < 1e-3  # the take's own frames, as they were
     step = np.linalg.norm(np.diff(new, axis=0), axis=-1).mean(-1)
     assert 0.5 < step[len(heads):].mean() / step[:len(heads) - 1].mean() < 1.6  # walking on, not frozen
+    cast = tmp_path / "cast.fbx"  # two walkers in one FBX: --every-armature --in-place would keep one of them
+    run_bpy(f"""
+bpy.ops.wm.read_factory_settings(use_empty=True)
+for x in (0.0, 2.0):
+    bpy.ops.import_anim.bvh(filepath={str(clip)!r})
+    bpy.context.active_object.location.x = x
+bpy.ops.export_scene.fbx(filepath={str(cast)!r})
+print(json.dumps(0))
+""")
+    kept = cast.read_bytes()
+    code = strnn_batch.main(["extend", "--frames", "10", "--every-armature", "--in-place", str(cast), "--extension",
+                             str(extension)])
+    err = capsys.readouterr().err
+    assert code == 1 and "a .fbx result holds one" in err and cast.read_bytes() == kept, err
     hero = tmp_path / "hero.blend"
     run_bpy(f"""
 bpy.ops.wm.read_factory_settings(use_empty=True)
@@ -627,7 +642,7 @@ def test_a_finished_batch_leaves_no_temporary_folder(tmp_path, extension, monkey
 def test_fbx_inputs_are_found_and_named_and_a_crowd_is_no_fbx(tmp_path, capsys):
     """Folders give up their FBX files beside BVH and .blend ones (any case of the suffix), an FBX's result is an FBX
     by default (a transfer's is the character's format), and --every-armature, whose result holds every character,
-    refuses --format fbx as it does bvh."""
+    writes a .blend for an FBX and refuses --format fbx as it does bvh."""
     (tmp_path / "takes" / "sub").mkdir(parents=True)
     for name in ("a.bvh", "sub/b.FBX", "c.blend", "notes.txt"):
         (tmp_path / "takes" / name).write_bytes(b"")
@@ -643,3 +658,5 @@ def test_fbx_inputs_are_found_and_named_and_a_crowd_is_no_fbx(tmp_path, capsys):
     with pytest.raises(SystemExit):
         strnn_batch.main(["extend", "--every-armature", "--format", "fbx", str(tmp_path / "takes" / "c.blend")])
     assert "--every-armature writes .blend results" in capsys.readouterr().err
+    crowd = parse(["extend", "--every-armature", str(fbx)])  # an FBX of a cast: every character, so a .blend
+    assert strnn_batch.output_path(fbx, Path("sub/b.FBX"), crowd).name == "b.extend.blend"
