@@ -2,7 +2,7 @@
 
 The first :func:`process_file` of a worker process starts Blender (the ``bpy`` module) with factory
 settings in a user folder of its own and installs and enables the extension zip; every file then
-starts from Blender's factory startup file, is imported (Blender's BVH or FBX importer, or the .blend is
+starts from Blender's factory startup file, is imported (Blender's BVH, FBX or glTF importer, or the .blend is
 opened), has the extension's operator run on its armature, and its result is written atomically.
 It never raises: a failure becomes a one-line reason in the result. :func:`install_extension` is
 also used by the README pictures, which install the extension the same way.
@@ -12,7 +12,9 @@ from __future__ import annotations
 
 import contextlib
 import importlib
+import json
 import os
+import struct
 import sys
 import tempfile
 import time
@@ -23,6 +25,10 @@ REPO = Path(__file__).resolve().parent.parent
 REPO_MODULE = "strnn_batch"
 ADDON = f"bl_ext.{REPO_MODULE}.strnn_motion"
 BOM = b"\xef\xbb\xbf"  # UTF-8's byte-order mark
+GLTF = (".glb", ".gltf")
+# the frame rates a glTF's keys are read at where their spacing says one (within RATE_TOLERANCE)
+FRAME_RATES = (8, 10, 12, 15, 20, 24, 25, 30, 48, 50, 60, 72, 90, 100, 120, 144, 240)
+RATE_TOLERANCE = 0.01
 
 
 class BatchError(Exception):
@@ -115,6 +121,89 @@ def file_axes(bvh) -> tuple[str, str]:
     return ("Y" if up.endswith("Z") else "-Z"), up
 
 
+def gltf_document(path: Path) -> dict:
+    """The JSON of a .gltf file, or of a .glb's first chunk (the binary form's header, then its JSON)."""
+    data = path.read_bytes()
+    if path.suffix.lower() == ".glb":
+        if len(data) < 20 or data[:4] != b"glTF":
+            raise BatchError("not a binary glTF file: it does not start with glTF's header")
+        length, kind = struct.unpack_from("<I4s", data, 12)
+        if kind != b"JSON":
+            raise BatchError("broken glTF: its first chunk is not its JSON")
+        data = data[20:20 + length]
+    try:
+        document = json.loads(data)
+    except (UnicodeDecodeError, ValueError) as e:
+        raise BatchError(f"broken glTF: its JSON cannot be read ({e})") from None
+    if not isinstance(document, dict):
+        raise BatchError("broken glTF: its JSON is not an object")
+    return document
+
+
+def gltf_animations(document: dict) -> list[str]:
+    """The names of the glTF's animations, in the file's order (an unnamed one as glTF numbers it)."""
+    animations = document.get("animations")
+    if not isinstance(animations, list):
+        return []
+    return [a.get("name") or f"animation {i}" if isinstance(a, dict) else f"animation {i}"
+            for i, a in enumerate(animations)]
+
+
+def gltf_frame_rate(document: dict) -> int | None:
+    """The frame rate a glTF's keys were made at, or None where their spacing says none.
+
+    glTF keeps time in seconds, and Blender's importer puts a key at the scene's frame rate times its time: at the
+    factory 24 fps a 30 fps take's keys land 0.8 frames apart. Read from the animation sampler with the most keys
+    (its times' count, first and last, which glTF's accessors must state), as (count - 1) / (last - first), and
+    kept where that is within :data:`RATE_TOLERANCE` of one of :data:`FRAME_RATES` (keys set by hand at a few
+    poses say no rate)."""
+    densest = None
+    try:
+        for animation in document.get("animations") or []:
+            for sampler in animation.get("samplers") or []:
+                times = document["accessors"][sampler["input"]]
+                count, first, last = int(times["count"]), float(times["min"][0]), float(times["max"][0])
+                if count >= 3 and last > first and (densest is None or count > densest[0]):
+                    densest = (count, first, last)
+    except (AttributeError, KeyError, IndexError, TypeError, ValueError):  # the importer says what is wrong
+        return None
+    if densest is None:
+        return None
+    count, first, last = densest
+    spacing = (count - 1) / (last - first)
+    rate = min(FRAME_RATES, key=lambda r: abs(spacing - r))
+    return rate if abs(spacing - rate) <= RATE_TOLERANCE * rate else None
+
+
+def import_gltf(bpy, path: Path) -> list[str]:
+    """Import a .glb or .gltf with Blender's glTF importer, the scene first set to the rate its keys were made at
+    (:func:`gltf_frame_rate`: each key on a frame, as a BVH's or an FBX's are); its first animation is the one
+    Blender makes active (the others go to NLA tracks). No bone shape is made (the importer's icosphere object).
+    Returns the notes a batch reports: keys at no rate, animations left as they were."""
+    document = gltf_document(path)
+    rate = gltf_frame_rate(document)
+    scene = bpy.context.scene
+    if rate is not None:
+        scene.render.fps, scene.render.fps_base = rate, 1.0
+    there = set(bpy.data.objects)
+    try:
+        bpy.ops.import_scene.gltf(filepath=str(path), disable_bone_shape=True)
+    except RuntimeError as e:
+        raise BatchError(f"Blender's glTF importer could not read it: {blender_error(e)}") from None
+    if not document.get("skins") and not any(o.type == "ARMATURE" for o in set(bpy.data.objects) - there):
+        raise BatchError("the glTF has no skin, and Blender's importer makes an armature of a skin's joints alone "
+                         "(its nodes came in as empties): export the character with its skinned mesh")
+    notes = []
+    animations = gltf_animations(document)
+    if animations and rate is None:
+        notes.append(f"the glTF's keys are not spaced at a frame rate: read at the scene's {scene.render.fps} "
+                     "frames a second (its keys between frames)")
+    if len(animations) > 1:
+        notes.append(f"the glTF holds {len(animations)} animations: ran on its first, {animations[0]!r} (the one "
+                     "Blender's importer makes active); the result holds the new one alone")
+    return notes
+
+
 def blender_error(e: Exception) -> str:
     """The last meaningful line of a bpy.ops RuntimeError (Blender packs tracebacks in the message)."""
     lines = [line.strip() for line in str(e).splitlines() if line.strip() and not line.strip().startswith(
@@ -187,14 +276,16 @@ def clear_keys(obj, start: int, end: int) -> None:
 
 
 def open_target(bpy, job: dict):
-    """For ``transfer``: open the character .blend (or import the character FBX into Blender's factory startup
-    file) and return its rig (``--rig``, or the one to pick)."""
+    """For ``transfer``: open the character .blend (or import the character FBX or glTF into Blender's factory
+    startup file) and return its rig (``--rig``, or the one to pick)."""
     try:
         if job["target"].lower().endswith(".fbx"):
             bpy.ops.import_scene.fbx(filepath=job["target"])
+        elif job["target"].lower().endswith(GLTF):
+            import_gltf(bpy, Path(job["target"]))
         else:
             bpy.ops.wm.open_mainfile(filepath=job["target"], load_ui=False)
-    except RuntimeError as e:
+    except (RuntimeError, BatchError) as e:
         raise BatchError(f"Blender could not open --target {job['target']}: {blender_error(e)}") from None
     if job["rig"]:
         rig = bpy.data.objects.get(job["rig"])
@@ -210,12 +301,18 @@ def run_file(bpy, job: dict) -> list[str]:
     src, dst = Path(job["input"]), Path(job["output"])
     target = None
     if job["operator"] == "transfer_motion":
-        if src.suffix.lower() not in (".bvh", ".fbx"):
-            raise BatchError("transfer takes BVH or FBX takes; a .blend is a target (--target), not a take")
+        if src.suffix.lower() not in (".bvh", ".fbx", *GLTF):
+            raise BatchError("transfer takes BVH, FBX or glTF takes; a .blend is a target (--target), not a take")
         target = open_target(bpy, job)
+    if dst.suffix.lower() == ".gltf":  # (--in-place on a .gltf)
+        raise BatchError("a .gltf result is two files (the .gltf and its .bin), which cannot be replaced at once: "
+                         "write .glb results to --out (leave out --in-place)")
     axes = ("-Z", "Y")
-    there = set(bpy.data.objects)
-    if src.suffix.lower() == ".fbx":
+    there, there_collections = set(bpy.data.objects), set(bpy.data.collections)
+    imported = []
+    if src.suffix.lower() in GLTF:
+        imported = import_gltf(bpy, src)
+    elif src.suffix.lower() == ".fbx":
         try:  # as File > Import > FBX does it: the scene takes the file's frame rate
             bpy.ops.import_scene.fbx(filepath=str(src))
         except RuntimeError as e:
@@ -233,7 +330,7 @@ def run_file(bpy, job: dict) -> list[str]:
             bpy.ops.wm.open_mainfile(filepath=str(src), load_ui=False)
         except RuntimeError as e:
             raise BatchError(f"Blender could not open it: {blender_error(e)}") from None
-    if src.suffix.lower() != ".blend":  # the imported armature (an FBX's animated one first) is what runs
+    if src.suffix.lower() != ".blend":  # the imported armature (an FBX's or glTF's animated one first) runs
         brought = sorted((o for o in set(bpy.data.objects) - there if o.type == "ARMATURE"),
                          key=lambda o: (not (o.animation_data and o.animation_data.action), o.name))
         if not brought:
@@ -280,11 +377,13 @@ def run_file(bpy, job: dict) -> list[str]:
     if source is not None:  # the result file holds the character alone: what the take brought goes
         for brought in set(bpy.data.objects) - there:
             bpy.data.objects.remove(brought)
+        for brought in set(bpy.data.collections) - there_collections:  # (the glTF importer's scene collection)
+            bpy.data.collections.remove(brought)
     action = obj.animation_data.action if obj.animation_data else None
     if action is None:
         raise BatchError(f"strnn.{job['operator']} left the armature without an action")
     common = importlib.import_module(f"{ADDON}.strnn_addon.stages.common")
-    notes = batch_notes(common, action)
+    notes = imported + batch_notes(common, action)
     if crowd:
         notes = [f"{obj.name}: {n}" for n in notes] + crowd_notes(common, crowd, before)
     if axes[1] != "Y":
@@ -304,6 +403,8 @@ def run_file(bpy, job: dict) -> list[str]:
                                     check_existing=False)
         elif dst.suffix.lower() == ".fbx":
             export_fbx(bpy, obj, tmp)
+        elif dst.suffix.lower() == ".glb":
+            export_gltf(bpy, obj, tmp)
         else:
             bpy.ops.wm.save_as_mainfile(filepath=str(tmp), copy=True, compress=True)
     except RuntimeError as e:
@@ -313,13 +414,10 @@ def run_file(bpy, job: dict) -> list[str]:
     return notes
 
 
-def export_fbx(bpy, obj, path: Path) -> None:
-    """Write ``obj``, the objects it hangs from (a root null) and the meshes it deforms (or that hang from it) to an
-    FBX at ``path`` with Blender's exporter,
-    its active action the file's one take (named as the action; the worker's other actions, the input's own among
-    them, are dropped first: the exporter writes a take for every action), every frame keyed (no curve
-    simplification) and no leaf bones added, so that it imports again as it was written. (The exporter's take of the
-    scene instead of the actions imports one frame late.)"""
+def select_character(bpy, obj) -> None:
+    """Select ``obj``, the objects it hangs from (a root null) and the meshes it deforms (or that hang from it), and
+    drop every action but its active one (an exporter writes a take or an animation for each action; the worker's
+    others, the input's own among them, are not the result)."""
     keep = {obj} | {o for o in bpy.data.objects if o.type == "MESH" and (
         o.parent is obj or any(m.type == "ARMATURE" and m.object is obj for m in o.modifiers))}
     above = obj.parent
@@ -331,10 +429,29 @@ def export_fbx(bpy, obj, path: Path) -> None:
     for o in bpy.context.view_layer.objects:
         o.select_set(o in keep)
     bpy.context.view_layer.objects.active = obj
+
+
+def export_fbx(bpy, obj, path: Path) -> None:
+    """Write ``obj`` with what :func:`select_character` selects to an FBX at ``path`` with Blender's exporter, its
+    active action the file's one take (named as the action), every frame keyed (no curve simplification) and no
+    leaf bones added, so that it imports again as it was written. (The exporter's take of the scene instead of the
+    actions imports one frame late.)"""
+    select_character(bpy, obj)
     bpy.ops.export_scene.fbx(filepath=str(path), check_existing=False, use_selection=True,
                              object_types={"ARMATURE", "MESH", "EMPTY"}, add_leaf_bones=False, bake_anim=True,
                              bake_anim_use_all_actions=True, bake_anim_use_nla_strips=False,
                              bake_anim_force_startend_keying=True, bake_anim_simplify_factor=0.0)
+
+
+def export_gltf(bpy, obj, path: Path) -> None:
+    """Write ``obj`` with what :func:`select_character` selects to a binary glTF (.glb) at ``path`` with Blender's
+    exporter, its active action the file's one animation (named as the action), sampled at every frame of the
+    action at the scene's rate (glTF's times in seconds: a key at frame f at f / fps), so that it imports again as
+    it was written; the bones' rest as Blender has it (the importer's, for a glTF input)."""
+    select_character(bpy, obj)
+    bpy.ops.export_scene.gltf(filepath=str(path), check_existing=False, export_format="GLB", use_selection=True,
+                              export_animations=True, export_animation_mode="ACTIONS", export_force_sampling=True,
+                              export_frame_range=False, export_anim_slide_to_zero=False)
 
 
 def every_armature(bpy, obj) -> list:

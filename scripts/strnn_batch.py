@@ -1,4 +1,4 @@
-"""Run the STRNN Motion extension headless over many BVH / FBX / .blend files, one Blender (bpy) per file.
+"""Run the STRNN Motion extension headless over many BVH / FBX / glTF / .blend files, one Blender (bpy) per file.
 
     python scripts/strnn_batch.py extend   --frames 120 data/clips/ --out out/batch
     python scripts/strnn_batch.py denoise  --strength 0.8 a.bvh b.bvh --jobs 4
@@ -8,19 +8,21 @@
     python scripts/strnn_batch.py follow   --path figure_eight --frames 300 walk.bvh
     python scripts/strnn_batch.py transfer --target hero.blend data/clips/ --out out/hero
     python scripts/strnn_batch.py transfer --target hero.fbx takes/ --out out/hero   # FBX results
+    python scripts/strnn_batch.py extend   --frames 60 game_clips/*.glb --out out/glb   # glTF in, .glb out
 
 Each input file runs in its own worker process (``--jobs N`` at a time) that imports the ``bpy``
 module, resets to factory settings, installs and enables the built extension zip (built once
 here with scripts/build_extension.py into dist/ unless dist/ is up to date, or ``--extension``),
-imports the file with Blender's own BVH or FBX importer (a .blend is opened), runs the extension's real
+imports the file with Blender's own BVH, FBX or glTF importer (a .blend is opened), runs the extension's real
 operator (strnn.extend_clip, strnn.inbetween, strnn.denoise_action, strnn.foot_lock,
-strnn.make_loop, strnn.follow_curve) on the armature, and writes the result with Blender's own BVH or FBX
-exporter (or saves a .blend) as ``OUT/NAME.<command>.bvh`` (``.fbx``: the file's armature and meshes, the new
-action its one take). Folders are searched recursively for *.bvh, *.fbx and *.blend; their
-sub-folders are kept under OUT. An input is never overwritten unless ``--in-place``. ``transfer``
-opens the character .blend (--target; an FBX character is imported) instead, imports each take (BVH or FBX)
-beside its rig, runs strnn.transfer_motion from the take onto the rig, removes what the take brought and saves a
-copy of the .blend (an FBX of the character, for an FBX character).
+strnn.make_loop, strnn.follow_curve) on the armature, and writes the result with Blender's own BVH, FBX or
+glTF exporter (or saves a .blend) as ``OUT/NAME.<command>.bvh`` (``.fbx``, ``.glb``: the file's armature and
+meshes, the new action its one take or animation; a .gltf's result is a .glb). Folders are searched recursively
+for *.bvh, *.fbx, *.glb, *.gltf and *.blend; their sub-folders are kept under OUT. An input is never overwritten
+unless ``--in-place``. ``transfer`` opens the character .blend (--target; an FBX or glTF character is imported)
+instead, imports each take (BVH, FBX or glTF) beside its rig, runs strnn.transfer_motion from the take onto the
+rig, removes what the take brought and saves a copy of the .blend (an FBX or .glb of the character, for an FBX or
+glTF character).
 
 One progress line per finished file, then a summary table (file, status, seconds, and the reason a
 file failed or the notes the operator's report warns of for one that did: motion unlike what the model
@@ -56,7 +58,8 @@ else:  # run by path from a checkout
 from model_core.io.files import unwritable, write_json  # noqa: E402  (model_core never imports bpy)
 from model_core.ops import options as opts  # noqa: E402
 
-EXTENSIONS = (".bvh", ".fbx", ".blend")
+EXTENSIONS = (".bvh", ".fbx", ".glb", ".gltf", ".blend")
+CHARACTERS = (".blend", ".fbx", ".glb", ".gltf")  # what --target may be
 PATHS = ("line", "circle", "s_curve", "figure_eight")
 SOURCES = ("strnn_addon", "model_core", "models", "blender_manifest.toml", "__init__.py")
 
@@ -69,15 +72,17 @@ def build_parser() -> argparse.ArgumentParser:
     common = argparse.ArgumentParser(add_help=False)
     io = common.add_argument_group("inputs and outputs")
     io.add_argument("inputs", nargs="+", type=Path, metavar="PATH",
-                    help="BVH, FBX or .blend files, or folders searched recursively for them")
+                    help="BVH, FBX, glTF (.glb, .gltf) or .blend files, or folders searched recursively for them")
     io.add_argument("--out", type=Path, default=Path("out"), metavar="DIR",
-                    help="output folder (default: ./out); results are named NAME.<command>.bvh (.fbx, .blend)")
-    io.add_argument("--format", choices=("auto", "bvh", "fbx", "blend"), default="auto",
-                    help="what to write: a BVH or an FBX (Blender's exporters; an FBX with the file's meshes, the "
-                         "new action its one take) or a .blend; auto (default): the input's own format")
+                    help="output folder (default: ./out); results are named NAME.<command>.bvh (.fbx, .glb, "
+                         ".blend)")
+    io.add_argument("--format", choices=("auto", "bvh", "fbx", "glb", "blend"), default="auto",
+                    help="what to write: a BVH, an FBX or a binary glTF (Blender's exporters; an FBX or .glb with "
+                         "the file's meshes, the new action its one take or animation) or a .blend; auto "
+                         "(default): the input's own format (a .glb for a .gltf)")
     io.add_argument("--in-place", action="store_true",
                     help="overwrite each input with its result instead of writing to --out "
-                         "(the output format is then the input's)")
+                         "(the output format is then the input's; not for .gltf, whose result is a .glb)")
     io.add_argument("--every-armature", action="store_true",
                     help="in a .blend, run on every armature that has an action (a crowd, a cast), as the sidebar "
                          "does with them all selected, instead of the active one alone; the result is a .blend "
@@ -179,12 +184,14 @@ def build_parser() -> argparse.ArgumentParser:
     foot_lock_flag(p, "follow_curve")
     ground_flag(p, "the walk goes up and down with it, feet locked on it")
     p = sub.add_parser("transfer", parents=[common], help="move each take onto a character "
-                       "(strnn.transfer_motion)", description="Move the motion of each BVH or FBX take onto the "
-                       "rig of a character .blend or FBX (its proportions, feet on the floor), one new action per "
-                       "take, saved as a copy of that .blend, or for an FBX character as an FBX of it with the new "
-                       "action its take (--format: bvh, the rig exported as BVH; fbx or blend).")
-    p.add_argument("--target", type=Path, required=True, metavar="RIG.blend|RIG.fbx",
-                   help="the .blend or FBX holding the character's armature (never changed; each result is a copy)")
+                       "(strnn.transfer_motion)", description="Move the motion of each BVH, FBX or glTF take onto "
+                       "the rig of a character .blend, FBX or glTF (its proportions, feet on the floor), one new "
+                       "action per take, saved as a copy of that .blend, or for an FBX or glTF character as an FBX "
+                       "or .glb of it with the new action its take (--format: bvh, the rig exported as BVH; fbx, "
+                       "glb or blend).")
+    p.add_argument("--target", type=Path, required=True, metavar="RIG.blend|RIG.fbx|RIG.glb",
+                   help="the .blend, FBX or glTF holding the character's armature (never changed; each result is "
+                        "a copy)")
     p.add_argument("--rig", default="", metavar="NAME",
                    help="the armature object in --target to put the motion on (default: its active armature, "
                         "or its only one)")
@@ -258,14 +265,14 @@ def check_args(parser, args) -> None:
         parser.error("--range START END: END must come after START")
     if args.command == "follow" and (args.frames < 0 or args.speed < 0):
         parser.error("--frames and --speed must not be negative")
-    if args.command == "transfer" and (args.target.suffix.lower() not in (".blend", ".fbx")
+    if args.command == "transfer" and (args.target.suffix.lower() not in CHARACTERS
                                        or not args.target.is_file()):
-        parser.error(f"--target {args.target}: not a .blend or .fbx file")
+        parser.error(f"--target {args.target}: not a .blend, .fbx, .glb or .gltf file")
     if args.command == "transfer" and args.in_place:
         parser.error("--in-place is not for transfer: the results go beside the takes in --out")
     if args.every_armature and args.command in ("transfer", "follow"):
         parser.error(f"--every-armature is not for {args.command}: it moves one character at a time")
-    if args.every_armature and args.format in ("bvh", "fbx"):
+    if args.every_armature and args.format in ("bvh", "fbx", "glb"):
         parser.error(f"--every-armature writes .blend results (a {args.format.upper()} file here holds one "
                      f"armature's take): drop --format {args.format}")
     if args.keys_per_second is not None and not 0.0 < args.keys_per_second <= 1000.0:
@@ -297,11 +304,12 @@ def collect(inputs: list[Path]) -> tuple[list[tuple[Path, Path]], list[tuple[str
         if item.is_dir():
             files = sorted(p for p in item.rglob("*") if p.suffix.lower() in EXTENSIONS and p.is_file())
             if not files:
-                problems.append((str(item), "folder holds no .bvh, .fbx or .blend file"))
+                problems.append((str(item), "folder holds no .bvh, .fbx, .glb, .gltf or .blend file"))
             pairs = [(p, p.relative_to(item)) for p in files]
         elif item.is_file():
             if item.suffix.lower() not in EXTENSIONS:
-                problems.append((str(item), f"not a .bvh, .fbx or .blend file ({item.suffix or 'no extension'})"))
+                problems.append((str(item), f"not a .bvh, .fbx, .glb, .gltf or .blend file "
+                                            f"({item.suffix or 'no extension'})"))
                 continue
             pairs = [(item, Path(item.name))]
         else:
@@ -314,12 +322,19 @@ def collect(inputs: list[Path]) -> tuple[list[tuple[Path, Path]], list[tuple[str
     return found, problems
 
 
+def own_format(path: Path) -> str:
+    """The format a file's result is written in by default: its own, a .glb for a .gltf (glTF's one-file form,
+    which is written whole; a .gltf's .bin beside it could not be replaced with it at once)."""
+    own = path.suffix.lower().lstrip(".")
+    return "glb" if own == "gltf" else own
+
+
 def output_path(path: Path, rel: Path, args) -> Path:
     if args.in_place:
         return path
-    own = path.suffix.lower().lstrip(".")
+    own = own_format(path)
     if args.command == "transfer":  # the character's format
-        own = "fbx" if args.target.suffix.lower() == ".fbx" else "blend"
+        own = own_format(args.target)
     elif args.every_armature:  # every character of the file, which a BVH or an FBX result would not hold
         own = "blend"
     fmt = args.format if args.format != "auto" else own

@@ -414,7 +414,7 @@ print(json.dumps({{"armatures": [o.name for o in bpy.data.objects if o.type == "
     assert got["armatures"] == ["Hero"] and got["record"] == "Transfer Motion" and got["frames"] == 60
     with pytest.raises(SystemExit):
         strnn_batch.main(["transfer", "--target", str(clip), str(clip)])
-    assert "not a .blend or .fbx file" in capsys.readouterr().err
+    assert "not a .blend, .fbx, .glb or .gltf file" in capsys.readouterr().err
 
 
 @pytest.mark.parametrize("sig, code", [(signal.SIGINT, 130), (signal.SIGTERM, 143)], ids=["ctrl-c", "sigterm"])
@@ -498,6 +498,17 @@ arm = next(o for o in bpy.data.objects if o.type == "ARMATURE")
 print(json.dumps(arm.animation_data.action["strnn"]["ground"].to_dict()))
 """)
     assert got == {"object": "Floor", "frames_without": 0}
+
+
+def transferred(capsys, extension: Path, hero: Path, take: Path, out: Path) -> list[str]:
+    """The names of the files the batch's transfer of ``take`` onto the character file ``hero`` writes in ``out``
+    (the character's file left as it was)."""
+    before = hero.read_bytes()
+    code = strnn_batch.main(["transfer", "--target", str(hero), str(take), "--out", str(out),
+                             "--extension", str(extension)])
+    assert code == 0, capsys.readouterr().err
+    assert hero.read_bytes() == before
+    return sorted(p.name for p in out.iterdir())
 
 
 FBX_READ = """
@@ -610,11 +621,7 @@ skin.parent = rig
 bpy.ops.export_scene.fbx(filepath={str(hero_fbx)!r}, add_leaf_bones=False)
 print(json.dumps(0))
 """)
-    before = hero_fbx.read_bytes()
-    code = strnn_batch.main(["transfer", "--target", str(hero_fbx), str(take), "--out", str(out / "fbx"),
-                             "--extension", str(extension)])
-    assert code == 0, capsys.readouterr().err
-    assert hero_fbx.read_bytes() == before and sorted(p.name for p in (out / "fbx").iterdir()) == ["walk.transfer.fbx"]
+    assert transferred(capsys, extension, hero_fbx, take, out / "fbx") == ["walk.transfer.fbx"]
     got = run_bpy(FBX_READ + f"""
 print(json.dumps({{"moved": read_fbx({str(out / "fbx" / "walk.transfer.fbx")!r})}}))
 """)
@@ -660,3 +667,176 @@ def test_fbx_inputs_are_found_and_named_and_a_crowd_is_no_fbx(tmp_path, capsys):
     assert "--every-armature writes .blend results" in capsys.readouterr().err
     crowd = parse(["extend", "--every-armature", str(fbx)])  # an FBX of a cast: every character, so a .blend
     assert strnn_batch.output_path(fbx, Path("sub/b.FBX"), crowd).name == "b.extend.blend"
+
+
+def test_gltf_inputs_are_found_and_named_and_a_gltf_is_not_replaced_in_place(tmp_path, extension, capsys):
+    """Folders give up .glb and .gltf files; a glTF's result is a .glb (a .gltf's too: glTF's one-file form, written
+    whole), a glTF character's transfers are .glb files, --every-armature refuses --format glb, and --in-place on a
+    .gltf (two files, the .gltf and its .bin, which cannot be replaced at once) fails with the fix, the file left."""
+    (tmp_path / "takes").mkdir()
+    for name in ("a.glb", "b.GLTF", "b.bin"):
+        (tmp_path / "takes" / name).write_bytes(b"")
+    found, problems = strnn_batch.collect([tmp_path / "takes"])
+    assert sorted(str(rel) for _, rel in found) == ["a.glb", "b.GLTF"] and problems == []
+    parse = strnn_batch.build_parser().parse_args
+    glb, gltf = tmp_path / "takes" / "a.glb", tmp_path / "takes" / "b.GLTF"
+    assert strnn_batch.output_path(glb, Path("a.glb"), parse(["extend", str(glb)])).name == "a.extend.glb"
+    assert strnn_batch.output_path(gltf, Path("b.GLTF"), parse(["denoise", str(gltf)])).name == "b.denoise.glb"
+    args = parse(["transfer", "--target", str(gltf), str(tmp_path / "walk.bvh")])
+    assert strnn_batch.output_path(tmp_path / "walk.bvh", Path("walk.bvh"), args).name == "walk.transfer.glb"
+    with pytest.raises(SystemExit):
+        strnn_batch.main(["extend", "--every-armature", "--format", "glb", str(glb)])
+    assert "--every-armature writes .blend results" in capsys.readouterr().err
+    gltf.write_text('{"asset": {"version": "2.0"}}')
+    code = strnn_batch.main(["extend", "--in-place", str(gltf), "--extension", str(extension)])
+    err = capsys.readouterr().err
+    assert code == 1 and "write .glb results to --out" in err and gltf.read_text() == '{"asset": {"version": "2.0"}}'
+
+
+GLTF_READ = """
+def read_gltf(path, fps):
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    bpy.context.scene.render.fps = fps  # glTF's times in seconds, each key on a frame at the file's rate
+    bpy.ops.import_scene.gltf(filepath=path, disable_bone_shape=True)
+    arm = next(o for o in bpy.data.objects if o.type == "ARMATURE")
+    action = arm.animation_data.action
+    first, last = action.frame_range
+    heads = []
+    for f in range(int(round(first)), int(round(last)) + 1):
+        bpy.context.scene.frame_set(f)
+        heads.append([list(arm.matrix_world @ b.head) for b in arm.pose.bones])
+    return {"objects": sorted([o.name, o.type, o.parent.name if o.parent else None] for o in bpy.data.objects),
+            "bones": sorted(b.name for b in arm.data.bones), "action": action.name,
+            "first": first, "last": last, "heads": heads}
+"""
+
+GLTF_MAKE = """
+def make_gltf(bvh, path, second=False):
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    bpy.ops.import_anim.bvh(filepath=bvh, update_scene_fps=True, update_scene_duration=True)
+    arm = bpy.context.active_object
+    null = bpy.data.objects.new("Null", None)  # a root node above the armature
+    bpy.context.scene.collection.objects.link(null)
+    null.location = (1.0, 2.0, 0.0)
+    arm.parent = null
+    bpy.ops.mesh.primitive_cube_add(size=0.3, location=(0, 0, 1))  # skinned: glTF's armature is a skin's joints
+    body = bpy.context.active_object
+    body.name = "Body"
+    body.modifiers.new("Armature", "ARMATURE").object = arm
+    body.parent = arm
+    body.vertex_groups.new(name="Hips").add(range(len(body.data.vertices)), 1.0, "REPLACE")
+    if second:  # a second clip, stashed in an NLA track, exported as the file's second animation
+        idle = arm.animation_data.action.copy()
+        idle.name = "zz_idle"
+        arm.animation_data.nla_tracks.new().strips.new("zz_idle", 1, idle)
+    bpy.ops.export_scene.gltf(filepath=path, export_format="GLB")
+"""
+
+
+def without_skin(glb: Path, path: Path) -> None:
+    """Write ``glb`` to ``path`` without its skins (as a tool that exports a node tree with no mesh writes it)."""
+    import struct
+
+    data = glb.read_bytes()
+    length = struct.unpack_from("<I", data, 12)[0]
+    document = json.loads(data[20:20 + length])
+    document.pop("skins")
+    for node in document["nodes"]:
+        node.pop("skin", None)
+    text = json.dumps(document).encode()
+    text += b" " * (-len(text) % 4)
+    rest = data[20 + length:]
+    header = struct.pack("<4sII", b"glTF", 2, 20 + len(text) + len(rest))
+    path.write_bytes(header + struct.pack("<I4s", len(text), b"JSON") + text + rest)
+
+
+def test_gltf_takes_are_extended_into_glb_and_moved_onto_a_character(tmp_path, extension, capsys):
+    """A .glb (Blender's exporter: a 30 fps walk on an armature under a root node, a cube skinned to it) is read
+    with Blender's glTF importer at the rate its keys were made at and written back as a .glb: the same objects and
+    bones, the take's frames where they were and the new ones walking on after them, at 30 frames a second (not the
+    factory 24, at which its keys would land 0.8 frames apart). A broken .glb and one with no skin (no armature in
+    Blender) fail with their reasons; a file of two animations runs on its first and says so. As a take it moves
+    onto a character .glb (a .glb result of it; the character's file unchanged)."""
+    import batch_worker
+
+    clip = write_bvh(tmp_path / "walk.bvh", walking_skeleton(60))
+    takes = tmp_path / "takes"
+    takes.mkdir()
+    run_bpy(GLTF_MAKE + f"""
+make_gltf({str(clip)!r}, {str(takes / "walk.glb")!r})
+make_gltf({str(clip)!r}, {str(takes / "two.glb")!r}, second=True)
+print(json.dumps(0))
+""")
+    take = takes / "walk.glb"
+    (takes / "broken.glb").write_bytes(take.read_bytes()[:-100])  # its binary chunk cut short
+    (takes / "cut.glb").write_bytes(take.read_bytes()[:600])  # its JSON cut short
+    without_skin(take, takes / "bare.glb")
+    out = tmp_path / "out"
+    report = tmp_path / "report.json"
+    code = strnn_batch.main(["extend", "--frames", "20", str(takes), "--out", str(out), "--report", str(report),
+                             "--extension", str(extension)])
+    err = capsys.readouterr().err
+    assert code == 1, err
+    rows = {Path(r["file"]).name: r for r in json.loads(report.read_text())["files"]}
+    assert "glTF importer could not read it" in rows["broken.glb"]["reason"], rows["broken.glb"]
+    assert rows["cut.glb"]["reason"].startswith("broken glTF: its JSON cannot be read"), rows["cut.glb"]
+    assert "has no skin" in rows["bare.glb"]["reason"] and "skinned mesh" in rows["bare.glb"]["reason"]
+    assert rows["walk.glb"]["status"] == rows["two.glb"]["status"] == "ok"
+    assert any("2 animations" in n and "'zz_idle'" not in n for n in rows["two.glb"]["notes"]), rows["two.glb"]
+    assert not any("animations" in n for n in rows["walk.glb"]["notes"])
+    assert sorted(p.name for p in out.iterdir()) == ["two.extend.glb", "walk.extend.glb"]
+    result = batch_worker.gltf_document(out / "walk.extend.glb")
+    assert batch_worker.gltf_frame_rate(result) == 30 and len(result["animations"]) == 1
+    got = run_bpy(GLTF_READ + f"""
+print(json.dumps({{"take": read_gltf({str(take)!r}, 30), "extended": read_gltf({str(out / "walk.extend.glb")!r}, 30)}}))
+""")
+    before, after = got["take"], got["extended"]
+    assert after["objects"] == before["objects"] and after["bones"] == before["bones"]
+    assert after["action"] == result["animations"][0]["name"] != before["action"]  # the new action, by its name
+    assert round(after["first"], 3) == round(before["first"], 3) == 1.0 and round(after["last"], 3) == 80.0
+    heads, new = np.array(before["heads"]), np.array(after["heads"])
+    assert len(heads) == 60 and len(new) == 80
+    assert np.abs(new[:60] - heads).max() < 1e-3  # the take's own frames, as they were
+    step = np.linalg.norm(np.diff(new, axis=0), axis=-1).mean(-1)
+    assert 0.5 < step[60:].mean() / step[:59].mean() < 1.6  # walking on, not frozen
+    hero = tmp_path / "hero.glb"  # a character given as glTF (a rig with its skinned mesh, no animation)
+    small = write_bvh(tmp_path / "small.bvh", walking_skeleton(2) * 0.8)
+    run_bpy(GLTF_MAKE + f"""
+make_gltf({str(small)!r}, {str(hero)!r})
+print(json.dumps(0))
+""")
+    assert transferred(capsys, extension, hero, take, out / "hero") == ["walk.transfer.glb"]
+    got = run_bpy(GLTF_READ + f"""
+print(json.dumps({{"moved": read_gltf({str(out / "hero" / "walk.transfer.glb")!r}, 30)}}))
+""")
+    moved = got["moved"]
+    assert sorted(o[1] for o in moved["objects"]) == ["ARMATURE", "EMPTY", "MESH"], moved["objects"]
+    assert len(moved["heads"]) == 60
+    travel = np.linalg.norm(np.array(moved["heads"])[-1, 0, :2] - np.array(moved["heads"])[0, 0, :2])
+    assert travel > 0.5  # the hero walks (the take's 60 frames of walking, on its shorter legs)
+
+
+def test_a_gltf_frame_rate_is_read_from_its_keys(tmp_path):
+    """The rate of a glTF's keys: (count - 1) / (last - first) of its densest sampler, where that is a frame rate
+    (within 1 %); keys at a few poses, a file with no animation or a malformed one say none. The .glb's header and
+    JSON are checked with a plain reason."""
+    import batch_worker
+
+    def document(*samplers):  # (count, first, last) per sampler's times
+        accessors = [{"count": n, "min": [a], "max": [b]} for n, a, b in samplers]
+        return {"accessors": accessors, "animations": [{"samplers": [{"input": i} for i in range(len(samplers))]}]}
+
+    rate = batch_worker.gltf_frame_rate
+    assert rate(document((115, 1 / 30, 115 / 30))) == 30
+    assert rate(document((2, 0.0, 4.0), (241, 0.0, 4.0))) == 60  # the densest sampler (a constant channel has 2)
+    assert rate(document((97, 0.0, 96 / 24 * 1.001))) == 24  # 23.976 fps: keys 0.999 frames apart at 24
+    assert rate(document((5, 0.0, 2.0))) is None  # keys at a few poses: no rate
+    assert rate(document((101, 0.0, 100 / 27))) is None  # 27 keys a second: no frame rate
+    assert rate({"asset": {"version": "2.0"}}) is None and rate({"animations": [{"samplers": [{"input": 3}]}]}) is None
+    assert batch_worker.gltf_animations({"animations": [{"name": "Walk"}, {}]}) == ["Walk", "animation 1"]
+    (tmp_path / "a.glb").write_bytes(b"PK\x03\x04" + bytes(40))
+    with pytest.raises(batch_worker.BatchError, match="does not start with glTF's header"):
+        batch_worker.gltf_document(tmp_path / "a.glb")
+    (tmp_path / "b.gltf").write_text('{"asset": ')
+    with pytest.raises(batch_worker.BatchError, match="broken glTF: its JSON cannot be read"):
+        batch_worker.gltf_document(tmp_path / "b.gltf")
