@@ -200,8 +200,34 @@ def import_gltf(bpy, path: Path) -> list[str]:
                      "frames a second (its keys between frames)")
     if len(animations) > 1:
         notes.append(f"the glTF holds {len(animations)} animations: ran on its first, {animations[0]!r} (the one "
-                     "Blender's importer makes active); the result holds the new one alone")
+                     "Blender's importer makes active; --action NAME for another); the result holds the new one alone")
     return notes
+
+
+def fbx_takes(bpy, obj, before: set) -> list[str]:
+    """The notes of an FBX of several takes (Blender's importer makes an action ``ARMATURE|...|TAKE`` of each and
+    plays the first): which one ran. ``before``: the actions there were before the import."""
+    takes = {a.name.rsplit("|", 1)[1] for a in bpy.data.actions
+             if a not in before and a.name.startswith(obj.name + "|")}
+    if len(takes) < 2 or obj.animation_data is None or obj.animation_data.action is None:
+        return []
+    return [f"the FBX holds {len(takes)} takes: ran on {obj.animation_data.action.name.split('|')[-1]!r} (the one "
+            "Blender's importer plays; --action NAME for another); the result holds the new one alone"]
+
+
+def use_action(bpy, obj, name: str) -> None:
+    """Play the action ``name`` on ``obj`` (``--action``): an action of that name, or an FBX take of it (the
+    importer's ``ARMATURE|...|TAKE``, this armature's first); a :class:`BatchError` naming the file's actions where
+    none is."""
+    found = bpy.data.actions.get(name)
+    if found is None:
+        takes = [a for a in bpy.data.actions if "|" in a.name and a.name.rsplit("|", 1)[1] == name]
+        found = next((a for a in takes if a.name.startswith(obj.name + "|")), takes[0] if takes else None)
+    if found is None:
+        names = sorted(a.name.rsplit("|", 1)[-1] for a in bpy.data.actions)
+        raise BatchError(f"no action named {name!r} for --action; the file has {', '.join(map(repr, names))}"
+                         if names else f"no action named {name!r} for --action; the file has no action")
+    (obj.animation_data or obj.animation_data_create()).action = found
 
 
 def blender_error(e: Exception) -> str:
@@ -309,6 +335,7 @@ def run_file(bpy, job: dict) -> list[str]:
                          "write .glb results to --out (leave out --in-place)")
     axes = ("-Z", "Y")
     there, there_collections = set(bpy.data.objects), set(bpy.data.collections)
+    actions = set(bpy.data.actions)
     imported = []
     if src.suffix.lower() in GLTF:
         imported = import_gltf(bpy, src)
@@ -337,6 +364,11 @@ def run_file(bpy, job: dict) -> list[str]:
             raise BatchError("the file has no armature")
         bpy.context.view_layer.objects.active = brought[0]
     obj = pick_armature(bpy, bool(job.get("every_armature")) and target is None)
+    if src.suffix.lower() == ".fbx":
+        imported += fbx_takes(bpy, obj, actions)
+    if job.get("action"):  # another take than the one the file plays
+        use_action(bpy, obj, job["action"])
+        imported = [note for note in imported if "--action NAME for another" not in note]
     view_layer = bpy.context.view_layer
     for other in view_layer.objects:
         other.select_set(False)

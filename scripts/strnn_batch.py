@@ -87,6 +87,10 @@ def build_parser() -> argparse.ArgumentParser:
                     help="in a .blend, run on every armature that has an action (a crowd, a cast), as the sidebar "
                          "does with them all selected, instead of the active one alone; the result is a .blend "
                          "(extend, inbetween, denoise, footlock, loop)")
+    io.add_argument("--action", default="", metavar="NAME",
+                    help="run on this action of the file's armature instead of the one it plays (a .blend's action, "
+                         "an FBX's take, a glTF's animation, by name; an FBX's or glTF's first otherwise); a "
+                         "file that has none of that name fails with the names it has")
     motion = common.add_argument_group("motion")
     motion.add_argument("--keys-per-second", type=float, default=None, metavar="FPS",
                         help="how many of each take's frames make one second of its motion, where its file says "
@@ -272,6 +276,8 @@ def check_args(parser, args) -> None:
         parser.error("--in-place is not for transfer: the results go beside the takes in --out")
     if args.every_armature and args.command in ("transfer", "follow"):
         parser.error(f"--every-armature is not for {args.command}: it moves one character at a time")
+    if args.every_armature and args.action:
+        parser.error("--action is not for --every-armature: each character plays its own action")
     if args.every_armature and args.format in ("bvh", "fbx", "glb"):
         parser.error(f"--every-armature writes .blend results (a {args.format.upper()} file here holds one "
                      f"armature's take): drop --format {args.format}")
@@ -588,7 +594,8 @@ def main(argv: list[str] | None = None) -> int:
                      "rig": getattr(args, "rig", ""),
                      "model": str(args.model.resolve()) if args.model else "",
                      "denoise_model": str(args.denoise_model.resolve()) if getattr(args, "denoise_model", None)
-                     else "", "verbose": args.verbose, "every_armature": args.every_armature})
+                     else "", "verbose": args.verbose, "every_armature": args.every_armature,
+                     "action": args.action})
     total = len(jobs) + len(results)
     if not total:
         parser.error("no input files")

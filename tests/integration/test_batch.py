@@ -840,3 +840,49 @@ def test_a_gltf_frame_rate_is_read_from_its_keys(tmp_path):
     (tmp_path / "b.gltf").write_text('{"asset": ')
     with pytest.raises(batch_worker.BatchError, match="broken glTF: its JSON cannot be read"):
         batch_worker.gltf_document(tmp_path / "b.gltf")
+
+
+def test_action_picks_the_take_of_an_fbx_or_the_animation_of_a_gltf(tmp_path, extension, capsys):
+    """A file of several takes runs on the one Blender's importer plays and says so, naming --action; --action NAME
+    runs on another (an FBX take by its name, a glTF animation by its), and a name the file does not have fails with
+    the names it has, nothing written for it."""
+    clip = write_bvh(tmp_path / "walk.bvh", walking_skeleton(60))
+    takes = tmp_path / "takes"
+    takes.mkdir()
+    run_bpy(GLTF_MAKE + f"""
+make_gltf({str(clip)!r}, {str(takes / "two.glb")!r}, second=True)
+arm = next(o for o in bpy.data.objects if o.type == "ARMATURE")
+arm.animation_data.action.name = "walk"
+arm.select_set(True)
+bpy.ops.export_scene.fbx(filepath={str(takes / "two.fbx")!r}, bake_anim_use_all_actions=True, add_leaf_bones=False)
+print(json.dumps(0))
+""")
+    report = tmp_path / "report.json"
+
+    def run(*flags):
+        code = strnn_batch.main(["extend", "--frames", "10", str(takes), "--out", str(tmp_path / "out"),
+                                 "--report", str(report), "--extension", str(extension), *flags])
+        capsys.readouterr()
+        return code, {Path(r["file"]).name: r for r in json.loads(report.read_text())["files"]}
+
+    code, rows = run()
+    assert code == 0
+    assert any("2 animations" in n and "'walk'" in n and "--action NAME" in n for n in rows["two.glb"]["notes"])
+    assert any("2 takes" in n and "--action NAME" in n for n in rows["two.fbx"]["notes"]), rows["two.fbx"]
+    code, rows = run("--action", "zz_idle")
+    assert code == 0 and not any("--action" in n for r in rows.values() for n in r["notes"])
+    got = run_bpy(GLTF_READ + FBX_READ + f"""
+glb = read_gltf({str(tmp_path / "out" / "two.extend.glb")!r}, 30)
+bpy.ops.wm.read_factory_settings(use_empty=True)
+bpy.ops.import_scene.fbx(filepath={str(tmp_path / "out" / "two.extend.fbx")!r})
+print(json.dumps({{"glb": glb["action"], "fbx": [a.name for a in bpy.data.actions]}}))
+""")
+    assert got["glb"].startswith("zz_idle") and len(got["fbx"]) == 1 and "zz_idle" in got["fbx"][0], got
+    (tmp_path / "out" / "two.extend.glb").unlink()
+    code, rows = run("--action", "nope")
+    assert code == 1 and rows["two.glb"]["reason"] == "no action named 'nope' for --action; the file has 'walk', " \
+        "'zz_idle'", rows["two.glb"]
+    assert "no action named 'nope'" in rows["two.fbx"]["reason"] and not (tmp_path / "out" / "two.extend.glb").exists()
+    with pytest.raises(SystemExit):
+        strnn_batch.main(["extend", "--every-armature", "--action", "walk", str(takes)])
+    assert "--action is not for --every-armature" in capsys.readouterr().err
