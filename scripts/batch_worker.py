@@ -215,6 +215,50 @@ def fbx_takes(bpy, obj, before: set) -> list[str]:
             "Blender's importer plays; --action NAME for another); the result holds the new one alone"]
 
 
+def every_take(bpy, obj, src: Path, before: set) -> list:
+    """``--every-action``: the actions of ``obj`` to run on, each in turn: the one it plays and those of its NLA
+    tracks (a glTF's other animations, a .blend's stashed actions), or for an FBX every take Blender's importer made
+    for it (``ARMATURE|...|TAKE``, which it leaves unassigned but the first). ``before``: the actions there were
+    before the import."""
+    ad = obj.animation_data
+    if src.suffix.lower() == ".fbx":
+        found = sorted((a for a in bpy.data.actions if a not in before and a.name.startswith(obj.name + "|")),
+                       key=lambda a: a.name)
+    else:
+        found = ([ad.action] if ad else []) + [s.action for t in (ad.nla_tracks if ad else []) for s in t.strips]
+    takes = list(dict.fromkeys(a for a in found if a is not None))
+    if not takes:
+        raise BatchError(f"--every-action: {obj.name!r} has no action")
+    return takes
+
+
+def stash(obj, action) -> None:
+    """Keep ``action`` on ``obj`` in a muted NLA track of its own (as Blender's Stash does: saved with the file, and
+    each such action an animation of a glTF)."""
+    track = obj.animation_data.nla_tracks.new()
+    track.name = action.name
+    track.strips.new(action.name, int(action.frame_range[0]), action)
+    track.mute = True
+
+
+def run_operator(bpy, job: dict, obj, kwargs: dict):
+    """Run the job's operator on ``obj`` (and the selection) for the action it plays now; returns ``obj``'s new
+    action."""
+    if job["operator"] == "inbetween" and kwargs.get("use_range"):
+        clear_keys(obj, kwargs["frame_start"], kwargs["frame_end"])
+    if kwargs.get("from_current"):
+        bpy.context.scene.frame_set(job["from_frame"])
+    bpy.context.view_layer.objects.active = obj
+    try:
+        getattr(bpy.ops.strnn, job["operator"])(**kwargs)
+    except RuntimeError as e:
+        raise BatchError(f"strnn.{job['operator']} refused: {blender_error(e)}") from None
+    action = obj.animation_data.action if obj.animation_data else None
+    if action is None:
+        raise BatchError(f"strnn.{job['operator']} left the armature without an action")
+    return action
+
+
 def use_action(bpy, obj, name: str) -> None:
     """Play the action ``name`` on ``obj`` (``--action``): an action of that name, or an FBX take of it (the
     importer's ``ARMATURE|...|TAKE``, this armature's first); a :class:`BatchError` naming the file's actions where
@@ -368,7 +412,12 @@ def run_file(bpy, job: dict) -> list[str]:
         imported += fbx_takes(bpy, obj, actions)
     if job.get("action"):  # another take than the one the file plays
         use_action(bpy, obj, job["action"])
+    takes = every_take(bpy, obj, src, actions) if job.get("every_action") else [obj.animation_data.action]
+    if job.get("action") or job.get("every_action"):
         imported = [note for note in imported if "--action NAME for another" not in note]
+    if len(takes) > 1 and dst.suffix.lower() == ".bvh":
+        raise BatchError(f"--every-action found {len(takes)} takes, and a BVH holds one: write FBX, .glb or .blend "
+                         "results (--format)")
     view_layer = bpy.context.view_layer
     for other in view_layer.objects:
         other.select_set(False)
@@ -387,10 +436,6 @@ def run_file(bpy, job: dict) -> list[str]:
         for each in [obj if source is None else source, *crowd]:
             each.strnn_keys_per_second = job["keys_per_second"]
     kwargs = dict(job["kwargs"])
-    if job["operator"] == "inbetween" and kwargs.get("use_range"):
-        clear_keys(obj, kwargs["frame_start"], kwargs["frame_end"])
-    if kwargs.get("from_current"):
-        bpy.context.scene.frame_set(job["from_frame"])
     if job["operator"] == "follow_curve":
         if job["curve"]:
             if bpy.data.objects.get(job["curve"]) is None:
@@ -402,26 +447,32 @@ def run_file(bpy, job: dict) -> list[str]:
     if kwargs.get("ground") and bpy.data.objects.get(kwargs["ground"]) is None \
             and bpy.data.collections.get(kwargs["ground"]) is None:
         raise BatchError(f"no object or collection named {kwargs['ground']!r} in the file for --ground")
-    try:
-        getattr(bpy.ops.strnn, job["operator"])(**kwargs)
-    except RuntimeError as e:
-        raise BatchError(f"strnn.{job['operator']} refused: {blender_error(e)}") from None
+    common = importlib.import_module(f"{ADDON}.strnn_addon.stages.common")
+    results, notes = [], list(imported)
+    for take in takes:  # the take the file plays, or with --every-action each in turn
+        player = obj if source is None else source
+        if len(takes) > 1:
+            player.animation_data.action = take
+        action = run_operator(bpy, job, obj, kwargs)
+        results.append(action)
+        named = batch_notes(common, action)
+        notes += [f"{take.name}: {n}" for n in named] if len(takes) > 1 else named
+    if len(results) > 1:  # the first plays; the others are kept in muted NLA tracks (saved, and exported as takes)
+        obj.animation_data.action = results[0]
+        for action in results[1:]:
+            stash(obj, action)
     if source is not None:  # the result file holds the character alone: what the take brought goes
         for brought in set(bpy.data.objects) - there:
             bpy.data.objects.remove(brought)
         for brought in set(bpy.data.collections) - there_collections:  # (the glTF importer's scene collection)
             bpy.data.collections.remove(brought)
-    action = obj.animation_data.action if obj.animation_data else None
-    if action is None:
-        raise BatchError(f"strnn.{job['operator']} left the armature without an action")
-    common = importlib.import_module(f"{ADDON}.strnn_addon.stages.common")
-    notes = imported + batch_notes(common, action)
     if crowd:
         notes = [f"{obj.name}: {n}" for n in notes] + crowd_notes(common, crowd, before)
     if axes[1] != "Y":
         notes.append(f"the take stands along its file's {axes[1]} axis, not Y: read with Up {axes[1]} so that it "
                      "stands, and written back in the file's own axes")
-    start, end = (int(round(f)) for f in action.frame_range)
+    start = min(int(round(a.frame_range[0])) for a in results)
+    end = max(int(round(a.frame_range[1])) for a in results)
     scene = bpy.context.scene
     scene.frame_start, scene.frame_end = start, end
     dst.parent.mkdir(parents=True, exist_ok=True)
@@ -434,9 +485,9 @@ def run_file(bpy, job: dict) -> list[str]:
             bpy.ops.export_anim.bvh(filepath=str(tmp), frame_start=start, frame_end=end,
                                     check_existing=False)
         elif dst.suffix.lower() == ".fbx":
-            export_fbx(bpy, obj, tmp)
+            export_fbx(bpy, obj, results, tmp)
         elif dst.suffix.lower() == ".glb":
-            export_gltf(bpy, obj, tmp)
+            export_gltf(bpy, obj, results, tmp)
         else:
             bpy.ops.wm.save_as_mainfile(filepath=str(tmp), copy=True, compress=True)
     except RuntimeError as e:
@@ -446,9 +497,9 @@ def run_file(bpy, job: dict) -> list[str]:
     return notes
 
 
-def select_character(bpy, obj) -> None:
+def select_character(bpy, obj, results: list) -> None:
     """Select ``obj``, the objects it hangs from (a root null) and the meshes it deforms (or that hang from it), and
-    drop every action but its active one (an exporter writes a take or an animation for each action; the worker's
+    drop every action but ``results`` (an exporter writes a take or an animation for each action; the worker's
     others, the input's own among them, are not the result)."""
     keep = {obj} | {o for o in bpy.data.objects if o.type == "MESH" and (
         o.parent is obj or any(m.type == "ARMATURE" and m.object is obj for m in o.modifiers))}
@@ -456,31 +507,32 @@ def select_character(bpy, obj) -> None:
     while above is not None:
         keep.add(above)
         above = above.parent
-    for action in [a for a in bpy.data.actions if a is not obj.animation_data.action]:
+    for action in [a for a in bpy.data.actions if a not in results]:
         bpy.data.actions.remove(action)
     for o in bpy.context.view_layer.objects:
         o.select_set(o in keep)
     bpy.context.view_layer.objects.active = obj
 
 
-def export_fbx(bpy, obj, path: Path) -> None:
-    """Write ``obj`` with what :func:`select_character` selects to an FBX at ``path`` with Blender's exporter, its
-    active action the file's one take (named as the action), every frame keyed (no curve simplification) and no
-    leaf bones added, so that it imports again as it was written. (The exporter's take of the scene instead of the
-    actions imports one frame late.)"""
-    select_character(bpy, obj)
+def export_fbx(bpy, obj, results: list, path: Path) -> None:
+    """Write ``obj`` with what :func:`select_character` selects to an FBX at ``path`` with Blender's exporter, each
+    of ``results`` (its new actions) a take of the file (named as the action), every frame keyed (no curve
+    simplification) and no leaf bones added, so that it imports again as it was written. (The exporter's take of
+    the scene instead of the actions imports one frame late.)"""
+    select_character(bpy, obj, results)
     bpy.ops.export_scene.fbx(filepath=str(path), check_existing=False, use_selection=True,
                              object_types={"ARMATURE", "MESH", "EMPTY"}, add_leaf_bones=False, bake_anim=True,
                              bake_anim_use_all_actions=True, bake_anim_use_nla_strips=False,
                              bake_anim_force_startend_keying=True, bake_anim_simplify_factor=0.0)
 
 
-def export_gltf(bpy, obj, path: Path) -> None:
+def export_gltf(bpy, obj, results: list, path: Path) -> None:
     """Write ``obj`` with what :func:`select_character` selects to a binary glTF (.glb) at ``path`` with Blender's
-    exporter, its active action the file's one animation (named as the action), sampled at every frame of the
+    exporter, each of ``results`` (its new actions: the one it plays and those in its NLA tracks) an animation of
+    the file (named as the action), sampled at every frame of the
     action at the scene's rate (glTF's times in seconds: a key at frame f at f / fps), so that it imports again as
     it was written; the bones' rest as Blender has it (the importer's, for a glTF input)."""
-    select_character(bpy, obj)
+    select_character(bpy, obj, results)
     bpy.ops.export_scene.gltf(filepath=str(path), check_existing=False, export_format="GLB", use_selection=True,
                               export_animations=True, export_animation_mode="ACTIONS", export_force_sampling=True,
                               export_frame_range=False, export_anim_slide_to_zero=False)

@@ -91,6 +91,11 @@ def build_parser() -> argparse.ArgumentParser:
                     help="run on this action of the file's armature instead of the one it plays (a .blend's action, "
                          "an FBX's take, a glTF's animation, by name; an FBX's or glTF's first otherwise); a "
                          "file that has none of that name fails with the names it has")
+    io.add_argument("--every-action", action="store_true",
+                    help="run on every take of the file's armature, each in turn, into one result that holds them "
+                         "all (an FBX's takes, a glTF's animations; for a .blend the action it plays and those in "
+                         "its NLA tracks): an FBX, .glb or .blend result, the first new action playing and the "
+                         "others in muted NLA tracks")
     motion = common.add_argument_group("motion")
     motion.add_argument("--keys-per-second", type=float, default=None, metavar="FPS",
                         help="how many of each take's frames make one second of its motion, where its file says "
@@ -276,8 +281,11 @@ def check_args(parser, args) -> None:
         parser.error("--in-place is not for transfer: the results go beside the takes in --out")
     if args.every_armature and args.command in ("transfer", "follow"):
         parser.error(f"--every-armature is not for {args.command}: it moves one character at a time")
-    if args.every_armature and args.action:
-        parser.error("--action is not for --every-armature: each character plays its own action")
+    if args.every_armature and (args.action or args.every_action):
+        parser.error(f"--{'action' if args.action else 'every-action'} is not for --every-armature: each character "
+                     "plays its own action")
+    if args.every_action and args.action:
+        parser.error("--action picks one take and --every-action runs them all: give one of them")
     if args.every_armature and args.format in ("bvh", "fbx", "glb"):
         parser.error(f"--every-armature writes .blend results (a {args.format.upper()} file here holds one "
                      f"armature's take): drop --format {args.format}")
@@ -595,7 +603,7 @@ def main(argv: list[str] | None = None) -> int:
                      "model": str(args.model.resolve()) if args.model else "",
                      "denoise_model": str(args.denoise_model.resolve()) if getattr(args, "denoise_model", None)
                      else "", "verbose": args.verbose, "every_armature": args.every_armature,
-                     "action": args.action})
+                     "action": args.action, "every_action": args.every_action})
     total = len(jobs) + len(results)
     if not total:
         parser.error("no input files")

@@ -500,12 +500,27 @@ print(json.dumps(arm.animation_data.action["strnn"]["ground"].to_dict()))
     assert got == {"object": "Floor", "frames_without": 0}
 
 
-def transferred(capsys, extension: Path, hero: Path, take: Path, out: Path) -> list[str]:
+def hero_blend(tmp_path: Path) -> Path:
+    """A character .blend: the rig ``Hero``, a walking skeleton 0.8 x the size, with no action."""
+    hero = tmp_path / "hero.blend"
+    run_bpy(f"""
+bpy.ops.wm.read_factory_settings(use_empty=True)
+bpy.ops.import_anim.bvh(filepath={str(write_bvh(tmp_path / "small.bvh", walking_skeleton(2) * 0.8))!r})
+rig = bpy.context.active_object
+rig.name = "Hero"
+rig.animation_data_clear()
+bpy.ops.wm.save_as_mainfile(filepath={str(hero)!r})
+print(json.dumps(0))
+""")
+    return hero
+
+
+def transferred(capsys, extension: Path, hero: Path, take: Path, out: Path, *flags: str) -> list[str]:
     """The names of the files the batch's transfer of ``take`` onto the character file ``hero`` writes in ``out``
     (the character's file left as it was)."""
     before = hero.read_bytes()
     code = strnn_batch.main(["transfer", "--target", str(hero), str(take), "--out", str(out),
-                             "--extension", str(extension)])
+                             "--extension", str(extension), *flags])
     assert code == 0, capsys.readouterr().err
     assert hero.read_bytes() == before
     return sorted(p.name for p in out.iterdir())
@@ -588,16 +603,7 @@ print(json.dumps(0))
                              str(extension)])
     err = capsys.readouterr().err
     assert code == 1 and "a .fbx result holds one" in err and cast.read_bytes() == kept, err
-    hero = tmp_path / "hero.blend"
-    run_bpy(f"""
-bpy.ops.wm.read_factory_settings(use_empty=True)
-bpy.ops.import_anim.bvh(filepath={str(write_bvh(tmp_path / "small.bvh", walking_skeleton(2) * 0.8))!r})
-rig = bpy.context.active_object
-rig.name = "Hero"
-rig.animation_data_clear()
-bpy.ops.wm.save_as_mainfile(filepath={str(hero)!r})
-print(json.dumps(0))
-""")
+    hero = hero_blend(tmp_path)
     code = strnn_batch.main(["transfer", "--target", str(hero), str(take), "--out", str(out),
                              "--extension", str(extension)])
     assert code == 0, capsys.readouterr().err
@@ -842,20 +848,26 @@ def test_a_gltf_frame_rate_is_read_from_its_keys(tmp_path):
         batch_worker.gltf_document(tmp_path / "b.gltf")
 
 
+def two_takes(folder: Path, then: str) -> None:
+    """``folder``/two.glb: a 60-frame walk on a skinned rig with a second animation (``zz_idle``), made by
+    Blender's exporter; then ``then`` runs in the same Blender, the rig ``arm``."""
+    folder.mkdir()
+    clip = write_bvh(folder.parent / "walk.bvh", walking_skeleton(60))
+    run_bpy(GLTF_MAKE + f"""
+make_gltf({str(clip)!r}, {str(folder / "two.glb")!r}, second=True)
+arm = next(o for o in bpy.data.objects if o.type == "ARMATURE")
+""" + then + "\nprint(json.dumps(0))\n")
+
+
 def test_action_picks_the_take_of_an_fbx_or_the_animation_of_a_gltf(tmp_path, extension, capsys):
     """A file of several takes runs on the one Blender's importer plays and says so, naming --action; --action NAME
     runs on another (an FBX take by its name, a glTF animation by its), and a name the file does not have fails with
     the names it has, nothing written for it."""
-    clip = write_bvh(tmp_path / "walk.bvh", walking_skeleton(60))
     takes = tmp_path / "takes"
-    takes.mkdir()
-    run_bpy(GLTF_MAKE + f"""
-make_gltf({str(clip)!r}, {str(takes / "two.glb")!r}, second=True)
-arm = next(o for o in bpy.data.objects if o.type == "ARMATURE")
+    two_takes(takes, f"""
 arm.animation_data.action.name = "walk"
 arm.select_set(True)
 bpy.ops.export_scene.fbx(filepath={str(takes / "two.fbx")!r}, bake_anim_use_all_actions=True, add_leaf_bones=False)
-print(json.dumps(0))
 """)
     report = tmp_path / "report.json"
 
@@ -886,3 +898,70 @@ print(json.dumps({{"glb": glb["action"], "fbx": [a.name for a in bpy.data.action
     with pytest.raises(SystemExit):
         strnn_batch.main(["extend", "--every-armature", "--action", "walk", str(takes)])
     assert "--action is not for --every-armature" in capsys.readouterr().err
+
+
+def test_every_action_runs_on_each_take_into_one_file(tmp_path, extension, capsys):
+    """--every-action: each take of a .glb (two animations) and of an FBX (three) is extended in turn into one
+    result that holds every new take, each as long as its take and the new frames, the notes named by take; moved onto a
+    character .blend, every take of the FBX is a new action of the rig (the first playing, the others in muted NLA
+    tracks, saved with the file); a BVH result, which holds one take, is refused for several."""
+    import batch_worker
+
+    short = write_bvh(tmp_path / "short.bvh", walking_skeleton(40))
+    takes = tmp_path / "takes"
+    two_takes(takes, f"""
+bpy.ops.import_anim.bvh(filepath={str(short)!r})
+other = bpy.context.active_object
+arm.animation_data.action = other.animation_data.action  # a 40-frame take beside the 60-frame one
+arm.animation_data.action.name = "short"
+bpy.data.objects.remove(other)
+for o in bpy.data.objects:
+    o.select_set(o is arm)
+bpy.ops.export_scene.fbx(filepath={str(takes / "two.fbx")!r}, use_selection=True, bake_anim_use_all_actions=True,
+                         bake_anim_use_nla_strips=False, add_leaf_bones=False)
+""")
+    out, report = tmp_path / "out", tmp_path / "report.json"
+    code = strnn_batch.main(["extend", "--frames", "10", "--every-action", str(takes), "--out", str(out),
+                             "--report", str(report), "--extension", str(extension)])
+    assert code == 0, capsys.readouterr().err
+    rows = {Path(r["file"]).name: r for r in json.loads(report.read_text())["files"]}
+    assert all(n.startswith(("walk", "zz_idle")) for n in rows["two.glb"]["notes"]), rows["two.glb"]["notes"]
+    glb = batch_worker.gltf_document(out / "two.extend.glb")
+    assert sorted(a["name"] for a in glb["animations"]) == ["walk.extended", "zz_idle.extended"]
+    got = run_bpy(f"""
+spans = {{}}
+for path, read in (({str(out / "two.extend.fbx")!r}, bpy.ops.import_scene.fbx),
+                   ({str(out / "two.extend.glb")!r}, bpy.ops.import_scene.gltf)):
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    bpy.context.scene.render.fps = 30
+    read(filepath=path)
+    spans[path[-3:]] = {{a.name.rsplit("|", 1)[-1]: [round(f) for f in a.frame_range] for a in bpy.data.actions}}
+print(json.dumps(spans))
+""")
+    assert got["glb"] == {"walk.extended": [1, 70], "zz_idle.extended": [1, 70]}, got  # each 60-frame take + 10
+    taken = run_bpy(f"""
+bpy.ops.wm.read_factory_settings(use_empty=True)
+bpy.ops.import_scene.fbx(filepath={str(takes / "two.fbx")!r})
+print(json.dumps({{a.name.rsplit("|", 1)[-1]: [round(f) for f in a.frame_range] for a in bpy.data.actions}}))
+""")
+    assert len(taken) >= 2 and got["fbx"] == {f"{name}.extended": [first, last + 10]
+                                              for name, (first, last) in taken.items()}, (taken, got)
+    hero = hero_blend(tmp_path)
+    assert transferred(capsys, extension, hero, takes / "two.fbx", out / "hero", "--every-action") == \
+        ["two.transfer.blend"]
+    got = run_bpy(f"""
+bpy.ops.wm.open_mainfile(filepath={str(out / "hero" / "two.transfer.blend")!r})
+ad = bpy.data.objects["Hero"].animation_data
+print(json.dumps({{"plays": round(ad.action.frame_range[1] - ad.action.frame_range[0]) + 1,
+                  "stashed": [[t.mute, round(s.action.frame_range[1] - s.action.frame_range[0]) + 1]
+                              for t in ad.nla_tracks for s in t.strips]}}))
+""")
+    assert sorted([got["plays"]] + [n for _, n in got["stashed"]]) == sorted(b - a + 1 for a, b in taken.values())
+    assert all(mute for mute, _ in got["stashed"]), got
+    code = strnn_batch.main(["extend", "--every-action", "--format", "bvh", str(takes / "two.glb"), "--out",
+                             str(out / "bvh"), "--extension", str(extension)])
+    err = capsys.readouterr().err
+    assert code == 1 and "--every-action found 2 takes, and a BVH holds one" in err, err
+    with pytest.raises(SystemExit):
+        strnn_batch.main(["extend", "--every-action", "--action", "walk", str(takes)])
+    assert "give one of them" in capsys.readouterr().err
