@@ -204,28 +204,23 @@ def import_gltf(bpy, path: Path) -> list[str]:
     return notes
 
 
-def fbx_takes(bpy, obj, before: set) -> list[str]:
-    """The notes of an FBX of several takes (Blender's importer makes an action ``ARMATURE|...|TAKE`` of each and
-    plays the first): which one ran. ``before``: the actions there were before the import."""
-    takes = {a.name.rsplit("|", 1)[1] for a in bpy.data.actions
-             if a not in before and a.name.startswith(obj.name + "|")}
-    if len(takes) < 2 or obj.animation_data is None or obj.animation_data.action is None:
-        return []
-    return [f"the FBX holds {len(takes)} takes: ran on {obj.animation_data.action.name.split('|')[-1]!r} (the one "
-            "Blender's importer plays; --action NAME for another); the result holds the new one alone"]
+def fbx_takes(bpy, obj, before: set) -> list:
+    """The takes Blender's FBX importer made for ``obj``: an action of each named ``ARMATURE|...|TAKE``, which it
+    leaves unassigned but the first; renamed ``TAKE`` (the exporter writes ``ARMATURE|ACTION`` again, and the name
+    would grow by a prefix at each round trip). ``before``: the actions there were before the import."""
+    takes = sorted((a for a in bpy.data.actions if a not in before and a.name.startswith(obj.name + "|")),
+                   key=lambda a: a.name)
+    for action in takes:
+        action.name = action.name.rsplit("|", 1)[1]
+    return takes
 
 
-def every_take(bpy, obj, src: Path, before: set) -> list:
-    """``--every-action``: the actions of ``obj`` to run on, each in turn: the one it plays and those of its NLA
-    tracks (a glTF's other animations, a .blend's stashed actions), or for an FBX every take Blender's importer made
-    for it (``ARMATURE|...|TAKE``, which it leaves unassigned but the first). ``before``: the actions there were
-    before the import."""
+def every_take(obj, fbx: list) -> list:
+    """``--every-action``: the actions of ``obj`` to run on, each in turn: an FBX's takes (``fbx``, from
+    :func:`fbx_takes`), else the one it plays and those of its NLA tracks (a glTF's other animations, a .blend's
+    stashed actions)."""
     ad = obj.animation_data
-    if src.suffix.lower() == ".fbx":
-        found = sorted((a for a in bpy.data.actions if a not in before and a.name.startswith(obj.name + "|")),
-                       key=lambda a: a.name)
-    else:
-        found = ([ad.action] if ad else []) + [s.action for t in (ad.nla_tracks if ad else []) for s in t.strips]
+    found = fbx or ([ad.action] if ad else []) + [s.action for t in (ad.nla_tracks if ad else []) for s in t.strips]
     takes = list(dict.fromkeys(a for a in found if a is not None))
     if not takes:
         raise BatchError(f"--every-action: {obj.name!r} has no action")
@@ -260,9 +255,9 @@ def run_operator(bpy, job: dict, obj, kwargs: dict):
 
 
 def use_action(bpy, obj, name: str) -> None:
-    """Play the action ``name`` on ``obj`` (``--action``): an action of that name, or an FBX take of it (the
-    importer's ``ARMATURE|...|TAKE``, this armature's first); a :class:`BatchError` naming the file's actions where
-    none is."""
+    """Play the action ``name`` on ``obj`` (``--action``): an action of that name, or an FBX take of it (named by
+    Blender's importer ``ARMATURE|...|TAKE``, as a .blend that imported one keeps it; this armature's first); a
+    :class:`BatchError` naming the file's actions where none is."""
     found = bpy.data.actions.get(name)
     if found is None:
         takes = [a for a in bpy.data.actions if "|" in a.name and a.name.rsplit("|", 1)[1] == name]
@@ -408,11 +403,13 @@ def run_file(bpy, job: dict) -> list[str]:
             raise BatchError("the file has no armature")
         bpy.context.view_layer.objects.active = brought[0]
     obj = pick_armature(bpy, bool(job.get("every_armature")) and target is None)
-    if src.suffix.lower() == ".fbx":
-        imported += fbx_takes(bpy, obj, actions)
+    fbx = fbx_takes(bpy, obj, actions) if src.suffix.lower() == ".fbx" else []
+    if len(fbx) > 1 and obj.animation_data and obj.animation_data.action:
+        imported.append(f"the FBX holds {len(fbx)} takes: ran on {obj.animation_data.action.name!r} (the one "
+                        "Blender's importer plays; --action NAME for another); the result holds the new one alone")
     if job.get("action"):  # another take than the one the file plays
         use_action(bpy, obj, job["action"])
-    takes = every_take(bpy, obj, src, actions) if job.get("every_action") else [obj.animation_data.action]
+    takes = every_take(obj, fbx) if job.get("every_action") else [obj.animation_data.action]
     if job.get("action") or job.get("every_action"):
         imported = [note for note in imported if "--action NAME for another" not in note]
     if len(takes) > 1 and dst.suffix.lower() == ".bvh":
