@@ -217,10 +217,12 @@ def fbx_takes(bpy, obj, before: set) -> list:
 
 def every_take(obj, fbx: list) -> list:
     """``--every-action``: the actions of ``obj`` to run on, each in turn: an FBX's takes (``fbx``, from
-    :func:`fbx_takes`), else the one it plays and those of its NLA tracks (a glTF's other animations, a .blend's
-    stashed actions)."""
+    :func:`fbx_takes`), else the one it plays and those of its muted NLA tracks (a glTF's other animations, which
+    Blender's importer puts there, a .blend's stashed actions; a track that plays is a layer of the motion, not a
+    take)."""
     ad = obj.animation_data
-    found = fbx or ([ad.action] if ad else []) + [s.action for t in (ad.nla_tracks if ad else []) for s in t.strips]
+    tracks = [t for t in ad.nla_tracks if t.mute] if ad else []
+    found = fbx or ([ad.action] if ad else []) + [s.action for t in tracks for s in t.strips]
     takes = list(dict.fromkeys(a for a in found if a is not None))
     if not takes:
         raise BatchError(f"--every-action: {obj.name!r} has no action")

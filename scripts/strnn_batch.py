@@ -93,9 +93,9 @@ def build_parser() -> argparse.ArgumentParser:
                          "file that has none of that name fails with the names it has")
     io.add_argument("--every-action", action="store_true",
                     help="run on every take of the file's armature, each in turn, into one result that holds them "
-                         "all (an FBX's takes, a glTF's animations; for a .blend the action it plays and those in "
-                         "its NLA tracks): an FBX, .glb or .blend result, the first new action playing and the "
-                         "others in muted NLA tracks")
+                         "all (an FBX's takes, a glTF's animations; for a .blend the action it plays and those "
+                         "stashed in its muted NLA tracks): an FBX, .glb or .blend result, the first new action "
+                         "playing and the others in muted NLA tracks")
     motion = common.add_argument_group("motion")
     motion.add_argument("--keys-per-second", type=float, default=None, metavar="FPS",
                         help="how many of each take's frames make one second of its motion, where its file says "

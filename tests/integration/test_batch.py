@@ -967,3 +967,25 @@ print(json.dumps({{"plays": round(ad.action.frame_range[1] - ad.action.frame_ran
     with pytest.raises(SystemExit):
         strnn_batch.main(["extend", "--every-action", "--action", "walk", str(takes)])
     assert "give one of them" in capsys.readouterr().err
+
+
+def test_every_action_of_a_blend_is_its_action_and_its_stashed_ones():
+    """--every-action on a .blend runs on the action the armature plays and those of its muted NLA tracks (stashed,
+    as Blender's Stash and glTF importer leave them), not on a track that plays (a layer of the motion)."""
+    got = run_bpy(f"""
+import sys
+sys.path.insert(0, {str(REPO / "scripts")!r})
+import batch_worker
+bpy.ops.wm.read_factory_settings(use_empty=True)
+bpy.ops.object.armature_add()
+arm = bpy.context.active_object
+ad = arm.animation_data_create()
+played, stashed, layer = (bpy.data.actions.new(name) for name in ("played", "stashed", "layer"))
+ad.action = played
+for action, mute in ((stashed, True), (layer, False)):
+    track = ad.nla_tracks.new()
+    track.strips.new(action.name, 1, action)
+    track.mute = mute
+print(json.dumps([a.name for a in batch_worker.every_take(arm, [])]))
+""")
+    assert got == ["played", "stashed"]
