@@ -216,17 +216,42 @@ def fbx_takes(bpy, obj, before: set) -> list:
 
 
 def every_take(obj, fbx: list) -> list:
-    """``--every-action``: the actions of ``obj`` to run on, each in turn: an FBX's takes (``fbx``, from
-    :func:`fbx_takes`), else the one it plays and those of its muted NLA tracks (a glTF's other animations, which
+    """``--every-action``: the actions of ``obj`` to run on, each in turn, the one it plays first: an FBX's takes
+    (``fbx``, from :func:`fbx_takes`), else those of its muted NLA tracks (a glTF's other animations, which
     Blender's importer puts there, a .blend's stashed actions; a track that plays is a layer of the motion, not a
     take)."""
     ad = obj.animation_data
     tracks = [t for t in ad.nla_tracks if t.mute] if ad else []
-    found = fbx or ([ad.action] if ad else []) + [s.action for t in tracks for s in t.strips]
+    found = ([ad.action] if ad else []) + (fbx or [s.action for t in tracks for s in t.strips])
     takes = list(dict.fromkeys(a for a in found if a is not None))
     if not takes:
         raise BatchError(f"--every-action: {obj.name!r} has no action")
     return takes
+
+
+def inspect(bpy, obj, fbx: list, imported: list[str]) -> list[str]:
+    """``inspect``: what the operators would run on in the imported file, as notes (the armature, how its bones map
+    and which controls are keyed, its takes and their rate), or a :class:`BatchError` with the reason they would
+    refuse it (the sidebar's own check, ``pipeline.prepare``)."""
+    pipeline = importlib.import_module(f"{ADDON}.strnn_addon.scene.pipeline")
+    try:
+        clip = pipeline.prepare(bpy.context, obj)
+    except pipeline.UserError as e:
+        raise BatchError(f"the operators would refuse it: {e}") from None
+    mapping = pipeline.mapping
+    stored = len(mapping.stored_map(obj)) == len(mapping.bonemap.JOINTS)
+    how = "the bone map stored with it" if stored else f"its {mapping.auto_map(obj)[0]} bone names"
+    others = sorted(o.name for o in bpy.context.scene.objects if o.type == "ARMATURE" and o is not obj)
+    beside = f", beside {', '.join(map(repr, others))}" if others else ""
+    notes = [f"armature {obj.name!r} ({len(obj.data.bones)} bones{beside}): the model's 21 joints mapped from {how}"]
+    if clip.controls is not None:
+        notes.append("results keyed on its bones by a visual bake" if clip.controls.name == pipeline.OWN_BONES
+                     else f"results keyed on its {clip.controls.name} controls")
+    takes = every_take(obj, fbx)
+    spans = ", ".join(f"{a.name!r} frames {round(a.frame_range[0])}-{round(a.frame_range[1])}" for a in takes)
+    notes.append(f"{len(takes)} takes ({spans}; the first plays)" if len(takes) > 1 else f"1 take ({spans})")
+    notes[-1] += f" at {clip.fps:g} keys a second"
+    return [n for n in imported if "--action NAME for another" not in n] + notes
 
 
 def stash(obj, action) -> None:
@@ -409,6 +434,8 @@ def run_file(bpy, job: dict) -> list[str]:
     if len(fbx) > 1 and obj.animation_data and obj.animation_data.action:
         imported.append(f"the FBX holds {len(fbx)} takes: ran on {obj.animation_data.action.name!r} (the one "
                         "Blender's importer plays; --action NAME for another); the result holds the new one alone")
+    if job["operator"] == "inspect":
+        return inspect(bpy, obj, fbx, imported)
     if job.get("action"):  # another take than the one the file plays
         use_action(bpy, obj, job["action"])
     takes = every_take(obj, fbx) if job.get("every_action") else [obj.animation_data.action]

@@ -9,6 +9,7 @@
     python scripts/strnn_batch.py transfer --target hero.blend data/clips/ --out out/hero
     python scripts/strnn_batch.py transfer --target hero.fbx takes/ --out out/hero   # FBX results
     python scripts/strnn_batch.py extend   --frames 60 game_clips/*.glb --out out/glb   # glTF in, .glb out
+    python scripts/strnn_batch.py inspect  library/      # what each file holds and would run on; writes nothing
 
 Each input file runs in its own worker process (``--jobs N`` at a time) that imports the ``bpy``
 module, resets to factory settings, installs and enables the built extension zip (built once
@@ -71,8 +72,7 @@ SOURCES = ("strnn_addon", "model_core", "models", "blender_manifest.toml", "__in
 def build_parser() -> argparse.ArgumentParser:
     common = argparse.ArgumentParser(add_help=False)
     io = common.add_argument_group("inputs and outputs")
-    io.add_argument("inputs", nargs="+", type=Path, metavar="PATH",
-                    help="BVH, FBX, glTF (.glb, .gltf) or .blend files, or folders searched recursively for them")
+    add_inputs(io)
     io.add_argument("--out", type=Path, default=Path("out"), metavar="DIR",
                     help="output folder (default: ./out); results are named NAME.<command>.bvh (.fbx, .glb, "
                          ".blend)")
@@ -102,24 +102,7 @@ def build_parser() -> argparse.ArgumentParser:
                              "otherwise (a 60 fps capture whose header says 120: 60); sets each armature's Keys per "
                              "Second (STRNN sidebar) before the operator runs (default: the file's own rate, or "
                              "what a .blend's armature has set)")
-    run = common.add_argument_group("running")
-    run.add_argument("--jobs", "-j", type=int, default=1, metavar="N",
-                     help="files processed at the same time, each in its own process (default: 1)")
-    run.add_argument("--timeout", type=float, default=900.0, metavar="SECONDS",
-                     help="give up on a file whose worker runs longer than this; it is killed, reported "
-                          "as failed and nothing is written for it (default: 900; 0: no limit)")
-    run.add_argument("--extension", type=Path, default=None, metavar="ZIP",
-                     help="the extension zip to install (default: dist/strnn_motion-*.zip, rebuilt with "
-                          "scripts/build_extension.py when older than the sources)")
-    run.add_argument("--model", type=Path, default=None, metavar="DIR",
-                     help="model release folder for the extension's Model Folder preference "
-                          "(default: the model bundled in the zip)")
-    run.add_argument("--report", type=Path, default=None, metavar="FILE",
-                     help="also write the results as JSON for pipelines: the command, and per file its "
-                          "status (ok / failed), seconds, output, reason and notes (what the operator's report "
-                          "warns of)")
-    run.add_argument("--verbose", "-v", action="store_true",
-                     help="let Blender's own output through (default: hidden; kept in the failure reason)")
+    add_running(common)
 
     parser = argparse.ArgumentParser(
         description=__doc__.split("\n\n")[0],
@@ -208,7 +191,44 @@ def build_parser() -> argparse.ArgumentParser:
     ground_flag(p, "each take is carried up and down with it from where the character stands, feet locked on it",
                 "name of a mesh, or of a collection of meshes, in --target's .blend")
     p.add_argument("--root-motion", action="store_true", help=opts.ROOT_MOTION.help())
+    p = sub.add_parser("inspect", help="say what each file holds and whether the operators can take it; writes "
+                       "nothing", description="Import each file as the other commands do and say, without running "
+                       "an operator or writing anything, what they would run on: the armature, how its bones map "
+                       "to the model's joints and which controls are keyed, its takes (frames, the rate read), or "
+                       "why the operators would refuse it (a failure, with the fix).")
+    add_inputs(p)
+    add_running(p, model=False)
+    p.set_defaults(out=None, format="auto", in_place=False, every_armature=False, action="", every_action=False,
+                   keys_per_second=None, model=None)
     return parser
+
+
+def add_running(p, model: bool = True) -> None:
+    """The options of how the batch runs (workers, timeout, the extension, the report), on parser ``p``."""
+    run = p.add_argument_group("running")
+    run.add_argument("--jobs", "-j", type=int, default=1, metavar="N",
+                     help="files processed at the same time, each in its own process (default: 1)")
+    run.add_argument("--timeout", type=float, default=900.0, metavar="SECONDS",
+                     help="give up on a file whose worker runs longer than this; it is killed, reported "
+                          "as failed and nothing is written for it (default: 900; 0: no limit)")
+    run.add_argument("--extension", type=Path, default=None, metavar="ZIP",
+                     help="the extension zip to install (default: dist/strnn_motion-*.zip, rebuilt with "
+                          "scripts/build_extension.py when older than the sources)")
+    if model:
+        run.add_argument("--model", type=Path, default=None, metavar="DIR",
+                         help="model release folder for the extension's Model Folder preference "
+                              "(default: the model bundled in the zip)")
+    run.add_argument("--report", type=Path, default=None, metavar="FILE",
+                     help="also write the results as JSON for pipelines: the command, and per file its "
+                          "status (ok / failed), seconds, output, reason and notes (what the operator's report "
+                          "warns of)")
+    run.add_argument("--verbose", "-v", action="store_true",
+                     help="let Blender's own output through (default: hidden; kept in the failure reason)")
+
+
+def add_inputs(p) -> None:
+    p.add_argument("inputs", nargs="+", type=Path, metavar="PATH",
+                   help="BVH, FBX, glTF (.glb, .gltf) or .blend files, or folders searched recursively for them")
 
 
 def ground_flag(p, what: str, where: str = "for .blend inputs: name of a mesh, or of a collection of meshes, in "
@@ -244,6 +264,8 @@ def operator_call(args) -> tuple[str, dict]:
         start, end = args.gap or (1, 250)
         return "inbetween", {"use_range": args.gap is not None, "frame_start": start, "frame_end": end,
                              "follow_take": args.follow_take, "foot_lock": args.foot_lock}
+    if args.command == "inspect":
+        return "inspect", {}
     if args.command == "transfer":
         return "transfer_motion", {"foot_lock": args.foot_lock, "ground": args.ground, "root_motion": args.root_motion}
     if args.command == "loop":
@@ -301,7 +323,7 @@ def check_args(parser, args) -> None:
 
 def check_writable(parser, args) -> None:
     """The output folder and the report's folder can be written (found before the first file, not after)."""
-    places = [] if args.in_place else [("--out", args.out)]
+    places = [] if args.in_place or args.out is None else [("--out", args.out)]
     if args.report is not None:
         places.append(("--report", args.report.parent if str(args.report.parent) else Path(".")))
     for option, folder in places:
@@ -385,7 +407,7 @@ def progress_line(done: int, total: int, result: dict) -> str:
     width = 20
     filled = round(width * done / total)
     bar = "#" * filled + "-" * (width - filled)
-    tail = f"-> {result['output']}" if result["status"] == "ok" else result["reason"]
+    tail = (f"-> {result['output']}" if result["output"] else "") if result["status"] == "ok" else result["reason"]
     if result.get("notes"):
         tail += f"  (note: {'; '.join(result['notes'])})"
     return f"[{bar}] {done}/{total} {result['status']:6s} {result['seconds']:6.1f}s  {result['file']}  {tail}"
@@ -571,6 +593,20 @@ def _loop(ctx, pending: list, pool: list, results: dict, workers: int, report, t
                                                               "written for it", now - worker.started), dead=True)
 
 
+def job_of(args, op: str, kwargs: dict, path: Path, display: str, out: Path | None) -> dict:
+    """A worker's job: one input file, its output (None: nothing is written) and what to run on it."""
+    return {"input": str(path.resolve()), "display": display, "output": str(out.resolve()) if out else "",
+            "shown_output": str(out or ""), "operator": op, "kwargs": kwargs,
+            "path": getattr(args, "path", None), "curve": getattr(args, "curve", ""),
+            "from_frame": getattr(args, "from_frame", None), "keys_per_second": args.keys_per_second,
+            "target": str(args.target.resolve()) if getattr(args, "target", None) else "",
+            "rig": getattr(args, "rig", ""),
+            "model": str(args.model.resolve()) if args.model else "",
+            "denoise_model": str(args.denoise_model.resolve()) if getattr(args, "denoise_model", None) else "",
+            "verbose": args.verbose, "every_armature": args.every_armature,
+            "action": args.action, "every_action": args.every_action}
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
@@ -585,8 +621,11 @@ def main(argv: list[str] | None = None) -> int:
     jobs, claimed = [], {}
     inputs = {p.resolve() for p, _ in files}
     for path, rel in files:
-        out = output_path(path, rel, args)
         display = str(path)
+        if args.out is None:  # inspect: nothing is written
+            jobs.append(job_of(args, op, kwargs, path, display, None))
+            continue
+        out = output_path(path, rel, args)
         if not args.in_place and out.resolve() in inputs:
             results.append(_failed(display, f"output {out} is an input; pass --in-place to overwrite inputs"))
             continue
@@ -594,16 +633,9 @@ def main(argv: list[str] | None = None) -> int:
             results.append(_failed(display, f"output {out} would also be written for {claimed[out.resolve()]}"))
             continue
         claimed[out.resolve()] = display
-        jobs.append({"index": len(jobs), "input": str(path.resolve()), "display": display,
-                     "output": str(out.resolve()), "shown_output": str(out), "operator": op, "kwargs": kwargs,
-                     "path": getattr(args, "path", None), "curve": getattr(args, "curve", ""),
-                     "from_frame": getattr(args, "from_frame", None), "keys_per_second": args.keys_per_second,
-                     "target": str(args.target.resolve()) if getattr(args, "target", None) else "",
-                     "rig": getattr(args, "rig", ""),
-                     "model": str(args.model.resolve()) if args.model else "",
-                     "denoise_model": str(args.denoise_model.resolve()) if getattr(args, "denoise_model", None)
-                     else "", "verbose": args.verbose, "every_armature": args.every_armature,
-                     "action": args.action, "every_action": args.every_action})
+        jobs.append(job_of(args, op, kwargs, path, display, out))
+    for n, job in enumerate(jobs):
+        job["index"] = n
     total = len(jobs) + len(results)
     if not total:
         parser.error("no input files")

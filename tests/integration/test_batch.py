@@ -848,14 +848,20 @@ def test_a_gltf_frame_rate_is_read_from_its_keys(tmp_path):
         batch_worker.gltf_document(tmp_path / "b.gltf")
 
 
-def two_takes(folder: Path, then: str) -> None:
+def two_takes(folder: Path, then: str = "", fbx: bool = False) -> None:
     """``folder``/two.glb: a 60-frame walk on a skinned rig with a second animation (``zz_idle``), made by
-    Blender's exporter; then ``then`` runs in the same Blender, the rig ``arm``."""
+    Blender's exporter (with ``fbx`` also ``folder``/two.fbx of the rig, its takes ``walk`` and ``zz_idle``); then
+    ``then`` runs in the same Blender, the rig ``arm``."""
     folder.mkdir()
     clip = write_bvh(folder.parent / "walk.bvh", walking_skeleton(60))
     run_bpy(GLTF_MAKE + f"""
 make_gltf({str(clip)!r}, {str(folder / "two.glb")!r}, second=True)
 arm = next(o for o in bpy.data.objects if o.type == "ARMATURE")
+if {fbx!r}:
+    arm.animation_data.action.name = "walk"
+    arm.select_set(True)
+    bpy.ops.export_scene.fbx(filepath={str(folder / "two.fbx")!r}, bake_anim_use_all_actions=True,
+                             bake_anim_use_nla_strips=False, add_leaf_bones=False)
 """ + then + "\nprint(json.dumps(0))\n")
 
 
@@ -864,12 +870,7 @@ def test_action_picks_the_take_of_an_fbx_or_the_animation_of_a_gltf(tmp_path, ex
     runs on another (an FBX take by its name, a glTF animation by its), and a name the file does not have fails with
     the names it has, nothing written for it."""
     takes = tmp_path / "takes"
-    two_takes(takes, f"""
-arm.animation_data.action.name = "walk"
-arm.select_set(True)
-bpy.ops.export_scene.fbx(filepath={str(takes / "two.fbx")!r}, bake_anim_use_all_actions=True,
-                         bake_anim_use_nla_strips=False, add_leaf_bones=False)
-""")
+    two_takes(takes, fbx=True)
     report = tmp_path / "report.json"
 
     def run(*flags):
@@ -989,3 +990,34 @@ for action, mute in ((stashed, True), (layer, False)):
 print(json.dumps([a.name for a in batch_worker.every_take(arm, [])]))
 """)
     assert got == ["played", "stashed"]
+
+
+def test_inspect_says_what_each_file_holds_and_writes_nothing(tmp_path, extension, capsys, monkeypatch):
+    """``inspect``: for each file the armature the operators would run on, how its bones map, its takes (the one that
+    plays first, each one's frames) and the rate read, or the reason the operators would refuse it (a prop's armature:
+    a failure, exit status 1); nothing is written, not even an output folder."""
+    takes = tmp_path / "takes"
+    two_takes(takes, fbx=True, then=f"""
+bpy.ops.wm.read_factory_settings(use_empty=True)
+bpy.ops.object.armature_add()  # a prop's rig: one bone, keyed
+prop = bpy.context.active_object
+prop.name = "Lamp"
+prop.pose.bones[0].keyframe_insert("location", frame=1)
+prop.pose.bones[0].location.z = 1.0
+prop.pose.bones[0].keyframe_insert("location", frame=20)
+bpy.ops.wm.save_as_mainfile(filepath={str(takes / "prop.blend")!r})
+""")
+    monkeypatch.chdir(tmp_path)
+    before = sorted(p.relative_to(tmp_path) for p in tmp_path.rglob("*"))
+    report = tmp_path / "report.json"
+    code = strnn_batch.main(["inspect", str(takes), "--report", str(report), "--extension", str(extension)])
+    capsys.readouterr()
+    rows = {Path(r["file"]).name: r for r in json.loads(report.read_text())["files"]}
+    assert code == 1 and sorted(rows) == ["prop.blend", "two.fbx", "two.glb"]
+    assert rows["prop.blend"]["status"] == "failed" and "the operators would refuse it" in rows["prop.blend"]["reason"]
+    for name in ("two.fbx", "two.glb"):
+        notes = "; ".join(rows[name]["notes"])
+        assert rows[name]["status"] == "ok" and rows[name]["output"] == "", rows[name]
+        assert "21 joints mapped from its" in notes and "2 takes ('walk' frames 1-60, 'zz_idle' frames 1-60; the " \
+            "first plays) at 30 keys a second" in notes, notes
+    assert sorted(p.relative_to(tmp_path) for p in tmp_path.rglob("*")) == sorted(before + [Path("report.json")])
