@@ -23,7 +23,9 @@ for *.bvh, *.fbx, *.glb, *.gltf and *.blend; their sub-folders are kept under OU
 unless ``--in-place``. ``transfer`` opens the character .blend (--target; an FBX or glTF character is imported)
 instead, imports each take (BVH, FBX or glTF) beside its rig, runs strnn.transfer_motion from the take onto the
 rig, removes what the take brought and saves a copy of the .blend (an FBX or .glb of the character, for an FBX or
-glTF character).
+glTF character). ``--action NAME`` runs on another take of a file than the one it plays, ``--every-action`` on
+each of them into one result. ``inspect`` imports each file and says what the others would run on (the armature,
+its bone map and controls, its takes and their rate) or why they would refuse it, writing nothing.
 
 One progress line per finished file, then a summary table (file, status, seconds, and the reason a
 file failed or the notes the operator's report warns of for one that did: motion unlike what the model
