@@ -196,8 +196,9 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("inspect", help="say what each file holds and whether the operators can take it; writes "
                        "nothing", description="Import each file as the other commands do and say, without running "
                        "an operator or writing anything, what they would run on: the armature, how its bones map "
-                       "to the model's joints and which controls are keyed, its takes (frames, the rate read), or "
-                       "why the operators would refuse it (a failure, with the fix).")
+                       "to the model's joints and which controls are keyed, its takes (frames, the rate read, how "
+                       "familiar each one's motion is to the model, as Extend's report judges it), or why the "
+                       "operators would refuse it (a failure, with the fix).")
     add_inputs(p)
     add_running(p, model=False)
     p.set_defaults(out=None, format="auto", in_place=False, every_armature=False, action="", every_action=False,
