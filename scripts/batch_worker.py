@@ -258,33 +258,14 @@ def inspect(bpy, obj, fbx: list, imported: list[str]) -> list[str]:
     return [n for n in imported if "--action NAME for another" not in n] + notes
 
 
-INSPECT_S = 30.0  # inspect judges at most a take's last this many seconds
-
-
 def take_familiarity(bpy, pipeline, obj) -> str:
-    """How familiar the motion of the action ``obj`` plays (its last :data:`INSPECT_S` seconds) is to the model, as
-    Extend's report judges a clip (``familiarity.clip_familiarity``: the model's rebuild of it against the motion it
-    knows), or why it cannot say."""
-    import numpy as np
-
-    common = importlib.import_module(f"{ADDON}.strnn_addon.stages.common")
-    bridge = importlib.import_module(f"{ADDON}.strnn_addon.engine_bridge")
+    """How familiar the motion of the action ``obj`` plays is to the model, as the sidebar's Check Motion says it
+    (``stages.check``: its last 10 s rebuilt by the model, against the motion it knows), or why it cannot say."""
+    check = importlib.import_module(f"{ADDON}.strnn_addon.stages.check")
     try:
-        clip = pipeline.prepare(bpy.context, obj)
-        frames = np.arange(max(clip.first, clip.last - round(INSPECT_S * clip.fps)), clip.last + 1)
-        pos = pipeline.joint_positions(bpy.context, clip, frames)
-        found = common.model_call(bridge.run_familiarity, common.prefs(bpy.context), pos, clip.fps)
+        return check.check_motion(bpy.context, obj).message()
     except pipeline.UserError as e:
         return f"not judged ({e})"
-    except ValueError as e:  # a take shorter than the model's context
-        return f"not judged ({e})"
-    if found.ratio is None:
-        return f"rebuilt by the model within {found.error_cm:.1f} cm (the model carries no calibration to judge it)"
-    if found.unfamiliar:
-        return (f"unlike what the model learnt (it rebuilds it {found.ratio:.1f} x worse than 90 % of the motion it "
-                "knows): check what the operators make of it")
-    return (f"motion the model knows (its rebuild error is {found.ratio:.1f} x the one 90 % of the motion it knows "
-            "stays under)")
 
 
 def stash(obj, action) -> None:

@@ -11,6 +11,7 @@ from .scene import anim, controls, mapping
 from .scene.curves import find_curve
 from .scene.pipeline import OWN_BONES, UserError, check_object, rig_of
 from .scene.simplify import simplify_keys
+from .stages.check import check_motion
 from .stages.common import RECORD, STAGES, report_note, run
 from .stages.denoise import denoise_steps
 from .stages.extend import extend_steps
@@ -530,6 +531,43 @@ class STRNN_OT_auto_map(bpy.types.Operator):
         return {"FINISHED"}
 
 
+CHECKED: dict = {}  # (armature, action, frame range) -> the last Check Motion's message, shown in the sidebar
+
+
+class STRNN_OT_check_motion(bpy.types.Operator):
+    """Say how familiar the active armature's motion is to the model, so you know how far to trust Extend, Fill Gap
+    and Denoise on it; changes nothing"""
+
+    bl_idname = "strnn.check_motion"
+    bl_label = "Check Motion"
+    bl_options = {"REGISTER"}  # nothing changes: no undo step
+
+    @classmethod
+    def poll(cls, context):
+        problem = check_message(context.active_object)
+        if problem:
+            cls.poll_message_set(problem)
+        return not problem
+
+    def execute(self, context):
+        obj = context.active_object
+        try:
+            checked = check_motion(context, obj)
+        except UserError as e:
+            self.report({"ERROR"}, str(e))
+            return {"CANCELLED"}
+        said = checked.report(obj.animation_data.action.name)
+        CHECKED[checked_key(obj)] = (checked.unfamiliar, said)
+        self.report({"WARNING"} if checked.unfamiliar else {"INFO"}, said)
+        return {"FINISHED"}
+
+
+def checked_key(obj) -> tuple:
+    """Which action a Check Motion's message is for: the armature, its action and the action's frame range."""
+    action = obj.animation_data.action
+    return obj.name, action.name, tuple(round(f, 3) for f in action.frame_range)
+
+
 class STRNN_OT_clear_map(bpy.types.Operator):
     """Forget the active armature's bone map"""
 
@@ -706,5 +744,6 @@ def check_message(obj, need_action: bool = True) -> str:
 
 
 classes = (STRNN_OT_extend_clip, STRNN_OT_fill_gap, STRNN_OT_denoise_action, STRNN_OT_foot_lock,
-           STRNN_OT_make_loop, STRNN_OT_follow_curve, STRNN_OT_transfer_motion, STRNN_OT_auto_map,
+           STRNN_OT_make_loop, STRNN_OT_follow_curve, STRNN_OT_transfer_motion, STRNN_OT_check_motion,
+           STRNN_OT_auto_map,
            STRNN_OT_control_add, STRNN_OT_control_remove, STRNN_OT_controls_from_preset, STRNN_OT_clear_map)

@@ -52,6 +52,10 @@ class STRNN_PT_main(_Sidebar, bpy.types.Panel):
                       icon="OUTLINER_OB_ARMATURE")
             col.label(text=f"{', '.join(many[:-1])} and {many[-1]} run on each")
         col.prop(obj, "strnn_keys_per_second")
+        col.operator("strnn.check_motion", icon="VIEWZOOM")
+        checked = operators.CHECKED.get(operators.checked_key(obj))
+        if checked is not None:  # the last check of this action, kept in view after its report has gone
+            wrapped(col, context, checked[1], icon="ERROR" if checked[0] else "CHECKMARK")
         made_by_note(col, action, context)
 
 
@@ -325,6 +329,7 @@ class STRNN_MT_menu(bpy.types.Menu):
         layout.operator("strnn.follow_curve", icon="CURVE_PATH")
         layout.operator("strnn.transfer_motion", icon="ARMATURE_DATA")
         layout.separator()
+        layout.operator("strnn.check_motion", icon="VIEWZOOM")
         layout.operator("strnn.auto_map", icon="AUTOMERGE_ON")
 
 

@@ -32,7 +32,7 @@ def refuse(op_name: str, match: str) -> None:
     assert all(before[0][k][0] == after[0][k][0] and same_keys(before[0][k][1], after[0][k][1]) for k in before[0])
 
 
-MODEL_OPS = ["extend_clip", "denoise_action", "make_loop"]
+MODEL_OPS = ["extend_clip", "denoise_action", "make_loop", "check_motion"]
 ACTION_OPS = MODEL_OPS + ["foot_lock"]
 OPS = ACTION_OPS + ["follow_curve"]  # Follow Curve also starts an armature that has no action
 
@@ -177,7 +177,7 @@ def test_a_model_folder_without_a_model_names_its_preference(addon, tmp_path, op
 
 
 POLLED = ["extend_clip", "inbetween", "denoise_action", "foot_lock", "make_loop", "follow_curve", "transfer_motion",
-          "auto_map"]
+          "auto_map", "check_motion"]
 
 
 @pytest.mark.parametrize("op", POLLED)

@@ -75,7 +75,8 @@ def test_registered_in_sidebar_and_menus(addon):
     for name in PANELS:
         cls = getattr(bpy.types, name)
         assert cls.bl_space_type == "VIEW_3D" and cls.bl_region_type == "UI" and cls.bl_category == "STRNN"
-    for op in ("extend_clip", "inbetween", "denoise_action", "foot_lock", "make_loop", "follow_curve", "auto_map"):
+    for op in ("extend_clip", "inbetween", "denoise_action", "foot_lock", "make_loop", "follow_curve", "auto_map",
+               "check_motion"):
         rna = getattr(bpy.ops.strnn, op).get_rna_type()
         assert rna.description, f"{op} has no tooltip"
     assert hasattr(bpy.types, "STRNN_MT_menu")

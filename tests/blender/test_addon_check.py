@@ -1,0 +1,68 @@
+"""Check Motion: how familiar the active armature's motion is to the model, said before anything runs; it changes
+nothing (no action, key, map or undo step)."""
+
+from __future__ import annotations
+
+import bpy
+import pytest
+from scenes import action_of, addon_module, find_mocap, import_bvh, key_snapshot, same_keys, walk_bvh
+
+
+def checked(addon, capfd, obj) -> str:
+    """Run Check Motion on ``obj``; its report, after checking that nothing in the file changed."""
+    bpy.context.view_layer.objects.active = obj
+    before = ({a.name for a in bpy.data.actions}, action_of(obj).name, key_snapshot(obj), obj.strnn_map.hips)
+    capfd.readouterr()
+    assert bpy.ops.strnn.check_motion() == {"FINISHED"}
+    out = capfd.readouterr().out
+    after = ({a.name for a in bpy.data.actions}, action_of(obj).name, key_snapshot(obj), obj.strnn_map.hips)
+    assert before[:2] == after[:2] and same_keys(before[2], after[2]) and before[3] == after[3]
+    shown = addon_module(addon, "strnn_addon.operators").CHECKED  # what the sidebar shows under the button
+    key = addon_module(addon, "strnn_addon.operators").checked_key(obj)
+    assert shown[key][1] in out
+    return out
+
+
+def test_check_motion_says_how_far_the_model_knows_the_motion(addon, real_model, capfd, tmp_path):
+    """A procedural walk, stiffer than any capture, reads as unlike what the model learnt (a warning); the report
+    names the action and the frames judged (its last 10 s), and the sidebar keeps the message for that action."""
+    obj = import_bvh(walk_bvh(tmp_path, frames=400))
+    out = checked(addon, capfd, obj)
+    first = 400 - round(10 * bpy.context.scene.render.fps)  # its last 10 s, at the keys' rate (the scene's)
+    assert f"'{action_of(obj).name}', frames {first}-400: this motion is unlike what the model learnt" in out, out
+
+
+def test_check_motion_tells_a_capture_the_model_knows_from_a_fight_it_does_not(addon, real_model, capfd):
+    """Real takes: a Bandai walk is motion the model knows; a CMU martial-arts take (an action family kept out of
+    training) is not."""
+    root = find_mocap()
+    if root is None:
+        pytest.skip("no motion-capture data (unpack ../shared/mocap into data/mocap)")
+    walk = import_bvh(root / "bandai-namco" / "dataset-2" / "dataset-2_walk_normal_001.bvh")
+    assert "motion the model knows (its rebuild error is " in checked(addon, capfd, walk)
+    fight = import_bvh(root / "cmu" / "acrnn-dance" / "martial" / "03.bvh")
+    assert "this motion is unlike what the model learnt" in checked(addon, capfd, fight)
+
+
+def test_the_sidebar_keeps_the_last_check_of_the_action_in_view(addon, real_model, capfd, tmp_path):
+    """The main panel has the Check Motion button, and after a check the message under it, for that action only."""
+    obj = import_bvh(walk_bvh(tmp_path, frames=60))
+    texts = []
+
+    class Layout:  # records the labels and buttons the panel draws
+        def __getattr__(self, name):
+            def call(*args, **kw):
+                texts.append(kw.get("text", args[0] if name == "operator" and args else ""))
+                return Layout()
+            return call
+
+    def drawn() -> str:
+        texts.clear()
+        bpy.types.STRNN_PT_main.draw(type("Panel", (), {"layout": Layout()})(), bpy.context)
+        return " ".join(texts)
+
+    assert "strnn.check_motion" in drawn() and "unlike what the model learnt" not in drawn()
+    checked(addon, capfd, obj)
+    assert "unlike what the model learnt" in drawn()
+    obj.animation_data.action = obj.animation_data.action.copy()  # another action: its check is not shown
+    assert "unlike what the model learnt" not in drawn()
