@@ -500,3 +500,16 @@ def test_follow_curve_from_the_rigs_rest_pose_walks_with_its_feet_on_the_floor(r
 
 
 
+
+
+def test_check_motion_reads_the_rig_as_the_operators_do(walking_rig, addon, real_model, capfd):
+    """Check Motion on the generated rig reads its motion through its controls (Blender evaluates the rig frame by
+    frame): a real walk moved onto it is motion the model knows (the procedural one, without the data, is not), and
+    nothing in the file changes."""
+    before = ({a.name for a in bpy.data.actions}, key_snapshot(walking_rig))
+    capfd.readouterr()
+    assert bpy.ops.strnn.check_motion() == {"FINISHED"}
+    out = capfd.readouterr().out
+    assert {a.name for a in bpy.data.actions} == before[0] and same_keys(key_snapshot(walking_rig), before[1])
+    known = find_mocap() is not None and (find_mocap() / WALK).exists()
+    assert ("motion the model knows" if known else "this motion is unlike what the model learnt") in out, out
