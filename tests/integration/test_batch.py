@@ -1021,7 +1021,7 @@ bpy.ops.wm.save_as_mainfile(filepath={str(takes / "prop.blend")!r})
         assert rows[name]["status"] == "ok" and rows[name]["output"] == "", rows[name]
         assert "21 joints mapped from its" in notes and "2 takes, the first plays, at 30 keys a second" in notes
         for take in ("walk", "zz_idle"):  # the synthetic walk is stiffer than any capture: the model says so
-            assert f"'{take}' frames 1-60: unlike what the model learnt (it rebuilds it " in notes, notes
+            assert f"'{take}' frames 1-60: this motion is unlike what the model learnt (it rebuilds it " in notes, notes
     assert sorted(p.relative_to(tmp_path) for p in tmp_path.rglob("*")) == sorted(before + [Path("report.json")])
 
 
