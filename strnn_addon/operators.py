@@ -531,7 +531,7 @@ class STRNN_OT_auto_map(bpy.types.Operator):
         return {"FINISHED"}
 
 
-CHECKED: dict = {}  # (armature, action, frame range) -> the last Check Motion's message, shown in the sidebar
+CHECKED: dict = {}  # checked_key -> (unfamiliar, the last Check Motion's message), shown in the sidebar
 
 
 class STRNN_OT_check_motion(bpy.types.Operator):
@@ -563,9 +563,10 @@ class STRNN_OT_check_motion(bpy.types.Operator):
 
 
 def checked_key(obj) -> tuple:
-    """Which action a Check Motion's message is for: the armature, its action and the action's frame range."""
+    """Which action a Check Motion's message is for: the armature and its action as this Blender session knows them
+    (``session_uid``: not their names, which another file opened later may reuse) and the action's frame range."""
     action = obj.animation_data.action
-    return obj.name, action.name, tuple(round(f, 3) for f in action.frame_range)
+    return obj.session_uid, action.session_uid, tuple(round(f, 3) for f in action.frame_range)
 
 
 class STRNN_OT_clear_map(bpy.types.Operator):

@@ -45,8 +45,10 @@ def test_check_motion_tells_a_capture_the_model_knows_from_a_fight_it_does_not(a
 
 
 def test_the_sidebar_keeps_the_last_check_of_the_action_in_view(addon, real_model, capfd, tmp_path):
-    """The main panel has the Check Motion button, and after a check the message under it, for that action only."""
+    """The main panel has the Check Motion button, and after a check the message under it, for that action only (not
+    for another action, nor for an action of the same name in a file opened after)."""
     obj = import_bvh(walk_bvh(tmp_path, frames=60))
+    obj_name, action_name = obj.name, obj.animation_data.action.name
     texts = []
 
     class Layout:  # records the labels and buttons the panel draws
@@ -65,4 +67,8 @@ def test_the_sidebar_keeps_the_last_check_of_the_action_in_view(addon, real_mode
     checked(addon, capfd, obj)
     assert "unlike what the model learnt" in drawn()
     obj.animation_data.action = obj.animation_data.action.copy()  # another action: its check is not shown
+    assert "unlike what the model learnt" not in drawn()
+    bpy.ops.wm.read_homefile(use_empty=True)  # another file whose armature and action have the same names
+    again = import_bvh(walk_bvh(tmp_path, frames=60))
+    assert (again.name, again.animation_data.action.name) == (obj_name, action_name)
     assert "unlike what the model learnt" not in drawn()
