@@ -263,9 +263,11 @@ def take_familiarity(bpy, pipeline, obj) -> str:
     (``stages.check``: its last 10 s rebuilt by the model, against the motion it knows), or why it cannot say."""
     check = importlib.import_module(f"{ADDON}.strnn_addon.stages.check")
     try:
-        return check.check_motion(bpy.context, obj).message()
+        checked = check.check_motion(bpy.context, obj)
     except pipeline.UserError as e:
         return f"not judged ({e})"
+    rate = checked.suggested_rate
+    return checked.message() + (f" (in a batch: --keys-per-second {rate:g})" if rate else "")
 
 
 def stash(obj, action) -> None:

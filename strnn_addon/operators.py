@@ -531,7 +531,7 @@ class STRNN_OT_auto_map(bpy.types.Operator):
         return {"FINISHED"}
 
 
-CHECKED: dict = {}  # checked_key -> (unfamiliar, the last Check Motion's message), shown in the sidebar
+CHECKED: dict = {}  # checked_key -> (a warning?, the last Check Motion's message), shown in the sidebar
 
 
 class STRNN_OT_check_motion(bpy.types.Operator):
@@ -557,8 +557,8 @@ class STRNN_OT_check_motion(bpy.types.Operator):
             self.report({"ERROR"}, str(e))
             return {"CANCELLED"}
         said = checked.report(obj.animation_data.action.name)
-        CHECKED[checked_key(obj)] = (checked.unfamiliar, said)
-        self.report({"WARNING"} if checked.unfamiliar else {"INFO"}, said)
+        CHECKED[checked_key(obj)] = (checked.warns, said)
+        self.report({"WARNING"} if checked.warns else {"INFO"}, said)
         return {"FINISHED"}
 
 

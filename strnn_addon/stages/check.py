@@ -1,8 +1,10 @@
 """Check Motion: how familiar an armature's motion is to the model, before any operation runs on it.
 
 The judgement is Extend's report's (``familiarity.clip_familiarity``: how well the model rebuilds the motion, against
-the motion it knows), made on the last :data:`CHECK_S` seconds of the action instead of the context Extend reads, and
-it changes nothing in the file. The batch's ``inspect`` says the same for each take of a file.
+the motion it knows), made on the last :data:`CHECK_S` seconds of the action instead of the context Extend reads,
+with the operators' other warnings about the take itself (strides at a pace people do not walk: keys at another rate
+than the take's; a body lying along another axis than up); it changes nothing in the file. The batch's ``inspect``
+says the same for each take of a file.
 """
 
 from __future__ import annotations
@@ -14,7 +16,7 @@ import numpy as np
 from ...model_core.ops.familiarity import Familiarity
 from .. import engine_bridge
 from ..scene import pipeline
-from .common import model_call, prefs
+from .common import model_call, pace_record, prefs
 
 CHECK_S = 10.0  # the last this many seconds of the action are judged
 
@@ -26,13 +28,24 @@ class Checked:
     found: Familiarity
     first: int
     last: int
+    notes: tuple[str, ...] = ()  # what else the operators' reports would warn of: the keys' rate, the body's axis
+    suggested_rate: float | None = None  # the Keys per Second the pace's note suggests
 
     @property
     def unfamiliar(self) -> bool:
         return self.found.unfamiliar
 
+    @property
+    def warns(self) -> bool:
+        """Whether the report is a warning: the motion is unfamiliar, or another note says what to fix first."""
+        return self.unfamiliar or bool(self.notes)
+
     def message(self) -> str:
-        """What was found, as the batch's ``inspect`` says it (:meth:`report`, the operator's)."""
+        """What was found, as the batch's ``inspect`` says it (:meth:`report`, the operator's): the familiarity, then
+        the other notes."""
+        return "; ".join((self._familiarity(), *self.notes))
+
+    def _familiarity(self) -> str:
         ratio = self.found.ratio
         if ratio is None:
             return (f"the model rebuilds this motion within {self.found.error_cm:.1f} cm (its model folder carries "
@@ -63,4 +76,6 @@ def check_motion(context, obj) -> Checked:
     first = max(clip.first, clip.last - round(CHECK_S * clip.fps))
     positions = pipeline.joint_positions(context, clip, np.arange(first, clip.last + 1))
     found = model_call(engine_bridge.run_familiarity, prefs(context), positions, clip.fps)
-    return Checked(found, first, clip.last)
+    record = pace_record(context, clip)  # the strides' pace at the keys' rate, and the axis the body stands along
+    notes = tuple(entry["note"] for entry in record.values() if entry.get("note"))
+    return Checked(found, first, clip.last, notes, record.get("pace", {}).get("suggested_keys_per_second"))

@@ -72,3 +72,13 @@ def test_the_sidebar_keeps_the_last_check_of_the_action_in_view(addon, real_mode
     again = import_bvh(walk_bvh(tmp_path, frames=60))
     assert (again.name, again.animation_data.action.name) == (obj_name, action_name)
     assert "unlike what the model learnt" not in drawn()
+
+
+def test_check_motion_says_when_the_keys_are_at_another_rate_than_the_take(addon, real_model, capfd, tmp_path):
+    """A 60 fps walk imported into a 24 fps scene without scaling time plays 2.5 x slow: Check Motion warns, with the
+    Keys per Second to set, before any operator would make a slow result of it; at that rate the warning goes."""
+    obj = import_bvh(walk_bvh(tmp_path, frames=240, fps=60.0), update_scene_fps=False, use_fps_scale=False)
+    assert bpy.context.scene.render.fps == 24
+    assert "Warning" in (out := checked(addon, capfd, obj)) and "set Keys per Second to 60" in out, out
+    obj.strnn_keys_per_second = 60.0
+    assert "Keys per Second" not in checked(addon, capfd, obj)

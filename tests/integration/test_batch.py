@@ -994,9 +994,9 @@ print(json.dumps([a.name for a in batch_worker.every_take(arm, [])]))
 
 def test_inspect_says_what_each_file_holds_and_writes_nothing(tmp_path, extension, capsys, monkeypatch):
     """``inspect``: for each file the armature the operators would run on, how its bones map, its takes (the one that
-    plays first, each one's frames and how familiar its motion is to the model) and the rate read, or the reason the
-    operators would refuse it (a prop's armature: a failure, exit status 1); nothing is written, not even an output
-    folder."""
+    plays first, each one's frames and how familiar its motion is to the model) and the rate read (a walk at another
+    pace than people walk: the Keys per Second to set), or the reason the operators would refuse it (a prop's
+    armature: a failure, exit status 1); nothing is written, not even an output folder."""
     takes = tmp_path / "takes"
     two_takes(takes, fbx=True, then=f"""
 bpy.ops.wm.read_factory_settings(use_empty=True)
@@ -1008,13 +1008,17 @@ prop.pose.bones[0].location.z = 1.0
 prop.pose.bones[0].keyframe_insert("location", frame=20)
 bpy.ops.wm.save_as_mainfile(filepath={str(takes / "prop.blend")!r})
 """)
+    write_bvh(takes / "slow.bvh", walking_skeleton(240, fps=60.0), fps=24.0)  # a 60 fps walk its file says is 24
     monkeypatch.chdir(tmp_path)
     before = sorted(p.relative_to(tmp_path) for p in tmp_path.rglob("*"))
     report = tmp_path / "report.json"
     code = strnn_batch.main(["inspect", str(takes), "--report", str(report), "--extension", str(extension)])
     capsys.readouterr()
     rows = {Path(r["file"]).name: r for r in json.loads(report.read_text())["files"]}
-    assert code == 1 and sorted(rows) == ["prop.blend", "two.fbx", "two.glb"]
+    assert code == 1 and sorted(rows) == ["prop.blend", "slow.bvh", "two.fbx", "two.glb"]
+    slow = "; ".join(rows["slow.bvh"]["notes"])  # the pace's note, as the operators would give it after a run
+    assert "set Keys per Second to 60" in slow and slow.endswith("(in a batch: --keys-per-second 60)"), slow
+    assert not any("Keys per Second" in n for name in ("two.fbx", "two.glb") for n in rows[name]["notes"])
     assert rows["prop.blend"]["status"] == "failed" and "the operators would refuse it" in rows["prop.blend"]["reason"]
     for name in ("two.fbx", "two.glb"):
         notes = "; ".join(rows[name]["notes"])
