@@ -179,7 +179,7 @@ def import_gltf(bpy, path: Path) -> list[str]:
     """Import a .glb or .gltf with Blender's glTF importer, the scene first set to the rate its keys were made at
     (:func:`gltf_frame_rate`: each key on a frame, as a BVH's or an FBX's are); its first animation is the one
     Blender makes active (the others go to NLA tracks). No bone shape is made (the importer's icosphere object).
-    Returns the notes a batch reports: keys at no rate, animations left as they were."""
+    Returns the notes a batch reports: keys at no rate."""
     document = gltf_document(path)
     rate = gltf_frame_rate(document)
     scene = bpy.context.scene
@@ -198,9 +198,6 @@ def import_gltf(bpy, path: Path) -> list[str]:
     if animations and rate is None:
         notes.append(f"the glTF's keys are not spaced at a frame rate: read at the scene's {scene.render.fps} "
                      "frames a second (its keys between frames)")
-    if len(animations) > 1:
-        notes.append(f"the glTF holds {len(animations)} animations: ran on its first, {animations[0]!r} (the one "
-                     "Blender's importer makes active; --action NAME for another); the result holds the new one alone")
     return notes
 
 
@@ -255,7 +252,7 @@ def inspect(bpy, obj, fbx: list, imported: list[str]) -> list[str]:
         notes.append(f"{take.name!r} frames {round(take.frame_range[0])}-{round(take.frame_range[1])}: "
                      + take_familiarity(bpy, pipeline, obj))
     obj.animation_data.action = takes[0]
-    return [n for n in imported if "--action NAME for another" not in n] + notes
+    return imported + notes
 
 
 def take_familiarity(bpy, pipeline, obj) -> str:
@@ -447,16 +444,16 @@ def run_file(bpy, job: dict) -> list[str]:
         bpy.context.view_layer.objects.active = brought[0]
     obj = pick_armature(bpy, bool(job.get("every_armature")) and target is None)
     fbx = fbx_takes(bpy, obj, actions) if src.suffix.lower() == ".fbx" else []
-    if len(fbx) > 1 and obj.animation_data and obj.animation_data.action:
-        imported.append(f"the FBX holds {len(fbx)} takes: ran on {obj.animation_data.action.name!r} (the one "
-                        "Blender's importer plays; --action NAME for another); the result holds the new one alone")
     if job["operator"] == "inspect":
         return inspect(bpy, obj, fbx, imported)
     if job.get("action"):  # another take than the one the file plays
         use_action(bpy, obj, job["action"])
+    elif not job.get("every_action") and src.suffix.lower() in (".fbx", *GLTF) and obj.animation_data \
+            and obj.animation_data.action and len(held := every_take(obj, fbx)) > 1:  # the others left: say so
+        kind, what = ("FBX", "takes") if src.suffix.lower() == ".fbx" else ("glTF", "animations")
+        imported.append(f"the {kind} holds {len(held)} {what}: ran on {held[0].name!r} (the one Blender's importer "
+                        "plays; --action NAME for another); the result holds the new one alone")
     takes = every_take(obj, fbx) if job.get("every_action") else [obj.animation_data.action]
-    if job.get("action") or job.get("every_action"):
-        imported = [note for note in imported if "--action NAME for another" not in note]
     if len(takes) > 1 and dst.suffix.lower() == ".bvh":
         raise BatchError(f"--every-action found {len(takes)} takes, and a BVH holds one: write FBX, .glb or .blend "
                          "results (--format)")
