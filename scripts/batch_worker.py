@@ -2,8 +2,8 @@
 
 The first :func:`process_file` of a worker process starts Blender (the ``bpy`` module) with factory
 settings in a user folder of its own and installs and enables the extension zip; every file then
-starts from Blender's factory startup file, is imported (Blender's BVH, FBX or glTF importer, or the .blend is
-opened), has the extension's operator run on its armature, and its result is written atomically.
+starts from Blender's factory startup file, is imported (Blender's BVH, FBX, glTF or USD importer, or the .blend
+is opened), has the extension's operator run on its armature, and its result is written atomically.
 It never raises: a failure becomes a one-line reason in the result. :func:`install_extension` is
 also used by the README pictures, which install the extension the same way.
 """
@@ -26,7 +26,9 @@ REPO_MODULE = "strnn_batch"
 ADDON = f"bl_ext.{REPO_MODULE}.strnn_motion"
 BOM = b"\xef\xbb\xbf"  # UTF-8's byte-order mark
 GLTF = (".glb", ".gltf")
-# the frame rates a glTF's keys are read at where their spacing says one (within RATE_TOLERANCE)
+USD = (".usd", ".usda", ".usdc", ".usdz")
+# the frame rates a glTF's keys (or a USD stage's time codes) are read at where their spacing says one (within
+# RATE_TOLERANCE)
 FRAME_RATES = (8, 10, 12, 15, 20, 24, 25, 30, 48, 50, 60, 72, 90, 100, 120, 144, 240)
 RATE_TOLERANCE = 0.01
 
@@ -199,6 +201,55 @@ def import_gltf(bpy, path: Path) -> list[str]:
         notes.append(f"the glTF's keys are not spaced at a frame rate: read at the scene's {scene.render.fps} "
                      "frames a second (its keys between frames)")
     return notes
+
+
+def usd_stage(path: Path) -> dict:
+    """What Blender's USD importer and exporter leave to the caller, read from the stage with Pixar's own library
+    (``pxr``, the usd-core package): its time codes a second (``rate``; USD's 24 where the file says none, its
+    ``framesPerSecond`` where it gives that alone), its up axis (``up``, "Y" or "Z"), its metres per unit
+    (``meters``) and its default prim's name (``root``, or "")."""
+    try:
+        from pxr import Usd, UsdGeom
+    except ImportError:
+        raise BatchError("reading a USD file needs Pixar's USD library for Python: pip install usd-core "
+                         "(scripts/setup.sh installs it)") from None
+    try:
+        stage = Usd.Stage.Open(str(path), Usd.Stage.LoadNone)
+    except Exception as e:  # pxr.Tf.ErrorException: a file USD cannot read
+        reason = " ".join(str(e).split())
+        raise BatchError(f"broken USD: Pixar's library cannot open it ({reason[:200]})") from None
+    default = stage.GetDefaultPrim()
+    return {"rate": float(stage.GetTimeCodesPerSecond()), "up": str(UsdGeom.GetStageUpAxis(stage)),
+            "meters": float(UsdGeom.GetStageMetersPerUnit(stage)), "root": default.GetName() if default else ""}
+
+
+def set_frame_rate(scene, rate: float) -> None:
+    """Set ``scene`` to play ``rate`` frames a second: a frame rate of :data:`FRAME_RATES` where ``rate`` is within
+    :data:`RATE_TOLERANCE` of it (a take exported at 1 / 0.0333333 s is 30), else as Blender writes an odd rate
+    (the nearest whole number over a base)."""
+    near = min(FRAME_RATES, key=lambda r: abs(rate - r))
+    if abs(rate - near) <= RATE_TOLERANCE * near:
+        rate = near
+    scene.render.fps = max(1, round(rate))
+    scene.render.fps_base = scene.render.fps / rate
+
+
+def import_usd(bpy, path: Path) -> dict:
+    """Import a USD file (.usd, .usda, .usdc, .usdz) with Blender's USD importer, the scene first set to the stage's
+    time codes a second (:func:`usd_stage`: Blender's importer puts time code t on frame t but leaves the scene's
+    rate as it was, so a 30 fps take would play at the factory 24). Returns the stage's settings, which the result
+    is written back with (:func:`export_usd`)."""
+    stage = usd_stage(path)
+    set_frame_rate(bpy.context.scene, stage["rate"])
+    there = set(bpy.data.objects)
+    try:
+        bpy.ops.wm.usd_import(filepath=str(path))
+    except RuntimeError as e:
+        raise BatchError(f"Blender's USD importer could not read it: {blender_error(e)}") from None
+    if not any(o.type == "ARMATURE" for o in set(bpy.data.objects) - there):
+        raise BatchError("the USD has no skeleton (UsdSkel) for Blender's importer to make an armature of: export "
+                         "the character with its skeleton and skinned mesh")
+    return stage
 
 
 def fbx_takes(bpy, obj, before: set) -> list:
@@ -388,6 +439,8 @@ def open_target(bpy, job: dict):
             bpy.ops.import_scene.fbx(filepath=job["target"])
         elif job["target"].lower().endswith(GLTF):
             import_gltf(bpy, Path(job["target"]))
+        elif job["target"].lower().endswith(USD):
+            job["stage"] = import_usd(bpy, Path(job["target"]))  # the character's file is written back as it was
         else:
             bpy.ops.wm.open_mainfile(filepath=job["target"], load_ui=False)
     except (RuntimeError, BatchError) as e:
@@ -406,8 +459,9 @@ def run_file(bpy, job: dict) -> list[str]:
     src, dst = Path(job["input"]), Path(job["output"])
     target = None
     if job["operator"] == "transfer_motion":
-        if src.suffix.lower() not in (".bvh", ".fbx", *GLTF):
-            raise BatchError("transfer takes BVH, FBX or glTF takes; a .blend is a target (--target), not a take")
+        if src.suffix.lower() not in (".bvh", ".fbx", *GLTF, *USD):
+            raise BatchError("transfer takes BVH, FBX, glTF or USD takes; a .blend is a target (--target), not a "
+                             "take")
         target = open_target(bpy, job)
     if dst.suffix.lower() == ".gltf":  # (--in-place on a .gltf)
         raise BatchError("a .gltf result is two files (the .gltf and its .bin), which cannot be replaced at once: "
@@ -418,6 +472,10 @@ def run_file(bpy, job: dict) -> list[str]:
     imported = []
     if src.suffix.lower() in GLTF:
         imported = import_gltf(bpy, src)
+    elif src.suffix.lower() in USD:
+        stage = import_usd(bpy, src)
+        if target is None:  # the result is this file's character, written back in its axes and units
+            job["stage"] = stage
     elif src.suffix.lower() == ".fbx":
         try:  # as File > Import > FBX does it: the scene takes the file's frame rate
             bpy.ops.import_scene.fbx(filepath=str(src))
@@ -454,9 +512,10 @@ def run_file(bpy, job: dict) -> list[str]:
         imported.append(f"the {kind} holds {len(held)} {what}: ran on {held[0].name!r} (the one Blender's importer "
                         "plays; --action NAME for another); the result holds the new one alone")
     takes = every_take(obj, fbx) if job.get("every_action") else [obj.animation_data.action]
-    if len(takes) > 1 and dst.suffix.lower() == ".bvh":
-        raise BatchError(f"--every-action found {len(takes)} takes, and a BVH holds one: write FBX, .glb or .blend "
-                         "results (--format)")
+    if len(takes) > 1 and dst.suffix.lower() in (".bvh", *USD):
+        kind = "BVH" if dst.suffix.lower() == ".bvh" else "USD skeleton"
+        raise BatchError(f"--every-action found {len(takes)} takes, and a {kind} holds one: write FBX, .glb or "
+                         ".blend results (--format)")
     view_layer = bpy.context.view_layer
     for other in view_layer.objects:
         other.select_set(False)
@@ -527,6 +586,8 @@ def run_file(bpy, job: dict) -> list[str]:
             export_fbx(bpy, obj, results, tmp)
         elif dst.suffix.lower() == ".glb":
             export_gltf(bpy, obj, results, tmp)
+        elif dst.suffix.lower() in USD:
+            export_usd(bpy, obj, results, tmp, job.get("stage"))
         else:
             bpy.ops.wm.save_as_mainfile(filepath=str(tmp), copy=True, compress=True)
     except RuntimeError as e:
@@ -575,6 +636,30 @@ def export_gltf(bpy, obj, results: list, path: Path) -> None:
     bpy.ops.export_scene.gltf(filepath=str(path), check_existing=False, export_format="GLB", use_selection=True,
                               export_animations=True, export_animation_mode="ACTIONS", export_force_sampling=True,
                               export_frame_range=False, export_anim_slide_to_zero=False)
+
+
+# USD's metres per unit that Blender's USD exporter names (any other is written as its own figure)
+USD_UNITS = {1.0: "METERS", 1000.0: "KILOMETERS", 0.01: "CENTIMETERS", 0.001: "MILLIMETERS", 0.0254: "INCHES",
+             0.3048: "FEET", 0.9144: "YARDS"}
+
+
+def export_usd(bpy, obj, results: list, path: Path, stage: dict | None) -> None:
+    """Write ``obj`` with what :func:`select_character` selects to a USD file at ``path`` with Blender's exporter
+    (its suffix says which: .usd and .usdc binary, .usda text, .usdz a package), the new action as its skeleton's
+    animation over the scene's frames at the scene's rate. A USD input's result keeps the input stage's up axis,
+    units and default prim (``stage``, from :func:`usd_stage`), so that it drops into the pipeline it came from;
+    any other is written as Blender writes USD (Z up, metres, ``/root``)."""
+    select_character(bpy, obj, results)
+    options = {}
+    if stage is not None:
+        units = USD_UNITS.get(round(stage["meters"], 6), "CUSTOM")
+        options = {"convert_orientation": stage["up"] != "Z", "export_global_up_selection": "Y",
+                   "export_global_forward_selection": "NEGATIVE_Z", "convert_scene_units": units,
+                   "meters_per_unit": stage["meters"]}
+        if stage["root"]:  # the default prim: one Blender made (and left out on import) again, or its object's
+            options["root_prim_path"] = "" if bpy.data.objects.get(stage["root"]) else "/" + stage["root"]
+    bpy.ops.wm.usd_export(filepath=str(path), check_existing=False, selected_objects_only=True,
+                          export_animation=True, export_armatures=True, **options)
 
 
 def every_armature(bpy, obj) -> list:

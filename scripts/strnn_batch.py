@@ -1,4 +1,5 @@
-"""Run the STRNN Motion extension headless over many BVH / FBX / glTF / .blend files, one Blender (bpy) per file.
+"""Run the STRNN Motion extension headless over many BVH / FBX / glTF / USD / .blend files, one Blender (bpy) per
+file.
 
     python scripts/strnn_batch.py extend   --frames 120 data/clips/ --out out/batch
     python scripts/strnn_batch.py denoise  --strength 0.8 a.bvh b.bvh --jobs 4
@@ -9,23 +10,26 @@
     python scripts/strnn_batch.py transfer --target hero.blend data/clips/ --out out/hero
     python scripts/strnn_batch.py transfer --target hero.fbx takes/ --out out/hero   # FBX results
     python scripts/strnn_batch.py extend   --frames 60 game_clips/*.glb --out out/glb   # glTF in, .glb out
+    python scripts/strnn_batch.py denoise  shots/*.usd --out out/usd     # USD in, USD out (its axes, units, rate)
     python scripts/strnn_batch.py inspect  library/      # what each file holds and would run on; writes nothing
 
 Each input file runs in its own worker process (``--jobs N`` at a time) that imports the ``bpy``
 module, resets to factory settings, installs and enables the built extension zip (built once
 here with scripts/build_extension.py into dist/ unless dist/ is up to date, or ``--extension``),
-imports the file with Blender's own BVH, FBX or glTF importer (a .blend is opened), runs the extension's real
+imports the file with Blender's own BVH, FBX, glTF or USD importer (a .blend is opened), runs the extension's real
 operator (strnn.extend_clip, strnn.inbetween, strnn.denoise_action, strnn.foot_lock,
-strnn.make_loop, strnn.follow_curve) on the armature, and writes the result with Blender's own BVH, FBX or
-glTF exporter (or saves a .blend) as ``OUT/NAME.<command>.bvh`` (``.fbx``, ``.glb``: the file's armature and
-meshes, the new action its one take or animation; a .gltf's result is a .glb). Folders are searched recursively
-for *.bvh, *.fbx, *.glb, *.gltf and *.blend; their sub-folders are kept under OUT. An input is never overwritten
-unless ``--in-place``. ``transfer`` opens the character .blend (--target; an FBX or glTF character is imported)
-instead, imports each take (BVH, FBX or glTF) beside its rig, runs strnn.transfer_motion from the take onto the
-rig, removes what the take brought and saves a copy of the .blend (an FBX or .glb of the character, for an FBX or
-glTF character). ``--action NAME`` runs on another take of a file than the one it plays, ``--every-action`` on
-each of them into one result. ``inspect`` imports each file and says what the others would run on (the armature,
-its bone map and controls, its takes and their rate) or why they would refuse it, writing nothing.
+strnn.make_loop, strnn.follow_curve) on the armature, and writes the result with Blender's own BVH, FBX, glTF
+or USD exporter (or saves a .blend) as ``OUT/NAME.<command>.bvh`` (``.fbx``, ``.glb``, ``.usd``: the file's
+armature and meshes, the new action its one take or animation; a .gltf's result is a .glb; a USD result keeps
+its input's up axis, units and rate). Folders are searched recursively for *.bvh, *.fbx, *.glb, *.gltf, *.usd,
+*.usda, *.usdc, *.usdz and *.blend; their sub-folders are kept under OUT. An input is never overwritten
+unless ``--in-place``. ``transfer`` opens the character .blend (--target; an FBX, glTF or USD character is
+imported) instead, imports each take (BVH, FBX, glTF or USD) beside its rig, runs strnn.transfer_motion from the
+take onto the rig, removes what the take brought and saves a copy of the .blend (an FBX, .glb or USD file of the
+character, for a character in one of those). ``--action NAME`` runs on another take of a file than the one it
+plays, ``--every-action`` on each of them into one result. ``inspect`` imports each file and says what the others
+would run on (the armature, its bone map and controls, its takes and their rate) or why they would refuse it,
+writing nothing.
 
 One progress line per finished file, then a summary table (file, status, seconds, and the reason a
 file failed or the notes the operator's report warns of for one that did: motion unlike what the model
@@ -61,8 +65,10 @@ else:  # run by path from a checkout
 from model_core.io.files import unwritable, write_json  # noqa: E402  (model_core never imports bpy)
 from model_core.ops import options as opts  # noqa: E402
 
-EXTENSIONS = (".bvh", ".fbx", ".glb", ".gltf", ".blend")
-CHARACTERS = (".blend", ".fbx", ".glb", ".gltf")  # what --target may be
+USD = (".usd", ".usda", ".usdc", ".usdz")
+EXTENSIONS = (".bvh", ".fbx", ".glb", ".gltf", *USD, ".blend")
+CHARACTERS = (".blend", ".fbx", ".glb", ".gltf", *USD)  # what --target may be
+NAMED = ".bvh, .fbx, .glb, .gltf, .usd (.usda, .usdc, .usdz) or .blend"  # the inputs, as messages name them
 PATHS = ("line", "circle", "s_curve", "figure_eight")
 SOURCES = ("strnn_addon", "model_core", "models", "blender_manifest.toml", "__init__.py")
 
@@ -77,11 +83,13 @@ def build_parser() -> argparse.ArgumentParser:
     add_inputs(io)
     io.add_argument("--out", type=Path, default=Path("out"), metavar="DIR",
                     help="output folder (default: ./out); results are named NAME.<command>.bvh (.fbx, .glb, "
-                         ".blend)")
-    io.add_argument("--format", choices=("auto", "bvh", "fbx", "glb", "blend"), default="auto",
-                    help="what to write: a BVH, an FBX or a binary glTF (Blender's exporters; an FBX or .glb with "
-                         "the file's meshes, the new action its one take or animation) or a .blend; auto "
-                         "(default): the input's own format (a .glb for a .gltf)")
+                         ".usd, .blend)")
+    io.add_argument("--format", choices=("auto", "bvh", "fbx", "glb", "usd", "usda", "usdz", "blend"),
+                    default="auto",
+                    help="what to write: a BVH, an FBX, a binary glTF or a USD file (Blender's exporters; an FBX, "
+                         ".glb or USD file with the file's meshes, the new action its one take, animation or "
+                         "skeleton animation; usd binary, usda text, usdz a package) or a .blend; auto (default): "
+                         "the input's own format (a .glb for a .gltf)")
     io.add_argument("--in-place", action="store_true",
                     help="overwrite each input with its result instead of writing to --out "
                          "(the output format is then the input's; not for .gltf, whose result is a .glb)")
@@ -96,7 +104,8 @@ def build_parser() -> argparse.ArgumentParser:
     io.add_argument("--every-action", action="store_true",
                     help="run on every take of the file's armature, each in turn, into one result that holds them "
                          "all (an FBX's takes, a glTF's animations; for a .blend the action it plays and those "
-                         "stashed in its muted NLA tracks): an FBX, .glb or .blend result, the first new action "
+                         "stashed in its muted NLA tracks): an FBX, .glb or .blend result (a BVH or a USD "
+                         "skeleton holds one take), the first new action "
                          "playing and the others in muted NLA tracks")
     motion = common.add_argument_group("motion")
     motion.add_argument("--keys-per-second", type=float, default=None, metavar="FPS",
@@ -178,14 +187,14 @@ def build_parser() -> argparse.ArgumentParser:
     foot_lock_flag(p, "follow_curve")
     ground_flag(p, "the walk goes up and down with it, feet locked on it")
     p = sub.add_parser("transfer", parents=[common], help="move each take onto a character "
-                       "(strnn.transfer_motion)", description="Move the motion of each BVH, FBX or glTF take onto "
-                       "the rig of a character .blend, FBX or glTF (its proportions, feet on the floor), one new "
-                       "action per take, saved as a copy of that .blend, or for an FBX or glTF character as an FBX "
-                       "or .glb of it with the new action its take (--format: bvh, the rig exported as BVH; fbx, "
-                       "glb or blend).")
-    p.add_argument("--target", type=Path, required=True, metavar="RIG.blend|RIG.fbx|RIG.glb",
-                   help="the .blend, FBX or glTF holding the character's armature (never changed; each result is "
-                        "a copy)")
+                       "(strnn.transfer_motion)", description="Move the motion of each BVH, FBX, glTF or USD take "
+                       "onto the rig of a character .blend, FBX, glTF or USD file (its proportions, feet on the "
+                       "floor), one new action per take, saved as a copy of that .blend, or for an FBX, glTF or USD "
+                       "character as a file of it in its format with the new action its take (--format: bvh, the "
+                       "rig exported as BVH; fbx, glb, usd or blend).")
+    p.add_argument("--target", type=Path, required=True, metavar="RIG.blend|RIG.fbx|RIG.glb|RIG.usd",
+                   help="the .blend, FBX, glTF or USD file holding the character's armature (never changed; each "
+                        "result is a copy)")
     p.add_argument("--rig", default="", metavar="NAME",
                    help="the armature object in --target to put the motion on (default: its active armature, "
                         "or its only one)")
@@ -231,7 +240,8 @@ def add_running(p, model: bool = True) -> None:
 
 def add_inputs(p) -> None:
     p.add_argument("inputs", nargs="+", type=Path, metavar="PATH",
-                   help="BVH, FBX, glTF (.glb, .gltf) or .blend files, or folders searched recursively for them")
+                   help="BVH, FBX, glTF (.glb, .gltf), USD (.usd, .usda, .usdc, .usdz) or .blend files, or "
+                        "folders searched recursively for them")
 
 
 def ground_flag(p, what: str, where: str = "for .blend inputs: name of a mesh, or of a collection of meshes, in "
@@ -301,7 +311,7 @@ def check_args(parser, args) -> None:
         parser.error("--frames and --speed must not be negative")
     if args.command == "transfer" and (args.target.suffix.lower() not in CHARACTERS
                                        or not args.target.is_file()):
-        parser.error(f"--target {args.target}: not a .blend, .fbx, .glb or .gltf file")
+        parser.error(f"--target {args.target}: not a .blend, .fbx, .glb, .gltf or USD file")
     if args.command == "transfer" and args.in_place:
         parser.error("--in-place is not for transfer: the results go beside the takes in --out")
     if args.every_armature and args.command in ("transfer", "follow"):
@@ -311,7 +321,7 @@ def check_args(parser, args) -> None:
                      "plays its own action")
     if args.every_action and args.action:
         parser.error("--action picks one take and --every-action runs them all: give one of them")
-    if args.every_armature and args.format in ("bvh", "fbx", "glb"):
+    if args.every_armature and args.format not in ("auto", "blend"):
         parser.error(f"--every-armature writes .blend results (a {args.format.upper()} file here holds one "
                      f"armature's take): drop --format {args.format}")
     if args.keys_per_second is not None and not 0.0 < args.keys_per_second <= 1000.0:
@@ -343,11 +353,11 @@ def collect(inputs: list[Path]) -> tuple[list[tuple[Path, Path]], list[tuple[str
         if item.is_dir():
             files = sorted(p for p in item.rglob("*") if p.suffix.lower() in EXTENSIONS and p.is_file())
             if not files:
-                problems.append((str(item), "folder holds no .bvh, .fbx, .glb, .gltf or .blend file"))
+                problems.append((str(item), f"folder holds no {NAMED} file"))
             pairs = [(p, p.relative_to(item)) for p in files]
         elif item.is_file():
             if item.suffix.lower() not in EXTENSIONS:
-                problems.append((str(item), f"not a .bvh, .fbx, .glb, .gltf or .blend file "
+                problems.append((str(item), f"not a {NAMED} file "
                                             f"({item.suffix or 'no extension'})"))
                 continue
             pairs = [(item, Path(item.name))]

@@ -414,7 +414,7 @@ print(json.dumps({{"armatures": [o.name for o in bpy.data.objects if o.type == "
     assert got["armatures"] == ["Hero"] and got["record"] == "Transfer Motion" and got["frames"] == 60
     with pytest.raises(SystemExit):
         strnn_batch.main(["transfer", "--target", str(clip), str(clip)])
-    assert "not a .blend, .fbx, .glb or .gltf file" in capsys.readouterr().err
+    assert "not a .blend, .fbx, .glb, .gltf or USD file" in capsys.readouterr().err
 
 
 @pytest.mark.parametrize("sig, code", [(signal.SIGINT, 130), (signal.SIGTERM, 143)], ids=["ctrl-c", "sigterm"])
@@ -498,6 +498,14 @@ arm = next(o for o in bpy.data.objects if o.type == "ARMATURE")
 print(json.dumps(arm.animation_data.action["strnn"]["ground"].to_dict()))
 """)
     assert got == {"object": "Floor", "frames_without": 0}
+
+
+def batch_rows(capsys, extension: Path, report: Path, *argv: str) -> tuple[int, dict[str, dict]]:
+    """Run the batch with ``argv`` and a JSON report at ``report``: its exit status and the report's rows by file
+    name."""
+    code = strnn_batch.main([*argv, "--report", str(report), "--extension", str(extension)])
+    capsys.readouterr()
+    return code, {Path(r["file"]).name: r for r in json.loads(report.read_text())["files"]}
 
 
 def hero_blend(tmp_path: Path) -> Path:
@@ -739,6 +747,18 @@ def make_gltf(bvh, path, second=False):
 """
 
 
+def assert_extended_by_20(before: dict, after: dict) -> None:
+    """``after``, a file read back as the glTF and USD readers here read it, is the 60-frame walk ``before`` extended
+    by 20 frames: the same objects and bones, the take's frames where they were, the new ones walking on."""
+    assert after["objects"] == before["objects"] and after["bones"] == before["bones"]
+    assert round(after["first"], 3) == round(before["first"], 3) == 1.0 and round(after["last"], 3) == 80.0
+    heads, new = np.array(before["heads"]), np.array(after["heads"])
+    assert len(heads) == 60 and len(new) == 80
+    assert np.abs(new[:60] - heads).max() < 1e-3  # the take's own frames, as they were
+    step = np.linalg.norm(np.diff(new, axis=0), axis=-1).mean(-1)
+    assert 0.5 < step[60:].mean() / step[:59].mean() < 1.6  # walking on, not frozen
+
+
 def without_skin(glb: Path, path: Path) -> None:
     """Write ``glb`` to ``path`` without its skins (as a tool that exports a node tree with no mesh writes it)."""
     import struct
@@ -778,12 +798,9 @@ print(json.dumps(0))
     (takes / "cut.glb").write_bytes(take.read_bytes()[:600])  # its JSON cut short
     without_skin(take, takes / "bare.glb")
     out = tmp_path / "out"
-    report = tmp_path / "report.json"
-    code = strnn_batch.main(["extend", "--frames", "20", str(takes), "--out", str(out), "--report", str(report),
-                             "--extension", str(extension)])
-    err = capsys.readouterr().err
-    assert code == 1, err
-    rows = {Path(r["file"]).name: r for r in json.loads(report.read_text())["files"]}
+    code, rows = batch_rows(capsys, extension, tmp_path / "report.json", "extend", "--frames", "20", str(takes),
+                            "--out", str(out))
+    assert code == 1, rows
     assert "glTF importer could not read it" in rows["broken.glb"]["reason"], rows["broken.glb"]
     assert rows["cut.glb"]["reason"].startswith("broken glTF: its JSON cannot be read"), rows["cut.glb"]
     assert "has no skin" in rows["bare.glb"]["reason"] and "skinned mesh" in rows["bare.glb"]["reason"]
@@ -797,14 +814,8 @@ print(json.dumps(0))
 print(json.dumps({{"take": read_gltf({str(take)!r}, 30), "extended": read_gltf({str(out / "walk.extend.glb")!r}, 30)}}))
 """)
     before, after = got["take"], got["extended"]
-    assert after["objects"] == before["objects"] and after["bones"] == before["bones"]
     assert after["action"] == result["animations"][0]["name"] != before["action"]  # the new action, by its name
-    assert round(after["first"], 3) == round(before["first"], 3) == 1.0 and round(after["last"], 3) == 80.0
-    heads, new = np.array(before["heads"]), np.array(after["heads"])
-    assert len(heads) == 60 and len(new) == 80
-    assert np.abs(new[:60] - heads).max() < 1e-3  # the take's own frames, as they were
-    step = np.linalg.norm(np.diff(new, axis=0), axis=-1).mean(-1)
-    assert 0.5 < step[60:].mean() / step[:59].mean() < 1.6  # walking on, not frozen
+    assert_extended_by_20(before, after)
     hero = tmp_path / "hero.glb"  # a character given as glTF (a rig with its skinned mesh, no animation)
     small = write_bvh(tmp_path / "small.bvh", walking_skeleton(2) * 0.8)
     run_bpy(GLTF_MAKE + f"""
@@ -846,6 +857,160 @@ def test_a_gltf_frame_rate_is_read_from_its_keys(tmp_path):
     (tmp_path / "b.gltf").write_text('{"asset": ')
     with pytest.raises(batch_worker.BatchError, match="broken glTF: its JSON cannot be read"):
         batch_worker.gltf_document(tmp_path / "b.gltf")
+
+
+USD_MAKE = """
+def make_usd(bvh, path, **options):
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    bpy.ops.import_anim.bvh(filepath=bvh, update_scene_fps=True, update_scene_duration=True)
+    arm = bpy.context.active_object
+    arm.name = "Actor"
+    bpy.ops.mesh.primitive_cube_add(size=0.3, location=(0, 0, 1))  # skinned: a UsdSkel character
+    body = bpy.context.active_object
+    body.name = "Body"
+    body.modifiers.new("Armature", "ARMATURE").object = arm
+    body.parent = arm
+    body.vertex_groups.new(name="Hips").add(range(len(body.data.vertices)), 1.0, "REPLACE")
+    bpy.ops.wm.usd_export(filepath=path, export_animation=True, **options)
+"""
+
+USD_READ = """
+from pxr import Usd, UsdGeom
+
+
+def read_usd(path, fps):
+    stage = Usd.Stage.Open(path)
+    settings = [stage.GetTimeCodesPerSecond(), str(UsdGeom.GetStageUpAxis(stage)),
+                UsdGeom.GetStageMetersPerUnit(stage), str(stage.GetDefaultPrim().GetPath())]
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    bpy.context.scene.render.fps = fps
+    bpy.ops.wm.usd_import(filepath=path)
+    arm = next(o for o in bpy.data.objects if o.type == "ARMATURE")
+    first, last = arm.animation_data.action.frame_range
+    heads = []
+    for f in range(int(round(first)), int(round(last)) + 1):
+        bpy.context.scene.frame_set(f)
+        heads.append([list(arm.matrix_world @ b.head) for b in arm.pose.bones])
+    return {"stage": settings, "objects": sorted([o.name, o.type] for o in bpy.data.objects),
+            "bones": sorted(b.name for b in arm.data.bones), "first": first, "last": last, "heads": heads}
+"""
+
+
+def test_usd_takes_are_extended_in_their_own_axes_units_and_rate(tmp_path, extension, capsys):
+    """A USD character (Blender's exporter: a 30 fps walk on a skinned armature) is read with Blender's USD importer
+    at the stage's time codes a second, which the importer leaves to the caller (at the factory 24 a 30 fps take
+    would play slow), and written back as USD in the input's own form: a Y-up stage in centimetres under /World
+    stays so (as Maya's or Houdini's pipelines write it), a Z-up one in metres too, .usdc binary and .usda text; the
+    same objects and bones, the take's frames where they were and the new ones walking on. A USD with no skeleton
+    and a broken file fail with their reasons. A take moves onto a USD character (a USD file of it)."""
+    pytest.importorskip("pxr")
+    clip = write_bvh(tmp_path / "walk.bvh", walking_skeleton(60))
+    takes = tmp_path / "takes"
+    takes.mkdir()
+    run_bpy(USD_MAKE + f"""
+make_usd({str(clip)!r}, {str(takes / "maya.usdc")!r}, convert_orientation=True, export_global_up_selection="Y",
+         export_global_forward_selection="NEGATIVE_Z", convert_scene_units="CENTIMETERS", root_prim_path="/World")
+make_usd({str(clip)!r}, {str(takes / "plain.usda")!r})
+bpy.ops.wm.read_factory_settings(use_empty=True)
+bpy.ops.mesh.primitive_cube_add()
+bpy.ops.wm.usd_export(filepath={str(takes / "prop.usda")!r})
+print(json.dumps(0))
+""")
+    (takes / "broken.usdc").write_bytes((takes / "maya.usdc").read_bytes()[:300])
+    out = tmp_path / "out"
+    code, rows = batch_rows(capsys, extension, tmp_path / "report.json", "extend", "--frames", "20", str(takes),
+                            "--out", str(out))
+    assert code == 1, rows
+    assert rows["broken.usdc"]["reason"].startswith("broken USD: Pixar's library cannot open it"), rows["broken.usdc"]
+    assert "has no skeleton" in rows["prop.usda"]["reason"], rows["prop.usda"]
+    assert rows["maya.usdc"]["status"] == rows["plain.usda"]["status"] == "ok"
+    assert sorted(p.name for p in out.iterdir()) == ["maya.extend.usdc", "plain.extend.usda"]
+    assert (out / "plain.extend.usda").read_text().startswith("#usda")  # text stays text
+    got = run_bpy(USD_READ + f"""
+print(json.dumps({{name: read_usd(path, 30) for name, path in [
+    ("maya", {str(takes / "maya.usdc")!r}), ("maya_extended", {str(out / "maya.extend.usdc")!r}),
+    ("plain", {str(takes / "plain.usda")!r}), ("plain_extended", {str(out / "plain.extend.usda")!r})]}}))
+""")
+    assert got["maya"]["stage"] == got["maya_extended"]["stage"] == [30.0, "Y", 0.01, "/World"]
+    assert got["plain"]["stage"] == got["plain_extended"]["stage"] == [30.0, "Z", 1.0, "/root"]
+    for name in ("maya", "plain"):
+        assert_extended_by_20(got[name], got[name + "_extended"])
+    hero = tmp_path / "hero.usda"  # a character given as USD (a rig with its skinned mesh)
+    run_bpy(USD_MAKE + f"""
+make_usd({str(write_bvh(tmp_path / "small.bvh", walking_skeleton(2) * 0.8))!r}, {str(hero)!r})
+print(json.dumps(0))
+""")
+    assert transferred(capsys, extension, hero, takes / "maya.usdc", out / "hero") == ["maya.transfer.usda"]
+    moved = run_bpy(USD_READ + f"""
+print(json.dumps(read_usd({str(out / "hero" / "maya.transfer.usda")!r}, 30)))
+""")
+    assert moved["stage"] == [30.0, "Z", 1.0, "/root"] and len(moved["heads"]) == 60
+    # the character as its file has it (the rig under its Xform, its mesh), nothing of the take's
+    assert moved["objects"] == [["Actor", "EMPTY"], ["Cube", "MESH"], ["small", "ARMATURE"]], moved["objects"]
+    travel = np.linalg.norm(np.array(moved["heads"])[-1, 0, :2] - np.array(moved["heads"])[0, 0, :2])
+    assert travel > 0.5  # the hero walks (the take's 60 frames of walking, on its shorter legs)
+
+
+def test_usd_inputs_are_found_and_named_and_a_usd_skeleton_holds_one_take(tmp_path, extension, capsys):
+    """Folders give up .usd, .usda, .usdc and .usdz files, each written back in its own form (--format usd for
+    another input); a USD character's transfers are USD files of it; --every-armature refuses --format usd; and
+    several takes into a USD skeleton, which holds one animation, fail with the fix (an FBX's two takes)."""
+    (tmp_path / "lib").mkdir()
+    for name in ("a.usd", "b.USDA", "c.usdc", "d.usdz", "notes.txt"):
+        (tmp_path / "lib" / name).write_bytes(b"")
+    found, problems = strnn_batch.collect([tmp_path / "lib"])
+    assert sorted(str(rel) for _, rel in found) == ["a.usd", "b.USDA", "c.usdc", "d.usdz"] and problems == []
+    parse = strnn_batch.build_parser().parse_args
+    named = {rel.name: strnn_batch.output_path(path, rel, parse(["extend", str(path)])).name for path, rel in found}
+    assert named == {"a.usd": "a.extend.usd", "b.USDA": "b.extend.usda", "c.usdc": "c.extend.usdc",
+                     "d.usdz": "d.extend.usdz"}
+    walk = tmp_path / "walk.bvh"
+    assert strnn_batch.output_path(walk, Path("walk.bvh"), parse(["extend", "--format", "usd", str(walk)])).name \
+        == "walk.extend.usd"
+    args = parse(["transfer", "--target", str(tmp_path / "lib" / "c.usdc"), str(walk)])
+    assert strnn_batch.output_path(walk, Path("walk.bvh"), args).name == "walk.transfer.usdc"
+    with pytest.raises(SystemExit):
+        strnn_batch.main(["extend", "--every-armature", "--format", "usd", str(walk)])
+    assert "--every-armature writes .blend results" in capsys.readouterr().err
+    takes = tmp_path / "takes"
+    two_takes(takes, fbx=True)
+    (takes / "two.glb").unlink()
+    code, rows = batch_rows(capsys, extension, tmp_path / "report.json", "extend", "--every-action", "--frames",
+                            "10", "--format", "usd", str(takes), "--out", str(tmp_path / "out"))
+    assert code == 1 and "found 2 takes, and a USD skeleton holds one" in rows["two.fbx"]["reason"], rows
+    assert not (tmp_path / "out").exists() or not any((tmp_path / "out").iterdir())
+
+
+def test_a_usd_stage_is_read_for_its_rate_axes_units_and_root(tmp_path):
+    """What the batch reads from a USD stage with Pixar's library: its time codes a second (USD's 24 where the file
+    says none, its framesPerSecond where it gives that alone), up axis, metres per unit and default prim; a file it
+    cannot open is a plain reason. A rate near a frame rate is that rate (1 / 0.0333333 s is 30), another is kept
+    as Blender writes an odd rate."""
+    pytest.importorskip("pxr")
+    import types
+
+    import batch_worker
+
+    def stage(header: str) -> dict:
+        (tmp_path / "s.usda").write_text(f'#usda 1.0\n(\n{header}\n)\n\ndef Xform "Hero"\n{{\n}}\n')
+        return batch_worker.usd_stage(tmp_path / "s.usda")
+
+    got = stage('defaultPrim = "Hero"\ntimeCodesPerSecond = 60\nupAxis = "Y"\nmetersPerUnit = 0.01')
+    assert got == {"rate": 60.0, "up": "Y", "meters": 0.01, "root": "Hero"}
+    assert stage('framesPerSecond = 25')["rate"] == 25.0  # its frames a second where it gives no time codes
+    assert stage('') == {"rate": 24.0, "up": "Y", "meters": 0.01, "root": ""}  # USD's own defaults
+    (tmp_path / "bad.usdc").write_bytes(b"PXR-USDC" + bytes(40))
+    with pytest.raises(batch_worker.BatchError, match="broken USD: Pixar's library cannot open it"):
+        batch_worker.usd_stage(tmp_path / "bad.usdc")
+
+    def rate(value: float) -> tuple[int, float]:
+        scene = types.SimpleNamespace(render=types.SimpleNamespace(fps=24, fps_base=1.0))
+        batch_worker.set_frame_rate(scene, value)
+        return scene.render.fps, round(scene.render.fps / scene.render.fps_base, 4)
+
+    assert rate(30.00003) == (30, 30.0) and rate(1 / 0.0333333) == (30, 30.0)
+    assert rate(23.976) == (24, 24.0)  # NTSC film within 1 % of 24, as a glTF's keys are read
+    assert rate(27.0) == (27, 27.0) and rate(59.94)[1] == 60.0
 
 
 def two_takes(folder: Path, then: str = "", fbx: bool = False) -> None:
