@@ -526,7 +526,7 @@ def run_file(bpy, job: dict) -> list[str]:
     view_layer.objects.active = obj
     obj.select_set(True)
     crowd = every_armature(bpy, obj) if job.get("every_armature") and target is None else []
-    if crowd and dst.suffix.lower() != ".blend":  # (--in-place on an FBX: its file would keep one of them)
+    if crowd and dst.suffix.lower() not in (".blend", *USD):  # (--in-place on an FBX: it would keep one of them)
         raise BatchError(f"--every-armature found {len(crowd) + 1} animated armatures, and a {dst.suffix} result "
                          "holds one: write .blend results (leave out --in-place)")
     before = {o.name: o.animation_data.action for o in crowd}
@@ -569,8 +569,10 @@ def run_file(bpy, job: dict) -> list[str]:
     if axes[1] != "Y":
         notes.append(f"the take stands along its file's {axes[1]} axis, not Y: read with Up {axes[1]} so that it "
                      "stands, and written back in the file's own axes")
-    start = min(int(round(a.frame_range[0])) for a in results)
-    end = max(int(round(a.frame_range[1])) for a in results)
+    cast = [obj, *crowd]  # what the result holds: the character, or every one of a crowd with its action
+    kept = results + [o.animation_data.action for o in crowd if o.animation_data and o.animation_data.action]
+    start = min(int(round(a.frame_range[0])) for a in kept)
+    end = max(int(round(a.frame_range[1])) for a in kept)
     scene = bpy.context.scene
     scene.frame_start, scene.frame_end = start, end
     dst.parent.mkdir(parents=True, exist_ok=True)
@@ -587,7 +589,7 @@ def run_file(bpy, job: dict) -> list[str]:
         elif dst.suffix.lower() == ".glb":
             export_gltf(bpy, obj, results, tmp)
         elif dst.suffix.lower() in USD:
-            export_usd(bpy, obj, results, tmp, job.get("stage"))
+            export_usd(bpy, cast, kept, tmp, job.get("stage"))
         else:
             bpy.ops.wm.save_as_mainfile(filepath=str(tmp), copy=True, compress=True)
     except RuntimeError as e:
@@ -598,20 +600,23 @@ def run_file(bpy, job: dict) -> list[str]:
 
 
 def select_character(bpy, obj, results: list) -> None:
-    """Select ``obj``, the objects it hangs from (a root null) and the meshes it deforms (or that hang from it), and
-    drop every action but ``results`` (an exporter writes a take or an animation for each action; the worker's
-    others, the input's own among them, are not the result)."""
-    keep = {obj} | {o for o in bpy.data.objects if o.type == "MESH" and (
-        o.parent is obj or any(m.type == "ARMATURE" and m.object is obj for m in o.modifiers))}
-    above = obj.parent
-    while above is not None:
-        keep.add(above)
-        above = above.parent
+    """Select ``obj`` (an armature, or a list of them: a crowd, the first made active), the objects it hangs from (a
+    root null) and the meshes it deforms (or that hang from it), and drop every action but ``results`` (an exporter
+    writes a take or an animation for each action; the worker's others, the input's own among them, are not the
+    result)."""
+    rigs = obj if isinstance(obj, list) else [obj]
+    keep = set(rigs) | {o for o in bpy.data.objects if o.type == "MESH" and (
+        o.parent in rigs or any(m.type == "ARMATURE" and m.object in rigs for m in o.modifiers))}
+    for rig in rigs:
+        above = rig.parent
+        while above is not None:
+            keep.add(above)
+            above = above.parent
     for action in [a for a in bpy.data.actions if a not in results]:
         bpy.data.actions.remove(action)
     for o in bpy.context.view_layer.objects:
         o.select_set(o in keep)
-    bpy.context.view_layer.objects.active = obj
+    bpy.context.view_layer.objects.active = rigs[0]
 
 
 def export_fbx(bpy, obj, results: list, path: Path) -> None:
@@ -644,9 +649,10 @@ USD_UNITS = {1.0: "METERS", 1000.0: "KILOMETERS", 0.01: "CENTIMETERS", 0.001: "M
 
 
 def export_usd(bpy, obj, results: list, path: Path, stage: dict | None) -> None:
-    """Write ``obj`` with what :func:`select_character` selects to a USD file at ``path`` with Blender's exporter
-    (its suffix says which: .usd and .usdc binary, .usda text, .usdz a package), the new action as its skeleton's
-    animation over the scene's frames at the scene's rate. A USD input's result keeps the input stage's up axis,
+    """Write ``obj`` (or a list of armatures, with ``--every-armature``) with what :func:`select_character` selects to
+    a USD file at ``path`` with Blender's exporter (its suffix says which: .usd and .usdc binary, .usda text, .usdz a
+    package), each armature's action (the new one) as its skeleton's animation over the scene's frames at the
+    scene's rate. A USD input's result keeps the input stage's up axis,
     units and default prim (``stage``, from :func:`usd_stage`), so that it drops into the pipeline it came from;
     any other is written as Blender writes USD (Z up, metres, ``/root``)."""
     select_character(bpy, obj, results)

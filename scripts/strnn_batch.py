@@ -95,8 +95,9 @@ def build_parser() -> argparse.ArgumentParser:
                          "(the output format is then the input's; not for .gltf, whose result is a .glb)")
     io.add_argument("--every-armature", action="store_true",
                     help="in a .blend, run on every armature that has an action (a crowd, a cast), as the sidebar "
-                         "does with them all selected, instead of the active one alone; the result is a .blend "
-                         "(extend, inbetween, denoise, footlock, loop)")
+                         "does with them all selected, instead of the active one alone (a USD stage's every "
+                         "skeleton too); the result is a .blend, or a USD file of them all for a USD input or "
+                         "--format usd (extend, inbetween, denoise, footlock, loop)")
     io.add_argument("--action", default="", metavar="NAME",
                     help="run on this action of the file's armature instead of the one it plays (a .blend's action, "
                          "an FBX's take, a glTF's animation, by name; an FBX's or glTF's first otherwise); a "
@@ -321,8 +322,8 @@ def check_args(parser, args) -> None:
                      "plays its own action")
     if args.every_action and args.action:
         parser.error("--action picks one take and --every-action runs them all: give one of them")
-    if args.every_armature and args.format not in ("auto", "blend"):
-        parser.error(f"--every-armature writes .blend results (a {args.format.upper()} file here holds one "
+    if args.every_armature and args.format not in ("auto", "blend", "usd", "usda", "usdz"):
+        parser.error(f"--every-armature writes .blend or USD results (a {args.format.upper()} file here holds one "
                      f"armature's take): drop --format {args.format}")
     if args.keys_per_second is not None and not 0.0 < args.keys_per_second <= 1000.0:
         parser.error("--keys-per-second must be over 0 (frames a second, e.g. 60)")
@@ -384,8 +385,8 @@ def output_path(path: Path, rel: Path, args) -> Path:
     own = own_format(path)
     if args.command == "transfer":  # the character's format
         own = own_format(args.target)
-    elif args.every_armature:  # every character of the file, which a BVH or an FBX result would not hold
-        own = "blend"
+    elif args.every_armature and own not in ("usd", "usda", "usdc", "usdz"):  # every character of the file,
+        own = "blend"  # which a BVH, FBX or glTF result would not hold (a USD stage holds several skeletons)
     fmt = args.format if args.format != "auto" else own
     return args.out / rel.parent / f"{rel.stem}.{args.command}.{fmt}"
 

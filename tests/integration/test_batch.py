@@ -678,7 +678,7 @@ def test_fbx_inputs_are_found_and_named_and_a_crowd_is_no_fbx(tmp_path, capsys):
     assert strnn_batch.output_path(fbx, Path("b.FBX"), args).name == "b.transfer.fbx"
     with pytest.raises(SystemExit):
         strnn_batch.main(["extend", "--every-armature", "--format", "fbx", str(tmp_path / "takes" / "c.blend")])
-    assert "--every-armature writes .blend results" in capsys.readouterr().err
+    assert "--every-armature writes .blend or USD results" in capsys.readouterr().err
     crowd = parse(["extend", "--every-armature", str(fbx)])  # an FBX of a cast: every character, so a .blend
     assert strnn_batch.output_path(fbx, Path("sub/b.FBX"), crowd).name == "b.extend.blend"
 
@@ -700,7 +700,7 @@ def test_gltf_inputs_are_found_and_named_and_a_gltf_is_not_replaced_in_place(tmp
     assert strnn_batch.output_path(tmp_path / "walk.bvh", Path("walk.bvh"), args).name == "walk.transfer.glb"
     with pytest.raises(SystemExit):
         strnn_batch.main(["extend", "--every-armature", "--format", "glb", str(glb)])
-    assert "--every-armature writes .blend results" in capsys.readouterr().err
+    assert "--every-armature writes .blend or USD results" in capsys.readouterr().err
     gltf.write_text('{"asset": {"version": "2.0"}}')
     code = strnn_batch.main(["extend", "--in-place", str(gltf), "--extension", str(extension)])
     err = capsys.readouterr().err
@@ -951,10 +951,59 @@ print(json.dumps(read_usd({str(out / "hero" / "maya.transfer.usda")!r}, 30)))
     assert travel > 0.5  # the hero walks (the take's 60 frames of walking, on its shorter legs)
 
 
+def test_every_skeleton_of_a_usd_shot_is_extended_into_one_usd_file(tmp_path, extension, capsys):
+    """--every-armature on a USD shot of two skinned walkers (60 and 70 frames): one USD file of both, each skeleton
+    extended by 20 frames from its own take (the take's frames where they were), in the shot's axes and units."""
+    pytest.importorskip("pxr")
+    clips = [write_bvh(tmp_path / f"walk{i}.bvh", walking_skeleton(60 + 10 * i)) for i in range(2)]
+    shot = tmp_path / "shot.usda"
+    run_bpy(f"""
+bpy.ops.wm.read_factory_settings(use_empty=True)
+for i, clip in enumerate({[str(c) for c in clips]!r}):
+    bpy.ops.import_anim.bvh(filepath=clip, update_scene_fps=True, update_scene_duration=True)
+    arm = bpy.context.active_object
+    arm.location.x = 2.0 * i
+    bpy.ops.mesh.primitive_cube_add(size=0.3, location=(2.0 * i, 0, 1))
+    body = bpy.context.active_object
+    body.modifiers.new("Armature", "ARMATURE").object = arm
+    body.parent = arm
+    body.vertex_groups.new(name="Hips").add(range(len(body.data.vertices)), 1.0, "REPLACE")
+bpy.ops.wm.usd_export(filepath={str(shot)!r}, export_animation=True, convert_orientation=True,
+                      export_global_up_selection="Y", convert_scene_units="CENTIMETERS", root_prim_path="/World")
+print(json.dumps(0))
+""")
+    code, rows = batch_rows(capsys, extension, tmp_path / "report.json", "extend", "--frames", "20",
+                            "--every-armature", str(shot), "--out", str(tmp_path / "out"))
+    assert code == 0, rows
+    result = tmp_path / "out" / "shot.extend.usda"
+    got = run_bpy(USD_READ + f"""
+def heads(path):
+    found = {{}}
+    read_usd(path, 30)  # (the stage's settings; the armatures are read below, each at its own frames)
+    for arm in sorted((o for o in bpy.data.objects if o.type == "ARMATURE"), key=lambda o: o.name):
+        first, last = arm.animation_data.action.frame_range
+        frames = []
+        for f in range(int(round(first)), int(round(last)) + 1):
+            bpy.context.scene.frame_set(f)
+            frames.append([list(arm.matrix_world @ b.head) for b in arm.pose.bones])
+        found[arm.name] = frames
+    return found
+print(json.dumps({{"shot": heads({str(shot)!r}), "result": heads({str(result)!r}),
+                  "stage": read_usd({str(result)!r}, 30)["stage"]}}))
+""")
+    assert got["stage"][1:3] == ["Y", 0.01]
+    assert sorted(got["result"]) == sorted(got["shot"]) and len(got["shot"]) == 2
+    for name, frames in got["shot"].items():
+        take, new = np.array(frames), np.array(got["result"][name])
+        assert len(new) == len(take) + 20, (name, len(take), len(new))
+        assert np.abs(new[:len(take)] - take).max() < 1e-3  # each take's own frames, as they were
+
+
 def test_usd_inputs_are_found_and_named_and_a_usd_skeleton_holds_one_take(tmp_path, extension, capsys):
     """Folders give up .usd, .usda, .usdc and .usdz files, each written back in its own form (--format usd for
-    another input); a USD character's transfers are USD files of it; --every-armature refuses --format usd; and
-    several takes into a USD skeleton, which holds one animation, fail with the fix (an FBX's two takes)."""
+    another input); a USD character's transfers are USD files of it; a USD crowd's result is a USD file (a BVH's a
+    .blend); and several takes into a USD skeleton, which holds one animation, fail with the fix (an FBX's two
+    takes)."""
     (tmp_path / "lib").mkdir()
     for name in ("a.usd", "b.USDA", "c.usdc", "d.usdz", "notes.txt"):
         (tmp_path / "lib" / name).write_bytes(b"")
@@ -969,9 +1018,10 @@ def test_usd_inputs_are_found_and_named_and_a_usd_skeleton_holds_one_take(tmp_pa
         == "walk.extend.usd"
     args = parse(["transfer", "--target", str(tmp_path / "lib" / "c.usdc"), str(walk)])
     assert strnn_batch.output_path(walk, Path("walk.bvh"), args).name == "walk.transfer.usdc"
-    with pytest.raises(SystemExit):
-        strnn_batch.main(["extend", "--every-armature", "--format", "usd", str(walk)])
-    assert "--every-armature writes .blend results" in capsys.readouterr().err
+    crowd = parse(["extend", "--every-armature", str(walk)])  # a crowd's result holds them all: a USD stage can
+    assert strnn_batch.output_path(walk, Path("walk.bvh"), crowd).name == "walk.extend.blend"
+    crowd = parse(["extend", "--every-armature", str(tmp_path / "lib" / "c.usdc")])
+    assert strnn_batch.output_path(tmp_path / "lib" / "c.usdc", Path("c.usdc"), crowd).name == "c.extend.usdc"
     takes = tmp_path / "takes"
     two_takes(takes, fbx=True)
     (takes / "two.glb").unlink()
