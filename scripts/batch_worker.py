@@ -476,6 +476,10 @@ def run_file(bpy, job: dict) -> list[str]:
         stage = import_usd(bpy, src)
         if target is None:  # the result is this file's character, written back in its axes and units
             job["stage"] = stage
+        if job["operator"] == "inspect":
+            root = f", default prim /{stage['root']}" if stage["root"] else ""
+            imported.append(f"USD stage at {stage['rate']:g} time codes a second, {stage['up']} up, "
+                            f"{stage['meters']:g} m a unit{root}: results are written back so")
     elif src.suffix.lower() == ".fbx":
         try:  # as File > Import > FBX does it: the scene takes the file's frame rate
             bpy.ops.import_scene.fbx(filepath=str(src))

@@ -924,6 +924,9 @@ print(json.dumps(0))
     assert rows["broken.usdc"]["reason"].startswith("broken USD: Pixar's library cannot open it"), rows["broken.usdc"]
     assert "has no skeleton" in rows["prop.usda"]["reason"], rows["prop.usda"]
     assert rows["maya.usdc"]["status"] == rows["plain.usda"]["status"] == "ok"
+    code, looked = batch_rows(capsys, extension, tmp_path / "inspect.json", "inspect", str(takes / "maya.usdc"))
+    assert code == 0 and looked["maya.usdc"]["notes"][0] == "USD stage at 30 time codes a second, Y up, 0.01 m a " \
+        "unit, default prim /World: results are written back so", looked
     assert sorted(p.name for p in out.iterdir()) == ["maya.extend.usdc", "plain.extend.usda"]
     assert (out / "plain.extend.usda").read_text().startswith("#usda")  # text stays text
     got = run_bpy(USD_READ + f"""
