@@ -532,7 +532,7 @@ def run_file(bpy, job: dict) -> list[str]:
     crowd = every_armature(bpy, obj) if job.get("every_armature") and target is None else []
     if crowd and dst.suffix.lower() not in (".blend", *USD):  # (--in-place on an FBX: it would keep one of them)
         raise BatchError(f"--every-armature found {len(crowd) + 1} animated armatures, and a {dst.suffix} result "
-                         "holds one: write .blend results (leave out --in-place)")
+                         "holds one: write .blend or USD results (leave out --in-place)")
     before = {o.name: o.animation_data.action for o in crowd}
     if job.get("keys_per_second"):  # the take's own pace where its file says another rate (--keys-per-second)
         for each in [obj if source is None else source, *crowd]:
