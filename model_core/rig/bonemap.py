@@ -19,7 +19,7 @@ import numpy as np
 
 from ..motion.conventions import JOINTS, PARENT_NAMES
 from .names import bare_names
-from .rigs import RIG_FAMILIES, normalise_name
+from .rigs import RIG_FAMILIES, NameLookup, normalise_name
 from .solve import ACROSS_DEG, facing_and_up, placed, points_across, toe_across
 
 Mapping = dict[str, tuple[str, bool]]
@@ -84,18 +84,17 @@ WHOLE_ONLY = {"rigify_metarig", "auto_rig_pro", "mmd_english"}
 def _family_map(names: list[str]) -> tuple[str, Mapping]:
     """The known family matching most joints: (family, partial mapping); a family of :data:`WHOLE_ONLY` only where
     it finds every joint but the leaves."""
-    lookup = {normalise_name(n): n for n in names}
+    lookup = NameLookup(names)
     best: tuple[str, Mapping] = ("", {})
     for family, table in RIG_FAMILIES.items():
         found: Mapping = {}
         for joint in JOINTS:
             for cand in table[joint]:
-                c = cand.lower()
-                if c in lookup:
-                    found[joint] = (lookup[c], False)
+                if lookup.get(cand):
+                    found[joint] = (lookup.get(cand), False)
                     break
-                if c.endswith("_end") and c[:-4] in lookup:
-                    found[joint] = (lookup[c[:-4]], True)
+                if cand.lower().endswith("_end") and lookup.get(cand[:-4]):
+                    found[joint] = (lookup.get(cand[:-4]), True)
                     break
         if family in WHOLE_ONLY and any(j not in found and not j.endswith(_LEAVES) for j in JOINTS):
             continue

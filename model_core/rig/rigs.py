@@ -185,12 +185,34 @@ def normalise_name(name: str) -> str:
     return re.split(r"[:|]", name)[-1].lower()
 
 
+def loose_name(name: str) -> str:
+    """:func:`normalise_name` with ``-``, ``.`` and spaces read as ``_``: how a rig's names come back from a tool
+    whose names allow none of them (USD's prim and joint names, Maya's nodes: Rigify's ``DEF-thigh.L`` is
+    ``DEF_thigh_L`` after a round trip through USD or Maya)."""
+    return re.sub(r"[-. ]", "_", normalise_name(name))
+
+
+class NameLookup:
+    """The bone of each name as a family spells it: by :func:`normalise_name`, or failing that by
+    :func:`loose_name` where only one bone reads so."""
+
+    def __init__(self, names: list[str]):
+        self.exact = {normalise_name(n): n for n in names}
+        loose: dict[str, list[str]] = {}
+        for n in names:
+            loose.setdefault(loose_name(n), []).append(n)
+        self.loose = {k: v[0] for k, v in loose.items() if len(v) == 1}
+
+    def get(self, name: str) -> str | None:
+        return self.exact.get(name.lower()) or self.loose.get(loose_name(name))
+
+
 def _match(family: dict[str, list[str]], names: list[str]) -> tuple[dict[str, str | None], list[str]]:
-    lookup = {normalise_name(n): n for n in names}
+    lookup = NameLookup(names)
     found: dict[str, str | None] = {}
     missing = []
     for joint in JOINTS:
-        hit = next((lookup[c.lower()] for c in family[joint] if c.lower() in lookup), None)
+        hit = next((lookup.get(c) for c in family[joint] if lookup.get(c)), None)
         if hit is None and joint.endswith("fingertip"):
             found[joint] = None  # estimated from the wrist
         elif hit is None:

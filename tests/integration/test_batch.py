@@ -1034,6 +1034,38 @@ def test_usd_inputs_are_found_and_named_and_a_usd_skeleton_holds_one_take(tmp_pa
     assert not (tmp_path / "out").exists() or not any((tmp_path / "out").iterdir())
 
 
+def test_a_rigify_character_that_came_back_through_usd_is_read_by_its_family(tmp_path, extension, capsys):
+    """A Rigify character's deform skeleton exported to USD comes back with ``_`` for the ``-`` and ``.`` USD's names
+    allow none of (``DEF_thigh_L``): it is still read as Rigify's deform bones (it failed: "no bone found for
+    Head"), and extended into a USD file of it, the take's frames where they were."""
+    pytest.importorskip("pxr")
+    take = tmp_path / "rigify.usdc"
+    run_bpy(f"""
+import sys
+sys.path.insert(0, "tests/blender")
+from scenes import rigify_walk
+bpy.ops.wm.read_factory_settings(use_empty=True)
+bpy.context.scene.render.fps = 30
+rig = rigify_walk(60)
+bpy.context.scene.frame_start, bpy.context.scene.frame_end = 1, 60
+bpy.ops.wm.usd_export(filepath={str(take)!r}, export_animation=True)
+print(json.dumps(0))
+""")
+    code, rows = batch_rows(capsys, extension, tmp_path / "inspect.json", "inspect", str(take))
+    assert code == 0 and "mapped from its rigify_deform bone names" in rows["rigify.usdc"]["notes"][1], rows
+    code, rows = batch_rows(capsys, extension, tmp_path / "report.json", "extend", "--frames", "20", str(take),
+                            "--out", str(tmp_path / "out"))
+    assert code == 0, rows
+    got = run_bpy(USD_READ + f"""
+print(json.dumps({{"take": read_usd({str(take)!r}, 30),
+                  "extended": read_usd({str(tmp_path / "out" / "rigify.extend.usdc")!r}, 30)}}))
+""")
+    assert "DEF_thigh_L" in got["take"]["bones"] and got["extended"]["bones"] == got["take"]["bones"]
+    heads, new = np.array(got["take"]["heads"]), np.array(got["extended"]["heads"])
+    assert len(heads) == 60 and len(new) == 80 and np.abs(new[:60] - heads).max() < 1e-3
+    assert np.linalg.norm(np.diff(new[60:], axis=0), axis=-1).mean() > 1e-3  # the new frames move
+
+
 def test_a_usd_stage_is_read_for_its_rate_axes_units_and_root(tmp_path):
     """What the batch reads from a USD stage with Pixar's library: its time codes a second (USD's 24 where the file
     says none, its framesPerSecond where it gives that alone), up axis, metres per unit and default prim; a file it

@@ -11,7 +11,15 @@ import pytest
 from model_core.io.bvh_export import write_bvh
 from model_core.motion.conventions import JOINTS, STANDARD_LEG_LENGTH
 from model_core.motion.synthetic import walking_skeleton
-from model_core.rig.rigs import RIG_FAMILIES, RigError, detect_rig, leg_length, load_clip, normalise_name
+from model_core.rig.rigs import (
+    RIG_FAMILIES,
+    NameLookup,
+    RigError,
+    detect_rig,
+    leg_length,
+    load_clip,
+    normalise_name,
+)
 
 
 def family_names(family: str) -> list[str]:
@@ -38,6 +46,20 @@ def test_matching_ignores_case():
     names = [n.upper() for n in family_names("bandai_namco")]
     assert detect_rig(names).family == "bandai_namco"
     assert normalise_name("mixamorig:LeftUpLeg") == "leftupleg"
+
+
+@pytest.mark.parametrize("family", ["rigify", "rigify_deform", "rigify_metarig", "auto_rig_pro"])
+def test_names_that_came_back_through_usd_or_maya_are_read_as_their_family(family):
+    """USD's joint names and Maya's nodes allow no ``-``, ``.`` or space, so a rig's names come back from either with
+    ``_`` for them (Rigify's ``DEF-thigh.L`` as ``DEF_thigh_L``): read as the family spells them where only one bone
+    reads so, and the map keeps the bones' own names."""
+    names = [re.sub(r"[-. ]", "_", n) for n in family_names(family)]
+    rig = detect_rig(names + ["SomeExtraBone"])
+    assert rig.family == family and set(rig.sources) == set(JOINTS)
+    assert all(source is None or source in names for source in rig.sources.values())
+    mixed = names + ["DEF-thigh.L", "DEF_thigh.L"]  # two bones that read alike: neither is taken by the loose reading
+    assert NameLookup(mixed).get("DEF-thigh.L") == "DEF-thigh.L" and NameLookup(mixed[:-2] + ["a.b", "a-b"]).get(
+        "a_b") is None
 
 
 def test_missing_finger_tip_is_estimated_not_an_error():
