@@ -81,11 +81,13 @@ def split_side(name: str) -> tuple[str | None, str]:
 WHOLE_ONLY = {"rigify_metarig", "auto_rig_pro", "mmd_english"}
 
 
-def _family_map(names: list[str]) -> tuple[str, Mapping]:
+def _family_map(names: list[str], prefer: set[str] | None = None) -> tuple[str, Mapping]:
     """The known family matching most joints: (family, partial mapping); a family of :data:`WHOLE_ONLY` only where
-    it finds every joint but the leaves."""
+    it finds every joint but the leaves. Of families that match as many, the one with more of its bones in
+    ``prefer`` (the bones that carry the skin of a baked rig: :func:`auto_map`), else the first."""
     lookup = NameLookup(names)
     best: tuple[str, Mapping] = ("", {})
+    score = (0, 0)
     for family, table in RIG_FAMILIES.items():
         found: Mapping = {}
         for joint in JOINTS:
@@ -98,8 +100,9 @@ def _family_map(names: list[str]) -> tuple[str, Mapping]:
                     break
         if family in WHOLE_ONLY and any(j not in found and not j.endswith(_LEAVES) for j in JOINTS):
             continue
-        if len(found) > len(best[1]):
-            best = (family, found)
+        this = (len(found), sum(bone in prefer for bone, _ in found.values()) if prefer else 0)
+        if this > score:
+            best, score = (family, found), this
     return best
 
 
@@ -380,13 +383,15 @@ def chest_where_the_arms_meet(names: list[str], parents: list[int], mapping: Map
         mapping["spine1"] = (names[meet], False)
 
 
-def auto_map(names: list[str], parents: list[int]) -> tuple[str, Mapping]:
+def auto_map(names: list[str], parents: list[int], prefer: set[str] | None = None) -> tuple[str, Mapping]:
     """Map bones (``names``, ``parents`` int indices, -1 for roots) onto the canonical joints.
 
     Returns (rig family or ``"generic"``, mapping); joints that could not be found are absent
-    (see :func:`missing`). Finger tips and toes fall back to the hand's and foot's tail.
+    (see :func:`missing`). Finger tips and toes fall back to the hand's and foot's tail. ``prefer``: bones to map
+    rather than others a family names as well (a Rigify rig baked by an exporter, its constraints gone, has its
+    ``ORG-`` and its ``DEF-`` bones; its skin follows the ``DEF-`` bones alone).
     """
-    family, mapping = _mapped(names, parents)
+    family, mapping = _mapped(names, parents, prefer)
     bare = bare_names(names) if missing(mapping) else names
     if bare != names and len(set(bare)) == len(bare):
         # every bone named after its character or take (Character1_Hips), or Maya's Hips_jnt: read past that
@@ -397,9 +402,9 @@ def auto_map(names: list[str], parents: list[int]) -> tuple[str, Mapping]:
     return family, mapping
 
 
-def _mapped(names: list[str], parents: list[int]) -> tuple[str, Mapping]:
+def _mapped(names: list[str], parents: list[int], prefer: set[str] | None = None) -> tuple[str, Mapping]:
     """:func:`auto_map` of the names as they are."""
-    family, mapping = _family_map(names)
+    family, mapping = _family_map(names, prefer)
     if any(j not in mapping and not j.endswith(_LEAVES) for j in JOINTS):
         family = "generic"  # the family's names left body joints open
     if len(mapping) < len(JOINTS):

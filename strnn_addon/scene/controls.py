@@ -20,7 +20,7 @@ from mathutils import Matrix
 from ...model_core.motion.geometry import nearest_rotation, unit
 from ...model_core.rig import controls as rig_controls
 from ...model_core.rig.controls import ControlSet
-from . import anim
+from . import anim, mapping
 
 TOLERANCE = 2e-3  # armature units (metres on most rigs): a frame whose driven bones are further off is baked again
 MAX_SWEEPS = 3
@@ -43,13 +43,16 @@ def control_set(obj) -> ControlSet | None:
 
 def listed(obj) -> tuple[ControlSet | None, list[str]]:
     """(:func:`control_set`, what is wrong with the list set in the Bone Map panel: sentences saying how to fix
-    it, none for a preset)."""
+    it, none for a preset). A rig no bone of which follows a constraint takes no preset: a control rig back from an
+    FBX or USD exporter has its controls' names, but they drive nothing (each bone is baked on its own)."""
     stored = getattr(obj, "strnn_controls", None)
     if stored is not None and len(stored):
         return rig_controls.from_rows(
             "custom", [rig_controls.Row(c.bone, c.drives, c.location, c.role, c.switch) for c in stored],
             [rig_controls.SwitchRow(s.bone, s.prop, s.value, s.ik_value, s.pole_prop)
              for s in getattr(obj, "strnn_switches", ())])
+    if mapping.baked(obj):  # its controls drive nothing
+        return None, []
     return rig_controls.preset_for(obj.pose.bones.keys()), []
 
 

@@ -7,6 +7,7 @@ from there until the map is stored again.
 
 from __future__ import annotations
 
+import bpy
 import numpy as np
 
 from ...model_core.motion.conventions import JOINTS
@@ -45,10 +46,27 @@ def store_map(obj, mapping: bonemap.Mapping, family: str = "") -> None:
 
 def auto_map(obj) -> tuple[str, bonemap.Mapping]:
     """(family, mapping) guessed from armature object ``obj``'s bone names and hierarchy, a finger tip or toe at a
-    bone's tail only where that tail continues the limb (:func:`bonemap.heads_where_tails_point_across`)."""
+    bone's tail only where that tail continues the limb (:func:`bonemap.heads_where_tails_point_across`); on a baked
+    rig (:func:`baked`) the bones its meshes are weighted to rather than others of the same names' family."""
     names, parents, heads, tails = _rest_bones(obj)
-    family, mapping = bonemap.auto_map(names, parents)
+    family, mapping = bonemap.auto_map(names, parents, skinned_bones(obj) if baked(obj) else None)
     return family, bonemap.heads_where_tails_point_across(mapping, names, parents, heads, tails)
+
+
+def baked(obj) -> bool:
+    """Whether no bone of armature object ``obj`` follows a constraint: a rig whose every bone carries its own
+    motion (a BVH's or a mocap skeleton, or a control rig that came back from an FBX or USD exporter, which bakes
+    each bone and drops the constraints), so that no control drives another bone."""
+    return not any(len(pb.constraints) for pb in obj.pose.bones)
+
+
+def skinned_bones(obj) -> set[str]:
+    """The bones of ``obj`` that the meshes it deforms (an Armature modifier on it) are weighted to: the vertex
+    groups of those meshes that name a bone."""
+    bones = obj.data.bones
+    return {g.name for o in bpy.data.objects if o.type == "MESH"
+            and any(m.type == "ARMATURE" and m.object is obj for m in o.modifiers)
+            for g in o.vertex_groups if g.name in bones}
 
 
 def _rest_bones(obj) -> tuple[list[str], list[int], np.ndarray, np.ndarray]:

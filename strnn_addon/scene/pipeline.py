@@ -139,6 +139,11 @@ def check_evaluated(context, obj, fcurves, found: ControlSet | None) -> None:
                         "Skeleton) and run it again")
 
 
+# Families of control rigs whose deform bones hang from other bones than each other (Rigify's DEF- limbs from its
+# ORG- bones; Auto-Rig Pro's): once an exporter has baked them, no bone map of theirs fits the hierarchy.
+BAKED_CONTROL_RIGS = {"rigify", "rigify_deform", "auto_rig_pro"}
+
+
 def rig_of(obj) -> tuple[Rig, Anchors, dict, ControlSet | None]:
     """(rig, anchors, bone map, controls) of an armature: its rig (a control rig's joint skeleton) with the
     canonical joints on it; raises :class:`UserError` when the bone map or the controls do not fit, or
@@ -156,6 +161,13 @@ def rig_of(obj) -> tuple[Rig, Anchors, dict, ControlSet | None]:
     try:
         anchors, bone_map, rig = mapping.resolve(obj, rig, joint_skeleton=found is not None)
     except mapping.MapError as e:
+        if found is None and e.__cause__ is not None and mapping.baked(obj) \
+                and mapping.auto_map(obj)[0] in BAKED_CONTROL_RIGS:  # (a bone map that does not fit the hierarchy)
+            raise UserError(f"{obj.name!r} is a control rig (by its bone names) that an FBX or USD exporter has "
+                            "baked: no bone follows a constraint, so its controls drive nothing, and its deform bones "
+                            f"hang from others than each other ({e.__cause__}), so keys on them would leave the bones "
+                            "between behind. Run this on the rig itself, or export its deform bones alone as one tree "
+                            "(each parented to the one above it)") from e
         raise UserError(str(e)) from e
     ad = obj.animation_data
     fcurves = anim.Channels(ad.action, ad).fcurves if ad and ad.action else []

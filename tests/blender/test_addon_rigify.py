@@ -498,10 +498,6 @@ def test_follow_curve_from_the_rigs_rest_pose_walks_with_its_feet_on_the_floor(r
     assert np.linalg.norm(joints[-1, 0, :2] - joints[0, 0, :2]) > 2.0  # it walks
 
 
-
-
-
-
 def test_check_motion_reads_the_rig_as_the_operators_do(walking_rig, addon, real_model, capfd):
     """Check Motion on the generated rig reads its motion through its controls (Blender evaluates the rig frame by
     frame): a real walk moved onto it is motion the model knows (the procedural one, without the data, is not), and
@@ -513,3 +509,35 @@ def test_check_motion_reads_the_rig_as_the_operators_do(walking_rig, addon, real
     assert {a.name for a in bpy.data.actions} == before[0] and same_keys(key_snapshot(walking_rig), before[1])
     known = find_mocap() is not None and (find_mocap() / WALK).exists()
     assert ("motion the model knows" if known else "this motion is unlike what the model learnt") in out, out
+
+
+def test_a_rigify_rig_baked_by_an_fbx_exporter_is_refused_with_the_reason(rig, addon, tmp_path):
+    """The generated rig walking, exported to FBX with every bone (Blender's exporter bakes each bone and drops the
+    constraints) and imported again: it has Rigify's control names, but they drive nothing, and its DEF- thighs hang
+    from ORG-spine. Extend keyed the controls and the skin stood still in the new frames (DEF-spine moved 0.00 cm a
+    frame against 4.66 in the take); now it is refused with the reason and the fix, and nothing is added."""
+    bpy.ops.mesh.primitive_cube_add(size=0.3, location=(0, 0, 1))
+    body = bpy.context.active_object
+    body.modifiers.new("Armature", "ARMATURE").object = rig
+    for name in DEFORM_JOINTS:
+        body.vertex_groups.new(name=name).add(range(len(body.data.vertices)), 0.1, "REPLACE")
+    for obj in bpy.context.view_layer.objects:
+        obj.select_set(obj in (rig, body))
+    path = tmp_path / "baked.fbx"
+    bpy.ops.export_scene.fbx(filepath=str(path), use_selection=True, add_leaf_bones=False,
+                             bake_anim_use_all_actions=False, bake_anim_use_nla_strips=False)
+    bpy.ops.wm.read_homefile(use_empty=True)
+    bpy.ops.import_scene.fbx(filepath=str(path))
+    baked = next(o for o in bpy.data.objects if o.type == "ARMATURE")
+    assert "thigh_fk.L" in baked.pose.bones and not any(len(pb.constraints) for pb in baked.pose.bones)
+    for obj in bpy.context.view_layer.objects:
+        obj.select_set(obj is baked)
+    bpy.context.view_layer.objects.active = baked
+    actions = {a.name for a in bpy.data.actions}
+    with pytest.raises(RuntimeError, match="an FBX or USD exporter has baked: no bone follows a constraint, so its "
+                                           "controls drive nothing") as err:
+        bpy.ops.strnn.extend_clip(frames=20)
+    assert "DEF-thigh.L" in str(err.value) and "Run this on the rig itself" in str(err.value)
+    assert {a.name for a in bpy.data.actions} == actions
+    listed = addon_module(addon, "strnn_addon.scene.controls").listed
+    assert listed(baked) == (None, [])  # no preset: its controls are bones like any other

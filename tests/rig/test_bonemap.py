@@ -43,6 +43,22 @@ def test_generic_names_map_by_words_and_hierarchy():
     assert mapping["l_toe"] == ("foot.L", True) and mapping["r_fingertip"] == ("hand.R", True)
 
 
+def test_of_two_families_a_rig_names_in_full_the_one_its_skin_follows_is_preferred():
+    """A Rigify rig has its ORG- and its DEF- bones, each a family in full: the ORG- bones where nothing says
+    otherwise (what a generated rig's controls drive), the DEF- bones where they are the ones the skin is weighted to
+    (a rig an exporter baked)."""
+    from model_core.rig.rigs import RIG_FAMILIES
+
+    org = [c[0] for c in RIG_FAMILIES["rigify"].values()]
+    deform = [c[0] for c in RIG_FAMILIES["rigify_deform"].values()]
+    names = org + deform
+    parents = [-1] * len(names)
+    assert auto_map(names, parents)[0] == "rigify"
+    family, mapping = auto_map(names, parents, prefer=set(deform))
+    assert family == "rigify_deform" and mapping["l_upleg"] == ("DEF-thigh.L", False)
+    assert auto_map(names, parents, prefer={"ORG-spine"})[0] == "rigify"
+
+
 def test_end_site_candidates_become_tails():
     names = ["CC_Base_Hip", "CC_Base_Waist", "CC_Base_Spine02", "CC_Base_NeckTwist01", "CC_Base_Head"]
     names += [f"CC_Base_{s}_{b}" for s in "LR" for b in ("Thigh", "Calf", "Foot", "ToeBase", "Upperarm",
