@@ -44,7 +44,7 @@ def control_set(obj) -> ControlSet | None:
 def listed(obj) -> tuple[ControlSet | None, list[str]]:
     """(:func:`control_set`, what is wrong with the list set in the Bone Map panel: sentences saying how to fix
     it, none for a preset). A rig no bone of which follows a constraint takes no preset: a control rig back from an
-    FBX or USD exporter has its controls' names, but they drive nothing (each bone is baked on its own)."""
+    FBX, glTF or USD exporter has its controls' names, but they drive nothing (each bone is baked on its own)."""
     stored = getattr(obj, "strnn_controls", None)
     if stored is not None and len(stored):
         return rig_controls.from_rows(

@@ -55,7 +55,7 @@ def auto_map(obj) -> tuple[str, bonemap.Mapping]:
 
 def baked(obj) -> bool:
     """Whether no bone of armature object ``obj`` follows a constraint: a rig whose every bone carries its own
-    motion (a BVH's or a mocap skeleton, or a control rig that came back from an FBX or USD exporter, which bakes
+    motion (a BVH's or a mocap skeleton, or a control rig that came back from an FBX, glTF or USD exporter, which bakes
     each bone and drops the constraints), so that no control drives another bone."""
     return not any(len(pb.constraints) for pb in obj.pose.bones)
 

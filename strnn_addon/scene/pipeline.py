@@ -163,7 +163,7 @@ def rig_of(obj) -> tuple[Rig, Anchors, dict, ControlSet | None]:
     except mapping.MapError as e:
         if found is None and e.__cause__ is not None and mapping.baked(obj) \
                 and mapping.auto_map(obj)[0] in BAKED_CONTROL_RIGS:  # (a bone map that does not fit the hierarchy)
-            raise UserError(f"{obj.name!r} is a control rig (by its bone names) that an FBX or USD exporter has "
+            raise UserError(f"{obj.name!r} is a control rig (by its bone names) that an exporter (FBX, glTF, USD) has "
                             "baked: no bone follows a constraint, so its controls drive nothing, and its deform bones "
                             f"hang from others than each other ({e.__cause__}), so keys on them would leave the bones "
                             "between behind. Run this on the rig itself, or export its deform bones alone as one tree "

@@ -534,8 +534,8 @@ def test_a_rigify_rig_baked_by_an_fbx_exporter_is_refused_with_the_reason(rig, a
         obj.select_set(obj is baked)
     bpy.context.view_layer.objects.active = baked
     actions = {a.name for a in bpy.data.actions}
-    with pytest.raises(RuntimeError, match="an FBX or USD exporter has baked: no bone follows a constraint, so its "
-                                           "controls drive nothing") as err:
+    with pytest.raises(RuntimeError, match=r"an exporter \(FBX, glTF, USD\) has baked: no bone follows a constraint, "
+                                           "so its controls drive nothing") as err:
         bpy.ops.strnn.extend_clip(frames=20)
     assert "DEF-thigh.L" in str(err.value) and "Run this on the rig itself" in str(err.value)
     assert {a.name for a in bpy.data.actions} == actions
