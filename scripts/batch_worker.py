@@ -579,6 +579,9 @@ def run_file(bpy, job: dict) -> list[str]:
     end = max(int(round(a.frame_range[1])) for a in kept)
     scene = bpy.context.scene
     scene.frame_start, scene.frame_end = start, end
+    # a rate near a frame rate written as it: a BVH's 1 / 0.0333333 s as 30, not 30.00003, which an FBX would carry
+    # as a custom rate and a USD stage referencing the result would scale its time by
+    set_frame_rate(scene, scene.render.fps / scene.render.fps_base)
     dst.parent.mkdir(parents=True, exist_ok=True)
     tmp = dst.with_name(dst.stem + ".tmp" + dst.suffix)  # write beside, then replace: no half-written outputs
     try:

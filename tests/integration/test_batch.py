@@ -1004,7 +1004,8 @@ print(json.dumps({{"shot": heads({str(shot)!r}), "result": heads({str(result)!r}
 
 def test_usd_inputs_are_found_and_named_and_a_usd_skeleton_holds_one_take(tmp_path, extension, capsys):
     """Folders give up .usd, .usda, .usdc and .usdz files, each written back in its own form (--format usd for
-    another input); a USD character's transfers are USD files of it; a USD crowd's result is a USD file (a BVH's a
+    another input: a BVH's as Blender writes USD, at the frame rate its rounded frame time is near, as an FBX of it
+    is); a USD character's transfers are USD files of it; a USD crowd's result is a USD file (a BVH's a
     .blend); and several takes into a USD skeleton, which holds one animation, fail with the fix (an FBX's two
     takes)."""
     (tmp_path / "lib").mkdir()
@@ -1016,9 +1017,23 @@ def test_usd_inputs_are_found_and_named_and_a_usd_skeleton_holds_one_take(tmp_pa
     named = {rel.name: strnn_batch.output_path(path, rel, parse(["extend", str(path)])).name for path, rel in found}
     assert named == {"a.usd": "a.extend.usd", "b.USDA": "b.extend.usda", "c.usdc": "c.extend.usdc",
                      "d.usdz": "d.extend.usdz"}
-    walk = tmp_path / "walk.bvh"
+    walk = write_bvh(tmp_path / "walk.bvh", walking_skeleton(60))
+    text = walk.read_text()  # the frame time as capture files round it
+    walk.write_text(re.sub(r"Frame Time:.*", "Frame Time: 0.0333333", text))
     assert strnn_batch.output_path(walk, Path("walk.bvh"), parse(["extend", "--format", "usd", str(walk)])).name \
         == "walk.extend.usd"
+    code, rows = batch_rows(capsys, extension, tmp_path / "bvh.json", "extend", "--frames", "10", "--format", "usda",
+                            str(walk), "--out", str(tmp_path / "usd"))
+    text = (tmp_path / "usd" / "walk.extend.usda").read_text()  # Blender's own form: Z up, metres, /root
+    assert code == 0 and 'upAxis = "Z"' in text and "metersPerUnit = 1\n" in text and 'defaultPrim = "root"' in text
+    assert "timeCodesPerSecond = 30\n" in text and "endTimeCode = 70\n" in text  # 30, not Blender's 30.00003
+    code, rows = batch_rows(capsys, extension, tmp_path / "fbx.json", "extend", "--frames", "10", "--format", "fbx",
+                            str(walk), "--out", str(tmp_path / "fbx"))
+    got = run_bpy(f"""
+bpy.ops.import_scene.fbx(filepath={str(tmp_path / "fbx" / "walk.extend.fbx")!r})
+print(json.dumps([bpy.context.scene.render.fps, bpy.context.scene.render.fps_base]))
+""")
+    assert code == 0 and got == [30, 1.0], got  # an FBX at 30 frames a second, not a custom 30.00003
     args = parse(["transfer", "--target", str(tmp_path / "lib" / "c.usdc"), str(walk)])
     assert strnn_batch.output_path(walk, Path("walk.bvh"), args).name == "walk.transfer.usdc"
     crowd = parse(["extend", "--every-armature", str(walk)])  # a crowd's result holds them all: a USD stage can
