@@ -43,6 +43,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import glob
 import importlib.util
 import multiprocessing
 import multiprocessing.connection as mp_connection
@@ -509,11 +510,16 @@ def _failed(file: str, reason: str, seconds: float = 0.0) -> dict:
 
 
 def _discard_partial(job: dict) -> None:
-    """Remove what a killed worker may have left of its file: its half-written output."""
+    """Remove what a killed worker may have left of its file: its half-written output, under the worker's temporary
+    name or under the writer's own beside it (Blender's while saving a .blend, ``NAME.tmp.blend@``; USD's while
+    writing a layer or a package, ``NAME.tmp.`` and six letters or digits)."""
     dst = Path(job["output"])
     tmp = dst.with_name(dst.stem + ".tmp" + dst.suffix)
     tmp.unlink(missing_ok=True)
-    tmp.with_name(tmp.name + "@").unlink(missing_ok=True)  # Blender's own temporary name while saving a .blend
+    tmp.with_name(tmp.name + "@").unlink(missing_ok=True)
+    for sibling in tmp.parent.glob(glob.escape(tmp.stem) + ".??????"):
+        if sibling.suffix[1:].isalnum() and sibling.is_file():
+            sibling.unlink(missing_ok=True)
 
 
 BLAS_THREADS = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")

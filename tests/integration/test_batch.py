@@ -1081,6 +1081,21 @@ print(json.dumps({{"take": read_usd({str(take)!r}, 30),
     assert np.linalg.norm(np.diff(new[60:], axis=0), axis=-1).mean() > 1e-3  # the new frames move
 
 
+def test_a_killed_workers_half_written_usd_is_discarded(tmp_path):
+    """A worker killed while Blender's USD exporter writes leaves USD's own sibling temporary file (the name before
+    the suffix, a dot and six letters or digits: ``walk.extend.tmp.2j0kv5``) beside the worker's ``.tmp`` name: both
+    go; the result of an earlier run and other files stay."""
+    out = tmp_path / "out"
+    out.mkdir()
+    names = ["walk.extend.tmp.usdc", "walk.extend.tmp.2j0kv5", "walk.extend.usdc", "walk.extend.tmp.notes.txt",
+             "run.extend.tmp.a1b2c3"]
+    for name in names:
+        (out / name).write_bytes(b"x")
+    strnn_batch._discard_partial({"output": str(out / "walk.extend.usdc")})
+    assert sorted(p.name for p in out.iterdir()) == ["run.extend.tmp.a1b2c3", "walk.extend.tmp.notes.txt",
+                                                     "walk.extend.usdc"]
+
+
 def test_a_usd_stage_is_read_for_its_rate_axes_units_and_root(tmp_path):
     """What the batch reads from a USD stage with Pixar's library: its time codes a second (USD's 24 where the file
     says none, its framesPerSecond where it gives that alone), up axis, metres per unit and default prim; a file it
