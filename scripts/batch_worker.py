@@ -431,16 +431,18 @@ def clear_keys(obj, start: int, end: int) -> None:
                     pass
 
 
-def open_target(bpy, job: dict):
-    """For ``transfer``: open the character .blend (or import the character FBX or glTF into Blender's factory
-    startup file) and return its rig (``--rig``, or the one to pick)."""
+def open_target(bpy, job: dict) -> tuple:
+    """For ``transfer``: open the character .blend (or import the character FBX, glTF or USD file into Blender's
+    factory startup file); (its rig: ``--rig``, or the one to pick; a USD character's stage, which the result is
+    written back in, else None)."""
+    stage = None
     try:
         if job["target"].lower().endswith(".fbx"):
             bpy.ops.import_scene.fbx(filepath=job["target"])
         elif job["target"].lower().endswith(GLTF):
             import_gltf(bpy, Path(job["target"]))
         elif job["target"].lower().endswith(USD):
-            job["stage"] = import_usd(bpy, Path(job["target"]))  # the character's file is written back as it was
+            stage = import_usd(bpy, Path(job["target"]))
         else:
             bpy.ops.wm.open_mainfile(filepath=job["target"], load_ui=False)
     except (RuntimeError, BatchError) as e:
@@ -449,20 +451,20 @@ def open_target(bpy, job: dict):
         rig = bpy.data.objects.get(job["rig"])
         if rig is None or rig.type != "ARMATURE":
             raise BatchError(f"no armature named {job['rig']!r} in --target for --rig")
-        return rig
-    return pick_armature(bpy)
+        return rig, stage
+    return pick_armature(bpy), stage
 
 
 def run_file(bpy, job: dict) -> list[str]:
     """Import the job's input, run its operator, write the result; returns the notes of the new action's
     record (what the operator's report would warn of: the motion is unfamiliar, the keys' rate, ...)."""
     src, dst = Path(job["input"]), Path(job["output"])
-    target = None
+    target = stage = None  # stage: the USD stage the result is written back in (the character's)
     if job["operator"] == "transfer_motion":
         if src.suffix.lower() not in (".bvh", ".fbx", *GLTF, *USD):
             raise BatchError("transfer takes BVH, FBX, glTF or USD takes; a .blend is a target (--target), not a "
                              "take")
-        target = open_target(bpy, job)
+        target, stage = open_target(bpy, job)
     if dst.suffix.lower() == ".gltf":  # (--in-place on a .gltf)
         raise BatchError("a .gltf result is two files (the .gltf and its .bin), which cannot be replaced at once: "
                          "write .glb results to --out (leave out --in-place)")
@@ -473,13 +475,13 @@ def run_file(bpy, job: dict) -> list[str]:
     if src.suffix.lower() in GLTF:
         imported = import_gltf(bpy, src)
     elif src.suffix.lower() in USD:
-        stage = import_usd(bpy, src)
+        read = import_usd(bpy, src)
         if target is None:  # the result is this file's character, written back in its axes and units
-            job["stage"] = stage
+            stage = read
         if job["operator"] == "inspect":
-            root = f", default prim /{stage['root']}" if stage["root"] else ""
-            imported.append(f"USD stage at {stage['rate']:g} time codes a second, {stage['up']} up, "
-                            f"{stage['meters']:g} m a unit{root}: results are written back so")
+            root = f", default prim /{read['root']}" if read["root"] else ""
+            imported.append(f"USD stage at {read['rate']:g} time codes a second, {read['up']} up, "
+                            f"{read['meters']:g} m a unit{root}: results are written back so")
     elif src.suffix.lower() == ".fbx":
         try:  # as File > Import > FBX does it: the scene takes the file's frame rate
             bpy.ops.import_scene.fbx(filepath=str(src))
@@ -596,7 +598,7 @@ def run_file(bpy, job: dict) -> list[str]:
         elif dst.suffix.lower() == ".glb":
             export_gltf(bpy, obj, results, tmp)
         elif dst.suffix.lower() in USD:
-            export_usd(bpy, cast, kept, tmp, job.get("stage"))
+            export_usd(bpy, cast, kept, tmp, stage)
         else:
             bpy.ops.wm.save_as_mainfile(filepath=str(tmp), copy=True, compress=True)
     except RuntimeError as e:

@@ -59,14 +59,13 @@ REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
 if __package__:  # installed with pip: strnn_motion.scripts
-    from .batch_worker import process_file
+    from .batch_worker import USD, process_file
 else:  # run by path from a checkout
-    from batch_worker import process_file  # noqa: E402
+    from batch_worker import USD, process_file  # noqa: E402
 
 from model_core.io.files import unwritable, write_json  # noqa: E402  (model_core never imports bpy)
 from model_core.ops import options as opts  # noqa: E402
 
-USD = (".usd", ".usda", ".usdc", ".usdz")
 EXTENSIONS = (".bvh", ".fbx", ".glb", ".gltf", *USD, ".blend")
 CHARACTERS = (".blend", ".fbx", ".glb", ".gltf", *USD)  # what --target may be
 NAMED = ".bvh, .fbx, .glb, .gltf, .usd (.usda, .usdc, .usdz) or .blend"  # the inputs, as messages name them
@@ -323,7 +322,7 @@ def check_args(parser, args) -> None:
                      "plays its own action")
     if args.every_action and args.action:
         parser.error("--action picks one take and --every-action runs them all: give one of them")
-    if args.every_armature and args.format not in ("auto", "blend", "usd", "usda", "usdz"):
+    if args.every_armature and args.format not in ("auto", "blend") and f".{args.format}" not in USD:
         parser.error(f"--every-armature writes .blend or USD results (a {args.format.upper()} file here holds one "
                      f"armature's take): drop --format {args.format}")
     if args.keys_per_second is not None and not 0.0 < args.keys_per_second <= 1000.0:
@@ -386,8 +385,8 @@ def output_path(path: Path, rel: Path, args) -> Path:
     own = own_format(path)
     if args.command == "transfer":  # the character's format
         own = own_format(args.target)
-    elif args.every_armature and own not in ("usd", "usda", "usdc", "usdz"):  # every character of the file,
-        own = "blend"  # which a BVH, FBX or glTF result would not hold (a USD stage holds several skeletons)
+    elif args.every_armature and f".{own}" not in USD:  # every character of the file, which a BVH, FBX or glTF
+        own = "blend"  # result would not hold (a USD stage holds several skeletons)
     fmt = args.format if args.format != "auto" else own
     return args.out / rel.parent / f"{rel.stem}.{args.command}.{fmt}"
 

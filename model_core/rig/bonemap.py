@@ -92,11 +92,11 @@ def _family_map(names: list[str], prefer: set[str] | None = None) -> tuple[str, 
         found: Mapping = {}
         for joint in JOINTS:
             for cand in table[joint]:
-                if lookup.get(cand):
-                    found[joint] = (lookup.get(cand), False)
+                if bone := lookup.get(cand):
+                    found[joint] = (bone, False)
                     break
-                if cand.lower().endswith("_end") and lookup.get(cand[:-4]):
-                    found[joint] = (lookup.get(cand[:-4]), True)
+                if cand.lower().endswith("_end") and (bone := lookup.get(cand[:-4])):
+                    found[joint] = (bone, True)
                     break
         if family in WHOLE_ONLY and any(j not in found and not j.endswith(_LEAVES) for j in JOINTS):
             continue

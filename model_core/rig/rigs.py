@@ -212,7 +212,7 @@ def _match(family: dict[str, list[str]], names: list[str]) -> tuple[dict[str, st
     found: dict[str, str | None] = {}
     missing = []
     for joint in JOINTS:
-        hit = next((lookup.get(c) for c in family[joint] if lookup.get(c)), None)
+        hit = next((bone for c in family[joint] if (bone := lookup.get(c))), None)
         if hit is None and joint.endswith("fingertip"):
             found[joint] = None  # estimated from the wrist
         elif hit is None:
