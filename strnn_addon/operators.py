@@ -9,7 +9,7 @@ from . import props as options
 from .props import joint_label
 from .scene import anim, controls, mapping
 from .scene.curves import find_curve
-from .scene.pipeline import OWN_BONES, UserError, check_object, rig_of
+from .scene.pipeline import BAKED_BONES, OWN_BONES, UserError, check_object, rig_of
 from .scene.simplify import simplify_keys
 from .stages.check import check_motion
 from .stages.common import RECORD, STAGES, report_note, run
@@ -506,6 +506,9 @@ class STRNN_OT_auto_map(bpy.types.Operator):
         if found_controls is not None and found_controls.name == OWN_BONES:
             keyed = ("; results are keyed on its bones by a visual bake (bones that do not simply follow their "
                      "parents, or NLA strips under its action)")
+        if found_controls is not None and found_controls.name == BAKED_BONES:
+            keyed = ("; it is a control rig an exporter baked (its controls drive nothing), so results are keyed on "
+                     "its deform bones, the rest of its skin (fingers, face) carried with the bone each moves with")
         if placed:  # a chest or a neck, or both (both then lie between the spine and the head)
             below, above, _ = next(iter(placed.values()))
             keyed += (f"; it has no {' or '.join(joint_label(j) for j in placed)} bone, so "

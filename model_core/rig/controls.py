@@ -415,6 +415,72 @@ def joint_rig(rig: Rig, mapping: dict[str, tuple[str, bool]]) -> Rig:
     return Rig([rig.names[b] for b in order], parents, rig.rest[order], rig.lengths[order], tails=rig.tails[order])
 
 
+# Of the written bones a carried bone moves with (the spread of their relative transform over the take least, to
+# within this: its place in ``scale`` units plus its turn, the rotation matrices' mean distance), the one whose rest
+# segment its head lies nearest carries it: on a take that does not move the two apart, the bone it belongs to.
+CARRY_TIE = 0.01
+
+
+def hanging_from(rig: Rig, moved: set[str]) -> np.ndarray:
+    """bool ``[B]``: whether each bone of ``rig`` is in ``moved`` or hangs from one of them through its parents."""
+    out = np.zeros(len(rig.names), dtype=bool)
+    for b, name in enumerate(rig.names):  # parents first
+        out[b] = name in moved or (rig.parents[b] >= 0 and bool(out[rig.parents[b]]))
+    return out
+
+
+def carried_bones(rig: Rig, written: set[str], skinned: set[str]) -> list[int]:
+    """The bones of ``rig`` to carry so that none of ``skinned`` (what its meshes follow) is left behind by keys on
+    the ``written`` bones alone: for each skinned bone that hangs neither from a written bone nor from one carried
+    already (a baked Rigify rig's face and shoulders, which hang from its ORG-, MCH- and control bones), that bone, or
+    where it is connected to its parent (Blender then keeps its head on the parent's tail) the first bone above it
+    that is not; parents first."""
+    moved, out = set(written), []
+    while True:
+        follows = hanging_from(rig, moved)
+        left = next((b for b, name in enumerate(rig.names) if name in skinned and not follows[b]), None)
+        if left is None:
+            return sorted(out)
+        while rig.connected[left]:
+            left = int(rig.parents[left])
+        moved.add(rig.names[left])
+        out.append(left)
+
+
+def loose_bones(rig: Rig, written: list[str], carried: list[int]) -> list[str]:
+    """The ``written`` bones of ``rig`` whose parent neither is written or ``carried`` nor hangs from such a bone
+    (a baked Rigify rig's DEF-thigh.L hangs from ORG-spine): keys on their rotation alone would leave their heads
+    where that parent holds them, so their place is keyed too."""
+    follows = hanging_from(rig, set(written) | {rig.names[b] for b in carried})
+    index = {n: b for b, n in enumerate(rig.names)}
+    return [n for n in written if rig.parents[index[n]] < 0 or not follows[rig.parents[index[n]]]]
+
+
+def carriers(rig: Rig, carried: list[int], written: list[int], pose: np.ndarray, scale: float) -> dict[int, int]:
+    """{carried bone: the written bone it moves with}: over the take's poses ``pose`` ``[S, B, 4, 4]`` (armature
+    space, ``rig``'s bones), the written bone whose transform relative to it varies least (:data:`CARRY_TIE`);
+    ``scale``: a length of the rig (its leg) that places are measured in."""
+    if not written:
+        return {}
+    w = np.asarray(written)
+    heads = rig.rest[:, :3, 3]
+    a = heads[w]
+    b = np.einsum("bij,bj->bi", rig.rest[w], np.c_[rig.tails[w], np.ones(len(w))])[:, :3]
+    seg = b - a
+    out = {}
+    for c in carried:
+        rel = np.linalg.inv(pose[:, w]) @ pose[:, c][:, None]  # [S, W, 4, 4]
+        place = np.linalg.norm(rel[..., :3, 3] - rel[..., :3, 3].mean(axis=0), axis=-1).mean(axis=0) / scale
+        turn = np.linalg.norm(rel[..., :3, :3] - rel[..., :3, :3].mean(axis=0), axis=(-2, -1)).mean(axis=0)
+        spread = place + turn
+        t = np.clip(np.einsum("wi,wi->w", heads[c] - a, seg) / np.maximum(np.einsum("wi,wi->w", seg, seg), 1e-12),
+                    0, 1)
+        near = np.linalg.norm(a + t[:, None] * seg - heads[c], axis=-1)
+        near[spread > spread.min() + CARRY_TIE] = np.inf
+        out[c] = int(w[np.argmin(near)])
+    return out
+
+
 def visual_local(rig: Rig, pose: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Local ``loc`` ``[F, B, 3]`` and rotation ``[F, B, 3, 3]`` that reproduce pose matrices
     ``pose`` ``[F, B, 4, 4]`` (armature space) under ``rig``'s parents (Blender's visual transform)."""

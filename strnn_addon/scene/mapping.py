@@ -69,6 +69,12 @@ def skinned_bones(obj) -> set[str]:
             for g in o.vertex_groups if g.name in bones}
 
 
+def skin(obj) -> set[str]:
+    """The bones that carry ``obj``'s skin: :func:`skinned_bones`, or where no mesh is skinned to it its deform
+    bones."""
+    return skinned_bones(obj) or {b.name for b in obj.data.bones if b.use_deform}
+
+
 def _rest_bones(obj) -> tuple[list[str], list[int], np.ndarray, np.ndarray]:
     """(names, parent indices, rest heads ``[B, 3]``, rest tails ``[B, 3]``) of armature object ``obj``'s bones."""
     bones = obj.data.bones

@@ -8,7 +8,7 @@ the file changes, so a failed run leaves the scene exactly as it was.
 from __future__ import annotations
 
 import re
-from dataclasses import dataclass, replace as replace_set
+from dataclasses import dataclass, field, replace as replace_set
 
 import bpy
 import numpy as np
@@ -25,6 +25,7 @@ from ...model_core.motion.conventions import (  # noqa: F401  (MIN_MODEL_FRAMES,
 from ...model_core.motion.features import facing
 from ...model_core.motion.geometry import nearest_rotation
 from ...model_core.ops.root_motion import carried_root
+from ...model_core.rig import controls as controls_core
 from ...model_core.rig.controls import Control, ControlSet, chains_on_joints, visual_local
 from ...model_core.rig.rigs import leg_length
 from ...model_core.rig.solve import Anchors, Rig, anchor_positions, fk, hips_carrier, solve, solved_bones
@@ -51,6 +52,7 @@ class Clip:
     last: int
     controls: ControlSet | None = None  # a control rig's: ``rig`` is then its joint skeleton, written by a bake
     layered: bool = False  # NLA strips under the action show through it (rig_io.nla_beneath)
+    carried: dict[str, str] = field(default_factory=dict)  # a baked control rig's: {skinned bone: its carrier}
 
 
 def scene_fps(scene) -> float:
@@ -111,8 +113,32 @@ def clip_of(context, obj, action, channels, first: int, last: int) -> Clip:
     rig, anchors, bone_map, found = rig_of(obj)
     fcurves = channels.fcurves if channels else []
     check_evaluated(context, obj, fcurves, found)
-    return Clip(obj, action, channels, rig, anchors, bone_map, rig_io.world_matrix(obj),
+    clip = Clip(obj, action, channels, rig, anchors, bone_map, rig_io.world_matrix(obj),
                 keys_per_second(context, obj), first, last, found, rig_io.nla_beneath(obj, fcurves))
+    if found is not None and found.name == BAKED_BONES:
+        clip.carried = carried(context, clip)
+    return clip
+
+
+CARRY_SAMPLES = 32  # frames of the take read to tell which bone each carried bone moves with
+
+
+def carried(context, clip: Clip) -> dict[str, str]:
+    """{bone: the written bone it moves with} for the bones to carry so that a baked control rig's skin
+    (:func:`mapping.skin`) is not left behind by keys on its deform bones alone (:func:`controls.carried_bones`:
+    Rigify's face and shoulders hang from MCH-, ORG- and control bones, which no longer follow anything); read over
+    the take (:func:`controls.carriers`)."""
+    full = rig_io.read_rig(clip.obj)
+    names = [clip.rig.names[b] for b in written_bones(clip)]
+    these = controls_core.carried_bones(full, set(names), mapping.skin(clip.obj))
+    if not these:
+        return {}
+    frames = np.unique(np.linspace(clip.first, clip.last, CARRY_SAMPLES).round())
+    pose, _ = rig_io.pose_matrices_evaluated(context, clip.obj, full, frames)
+    written = [full.names.index(n) for n in names]
+    leg = leg_length(anchor_positions(clip.rig, clip.anchors, clip.rig.rest[None]))  # armature units
+    found = controls_core.carriers(full, these, written, pose, leg)
+    return {full.names[c]: full.names[w] for c, w in found.items()}
 
 
 OWN_BONES = "own bones"  # the controls of a plain rig keyed by the visual bake: each written bone its own
@@ -142,6 +168,8 @@ def check_evaluated(context, obj, fcurves, found: ControlSet | None) -> None:
 # Families of control rigs whose deform bones hang from other bones than each other (Rigify's DEF- limbs from its
 # ORG- bones; Auto-Rig Pro's): once an exporter has baked them, no bone map of theirs fits the hierarchy.
 BAKED_CONTROL_RIGS = {"rigify", "rigify_deform", "auto_rig_pro"}
+# The controls of such a rig: its mapped deform bones, each keyed by the visual bake on the joint skeleton.
+BAKED_BONES = "baked bones"
 
 
 def rig_of(obj) -> tuple[Rig, Anchors, dict, ControlSet | None]:
@@ -161,14 +189,20 @@ def rig_of(obj) -> tuple[Rig, Anchors, dict, ControlSet | None]:
     try:
         anchors, bone_map, rig = mapping.resolve(obj, rig, joint_skeleton=found is not None)
     except mapping.MapError as e:
-        if found is None and e.__cause__ is not None and mapping.baked(obj) \
-                and mapping.auto_map(obj)[0] in BAKED_CONTROL_RIGS:  # (a bone map that does not fit the hierarchy)
-            raise UserError(f"{obj.name!r} is a control rig (by its bone names) that an exporter (FBX, glTF, USD) has "
-                            "baked: no bone follows a constraint, so its controls drive nothing, and its deform bones "
-                            f"hang from others than each other ({e.__cause__}), so keys on them would leave the bones "
-                            "between behind. Run this on the rig itself, or export its deform bones alone as one tree "
-                            "(each parented to the one above it)") from e
-        raise UserError(str(e)) from e
+        if not (found is None and e.__cause__ is not None and mapping.baked(obj)
+                and mapping.auto_map(obj)[0] in BAKED_CONTROL_RIGS):  # (a bone map that does not fit the hierarchy)
+            raise UserError(str(e)) from e
+        # a control rig an exporter baked: its deform bones keyed on a joint skeleton, each its own control, and the
+        # rest of its skin carried with them (:func:`carried`)
+        full = rig
+        try:
+            anchors, bone_map, rig = mapping.resolve(obj, rig, joint_skeleton=True)
+        except mapping.MapError as again:
+            raise UserError(str(again)) from again
+        written = [rig.names[b] for b in solved_bones(rig, anchors)]
+        loose = controls_core.loose_bones(full, written,
+                                          controls_core.carried_bones(full, set(written), mapping.skin(obj)))
+        found = ControlSet(BAKED_BONES, [Control(name, name, name in loose) for name in written])
     ad = obj.animation_data
     fcurves = anim.Channels(ad.action, ad).fcurves if ad and ad.action else []
     layered = rig_io.nla_beneath(obj, fcurves)
@@ -626,6 +660,7 @@ def write_controls(context, clip: Clip, channels: anim.Channels, frames: np.ndar
         for c in chosen for prop in (rig_io.rotation_property(clip.obj.pose.bones[c.bone]),)
         + (("location",) if c.location else ()))
     played = _played(context, clip, frames) if lacking else None
+    carry = _carried_poses(context, clip, frames, targets)  # read before the bake and the keys turn any bone
     baked = controls.bake(context, clip.obj, control_set, frames, targets)
     for k, c in enumerate(chosen):
         pb = clip.obj.pose.bones[c.bone]
@@ -640,7 +675,73 @@ def write_controls(context, clip: Clip, channels: anim.Channels, frames: np.ndar
             _key_property(clip, channels, pb, "location", frames, baked.loc[:, k], replace, fill, interpolation)
     edges = np.array([f for f in (frames[0] - 1, frames[-1] + 1) if clip.first <= f <= clip.last])
     controls.key_switches(channels, clip.obj, clip.controls, frames, edges)
+    chans = rig_io.bone_channels(channels.fcurves)
+    edge = np.array([frames[-1] + 1 if follows else frames[0] - 1], np.float64)
+    for name, local in carry.items():
+        pb = clip.obj.pose.bones[name]
+        prop, values = encode_rotation(pb.rotation_mode, nearest_rotation(local[:, :3, :3]),
+                                       rig_io.rotation_values(chans, pb, edge)[0], follows)
+        _key_property(clip, channels, pb, prop, frames, values, replace, interpolation=interpolation)
+        _key_property(clip, channels, pb, "location", frames, local[:, :3, 3], replace, interpolation=interpolation)
     return baked.error
+
+
+def holders(clip: Clip) -> list[str]:
+    """The bones of a baked control rig that its keyed bones (the written ones and :attr:`Clip.carried`) hang from,
+    following none of them (Rigify's ORG-spine above DEF-thigh.L, the MCH- and control bones above its face): what
+    those keys were set against, so that an action of new keys alone must hold them as they played then
+    (:func:`hold`)."""
+    if not clip.carried and (clip.controls is None or clip.controls.name != BAKED_BONES):
+        return []
+    full = rig_io.read_rig(clip.obj)
+    keyed = {clip.rig.names[b] for b in written_bones(clip)} | set(clip.carried)
+    follows = controls_core.hanging_from(full, keyed)
+    out: set[int] = set()
+    for b, name in enumerate(full.names):
+        p = int(full.parents[b]) if name in keyed else -1
+        while p >= 0 and not follows[p]:
+            out.add(p)
+            p = int(full.parents[p])
+    return [full.names[b] for b in sorted(out)]
+
+
+def hold(clip: Clip, action, frames: np.ndarray, interpolation: str = "") -> None:
+    """Key in ``action`` (a new action of new keys alone) the :func:`holders` of a baked control rig at ``frames`` as
+    the clip's own action plays them (each channel it animates), so that the keys set against them stay where they
+    were put."""
+    if clip.channels is None:  # no action: they keep their pose, as they had it when the keys were set
+        return
+    chans = rig_io.bone_channels(clip.channels.fcurves)
+    channels = anim.Channels(action, clip.obj.animation_data, ensure=True)
+    frames = np.asarray(frames, np.float64)
+    for name in holders(clip):
+        pb = clip.obj.pose.bones[name]
+        for prop in ("location", rig_io.rotation_property(pb), "scale"):
+            if (name, prop) in chans:
+                values = rig_io.channel_values(chans, name, prop, getattr(pb, prop), frames)
+                _key_property(clip, channels, pb, prop, frames, values, None, interpolation=interpolation)
+
+
+def _carried_poses(context, clip: Clip, frames: np.ndarray, targets: dict) -> dict[str, np.ndarray]:
+    """{carried bone (:attr:`Clip.carried`): its local transforms ``[F, 4, 4]`` at ``frames``} that keep it where it
+    stood against the bone carrying it as the action plays those frames now (inside the take, as it was on that
+    frame; past it, as on its last), that bone going to its ``targets`` {bone: armature-space ``[F, 4, 4]``}; only
+    the bones whose carrier is among the ``targets``."""
+    these = {c: w for c, w in clip.carried.items() if w in targets}
+    if not these:
+        return {}
+    full = rig_io.read_rig(clip.obj)
+    index = {n: i for i, n in enumerate(full.names)}
+    parent = {c: full.names[full.parents[index[c]]] for c in these if full.parents[index[c]] >= 0}
+    names = sorted(set(these) | set(these.values()) | set(parent.values()))
+    at = {n: k for k, n in enumerate(names)}
+    now, _ = rig_io.pose_matrices_evaluated(context, clip.obj, names, np.asarray(frames, np.float64))
+    out = {}
+    for c, w in these.items():
+        world = targets[w] @ np.linalg.inv(now[:, at[w]]) @ now[:, at[c]]
+        base = full.rel_rest[index[c]] if c not in parent else now[:, at[parent[c]]] @ full.rel_rest[index[c]]
+        out[c] = np.linalg.inv(base) @ world
+    return out
 
 
 def _hips_on_root(clip: Clip, targets: dict, root: str) -> None:

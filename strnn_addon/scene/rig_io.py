@@ -126,13 +126,14 @@ def read_local_pose(obj, rig: Rig, fcurves, frames: np.ndarray, cache: KeyCache 
     rot = np.empty((f, len(rig.names), 3, 3))
     for b, name in enumerate(rig.names):
         pb = obj.pose.bones[name]
-        loc[:, b] = _channel(chans, name, "location", pb.location, frames, cache)
-        scale[:, b] = _channel(chans, name, "scale", pb.scale, frames, cache)
+        loc[:, b] = channel_values(chans, name, "location", pb.location, frames, cache)
+        scale[:, b] = channel_values(chans, name, "scale", pb.scale, frames, cache)
         rot[:, b] = rotation_matrices(pb.rotation_mode, rotation_values(chans, pb, frames, cache))
     return loc, rot, scale
 
 
-def _channel(chans, bone: str, prop: str, current, frames: np.ndarray, cache: KeyCache | None = None) -> np.ndarray:
+def channel_values(chans, bone: str, prop: str, current, frames: np.ndarray,
+                   cache: KeyCache | None = None) -> np.ndarray:
     """One vector property ``[F, len(current)]`` sampled from its F-curves or held at ``current``."""
     curves = chans.get((bone, prop), {})
     out = np.tile(np.asarray(current, dtype=np.float64), (len(frames), 1))
@@ -150,7 +151,7 @@ def rotation_property(pb) -> str:
 
 def rotation_values(chans, pb, frames: np.ndarray, cache: KeyCache | None = None) -> np.ndarray:
     prop = rotation_property(pb)
-    return _channel(chans, pb.name, prop, getattr(pb, prop), frames, cache)
+    return channel_values(chans, pb.name, prop, getattr(pb, prop), frames, cache)
 
 
 def rotation_matrices(mode: str, values: np.ndarray) -> np.ndarray:

@@ -320,6 +320,7 @@ def write_fresh(context, clip, name: str, frames, loc, rot, record: dict, scene_
     try:
         error = pipeline.write_pose(context, clip, action, frames, loc, rot, {}, None, interpolation=interpolation,
                                     root=root, joints=joints)
+        pipeline.hold(clip, action, frames, interpolation)
         action[RECORD] = with_bake(record, clip, error, frames)
         anim.assign_action(clip.obj, action, None)
         ad = clip.obj.animation_data

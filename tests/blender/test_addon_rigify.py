@@ -8,6 +8,8 @@ follow the result.
 
 from __future__ import annotations
 
+import re
+
 import addon_utils
 import bpy
 import numpy as np
@@ -511,16 +513,37 @@ def test_check_motion_reads_the_rig_as_the_operators_do(walking_rig, addon, real
     assert ("motion the model knows" if known else "this motion is unlike what the model learnt") in out, out
 
 
-def test_a_rigify_rig_baked_by_an_fbx_exporter_is_refused_with_the_reason(rig, addon, tmp_path):
-    """The generated rig walking, exported to FBX with every bone (Blender's exporter bakes each bone and drops the
-    constraints) and imported again: it has Rigify's control names, but they drive nothing, and its DEF- thighs hang
-    from ORG-spine. Extend keyed the controls and the skin stood still in the new frames (DEF-spine moved 0.00 cm a
-    frame against 4.66 in the take); now it is refused with the reason and the fix, and nothing is added."""
+FACE = ("lid", "nose", "lip", "brow", "ear", "jaw", "chin", "cheek", "temple", "forehead", "tongue")
+
+
+def world_bones(obj, names: list[str], frames) -> np.ndarray:
+    """World matrices ``[F, N, 4, 4]`` of pose bones ``names`` as Blender plays ``frames``."""
+    out = []
+    for f in frames:
+        bpy.context.scene.frame_set(int(f))
+        world = np.array(obj.matrix_world)
+        out.append([world @ np.array(obj.pose.bones[n].matrix) for n in names])
+    return np.array(out)
+
+
+@pytest.fixture
+def baked(rig, addon, tmp_path):
+    """The generated rig walking, its head nodding, with a mesh weighted to every deform bone, exported to FBX with
+    every bone (Blender's exporter bakes each bone and drops the constraints) and imported again, active: it keeps
+    Rigify's control names, but they drive nothing, its DEF- thighs hang from ORG-spine and its face from MCH- and
+    control bones."""
+    head = rig.pose.bones["head"]
+    head.rotation_mode = "XYZ"
+    for f in range(1, 61):
+        head.rotation_euler = (0.3 * np.sin(2 * np.pi * f / 40), 0.0, 0.0)
+        head.keyframe_insert("rotation_euler", frame=f)
+    bpy.context.scene.frame_start, bpy.context.scene.frame_end = 1, 60
     bpy.ops.mesh.primitive_cube_add(size=0.3, location=(0, 0, 1))
     body = bpy.context.active_object
     body.modifiers.new("Armature", "ARMATURE").object = rig
-    for name in DEFORM_JOINTS:
-        body.vertex_groups.new(name=name).add(range(len(body.data.vertices)), 0.1, "REPLACE")
+    for bone in rig.data.bones:
+        if bone.use_deform:
+            body.vertex_groups.new(name=bone.name).add(range(len(body.data.vertices)), 0.1, "REPLACE")
     for obj in bpy.context.view_layer.objects:
         obj.select_set(obj in (rig, body))
     path = tmp_path / "baked.fbx"
@@ -530,14 +553,72 @@ def test_a_rigify_rig_baked_by_an_fbx_exporter_is_refused_with_the_reason(rig, a
     bpy.ops.import_scene.fbx(filepath=str(path))
     baked = next(o for o in bpy.data.objects if o.type == "ARMATURE")
     assert "thigh_fk.L" in baked.pose.bones and not any(len(pb.constraints) for pb in baked.pose.bones)
+    assert baked.data.bones["DEF-thigh.L"].parent.name == "ORG-spine"
     for obj in bpy.context.view_layer.objects:
         obj.select_set(obj is baked)
     bpy.context.view_layer.objects.active = baked
-    actions = {a.name for a in bpy.data.actions}
-    with pytest.raises(RuntimeError, match=r"an exporter \(FBX, glTF, USD\) has baked: no bone follows a constraint, "
-                                           "so its controls drive nothing") as err:
-        bpy.ops.strnn.extend_clip(frames=20)
-    assert "DEF-thigh.L" in str(err.value) and "Run this on the rig itself" in str(err.value)
-    assert {a.name for a in bpy.data.actions} == actions
     listed = addon_module(addon, "strnn_addon.scene.controls").listed
     assert listed(baked) == (None, [])  # no preset: its controls are bones like any other
+    return baked
+
+
+def test_a_rigify_rig_baked_by_an_fbx_exporter_is_keyed_on_its_deform_bones_with_all_its_skin(baked, addon):
+    """Extend on the rig an exporter baked (:func:`baked`) keyed the dead controls at first (the skin stood still in
+    the new frames: DEF-spine 0.00 cm a frame against 4.66 in the take), then it was refused; now its deform bones
+    are keyed, the thighs' place too, and every bone of the skin that hangs from none of them is carried with the one
+    it moved with in the take: nothing of the body is left behind, the face rides the head."""
+    original = action_of(baked)
+    first, last = (int(round(x)) for x in original.frame_range)
+    skin = sorted(g.name for g in next(o for o in bpy.data.objects if o.type == "MESH").vertex_groups)
+    before = world_bones(baked, skin, range(last - 29, last + 1))
+
+    assert bpy.ops.strnn.extend_clip(frames=30) == {"FINISHED"}
+    new = action_of(baked)
+    assert new is not original and original.use_fake_user and new.name.endswith(".extended")
+    assert tuple(round(x) for x in new.frame_range) == (first, last + 30)
+    after = world_bones(baked, skin, range(last, last + 31))  # the take's last frame, then the new ones
+    heads = after[:, :, :3, 3]
+    hips = skin.index("DEF-spine")
+    travel = np.linalg.norm(heads[-1, :, :2] - heads[0, :, :2], axis=-1)
+    take = np.linalg.norm(before[-1, hips, :2, 3] - before[0, hips, :2, 3])
+    assert travel[hips] > 0.4 * take, (travel[hips], take)  # it walks on
+    left = {n: round(float(t), 3) for n, t in zip(skin, travel) if t < 0.5 * travel[hips]}
+    assert not left, f"left behind: {left}"
+    # the thighs' heads stay where the pelvis holds them (their place keyed: ORG-spine no longer moves)
+    for side in "LR":
+        thigh = skin.index(f"DEF-thigh.{side}")
+        gap = np.linalg.norm(heads[:, thigh] - heads[:, hips], axis=-1)
+        assert np.abs(gap - gap[0]).max() < 0.005
+    # the face rides the head as it did on the take's last frame
+    face = [k for k, n in enumerate(skin) if set(re.split(r"[-._]", n)) & set(FACE)]
+    assert len(face) > 50
+    on_head = np.linalg.inv(after[:, skin.index("DEF-spine.006")])[:, None] @ after[:, face]
+    assert np.abs(on_head - on_head[:1]).max() < 1e-3
+
+
+def test_motion_moved_onto_a_rigify_rig_an_exporter_baked_moves_all_its_skin(baked, addon, tmp_path):
+    """Transfer Motion from a walk onto the rig an exporter baked (:func:`baked`): every bone of its skin walks with
+    it, and the face keeps, frame by frame, where it stood against the head on that frame of the rig's own take (past
+    its end, as on its last)."""
+    skin = sorted(g.name for g in next(o for o in bpy.data.objects if o.type == "MESH").vertex_groups)
+    face = [k for k, n in enumerate(skin) if set(re.split(r"[-._]", n)) & set(FACE)]
+    head = skin.index("DEF-spine.006")
+    own_last = int(action_of(baked).frame_range[1])
+    own = world_bones(baked, skin, range(1, own_last + 1))
+    source = import_walk(tmp_path)
+    for obj in bpy.context.view_layer.objects:
+        obj.select_set(obj in (source, baked))
+    bpy.context.view_layer.objects.active = baked
+    assert bpy.ops.strnn.transfer_motion(foot_lock=False) == {"FINISHED"}
+    new = action_of(baked)
+    frames = np.arange(int(new.frame_range[0]), int(new.frame_range[1]) + 1)
+    got = world_bones(baked, skin, frames)
+    hips = skin.index("DEF-spine")
+    travel = np.linalg.norm(got[-1, :, :2, 3] - got[0, :, :2, 3], axis=-1)
+    assert travel[hips] > 0.5  # it walks
+    left = {n: round(float(t), 3) for n, t in zip(skin, travel) if t < 0.8 * travel[hips]}
+    assert not left, f"left behind: {left}"
+    on_head = np.linalg.inv(got[:, head])[:, None] @ got[:, face]
+    at = np.clip(frames, 1, own_last) - 1
+    was = np.linalg.inv(own[at, head])[:, None] @ own[at][:, face]
+    assert np.abs(on_head - was).max() < 1e-3

@@ -1,13 +1,27 @@
-"""The shipped control presets (no Blender): which rigs they fit and how they spell the bones."""
+"""The shipped control presets (no Blender): which rigs they fit and how they spell the bones; what a baked control
+rig carries."""
 
 from __future__ import annotations
 
 from dataclasses import replace
 
+import numpy as np
 from test_bonemap import _auto_rig_pro
 
-from model_core.rig.controls import PRESETS, Row, SwitchRow, as_rows, from_rows, preset_for
+from model_core.motion.geometry import rotvec_to_matrix
+from model_core.rig.controls import (
+    PRESETS,
+    Row,
+    SwitchRow,
+    as_rows,
+    carried_bones,
+    carriers,
+    from_rows,
+    loose_bones,
+    preset_for,
+)
 from model_core.rig.rigs import MMD_SPELLINGS, mmd_name
+from model_core.rig.solve import Rig
 
 
 def test_auto_rig_pro_fits_with_three_or_two_spine_bones():
@@ -141,3 +155,58 @@ def test_a_limb_always_in_ik_with_its_ik_off_is_keyed_on_fk():
     assert "足ＩＫ.L" not in bones and "足ＩＫ.R" in bones  # the right leg's IK is still on
     assert not bones["足.L"].twist and bones["足.R"].twist  # the left thigh keyed whole, the right about its axis
     assert found.ik_off(set(), {"足.L"}) is found
+
+
+def _baked_rig():
+    """A control rig as an exporter leaves it: the deform bones (DEF-) hang from a mechanism bone (ORG-spine) or a
+    mechanism bone's chain (MCH-lid > DEF-lid, connected), no constraint anywhere."""
+    bones = [("root", -1, (0, 0, 0), False), ("ORG-spine", 0, (0, 0, 1.0), False),
+             ("DEF-spine", 0, (0, 0, 1.0), False), ("DEF-thigh", 1, (0.1, 0, 0.95), False),
+             ("DEF-shin", 3, (0.1, 0, 0.5), True), ("MCH-lid", 1, (0.03, -0.1, 1.65), False),
+             ("DEF-lid", 5, (0.03, -0.1, 1.66), True), ("DEF-pelvis", 1, (0.02, 0, 1.05), False),
+             ("DEF-head", 2, (0, 0, 1.55), False), ("DEF-toe", 4, (0.1, -0.1, 0.02), False)]
+    rest = np.repeat(np.eye(4)[None], len(bones), axis=0)
+    rest[:, :3, 3] = [b[2] for b in bones]
+    rest[:, :3, :3] = [[1, 0, 0], [0, 0, -1], [0, 1, 0]]  # each bone's +Y up the body
+    return Rig([b[0] for b in bones], [b[1] for b in bones], rest, np.full(len(bones), 0.2),
+               np.array([b[3] for b in bones]))
+
+
+WRITTEN = ["DEF-spine", "DEF-head", "DEF-thigh", "DEF-shin"]
+SKIN = {"DEF-spine", "DEF-thigh", "DEF-shin", "DEF-head", "DEF-lid", "DEF-pelvis", "DEF-toe"}
+
+
+def test_a_baked_control_rigs_skin_that_hangs_from_no_written_bone_is_carried():
+    """Keys on the deform bones alone would leave behind the skin that hangs from mechanism bones: the pelvis
+    (from ORG-spine) is carried itself, the lid by the bone it is connected to (Blender keeps a connected bone's head
+    on its parent's tail, so only that parent can move it); the toe follows the shin. The written bones that hang
+    from no written or carried bone get their place keyed too."""
+    rig = _baked_rig()
+    carried = carried_bones(rig, set(WRITTEN), SKIN)
+    assert [rig.names[b] for b in carried] == ["MCH-lid", "DEF-pelvis"]
+    assert loose_bones(rig, WRITTEN, carried) == ["DEF-spine", "DEF-thigh"]
+    assert carried_bones(rig, set(WRITTEN), {"DEF-spine", "DEF-toe"}) == []
+
+
+def test_a_carried_bone_goes_with_the_written_bone_it_moved_with_in_the_take():
+    """The lid moved with the nodding head and the pelvis with the hips over the take, though both hang from
+    ORG-spine; on a take that holds still, each goes with the written bone whose rest segment it lies on."""
+    rig = _baked_rig()
+    index = {n: b for b, n in enumerate(rig.names)}
+    rng = np.random.default_rng(3)
+    frames = 12
+    pose = np.repeat(rig.rest[None], frames, axis=0)
+    for name in ("DEF-spine", "DEF-head", "DEF-thigh", "DEF-shin"):  # each written bone turns its own way
+        turn = rotvec_to_matrix(rng.normal(0.0, 0.3, (frames, 3)))
+        pose[:, index[name], :3, :3] = turn @ rig.rest[index[name], :3, :3]
+        pose[:, index[name], :3, 3] += rng.normal(0.0, 0.05, (frames, 3))
+    for carried, carrier in (("MCH-lid", "DEF-head"), ("DEF-pelvis", "DEF-spine")):
+        pose[:, index[carried]] = (pose[:, index[carrier]] @ np.linalg.inv(rig.rest[index[carrier]])
+                                   @ rig.rest[index[carried]])
+    written = [index[n] for n in WRITTEN]
+    these = [index["MCH-lid"], index["DEF-pelvis"]]
+    got = carriers(rig, these, written, pose, scale=0.9)
+    assert {rig.names[c]: rig.names[w] for c, w in got.items()} == {"MCH-lid": "DEF-head", "DEF-pelvis": "DEF-spine"}
+    still = carriers(rig, these, written, np.repeat(rig.rest[None], frames, axis=0), scale=0.9)
+    assert {rig.names[c]: rig.names[w] for c, w in still.items()} == {"MCH-lid": "DEF-head",
+                                                                       "DEF-pelvis": "DEF-spine"}
