@@ -508,7 +508,8 @@ class STRNN_OT_auto_map(bpy.types.Operator):
                      "parents, or NLA strips under its action)")
         if found_controls is not None and found_controls.name == BAKED_BONES:
             keyed = ("; it is a control rig an exporter baked (its controls drive nothing), so results are keyed on "
-                     "its deform bones, the rest of its skin (fingers, face) carried with the bone each moves with")
+                     "its deform bones, the rest of its skin (a face, a pelvis) carried with the deform bone it moves "
+                     "with")
         if placed:  # a chest or a neck, or both (both then lie between the spine and the head)
             below, above, _ = next(iter(placed.values()))
             keyed += (f"; it has no {' or '.join(joint_label(j) for j in placed)} bone, so "

@@ -415,9 +415,10 @@ def joint_rig(rig: Rig, mapping: dict[str, tuple[str, bool]]) -> Rig:
     return Rig([rig.names[b] for b in order], parents, rig.rest[order], rig.lengths[order], tails=rig.tails[order])
 
 
-# Of the written bones a carried bone moves with (the spread of their relative transform over the take least, to
-# within this: its place in ``scale`` units plus its turn, the rotation matrices' mean distance), the one whose rest
-# segment its head lies nearest carries it: on a take that does not move the two apart, the bone it belongs to.
+# A bone moves with a written bone over the take where the spread of its transform relative to it (its place in the
+# rig's ``scale`` units plus its turn, the rotation matrices' mean distance) is within this of the least over the
+# written bones; of several, the one whose rest segment it lies nearest carries it (on a take that does not move the
+# two apart, the bone it belongs to).
 CARRY_TIE = 0.01
 
 
@@ -429,56 +430,79 @@ def hanging_from(rig: Rig, moved: set[str]) -> np.ndarray:
     return out
 
 
-def carried_bones(rig: Rig, written: set[str], skinned: set[str]) -> list[int]:
-    """The bones of ``rig`` to carry so that none of ``skinned`` (what its meshes follow) is left behind by keys on
-    the ``written`` bones alone: for each skinned bone that hangs neither from a written bone nor from one carried
-    already (a baked Rigify rig's face and shoulders, which hang from its ORG-, MCH- and control bones), that bone, or
-    where it is connected to its parent (Blender then keeps its head on the parent's tail) the first bone above it
-    that is not; parents first."""
-    moved, out = set(written), []
+def _spreads(pose: np.ndarray, bones: np.ndarray, written: np.ndarray, scale: float) -> np.ndarray:
+    """``[len(bones), W]``: how far each bone's transform relative to each written bone varies over the take's poses
+    ``pose`` ``[S, B, 4, 4]`` (:data:`CARRY_TIE`)."""
+    rel = np.linalg.inv(pose[:, written])[:, None] @ pose[:, bones][:, :, None]  # [S, N, W, 4, 4]
+    place = np.linalg.norm(rel[..., :3, 3] - rel[..., :3, 3].mean(axis=0), axis=-1).mean(axis=0) / scale
+    turn = np.linalg.norm(rel[..., :3, :3] - rel[..., :3, :3].mean(axis=0), axis=(-2, -1)).mean(axis=0)
+    return place + turn
+
+
+def carried_bones(rig: Rig, written: list[str], skinned: set[str], pose: np.ndarray, scale: float) -> dict[int, int]:
+    """{bone to carry: the written bone it moves with} so that none of ``skinned`` (what the rig's meshes follow) is
+    left behind by keys on the ``written`` bones alone: a baked Rigify rig's face, pelvis and shoulders hang from its
+    ORG-, MCH- and control bones, which no longer follow anything. Over the take's poses ``pose`` ``[S, B, 4, 4]``
+    (armature space; ``scale``: a length of the rig, its leg), each skinned bone that hangs from no written or
+    carried bone goes with the written bone it moved with (:data:`CARRY_TIE`), carried by the highest bone above it
+    that moved with that one too, as did every skinned bone below it, and has no written bone below it (Rigify's
+    ORG-spine.006 for the whole face); a bone connected to its parent (Blender keeps its head on the parent's tail)
+    by that parent at least."""
+    index = {n: b for b, n in enumerate(rig.names)}
+    w = np.array([index[n] for n in written])
+    if not len(w):
+        return {}
+    n = len(rig.names)
+    below_written = np.isin(np.arange(n), w)  # a written bone is this one or below it
+    skin_below: list[list[int]] = [[] for _ in range(n)]
+    for b in range(n - 1, -1, -1):  # children first
+        if rig.names[b] in skinned:
+            skin_below[b].append(b)
+        p = int(rig.parents[b])
+        if p >= 0:
+            below_written[p] |= below_written[b]
+            skin_below[p].extend(skin_below[b])
+    heads = rig.rest[:, :3, 3]
+    a = heads[w]
+    seg = np.einsum("bij,bj->bi", rig.rest[w], np.c_[rig.tails[w], np.ones(len(w))])[:, :3] - a
+    spread: dict[int, np.ndarray] = {}
+
+    def spread_of(b: int) -> np.ndarray:
+        if b not in spread:
+            spread[b] = _spreads(pose, np.array([b]), w, scale)[0]
+        return spread[b]
+
+    def moves_with(b: int, k: int) -> bool:
+        return bool(spread_of(b)[k] <= spread_of(b).min() + CARRY_TIE)
+
+    moved, out = set(written), {}
     while True:
         follows = hanging_from(rig, moved)
         left = next((b for b, name in enumerate(rig.names) if name in skinned and not follows[b]), None)
         if left is None:
-            return sorted(out)
-        while rig.connected[left]:
-            left = int(rig.parents[left])
-        moved.add(rig.names[left])
-        out.append(left)
+            return dict(sorted(out.items()))
+        t = np.clip(np.einsum("wi,wi->w", heads[left] - a, seg) / np.maximum(np.einsum("wi,wi->w", seg, seg), 1e-12),
+                    0, 1)
+        near = np.linalg.norm(a + t[:, None] * seg - heads[left], axis=-1)
+        near[[not moves_with(left, k) for k in range(len(w))]] = np.inf
+        k = int(np.argmin(near))
+        top = left
+        while rig.connected[top]:
+            top = int(rig.parents[top])
+        while (p := int(rig.parents[top])) >= 0 and not below_written[p] and moves_with(p, k) \
+                and all(moves_with(x, k) for x in skin_below[p] if not follows[x]):
+            top = p
+        moved.add(rig.names[top])
+        out[top] = int(w[k])
 
 
-def loose_bones(rig: Rig, written: list[str], carried: list[int]) -> list[str]:
-    """The ``written`` bones of ``rig`` whose parent neither is written or ``carried`` nor hangs from such a bone
-    (a baked Rigify rig's DEF-thigh.L hangs from ORG-spine): keys on their rotation alone would leave their heads
-    where that parent holds them, so their place is keyed too."""
-    follows = hanging_from(rig, set(written) | {rig.names[b] for b in carried})
+def loose_bones(rig: Rig, written: list[str]) -> list[str]:
+    """The ``written`` bones of ``rig`` whose parent is not written and hangs from no written bone (a baked Rigify
+    rig's DEF-thigh.L hangs from ORG-spine): keys on their rotation alone would leave their heads where that parent
+    holds them, so their place is keyed too."""
+    follows = hanging_from(rig, set(written))
     index = {n: b for b, n in enumerate(rig.names)}
     return [n for n in written if rig.parents[index[n]] < 0 or not follows[rig.parents[index[n]]]]
-
-
-def carriers(rig: Rig, carried: list[int], written: list[int], pose: np.ndarray, scale: float) -> dict[int, int]:
-    """{carried bone: the written bone it moves with}: over the take's poses ``pose`` ``[S, B, 4, 4]`` (armature
-    space, ``rig``'s bones), the written bone whose transform relative to it varies least (:data:`CARRY_TIE`);
-    ``scale``: a length of the rig (its leg) that places are measured in."""
-    if not written:
-        return {}
-    w = np.asarray(written)
-    heads = rig.rest[:, :3, 3]
-    a = heads[w]
-    b = np.einsum("bij,bj->bi", rig.rest[w], np.c_[rig.tails[w], np.ones(len(w))])[:, :3]
-    seg = b - a
-    out = {}
-    for c in carried:
-        rel = np.linalg.inv(pose[:, w]) @ pose[:, c][:, None]  # [S, W, 4, 4]
-        place = np.linalg.norm(rel[..., :3, 3] - rel[..., :3, 3].mean(axis=0), axis=-1).mean(axis=0) / scale
-        turn = np.linalg.norm(rel[..., :3, :3] - rel[..., :3, :3].mean(axis=0), axis=(-2, -1)).mean(axis=0)
-        spread = place + turn
-        t = np.clip(np.einsum("wi,wi->w", heads[c] - a, seg) / np.maximum(np.einsum("wi,wi->w", seg, seg), 1e-12),
-                    0, 1)
-        near = np.linalg.norm(a + t[:, None] * seg - heads[c], axis=-1)
-        near[spread > spread.min() + CARRY_TIE] = np.inf
-        out[c] = int(w[np.argmin(near)])
-    return out
 
 
 def visual_local(rig: Rig, pose: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

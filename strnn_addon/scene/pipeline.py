@@ -126,18 +126,14 @@ CARRY_SAMPLES = 32  # frames of the take read to tell which bone each carried bo
 def carried(context, clip: Clip) -> dict[str, str]:
     """{bone: the written bone it moves with} for the bones to carry so that a baked control rig's skin
     (:func:`mapping.skin`) is not left behind by keys on its deform bones alone (:func:`controls.carried_bones`:
-    Rigify's face and shoulders hang from MCH-, ORG- and control bones, which no longer follow anything); read over
-    the take (:func:`controls.carriers`)."""
+    Rigify's face, pelvis and shoulders hang from MCH-, ORG- and control bones, which no longer follow anything),
+    read over the take."""
     full = rig_io.read_rig(clip.obj)
-    names = [clip.rig.names[b] for b in written_bones(clip)]
-    these = controls_core.carried_bones(full, set(names), mapping.skin(clip.obj))
-    if not these:
-        return {}
     frames = np.unique(np.linspace(clip.first, clip.last, CARRY_SAMPLES).round())
     pose, _ = rig_io.pose_matrices_evaluated(context, clip.obj, full, frames)
-    written = [full.names.index(n) for n in names]
     leg = leg_length(anchor_positions(clip.rig, clip.anchors, clip.rig.rest[None]))  # armature units
-    found = controls_core.carriers(full, these, written, pose, leg)
+    found = controls_core.carried_bones(full, [clip.rig.names[b] for b in written_bones(clip)],
+                                        mapping.skin(clip.obj), pose, leg)
     return {full.names[c]: full.names[w] for c, w in found.items()}
 
 
@@ -200,8 +196,7 @@ def rig_of(obj) -> tuple[Rig, Anchors, dict, ControlSet | None]:
         except mapping.MapError as again:
             raise UserError(str(again)) from again
         written = [rig.names[b] for b in solved_bones(rig, anchors)]
-        loose = controls_core.loose_bones(full, written,
-                                          controls_core.carried_bones(full, set(written), mapping.skin(obj)))
+        loose = controls_core.loose_bones(full, written)
         found = ControlSet(BAKED_BONES, [Control(name, name, name in loose) for name in written])
     ad = obj.animation_data
     fcurves = anim.Channels(ad.action, ad).fcurves if ad and ad.action else []

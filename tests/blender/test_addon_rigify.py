@@ -562,11 +562,15 @@ def baked(rig, addon, tmp_path):
     return baked
 
 
-def test_a_rigify_rig_baked_by_an_fbx_exporter_is_keyed_on_its_deform_bones_with_all_its_skin(baked, addon):
+def test_a_rigify_rig_baked_by_an_fbx_exporter_is_keyed_on_its_deform_bones_with_all_its_skin(baked, addon, capfd):
     """Extend on the rig an exporter baked (:func:`baked`) keyed the dead controls at first (the skin stood still in
     the new frames: DEF-spine 0.00 cm a frame against 4.66 in the take), then it was refused; now its deform bones
     are keyed, the thighs' place too, and every bone of the skin that hangs from none of them is carried with the one
     it moved with in the take: nothing of the body is left behind, the face rides the head."""
+    capfd.readouterr()
+    assert bpy.ops.strnn.auto_map() == {"FINISHED"}
+    assert "it is a control rig an exporter baked (its controls drive nothing), so results are keyed on its deform " \
+           "bones" in capfd.readouterr().out
     original = action_of(baked)
     first, last = (int(round(x)) for x in original.frame_range)
     skin = sorted(g.name for g in next(o for o in bpy.data.objects if o.type == "MESH").vertex_groups)

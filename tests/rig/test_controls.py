@@ -15,7 +15,6 @@ from model_core.rig.controls import (
     SwitchRow,
     as_rows,
     carried_bones,
-    carriers,
     from_rows,
     loose_bones,
     preset_for,
@@ -158,12 +157,14 @@ def test_a_limb_always_in_ik_with_its_ik_off_is_keyed_on_fk():
 
 
 def _baked_rig():
-    """A control rig as an exporter leaves it: the deform bones (DEF-) hang from a mechanism bone (ORG-spine) or a
-    mechanism bone's chain (MCH-lid > DEF-lid, connected), no constraint anywhere."""
+    """A control rig as an exporter leaves it: the deform bones (DEF-) hang from a mechanism bone (ORG-spine), the
+    face from the mechanism's head (ORG-head > MCH-lid > DEF-lid, connected; ORG-head > DEF-nose), no constraint
+    anywhere."""
     bones = [("root", -1, (0, 0, 0), False), ("ORG-spine", 0, (0, 0, 1.0), False),
              ("DEF-spine", 0, (0, 0, 1.0), False), ("DEF-thigh", 1, (0.1, 0, 0.95), False),
-             ("DEF-shin", 3, (0.1, 0, 0.5), True), ("MCH-lid", 1, (0.03, -0.1, 1.65), False),
-             ("DEF-lid", 5, (0.03, -0.1, 1.66), True), ("DEF-pelvis", 1, (0.02, 0, 1.05), False),
+             ("DEF-shin", 3, (0.1, 0, 0.5), True), ("ORG-head", 1, (0, 0, 1.56), False),
+             ("MCH-lid", 5, (0.03, -0.1, 1.65), False), ("DEF-lid", 6, (0.03, -0.1, 1.66), True),
+             ("DEF-nose", 5, (0, -0.12, 1.6), False), ("DEF-pelvis", 1, (0.02, 0, 1.05), False),
              ("DEF-head", 2, (0, 0, 1.55), False), ("DEF-toe", 4, (0.1, -0.1, 0.02), False)]
     rest = np.repeat(np.eye(4)[None], len(bones), axis=0)
     rest[:, :3, 3] = [b[2] for b in bones]
@@ -173,40 +174,53 @@ def _baked_rig():
 
 
 WRITTEN = ["DEF-spine", "DEF-head", "DEF-thigh", "DEF-shin"]
-SKIN = {"DEF-spine", "DEF-thigh", "DEF-shin", "DEF-head", "DEF-lid", "DEF-pelvis", "DEF-toe"}
+SKIN = {"DEF-spine", "DEF-thigh", "DEF-shin", "DEF-head", "DEF-lid", "DEF-nose", "DEF-pelvis", "DEF-toe"}
 
 
-def test_a_baked_control_rigs_skin_that_hangs_from_no_written_bone_is_carried():
-    """Keys on the deform bones alone would leave behind the skin that hangs from mechanism bones: the pelvis
-    (from ORG-spine) is carried itself, the lid by the bone it is connected to (Blender keeps a connected bone's head
-    on its parent's tail, so only that parent can move it); the toe follows the shin. The written bones that hang
-    from no written or carried bone get their place keyed too."""
-    rig = _baked_rig()
-    carried = carried_bones(rig, set(WRITTEN), SKIN)
-    assert [rig.names[b] for b in carried] == ["MCH-lid", "DEF-pelvis"]
-    assert loose_bones(rig, WRITTEN, carried) == ["DEF-spine", "DEF-thigh"]
-    assert carried_bones(rig, set(WRITTEN), {"DEF-spine", "DEF-toe"}) == []
-
-
-def test_a_carried_bone_goes_with_the_written_bone_it_moved_with_in_the_take():
-    """The lid moved with the nodding head and the pelvis with the hips over the take, though both hang from
-    ORG-spine; on a take that holds still, each goes with the written bone whose rest segment it lies on."""
-    rig = _baked_rig()
-    index = {n: b for b, n in enumerate(rig.names)}
+def _take(rig: Rig, rigid: dict[str, str], frames: int = 12) -> np.ndarray:
+    """Poses ``[S, B, 4, 4]`` where each bone turns and moves its own way, but the bones of ``rigid`` {bone: written
+    bone} go rigidly with theirs."""
     rng = np.random.default_rng(3)
-    frames = 12
+    index = {n: b for b, n in enumerate(rig.names)}
     pose = np.repeat(rig.rest[None], frames, axis=0)
-    for name in ("DEF-spine", "DEF-head", "DEF-thigh", "DEF-shin"):  # each written bone turns its own way
-        turn = rotvec_to_matrix(rng.normal(0.0, 0.3, (frames, 3)))
-        pose[:, index[name], :3, :3] = turn @ rig.rest[index[name], :3, :3]
-        pose[:, index[name], :3, 3] += rng.normal(0.0, 0.05, (frames, 3))
-    for carried, carrier in (("MCH-lid", "DEF-head"), ("DEF-pelvis", "DEF-spine")):
-        pose[:, index[carried]] = (pose[:, index[carrier]] @ np.linalg.inv(rig.rest[index[carrier]])
-                                   @ rig.rest[index[carried]])
-    written = [index[n] for n in WRITTEN]
-    these = [index["MCH-lid"], index["DEF-pelvis"]]
-    got = carriers(rig, these, written, pose, scale=0.9)
-    assert {rig.names[c]: rig.names[w] for c, w in got.items()} == {"MCH-lid": "DEF-head", "DEF-pelvis": "DEF-spine"}
-    still = carriers(rig, these, written, np.repeat(rig.rest[None], frames, axis=0), scale=0.9)
-    assert {rig.names[c]: rig.names[w] for c, w in still.items()} == {"MCH-lid": "DEF-head",
-                                                                       "DEF-pelvis": "DEF-spine"}
+    turn = rotvec_to_matrix(rng.normal(0.0, 0.3, (frames, len(rig.names), 3)))
+    pose[..., :3, :3] = turn @ rig.rest[:, :3, :3]
+    pose[..., :3, 3] += rng.normal(0.0, 0.05, (frames, len(rig.names), 3))
+    for bone, carrier in rigid.items():
+        pose[:, index[bone]] = pose[:, index[carrier]] @ np.linalg.inv(rig.rest[index[carrier]]) @ rig.rest[index[bone]]
+    return pose
+
+
+def named(rig: Rig, found: dict[int, int]) -> dict[str, str]:
+    return {rig.names[c]: rig.names[w] for c, w in found.items()}
+
+
+def test_a_baked_control_rigs_face_is_carried_by_the_bone_above_it_that_moved_with_the_head():
+    """Keys on the deform bones alone would leave behind the skin that hangs from mechanism bones. The face (the lid,
+    the nose) moved with the head in the take and the pelvis with the hips, though all hang from ORG-spine: the face
+    is carried by the mechanism's head above it, which moved with the head too (the highest such bone with no
+    written bone below it: not ORG-spine, above the thigh), the pelvis by itself; the toe follows the shin. The
+    written bones that hang from no written bone get their place keyed too."""
+    rig = _baked_rig()
+    face = {"ORG-head": "DEF-head", "MCH-lid": "DEF-head", "DEF-lid": "DEF-head", "DEF-nose": "DEF-head",
+            "DEF-pelvis": "DEF-spine"}
+    pose = _take(rig, face)
+    assert named(rig, carried_bones(rig, WRITTEN, SKIN, pose, 0.9)) == {"ORG-head": "DEF-head",
+                                                                        "DEF-pelvis": "DEF-spine"}
+    assert loose_bones(rig, WRITTEN) == ["DEF-spine", "DEF-thigh"]
+    assert carried_bones(rig, WRITTEN, {"DEF-spine", "DEF-toe"}, pose, 0.9) == {}
+    # a take that holds still: each goes with the written bone whose rest segment it lies on
+    still = np.repeat(rig.rest[None], 12, axis=0)
+    assert named(rig, carried_bones(rig, WRITTEN, SKIN, still, 0.9)) == {"ORG-head": "DEF-head",
+                                                                         "DEF-pelvis": "DEF-spine"}
+
+
+def test_a_face_bone_that_moved_its_own_way_is_carried_apart_and_a_connected_one_by_its_parent():
+    """Where the nose moved with another bone than the head in the take (the hips), the lid is carried without it:
+    by MCH-lid, which it is connected to (Blender keeps a connected bone's head on its parent's tail), and the nose
+    by itself, with the hips."""
+    rig = _baked_rig()
+    pose = _take(rig, {"ORG-head": "DEF-head", "MCH-lid": "DEF-head", "DEF-lid": "DEF-head",
+                       "DEF-nose": "DEF-spine", "DEF-pelvis": "DEF-spine"})
+    assert named(rig, carried_bones(rig, WRITTEN, SKIN, pose, 0.9)) == {
+        "MCH-lid": "DEF-head", "DEF-nose": "DEF-spine", "DEF-pelvis": "DEF-spine"}
