@@ -52,7 +52,7 @@ class Clip:
     last: int
     controls: ControlSet | None = None  # a control rig's: ``rig`` is then its joint skeleton, written by a bake
     layered: bool = False  # NLA strips under the action show through it (rig_io.nla_beneath)
-    carried: dict[str, str] = field(default_factory=dict)  # a baked control rig's: {skinned bone: its carrier}
+    carried: dict[str, str] = field(default_factory=dict)  # a baked control rig's: {bone: deform bone carrying it}
 
 
 def scene_fps(scene) -> float:
@@ -655,7 +655,15 @@ def write_controls(context, clip: Clip, channels: anim.Channels, frames: np.ndar
         for c in chosen for prop in (rig_io.rotation_property(clip.obj.pose.bones[c.bone]),)
         + (("location",) if c.location else ()))
     played = _played(context, clip, frames) if lacking else None
-    carry = _carried_poses(context, clip, frames, targets)  # read before the bake and the keys turn any bone
+    carry = _carried_poses(context, clip, frames, targets)  # read before the bake turns any bone
+    if carry:  # a baked control rig's carried bones, each its own control, set by the bake with the rest: a written
+        # bone may hang from one (Auto-Rig Pro's deform spine from its deform root)
+        chans = rig_io.bone_channels(channels.fcurves)
+        edge = np.array([frames[-1] + 1 if follows else frames[0] - 1], np.float64)
+        previous = {n: rig_io.rotation_values(chans, clip.obj.pose.bones[n], edge)[0] for n in carry} | previous
+        extra = [Control(name, name, True) for name in carry]
+        chosen, targets = chosen + extra, targets | carry
+        control_set = replace_set(control_set, controls=list(control_set.controls) + extra)
     baked = controls.bake(context, clip.obj, control_set, frames, targets)
     for k, c in enumerate(chosen):
         pb = clip.obj.pose.bones[c.bone]
@@ -670,14 +678,6 @@ def write_controls(context, clip: Clip, channels: anim.Channels, frames: np.ndar
             _key_property(clip, channels, pb, "location", frames, baked.loc[:, k], replace, fill, interpolation)
     edges = np.array([f for f in (frames[0] - 1, frames[-1] + 1) if clip.first <= f <= clip.last])
     controls.key_switches(channels, clip.obj, clip.controls, frames, edges)
-    chans = rig_io.bone_channels(channels.fcurves)
-    edge = np.array([frames[-1] + 1 if follows else frames[0] - 1], np.float64)
-    for name, local in carry.items():
-        pb = clip.obj.pose.bones[name]
-        prop, values = encode_rotation(pb.rotation_mode, nearest_rotation(local[:, :3, :3]),
-                                       rig_io.rotation_values(chans, pb, edge)[0], follows)
-        _key_property(clip, channels, pb, prop, frames, values, replace, interpolation=interpolation)
-        _key_property(clip, channels, pb, "location", frames, local[:, :3, 3], replace, interpolation=interpolation)
     return baked.error
 
 
@@ -686,7 +686,7 @@ def holders(clip: Clip) -> list[str]:
     following none of them (Rigify's ORG-spine above DEF-thigh.L, the MCH- and control bones above its face): what
     those keys were set against, so that an action of new keys alone must hold them as they played then
     (:func:`hold`)."""
-    if not clip.carried and (clip.controls is None or clip.controls.name != BAKED_BONES):
+    if clip.controls is None or clip.controls.name != BAKED_BONES:
         return []
     full = rig_io.read_rig(clip.obj)
     keyed = {clip.rig.names[b] for b in written_bones(clip)} | set(clip.carried)
@@ -718,25 +718,17 @@ def hold(clip: Clip, action, frames: np.ndarray, interpolation: str = "") -> Non
 
 
 def _carried_poses(context, clip: Clip, frames: np.ndarray, targets: dict) -> dict[str, np.ndarray]:
-    """{carried bone (:attr:`Clip.carried`): its local transforms ``[F, 4, 4]`` at ``frames``} that keep it where it
-    stood against the bone carrying it as the action plays those frames now (inside the take, as it was on that
+    """{carried bone (:attr:`Clip.carried`): its armature-space pose ``[F, 4, 4]`` at ``frames``} that keeps it where
+    it stood against the bone carrying it as the action plays those frames now (inside the take, as it was on that
     frame; past it, as on its last), that bone going to its ``targets`` {bone: armature-space ``[F, 4, 4]``}; only
     the bones whose carrier is among the ``targets``."""
     these = {c: w for c, w in clip.carried.items() if w in targets}
     if not these:
         return {}
-    full = rig_io.read_rig(clip.obj)
-    index = {n: i for i, n in enumerate(full.names)}
-    parent = {c: full.names[full.parents[index[c]]] for c in these if full.parents[index[c]] >= 0}
-    names = sorted(set(these) | set(these.values()) | set(parent.values()))
+    names = sorted(set(these) | set(these.values()))
     at = {n: k for k, n in enumerate(names)}
     now, _ = rig_io.pose_matrices_evaluated(context, clip.obj, names, np.asarray(frames, np.float64))
-    out = {}
-    for c, w in these.items():
-        world = targets[w] @ np.linalg.inv(now[:, at[w]]) @ now[:, at[c]]
-        base = full.rel_rest[index[c]] if c not in parent else now[:, at[parent[c]]] @ full.rel_rest[index[c]]
-        out[c] = np.linalg.inv(base) @ world
-    return out
+    return {c: targets[w] @ np.linalg.inv(now[:, at[w]]) @ now[:, at[c]] for c, w in these.items()}
 
 
 def _hips_on_root(clip: Clip, targets: dict, root: str) -> None:

@@ -308,3 +308,58 @@ def test_root_motion_goes_on_c_traj_and_extend_carries_it_on(addon, model_calls,
     joints, roots = evaluated_joints(addon, obj, more), traj(more)
     assert np.linalg.norm(roots[-1, :2] - roots[0, :2]) > 0.3  # on with the body
     assert np.linalg.norm(roots[:, :2] - joints[:, 0, :2], axis=-1).max() < 0.15
+
+
+# The bones of the rig above that deform a mesh in the add-on's rigs: the deform root and spine, the clavicles, the
+# hands, feet and toes, and the twist and stretch halves of each limb's segments.
+ARP_DEFORM = {"root", "spine_01", "spine_02", "spine_03", "neck", "head", "shoulder", "hand", "foot", "toes_01",
+              "thigh_twist", "thigh_stretch", "leg_stretch", "leg_twist", "arm_stretch", "forearm_stretch",
+              "forearm_twist"}
+
+
+def test_an_auto_rig_pro_rig_an_exporter_baked_walks_on_with_its_deform_bones(addon, model_calls, tmp_path):
+    """The rig walking, a mesh weighted to its deform bones, through Blender's FBX exporter and importer with every
+    bone (baked, the constraints dropped): its controls drive nothing, and its deform root (``root.x``) hangs from ``c_traj``, not from the body's
+    root control the bone map reads the hips on. Extend keys the mapped bones, the hips' place on
+    ``c_root_master.x``, and carries the deform bones that hang from none of them with the one they moved with: the
+    deform skeleton takes the walk on where the model put the joints."""
+    from test_addon_rigify import addon_joint_index
+
+    obj = arp_rig()
+    bpy.context.scene.frame_start, bpy.context.scene.frame_end = 1, 60
+    bpy.ops.mesh.primitive_cube_add(size=0.3, location=(0, 0, 1))
+    body = bpy.context.active_object
+    body.modifiers.new("Armature", "ARMATURE").object = obj
+    for bone in obj.data.bones:
+        if bone.name.split(".")[0] in ARP_DEFORM:
+            body.vertex_groups.new(name=bone.name).add(range(len(body.data.vertices)), 0.1, "REPLACE")
+    path = tmp_path / "arp_baked.fbx"
+    bpy.ops.export_scene.fbx(filepath=str(path), use_selection=False, object_types={"ARMATURE", "MESH"},
+                             add_leaf_bones=False, bake_anim_use_all_actions=False, bake_anim_use_nla_strips=False)
+    bpy.ops.wm.read_homefile(use_empty=True)
+    bpy.ops.import_scene.fbx(filepath=str(path))
+    baked = next(o for o in bpy.data.objects if o.type == "ARMATURE")
+    assert not any(len(pb.constraints) for pb in baked.pose.bones)
+    assert baked.data.bones["c_root_master.x"].parent.name == "c_traj" == baked.data.bones["root.x"].parent.name
+    for other in bpy.context.view_layer.objects:
+        other.select_set(other is baked)
+    bpy.context.view_layer.objects.active = baked
+    last = int(action_of(baked).frame_range[1])
+    assert bpy.ops.strnn.extend_clip(frames=30) == {"FINISHED"}
+    new = action_of(baked)
+    assert new["strnn"]["controls"]["set"] == "baked bones" and new["strnn"]["controls"]["max_error_cm"] < 0.5
+    joints = addon_joint_index()
+    model = model_calls.extended()
+    world = np.array(baked.matrix_world)
+    on = {"spine": ("root.x", "head"), "spine1": ("spine_03.x", "head"), "head": ("head.x", "head")}
+    for s in SIDES:
+        on.update({f"{s}_upleg": (f"thigh_twist.{s}", "head"), f"{s}_knee": (f"leg_stretch.{s}", "head"),
+                   f"{s}_foot": (f"foot.{s}", "head"), f"{s}_toe": (f"toes_01.{s}", "head"),
+                   f"{s}_elbow": (f"arm_stretch.{s}", "tail"), f"{s}_wrist": (f"hand.{s}", "head")})
+    got = {j: [] for j in on}
+    for f in range(last + 1, last + 31):
+        bpy.context.scene.frame_set(f)
+        for j, (bone, end) in on.items():
+            got[j].append((world @ np.r_[getattr(baked.pose.bones[bone], end), 1.0])[:3])
+    far = {j: float(np.linalg.norm(np.array(p) - model[:, joints[j]], axis=-1).max()) for j, p in got.items()}
+    assert max(far.values()) < 0.01, far
