@@ -319,10 +319,11 @@ ARP_DEFORM = {"root", "spine_01", "spine_02", "spine_03", "neck", "head", "shoul
 
 def test_an_auto_rig_pro_rig_an_exporter_baked_walks_on_with_its_deform_bones(addon, model_calls, tmp_path):
     """The rig walking, a mesh weighted to its deform bones, through Blender's FBX exporter and importer with every
-    bone (baked, the constraints dropped): its controls drive nothing, and its deform root (``root.x``) hangs from ``c_traj``, not from the body's
-    root control the bone map reads the hips on. Extend keys the mapped bones, the hips' place on
-    ``c_root_master.x``, and carries the deform bones that hang from none of them with the one they moved with: the
-    deform skeleton takes the walk on where the model put the joints."""
+    bone (baked, the constraints dropped): its controls drive nothing, and its deform root (``root.x``) hangs from
+    ``c_traj``, not from the body's root control the bone map reads the hips on. Extend keys the mapped bones, the
+    hips' place on ``c_root_master.x``, and carries the deform bones that hang from none of them with the one they
+    moved with (the deform root with the root control, the deform spine set below it): the deform skeleton takes the
+    walk on where the model put the joints."""
     from test_addon_rigify import addon_joint_index
 
     obj = arp_rig()
