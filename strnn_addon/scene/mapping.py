@@ -62,11 +62,17 @@ def baked(obj) -> bool:
 
 def skinned_bones(obj) -> set[str]:
     """The bones of ``obj`` that the meshes it deforms (an Armature modifier on it) are weighted to: the vertex
-    groups of those meshes that name a bone."""
+    groups of those meshes that name a bone and weigh some vertex (a glTF importer makes a group for every joint of
+    the skin, a Rigify character's ORG-, MCH- and control bones too, most of them weighing nothing)."""
     bones = obj.data.bones
-    return {g.name for o in bpy.data.objects if o.type == "MESH"
-            and any(m.type == "ARMATURE" and m.object is obj for m in o.modifiers)
-            for g in o.vertex_groups if g.name in bones}
+    out: set[str] = set()
+    for o in bpy.data.objects:
+        if o.type != "MESH" or not any(m.type == "ARMATURE" and m.object is obj for m in o.modifiers):
+            continue
+        named = {g.index: g.name for g in o.vertex_groups if g.name in bones}
+        weighed = {g.group for v in o.data.vertices for g in v.groups if g.weight > 0.0} if named else set()
+        out |= {named[i] for i in weighed if i in named}
+    return out
 
 
 def skin(obj) -> set[str]:

@@ -626,3 +626,18 @@ def test_motion_moved_onto_a_rigify_rig_an_exporter_baked_moves_all_its_skin(bak
     at = np.clip(frames, 1, own_last) - 1
     was = np.linalg.inv(own[at, head])[:, None] @ own[at][:, face]
     assert np.abs(on_head - was).max() < 1e-3
+
+
+def test_vertex_groups_that_weigh_nothing_are_not_a_baked_rigs_skin(baked, addon):
+    """A glTF importer gives a character's mesh a vertex group for every joint of its skin, weighted or not: a
+    Rigify character's ORG-, MCH- and control bones too. Those weighing nothing are not its skin, so the bone map still
+    takes the deform bones, and only they are carried."""
+    body = next(o for o in bpy.data.objects if o.type == "MESH")
+    weighted = {g.name for g in body.vertex_groups}
+    for bone in baked.data.bones:
+        if bone.name not in body.vertex_groups:
+            body.vertex_groups.new(name=bone.name)
+    mapping = addon_module(addon, "strnn_addon.scene.mapping")
+    assert len(body.vertex_groups) == len(baked.data.bones) > len(weighted)
+    assert mapping.skinned_bones(baked) == weighted
+    assert mapping.auto_map(baked)[0] == "rigify_deform"
