@@ -293,8 +293,10 @@ def inspect(bpy, obj, fbx: list, imported: list[str]) -> list[str]:
     beside = f", beside {', '.join(map(repr, others))}" if others else ""
     notes = [f"armature {obj.name!r} ({len(obj.data.bones)} bones{beside}): the model's 21 joints mapped from {how}"]
     if clip.controls is not None:
-        notes.append("results keyed on its bones by a visual bake" if clip.controls.name == pipeline.OWN_BONES
-                     else f"results keyed on its {clip.controls.name} controls")
+        baked = (f"a control rig an exporter baked (its controls drive nothing): results keyed on its deform bones, "
+                 f"{len(clip.carried)} more carried with them so that none of its skin is left behind")
+        notes.append({pipeline.OWN_BONES: "results keyed on its bones by a visual bake", pipeline.BAKED_BONES: baked}
+                     .get(clip.controls.name, f"results keyed on its {clip.controls.name} controls"))
     takes = every_take(obj, fbx)
     notes.append(f"{len(takes)} takes, the first plays" if len(takes) > 1 else "1 take")
     notes[-1] += f", at {clip.fps:g} keys a second"

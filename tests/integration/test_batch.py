@@ -1322,3 +1322,88 @@ def test_inspect_tells_motion_the_model_knows_from_motion_it_does_not(mocap_root
     assert code == 0
     assert "motion the model knows" in rows[walk.name], rows[walk.name]
     assert "unlike what the model learnt" in rows[fight.name], rows[fight.name]
+
+
+def test_a_rigify_character_from_a_gltf_file_is_extended_with_all_its_skin(tmp_path, extension, capsys):
+    """A generated Rigify rig walking, its head nodding, a skin of its own (a small tetrahedron at each deform bone,
+    weighted to it alone), written as glTF with every bone, as a character from a model store comes: the exporter
+    baked every bone and dropped the constraints, and the importer gives the mesh a vertex group for each of the 706
+    joints, weighted or not. The batch reads it as the control rig it was (its deform bones mapped, the rest of its
+    skin carried) and extends it into glTF: the face keeps its place on the head and no bone of the skin stays
+    behind (it was refused before)."""
+    take = tmp_path / "hero.glb"
+    run_bpy(f"""
+import addon_utils, bmesh, sys
+import numpy as np
+sys.path.insert(0, "tests/blender")
+from scenes import key_walk
+addon_utils.enable("rigify", default_set=True)
+bpy.ops.wm.read_factory_settings(use_empty=True)
+addon_utils.enable("rigify", default_set=True)
+bpy.context.scene.render.fps = 30
+bpy.ops.object.armature_human_metarig_add()
+bpy.ops.pose.rigify_generate()
+rig = bpy.data.objects["rig"]
+for bone in ("thigh_parent.L", "thigh_parent.R", "upper_arm_parent.L", "upper_arm_parent.R"):
+    rig.pose.bones[bone]["IK_FK"] = 1.0
+key_walk(rig, 60, "torso", ("thigh_fk.L", "thigh_fk.R"), ("shin_fk.L", "shin_fk.R"),
+         ("upper_arm_fk.L", "upper_arm_fk.R"), step=0.02)
+head = rig.pose.bones["head"]
+head.rotation_mode = "XYZ"
+for f in range(1, 61):
+    head.rotation_euler = (0.3 * np.sin(2 * np.pi * f / 40), 0.0, 0.0)
+    head.keyframe_insert("rotation_euler", frame=f)
+deform = [b for b in rig.data.bones if b.use_deform]
+mesh = bpy.data.meshes.new("skin")
+bm = bmesh.new()
+for b in deform:
+    h = b.head_local
+    vs = [bm.verts.new((h.x + x, h.y + y, h.z + z)) for x, y, z in ((0.01, 0, 0), (-0.01, 0, 0), (0, 0.01, 0),
+                                                                   (0, 0, 0.01))]
+    for face in ((0, 1, 2), (0, 1, 3), (0, 2, 3), (1, 2, 3)):
+        bm.faces.new([vs[i] for i in face])
+bm.to_mesh(mesh)
+body = bpy.data.objects.new("skin", mesh)
+bpy.context.scene.collection.objects.link(body)
+body.parent = rig
+body.modifiers.new("Armature", "ARMATURE").object = rig
+for k, b in enumerate(deform):
+    body.vertex_groups.new(name=b.name).add(list(range(4 * k, 4 * k + 4)), 1.0, "REPLACE")
+bpy.context.scene.frame_start, bpy.context.scene.frame_end = 1, 60
+bpy.ops.export_scene.gltf(filepath={str(take)!r}, export_format="GLB", export_animations=True)
+print(json.dumps(len(deform)))
+""")
+    code, rows = batch_rows(capsys, extension, tmp_path / "inspect.json", "inspect", str(take))
+    notes = "; ".join(rows["hero.glb"]["notes"])
+    assert code == 0 and "mapped from its rigify_deform bone names; a control rig an exporter baked (its controls " \
+                         "drive nothing): results keyed on its deform bones" in notes, rows
+    code, rows = batch_rows(capsys, extension, tmp_path / "report.json", "extend", "--frames", "20", str(take),
+                            "--out", str(tmp_path / "out"))
+    assert code == 0, rows
+    got = run_bpy(f"""
+import numpy as np
+bpy.ops.wm.read_factory_settings(use_empty=True)
+bpy.context.scene.render.fps = 30
+bpy.ops.import_scene.gltf(filepath={str(tmp_path / "out" / "hero.extend.glb")!r})
+arm = next(o for o in bpy.data.objects if o.type == "ARMATURE")
+body = next(o for o in bpy.data.objects if o.type == "MESH" and len(o.vertex_groups))
+weighed = {{g.group for v in body.data.vertices for g in v.groups if g.weight > 0}}
+skin = sorted(g.name for g in body.vertex_groups if g.index in weighed)
+first, last = (int(round(x)) for x in arm.animation_data.action.frame_range)
+mats = []
+for f in range(first, last + 1):
+    bpy.context.scene.frame_set(f)
+    mats.append([(np.array(arm.matrix_world) @ np.array(arm.pose.bones[n].matrix)).tolist() for n in skin])
+print(json.dumps({{"skin": skin, "first": first, "last": last, "mats": mats}}))
+""")
+    skin, mats = got["skin"], np.array(got["mats"])  # the take's 60 frames, then the 20 new ones
+    assert (got["first"], got["last"]) == (1, 80) and len(skin) > 100
+    hips, head = skin.index("DEF-spine"), skin.index("DEF-spine.006")
+    assert np.linalg.norm(mats[-1, hips, :2, 3] - mats[59, hips, :2, 3]) > 0.1  # it walks on
+    reach = np.linalg.norm(mats[:, :, :3, 3] - mats[:, hips:hips + 1, :3, 3], axis=-1)  # each bone from the hips
+    grew = reach[60:].max(axis=0) - reach[:60].max(axis=0)
+    assert grew.max() < 0.05, skin[int(grew.argmax())]  # none stays behind as the body walks on
+    face = [k for k, n in enumerate(skin) if n.split("-")[1].split(".")[0] in ("lid", "nose", "lip", "brow", "jaw",
+                                                                               "chin", "cheek", "ear", "temple")]
+    on_head = np.linalg.inv(mats[60:, head])[:, None] @ mats[60:, face]
+    assert len(face) > 40 and np.abs(on_head - on_head[:1]).max() < 2e-3
