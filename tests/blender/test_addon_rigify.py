@@ -600,15 +600,19 @@ def test_a_rigify_rig_baked_by_an_fbx_exporter_is_keyed_on_its_deform_bones_with
     assert np.abs(on_head - on_head[:1]).max() < 1e-3
 
 
-def test_motion_moved_onto_a_rigify_rig_an_exporter_baked_moves_all_its_skin(baked, addon, tmp_path):
-    """Transfer Motion from a walk onto the rig an exporter baked (:func:`baked`): every bone of its skin walks with
-    it, and the face keeps, frame by frame, where it stood against the head on that frame of the rig's own take (past
-    its end, as on its last)."""
+@pytest.mark.parametrize("animated", [True, False])
+def test_motion_moved_onto_a_rigify_rig_an_exporter_baked_moves_all_its_skin(baked, addon, tmp_path, animated):
+    """Transfer Motion from a walk onto the rig an exporter baked (:func:`baked`), animated or (as a character from a
+    model store comes) not: every bone of its skin walks with it, and the face keeps, frame by frame, where it stood
+    against the head on that frame of the rig's own take (past its end, as on its last; with no action, as it stands
+    now)."""
     skin = sorted(g.name for g in next(o for o in bpy.data.objects if o.type == "MESH").vertex_groups)
     face = [k for k, n in enumerate(skin) if set(re.split(r"[-._]", n)) & set(FACE)]
     head = skin.index("DEF-spine.006")
-    own_last = int(action_of(baked).frame_range[1])
+    own_last = int(action_of(baked).frame_range[1]) if animated else 1
     own = world_bones(baked, skin, range(1, own_last + 1))
+    if not animated:
+        baked.animation_data.action = None
     source = import_walk(tmp_path)
     for obj in bpy.context.view_layer.objects:
         obj.select_set(obj in (source, baked))
