@@ -443,17 +443,19 @@ def carried_bones(rig: Rig, written: list[str], skinned: set[str], pose: np.ndar
     """{bone to carry: the written bone it moves with} so that none of ``skinned`` (what the rig's meshes follow) is
     left behind by keys on the ``written`` bones alone: a baked Rigify rig's face, pelvis and shoulders hang from its
     ORG-, MCH- and control bones, which no longer follow anything. Over the take's poses ``pose`` ``[S, B, 4, 4]``
-    (armature space; ``scale``: a length of the rig, its leg), each skinned bone that hangs from no written or
-    carried bone goes with the written bone it moved with (:data:`CARRY_TIE`), carried by the highest bone above it
-    that moved with that one too, as did every skinned bone below it, and has no written bone below it (Rigify's
-    ORG-spine.006 for the whole face); a bone connected to its parent (Blender keeps its head on the parent's tail)
-    by that parent at least."""
+    (armature space; ``scale``: a length of the rig, its leg), each skinned bone that hangs neither from a written
+    bone nor from a carried one it moved with (:data:`CARRY_TIE`) goes with the written bone it moved with, carried
+    by the highest bone above it that moved with that one too, as did every skinned bone below it that hangs from no
+    written bone, and has no written bone below it (Rigify's ORG-spine.006 for the whole face); where that bone is
+    connected to its parent (Blender keeps its head on the parent's tail), the parent too, with the bone it moved
+    with."""
     index = {n: b for b, n in enumerate(rig.names)}
     w = np.array([index[n] for n in written])
     if not len(w):
         return {}
     n = len(rig.names)
-    below_written = np.isin(np.arange(n), w)  # a written bone is this one or below it
+    is_written = np.isin(np.arange(n), w)
+    below_written = is_written.copy()  # a written bone is this one or below it
     skin_below: list[list[int]] = [[] for _ in range(n)]
     for b in range(n - 1, -1, -1):  # children first
         if rig.names[b] in skinned:
@@ -462,6 +464,9 @@ def carried_bones(rig: Rig, written: list[str], skinned: set[str], pose: np.ndar
         if p >= 0:
             below_written[p] |= below_written[b]
             skin_below[p].extend(skin_below[b])
+    under_written = np.zeros(n, dtype=bool)  # hangs from a written bone (or is one)
+    for b in range(n):  # parents first
+        under_written[b] = is_written[b] or (rig.parents[b] >= 0 and bool(under_written[rig.parents[b]]))
     heads = rig.rest[:, :3, 3]
     a = heads[w]
     seg = np.einsum("bij,bj->bi", rig.rest[w], np.c_[rig.tails[w], np.ones(len(w))])[:, :3] - a
@@ -475,25 +480,41 @@ def carried_bones(rig: Rig, written: list[str], skinned: set[str], pose: np.ndar
     def moves_with(b: int, k: int) -> bool:
         return bool(spread_of(b)[k] <= spread_of(b).min() + CARRY_TIE)
 
-    moved, out = set(written), {}
-    while True:
-        follows = hanging_from(rig, moved)
-        left = next((b for b, name in enumerate(rig.names) if name in skinned and not follows[b]), None)
-        if left is None:
-            return dict(sorted(out.items()))
-        t = np.clip(np.einsum("wi,wi->w", heads[left] - a, seg) / np.maximum(np.einsum("wi,wi->w", seg, seg), 1e-12),
+    out: dict[int, int] = {}  # carried bone: index into ``w`` of its carrier
+
+    def fits(p: int, k: int) -> bool:
+        """Whether ``p`` can carry the bones below it with written bone ``w[k]``."""
+        return (p not in out and not below_written[p] and moves_with(p, k)
+                and all(moves_with(x, k) for x in skin_below[p] if not under_written[x]))
+
+    def left_behind() -> int | None:
+        """The first skinned bone that hangs from no written bone and from no carried bone it moves with."""
+        carrier = np.full(n, -1)  # the carrier (index into ``w``) of the nearest carried bone at or above each bone
+        for b in range(n):
+            carrier[b] = out[b] if b in out else (carrier[rig.parents[b]] if rig.parents[b] >= 0 else -1)
+        return next((b for b, name in enumerate(rig.names) if name in skinned and not under_written[b]
+                     and (carrier[b] < 0 or not moves_with(b, int(carrier[b])))), None)
+
+    def best(b: int) -> int:
+        """The written bone (index into ``w``) ``b`` moved with; of several, the one whose rest segment it lies on."""
+        t = np.clip(np.einsum("wi,wi->w", heads[b] - a, seg) / np.maximum(np.einsum("wi,wi->w", seg, seg), 1e-12),
                     0, 1)
-        near = np.linalg.norm(a + t[:, None] * seg - heads[left], axis=-1)
-        near[[not moves_with(left, k) for k in range(len(w))]] = np.inf
-        k = int(np.argmin(near))
+        near = np.linalg.norm(a + t[:, None] * seg - heads[b], axis=-1)
+        near[[not moves_with(b, k) for k in range(len(w))]] = np.inf
+        return int(np.argmin(near))
+
+    while (left := left_behind()) is not None:
+        k = best(left)
         top = left
-        while rig.connected[top]:
-            top = int(rig.parents[top])
-        while (p := int(rig.parents[top])) >= 0 and not below_written[p] and moves_with(p, k) \
-                and all(moves_with(x, k) for x in skin_below[p] if not follows[x]):
+        while (p := int(rig.parents[top])) >= 0 and fits(p, k):
             top = p
-        moved.add(rig.names[top])
-        out[top] = int(w[k])
+        out[top] = k
+        # a connected bone keeps its head on its parent's tail, whatever its place is keyed: its parents are carried
+        # too, each with the bone it moved with (Rigify's ORG-spine.006 on ORG-spine.005, the neck's)
+        while rig.connected[top] and (p := int(rig.parents[top])) not in out and not under_written[p]:
+            out[p] = best(p)
+            top = p
+    return {b: int(w[k]) for b, k in sorted(out.items())}
 
 
 def loose_bones(rig: Rig, written: list[str]) -> list[str]:

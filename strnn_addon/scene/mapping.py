@@ -47,9 +47,9 @@ def store_map(obj, mapping: bonemap.Mapping, family: str = "") -> None:
 def auto_map(obj) -> tuple[str, bonemap.Mapping]:
     """(family, mapping) guessed from armature object ``obj``'s bone names and hierarchy, a finger tip or toe at a
     bone's tail only where that tail continues the limb (:func:`bonemap.heads_where_tails_point_across`); on a baked
-    rig (:func:`baked`) the bones its meshes are weighted to rather than others of the same names' family."""
+    rig (:func:`baked`) the bones of its skin (:func:`skin`) rather than others of the same names' family."""
     names, parents, heads, tails = _rest_bones(obj)
-    family, mapping = bonemap.auto_map(names, parents, skinned_bones(obj) if baked(obj) else None)
+    family, mapping = bonemap.auto_map(names, parents, skin(obj) if baked(obj) else None)
     return family, bonemap.heads_where_tails_point_across(mapping, names, parents, heads, tails)
 
 

@@ -645,3 +645,33 @@ def test_vertex_groups_that_weigh_nothing_are_not_a_baked_rigs_skin(baked, addon
     assert len(body.vertex_groups) == len(baked.data.bones) > len(weighted)
     assert mapping.skinned_bones(baked) == weighted
     assert mapping.auto_map(baked)[0] == "rigify_deform"
+
+
+def test_a_rigify_rig_baked_in_blender_with_its_constraints_cleared_is_keyed_on_its_deform_bones(rig, addon):
+    """The generated rig walking, its head nodding, baked in Blender as a game export is (Object > Animation > Bake
+    Action: every bone, visual keying, constraints cleared), with no mesh: its deform bones are its skin. Extend keys
+    them and carries the rest of its deform bones, the face with the head."""
+    head = rig.pose.bones["head"]
+    head.rotation_mode = "XYZ"
+    for f in range(1, 61):
+        head.rotation_euler = (0.3 * np.sin(2 * np.pi * f / 40), 0.0, 0.0)
+        head.keyframe_insert("rotation_euler", frame=f)
+    bpy.ops.object.mode_set(mode="POSE")
+    bpy.ops.nla.bake(frame_start=1, frame_end=60, only_selected=False, visual_keying=True, clear_constraints=True,
+                     bake_types={"POSE"})
+    bpy.ops.object.mode_set(mode="OBJECT")
+    assert not any(len(pb.constraints) for pb in rig.pose.bones)
+    deform = sorted(b.name for b in rig.data.bones if b.use_deform)
+    last = int(action_of(rig).frame_range[1])
+    assert bpy.ops.strnn.extend_clip(frames=30) == {"FINISHED"}
+    new = action_of(rig)
+    assert new["strnn"]["controls"]["set"] == "baked bones"
+    mats = world_bones(rig, deform, range(1, last + 31))
+    hips, head_bone = deform.index("DEF-spine"), deform.index("DEF-spine.006")
+    assert np.linalg.norm(mats[-1, hips, :2, 3] - mats[last - 1, hips, :2, 3]) > 0.1  # it walks on
+    reach = np.linalg.norm(mats[:, :, :3, 3] - mats[:, hips:hips + 1, :3, 3], axis=-1)
+    grew = reach[last:].max(axis=0) - reach[:last].max(axis=0)
+    assert grew.max() < 0.05, deform[int(grew.argmax())]  # no deform bone stays behind
+    face = [k for k, n in enumerate(deform) if set(re.split(r"[-._]", n)) & set(FACE)]
+    on_head = np.linalg.inv(mats[last:, head_bone])[:, None] @ mats[last:, face]
+    assert len(face) > 50 and np.abs(on_head - on_head[:1]).max() < 1e-3

@@ -224,3 +224,37 @@ def test_a_face_bone_that_moved_its_own_way_is_carried_apart_and_a_connected_one
                        "DEF-nose": "DEF-spine", "DEF-pelvis": "DEF-spine"})
     assert named(rig, carried_bones(rig, WRITTEN, SKIN, pose, 0.9)) == {
         "MCH-lid": "DEF-head", "DEF-nose": "DEF-spine", "DEF-pelvis": "DEF-spine"}
+
+
+def test_a_skin_chain_beside_the_written_chain_is_carried_bone_by_bone():
+    """A deform chain that hangs beside the written one, not from it (a rig whose mapped bones are its mechanism's,
+    its skin a parallel chain: DEF-a > DEF-b beside ORG-a > ORG-b): DEF-b hangs from DEF-a, which is carried with
+    ORG-a, but moved with ORG-b, which bends against ORG-a; it is carried too, with ORG-b, not left rigid on
+    DEF-a."""
+    bones = [("root", -1, (0, 0, 0)), ("ORG-a", 0, (0, 0, 1.0)), ("ORG-b", 1, (0, 0, 1.3)),
+             ("DEF-a", 0, (0, 0, 1.0)), ("DEF-b", 3, (0, 0, 1.3))]
+    rest = np.repeat(np.eye(4)[None], len(bones), axis=0)
+    rest[:, :3, 3] = [b[2] for b in bones]
+    rest[:, :3, :3] = [[1, 0, 0], [0, 0, -1], [0, 1, 0]]
+    rig = Rig([b[0] for b in bones], [b[1] for b in bones], rest, np.full(len(bones), 0.3))
+    pose = _take(rig, {"DEF-a": "ORG-a", "DEF-b": "ORG-b"})
+    assert named(rig, carried_bones(rig, ["ORG-a", "ORG-b"], {"DEF-a", "DEF-b"}, pose, 0.9)) == {
+        "DEF-a": "ORG-a", "DEF-b": "ORG-b"}
+
+
+def test_a_carried_bone_connected_to_its_parent_has_that_parent_carried_with_the_bone_it_moved_with():
+    """Blender keeps a connected bone's head on its parent's tail, whatever its place is keyed: the face's mechanism
+    head (ORG-head), connected to the mechanism neck (ORG-neck, as a Rigify rig baked in Blender has them), is
+    carried with the head, and the neck it sits on with the neck it moved with."""
+    bones = [("root", -1, (0, 0, 0), False), ("DEF-spine", 0, (0, 0, 1.0), False),
+             ("DEF-neck", 1, (0, 0, 1.45), False), ("DEF-head", 2, (0, 0, 1.55), False),
+             ("ORG-neck", 0, (0, 0, 1.45), False), ("ORG-head", 4, (0, 0, 1.55), True),
+             ("DEF-face", 5, (0, -0.1, 1.6), False)]
+    rest = np.repeat(np.eye(4)[None], len(bones), axis=0)
+    rest[:, :3, 3] = [b[2] for b in bones]
+    rest[:, :3, :3] = [[1, 0, 0], [0, 0, -1], [0, 1, 0]]
+    rig = Rig([b[0] for b in bones], [b[1] for b in bones], rest, np.full(len(bones), 0.1),
+              np.array([b[3] for b in bones]))
+    pose = _take(rig, {"ORG-neck": "DEF-neck", "ORG-head": "DEF-head", "DEF-face": "DEF-head"})
+    assert named(rig, carried_bones(rig, ["DEF-spine", "DEF-neck", "DEF-head"], {"DEF-face"}, pose, 0.9)) == {
+        "ORG-neck": "DEF-neck", "ORG-head": "DEF-head"}
