@@ -454,8 +454,7 @@ def carried_bones(rig: Rig, written: list[str], skinned: set[str], pose: np.ndar
     if not len(w):
         return {}
     n = len(rig.names)
-    is_written = np.isin(np.arange(n), w)
-    below_written = is_written.copy()  # a written bone is this one or below it
+    below_written = np.isin(np.arange(n), w)  # a written bone is this one or below it
     skin_below: list[list[int]] = [[] for _ in range(n)]
     for b in range(n - 1, -1, -1):  # children first
         if rig.names[b] in skinned:
@@ -464,9 +463,7 @@ def carried_bones(rig: Rig, written: list[str], skinned: set[str], pose: np.ndar
         if p >= 0:
             below_written[p] |= below_written[b]
             skin_below[p].extend(skin_below[b])
-    under_written = np.zeros(n, dtype=bool)  # hangs from a written bone (or is one)
-    for b in range(n):  # parents first
-        under_written[b] = is_written[b] or (rig.parents[b] >= 0 and bool(under_written[rig.parents[b]]))
+    under_written = hanging_from(rig, set(written))
     heads = rig.rest[:, :3, 3]
     a = heads[w]
     seg = np.einsum("bij,bj->bi", rig.rest[w], np.c_[rig.tails[w], np.ones(len(w))])[:, :3] - a

@@ -322,6 +322,15 @@ def key_walk(obj, frames: int = 60, hips: str = "", legs=(), knees=(), arms=(), 
         _key_rotation(pb, Euler((0, 0.05 * np.sin(phase), 0)), f)
 
 
+def nod_head(obj, bone: str = "head", frames: int = 60) -> None:
+    """Key bone ``bone`` of ``obj`` nodding (Euler angles about its X axis) over ``frames`` frames from frame 1."""
+    pb = obj.pose.bones[bone]
+    pb.rotation_mode = "XYZ"
+    for f in range(1, frames + 1):
+        pb.rotation_euler = (0.3 * np.sin(2 * np.pi * f / 40), 0.0, 0.0)
+        pb.keyframe_insert("rotation_euler", frame=f)
+
+
 def _key_rotation(pb, euler, frame: int) -> None:
     mode = pb.rotation_mode
     if mode == "QUATERNION":

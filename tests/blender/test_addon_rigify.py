@@ -24,6 +24,7 @@ from scenes import (
     key_ik_walk,
     key_snapshot,
     key_walk,
+    nod_head,
     retargeted,
     same_keys,
     walk_bvh,
@@ -532,11 +533,7 @@ def baked(rig, addon, tmp_path):
     every bone (Blender's exporter bakes each bone and drops the constraints) and imported again, active: it keeps
     Rigify's control names, but they drive nothing, its DEF- thighs hang from ORG-spine and its face from MCH- and
     control bones."""
-    head = rig.pose.bones["head"]
-    head.rotation_mode = "XYZ"
-    for f in range(1, 61):
-        head.rotation_euler = (0.3 * np.sin(2 * np.pi * f / 40), 0.0, 0.0)
-        head.keyframe_insert("rotation_euler", frame=f)
+    nod_head(rig)
     bpy.context.scene.frame_start, bpy.context.scene.frame_end = 1, 60
     bpy.ops.mesh.primitive_cube_add(size=0.3, location=(0, 0, 1))
     body = bpy.context.active_object
@@ -651,11 +648,7 @@ def test_a_rigify_rig_baked_in_blender_with_its_constraints_cleared_is_keyed_on_
     """The generated rig walking, its head nodding, baked in Blender as a game export is (Object > Animation > Bake
     Action: every bone, visual keying, constraints cleared), with no mesh: its deform bones are its skin. Extend keys
     them and carries the rest of its deform bones, the face with the head."""
-    head = rig.pose.bones["head"]
-    head.rotation_mode = "XYZ"
-    for f in range(1, 61):
-        head.rotation_euler = (0.3 * np.sin(2 * np.pi * f / 40), 0.0, 0.0)
-        head.keyframe_insert("rotation_euler", frame=f)
+    nod_head(rig)
     bpy.ops.object.mode_set(mode="POSE")
     bpy.ops.nla.bake(frame_start=1, frame_end=60, only_selected=False, visual_keying=True, clear_constraints=True,
                      bake_types={"POSE"})

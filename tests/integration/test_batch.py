@@ -1334,9 +1334,8 @@ def test_a_rigify_character_from_a_gltf_file_is_extended_with_all_its_skin(tmp_p
     take = tmp_path / "hero.glb"
     run_bpy(f"""
 import addon_utils, bmesh, sys
-import numpy as np
 sys.path.insert(0, "tests/blender")
-from scenes import key_walk
+from scenes import key_walk, nod_head
 addon_utils.enable("rigify", default_set=True)
 bpy.ops.wm.read_factory_settings(use_empty=True)
 addon_utils.enable("rigify", default_set=True)
@@ -1348,11 +1347,7 @@ for bone in ("thigh_parent.L", "thigh_parent.R", "upper_arm_parent.L", "upper_ar
     rig.pose.bones[bone]["IK_FK"] = 1.0
 key_walk(rig, 60, "torso", ("thigh_fk.L", "thigh_fk.R"), ("shin_fk.L", "shin_fk.R"),
          ("upper_arm_fk.L", "upper_arm_fk.R"), step=0.02)
-head = rig.pose.bones["head"]
-head.rotation_mode = "XYZ"
-for f in range(1, 61):
-    head.rotation_euler = (0.3 * np.sin(2 * np.pi * f / 40), 0.0, 0.0)
-    head.keyframe_insert("rotation_euler", frame=f)
+nod_head(rig)
 deform = [b for b in rig.data.bones if b.use_deform]
 mesh = bpy.data.meshes.new("skin")
 bm = bmesh.new()
