@@ -27,6 +27,14 @@ def rotvec_to_matrix(w: np.ndarray) -> np.ndarray:
     return np.eye(3) + np.sin(theta) / safe * k + (1 - np.cos(theta)) / safe ** 2 * (k @ k)
 
 
+def closing_weights(n: int, blend: int) -> np.ndarray:
+    """Weights ``[n]`` that close a cycle of ``n`` frames (its first frame to its seam) over its end: 0 up to its last
+    ``blend`` frames (at least a tenth of the cycle), then rising by smoothstep to 1 on the seam."""
+    span = max(int(blend), max(1, (n - 1) // 10))
+    s = np.clip((np.arange(n) - (n - 1 - span)) / span, 0.0, 1.0)
+    return s * s * (3.0 - 2.0 * s)
+
+
 def shortest_arc(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Smallest rotations ``[..., 3, 3]`` taking directions ``a`` onto ``b`` ``[..., 3]`` (any length).
 

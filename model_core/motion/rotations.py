@@ -15,6 +15,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .geometry import rotvec_to_matrix
+
 EULER_ORDERS = ("XYZ", "XZY", "YXZ", "YZX", "ZXY", "ZYX")
 _AXIS = {"X": 0, "Y": 1, "Z": 2}
 
@@ -111,6 +113,22 @@ def quat_to_axis_angle(q: np.ndarray) -> np.ndarray:
     angle = 2.0 * np.arctan2(s, q[..., :1])
     axis = np.where(s > 1e-12, q[..., 1:] / np.maximum(s, 1e-12), np.array([0.0, 1.0, 0.0]))
     return np.concatenate([angle, axis], -1)
+
+
+def matrix_to_rotvec(m: np.ndarray) -> np.ndarray:
+    """Rotation matrices ``[..., 3, 3]`` -> rotation vectors ``[..., 3]`` (axis * angle, the angle at most pi)."""
+    a = quat_to_axis_angle(matrix_to_quat(m))
+    return a[..., :1] * a[..., 1:]
+
+
+def closing_turns(rot: np.ndarray, weights: np.ndarray) -> np.ndarray:
+    """Rotations ``rot`` ``[F, ..., 3, 3]`` each turned by its share ``weights`` ``[F]`` of the turn that takes the
+    last onto the first (applied on the left: in the frame they are given in), so that with a weight of 1 on the last
+    they end where they began."""
+    rot = np.asarray(rot, dtype=np.float64)
+    miss = matrix_to_rotvec(rot[0] @ np.swapaxes(rot[-1], -1, -2))
+    share = np.asarray(weights, dtype=np.float64).reshape((-1,) + (1,) * (rot.ndim - 2))
+    return rotvec_to_matrix(share * miss) @ rot
 
 
 def quat_continuous(q: np.ndarray, previous: np.ndarray | None = None) -> np.ndarray:

@@ -24,7 +24,8 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from ..motion.conventions import JOINT_INDEX, JOINTS, PARENT_NAMES
-from ..motion.geometry import nearest_rotation, shortest_arc
+from ..motion.geometry import closing_weights, nearest_rotation, shortest_arc
+from ..motion.rotations import closing_turns
 from .rigs import MMD_SPELLINGS, mmd_name, normalise_name
 from .solve import Anchors, Rig, SolveError, placed as placed_in
 
@@ -521,6 +522,48 @@ def loose_bones(rig: Rig, written: list[str]) -> list[str]:
     follows = hanging_from(rig, set(written))
     index = {n: b for b, n in enumerate(rig.names)}
     return [n for n in written if rig.parents[index[n]] < 0 or not follows[rig.parents[index[n]]]]
+
+
+STILL = 1e-5  # a bone at rest over a cycle: its place moves less than this share of the rig's size, its turn less
+
+
+def closed_cycle(rig: Rig, pose: np.ndarray, travel: np.ndarray, blend: int, kept: np.ndarray, turned: np.ndarray,
+                 placed: np.ndarray, scale: float) -> np.ndarray:
+    """A cycle's poses ``pose`` ``[L + 1, B, 4, 4]`` (armature space: its first frame to its seam) with every bone
+    made to end where it began carried by the cycle's ``travel`` ``[3]``, so that the rig played on cycle after
+    cycle, each location repeated with its offset, stays whole: a baked control rig's keyed bones were set against
+    mechanism bones (Rigify's ``torso``) that travel as far as the take did, not as far as the cycle does, and a
+    location keyed under a bone that turns repeats its offset turned.
+
+    A bone's place misses by as much as it ends off its first place carried by ``travel``: that is spread evenly over
+    the cycle; its turn's miss is eased in over the last ``blend`` frames (at least a tenth of the cycle). The bones
+    of ``kept`` (bool ``[B]``: those the solve wrote, whose cycle it is) keep their poses, as does each bone at rest
+    over the whole cycle with every bone above it (a root that stays put, which keeps its children's offsets the
+    travel; :data:`STILL` of ``scale``, a length of the rig). A bone goes where its parent takes it in what it is not
+    keyed in: its turn unless ``turned`` (bool ``[B]``), its place unless ``placed`` (bool ``[B]``: a location keyed
+    and not connected, which Blender would leave out)."""
+    pose = np.asarray(pose, dtype=np.float64)
+    frames = len(pose) - 1
+    out = pose.copy()
+    ease = closing_weights(frames + 1, blend)
+    ramp = np.arange(frames + 1) / max(frames, 1)
+    still = np.zeros(len(rig.names), dtype=bool)
+    for b, p in enumerate(rig.parents):  # parents first
+        moved = p >= 0 and not still[p] and not kept[p]
+        if kept[b]:
+            continue
+        if (p < 0 or still[p]) and np.abs(pose[:, b, :3, 3] - pose[0, b, :3, 3]).max() < STILL * scale \
+                and np.abs(pose[:, b, :3, :3] - pose[0, b, :3, :3]).max() < STILL:
+            still[b] = True
+            continue
+        target = out[:, p] @ np.linalg.inv(pose[:, p]) @ pose[:, b] if moved else pose[:, b].copy()
+        if turned[b]:
+            own = nearest_rotation(pose[:, b, :3, :3])  # (its scale kept)
+            target[:, :3, :3] = closing_turns(own, ease) @ np.swapaxes(own, -1, -2) @ pose[:, b, :3, :3]
+        if placed[b]:
+            target[:, :3, 3] = pose[:, b, :3, 3] + ramp[:, None] * (pose[0, b, :3, 3] + travel - pose[-1, b, :3, 3])
+        out[:, b] = target
+    return out
 
 
 def visual_local(rig: Rig, pose: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

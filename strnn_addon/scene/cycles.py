@@ -16,12 +16,12 @@ from __future__ import annotations
 
 import numpy as np
 
+from ...model_core.motion.conventions import JOINT_INDEX
+from ...model_core.motion.geometry import closing_weights
+from ...model_core.rig.controls import closed_cycle, visual_local
+from ...model_core.rig.rigs import leg_length
+from ...model_core.rig.solve import anchor_positions, fk
 from . import anim, pipeline, rig_io
-
-
-def _smoothstep(s: np.ndarray) -> np.ndarray:
-    s = np.clip(s, 0.0, 1.0)
-    return s * s * (3.0 - 2.0 * s)
 
 
 def close(fc, frames: np.ndarray, blend: int) -> bool:
@@ -32,9 +32,7 @@ def close(fc, frames: np.ndarray, blend: int) -> bool:
     values = np.array([fc.evaluate(float(f)) for f in frames])
     gap = values[0] - values[-1]
     if not fc.data_path.endswith("location") and abs(gap) > 1e-6 * max(1.0, float(np.abs(values).max())):
-        span = max(int(blend), max(1, (len(frames) - 1) // 10))
-        at = np.arange(len(frames)) - (len(frames) - 1 - span)
-        anim.write_keys(fc, frames, values + gap * _smoothstep(at / span), (-np.inf, np.inf))
+        anim.write_keys(fc, frames, values + gap * closing_weights(len(frames), blend), (-np.inf, np.inf))
         return True
     anim.write_keys(fc, frames[[0, -1]], values[[0, -1]])  # its ends pinned where they are, the keys between kept
     anim.keep_between(fc, frames[0], frames[-1])
@@ -49,10 +47,53 @@ def add_cycles(fc) -> None:
     mod.mute = False
 
 
+def close_baked(clip, action, frames: np.ndarray, blend: int) -> set[str]:
+    """On a control rig an exporter baked (:data:`pipeline.BAKED_BONES`), make every bone of ``action`` end the cycle
+    ``frames`` where it began carried by the cycle's travel (the hips'), its keys set anew where they change
+    (:func:`controls.closed_cycle`): the bones its keys were set against (Rigify's ``torso``) travel as far as the take
+    did, and the carried and loose bones' locations keyed against them would repeat that offset too, their skin
+    drifting off the deform bones cycle after cycle. Such a rig has no constraints: the action's curves are its pose.
+    Returns the data paths keyed anew."""
+    full = rig_io.read_rig(clip.obj)
+    channels = anim.Channels(action, clip.obj.animation_data)
+    chans = rig_io.bone_channels(channels.fcurves)
+    frames = np.asarray(frames, np.float64)
+    loc, rot, size = rig_io.read_local_pose(clip.obj, full, channels.fcurves, frames)
+    pose = fk(full, loc, rot, size)
+    index = {n: b for b, n in enumerate(full.names)}
+    hips = index[clip.rig.names[int(clip.anchors.bone[JOINT_INDEX["hips"]])]]
+    travel = pose[-1, hips, :3, 3] - pose[0, hips, :3, 3]
+    kept = np.isin(full.names, [clip.rig.names[b] for b in pipeline.written_bones(clip)])
+    props = [rig_io.rotation_property(clip.obj.pose.bones[n]) for n in full.names]
+    turned = np.array([(n, props[b]) in chans for b, n in enumerate(full.names)])
+    placed = np.array([(n, "location") in chans for n in full.names]) & ~full.connected
+    leg = leg_length(anchor_positions(clip.rig, clip.anchors, clip.rig.rest[None]))
+    out = closed_cycle(full, pose, travel, blend, kept, turned, placed, leg)
+    new_loc, new_rot = visual_local(full, out)
+    paths = set()
+    for b, name in enumerate(full.names):
+        if np.abs(new_rot[:, b] - rot[:, b]).max() < 1e-9 and np.abs(new_loc[:, b] - loc[:, b]).max() < 1e-9 * leg:
+            continue  # nor it nor anything above it moved
+        pb = clip.obj.pose.bones[name]
+        keys = []
+        if turned[b]:
+            previous = rig_io.rotation_values(chans, pb, frames[:1])[0]
+            keys.append(pipeline.encode_rotation(pb.rotation_mode, new_rot[:, b], previous))
+        if placed[b]:
+            keys.append(("location", new_loc[:, b]))
+        for prop, values in keys:
+            for i, fc in chans[(name, prop)].items():
+                anim.write_keys(fc, frames, values[:, i], (frames[0], frames[-1]))
+            paths.add(pipeline.bone_path(name, prop))
+    return paths
+
+
 def make_cyclic(clip, action, frames: np.ndarray, blend: int, written: set[str]) -> int:
     """Make ``action`` (the new action of ``clip``'s armature, keyed on ``frames`` ``[L + 1]``: the cycle's first
     frame to its seam) cyclic (see the module); the curves in ``written`` (data paths) hold the cycle already. Returns
     how many other curves had to be closed."""
+    if clip.controls is not None and clip.controls.name == pipeline.BAKED_BONES:
+        written = written | close_baked(clip, action, frames, blend)
     channels = anim.Channels(action, clip.obj.animation_data)
     closed = 0
     for fc in list(channels.fcurves):

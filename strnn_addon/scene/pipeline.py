@@ -240,7 +240,7 @@ def check_not_driven(obj, bones: list[str], moved: str = "") -> None:
     driven = {(d.data_path, d.array_index) for d in ad.drivers} if ad else set()
     for name in bones:
         props = (rig_io.rotation_property(obj.pose.bones[name]),) + (("location",) if name == moved else ())
-        hit = next(((prop, i) for prop in props for p, i in sorted(driven) if p == _bone_path(name, prop)), None)
+        hit = next(((prop, i) for prop in props for p, i in sorted(driven) if p == bone_path(name, prop)), None)
         if hit is not None:
             raise UserError(f"Bone {name!r} has a driver on {hit[0]}[{hit[1]}], so keys written on "
                             "it would not show: remove the driver, or set the bones the animator keys in STRNN > "
@@ -460,15 +460,15 @@ def written_paths(clip: Clip, root: str | None = None) -> set[str]:
     """The F-curve data paths :func:`write_pose` keys: each written bone's rotation and the location of the bone
     the hips' place is keyed on (:func:`located`), and a ``root`` bone's rotation and location; on a control rig its
     controls' rotations, and the locations of those that move."""
-    carried = ({_bone_path(root, rig_io.rotation_property(clip.obj.pose.bones[root])), _bone_path(root, "location")}
+    carried = ({bone_path(root, rig_io.rotation_property(clip.obj.pose.bones[root])), bone_path(root, "location")}
                if root is not None else set())
     if clip.controls is not None:
-        return carried | {_bone_path(c.bone, prop) for c in keyed_controls(clip)
+        return carried | {bone_path(c.bone, prop) for c in keyed_controls(clip)
                           for prop in (rig_io.rotation_property(clip.obj.pose.bones[c.bone]),)
                           + (("location",) if c.location else ())}
-    paths = {_bone_path(clip.rig.names[b], rig_io.rotation_property(clip.obj.pose.bones[clip.rig.names[b]]))
+    paths = {bone_path(clip.rig.names[b], rig_io.rotation_property(clip.obj.pose.bones[clip.rig.names[b]]))
              for b in written_bones(clip)}
-    return carried | paths | {_bone_path(clip.rig.names[located(clip.rig, clip.anchors)], "location")}
+    return carried | paths | {bone_path(clip.rig.names[located(clip.rig, clip.anchors)], "location")}
 
 
 # Keys on twos (threes, ...) held by Constant interpolation, the stepped look of hand-drawn-style animation: at least
@@ -651,7 +651,7 @@ def write_controls(context, clip: Clip, channels: anim.Channels, frames: np.ndar
     # where NLA strips show through, a channel the action lacks takes the pose as played on its other frames: read
     # before the bake turns any bone, and only if such a channel will be made
     lacking = clip.layered and any(
-        channels.find(_bone_path(c.bone, prop), 0) is None
+        channels.find(bone_path(c.bone, prop), 0) is None
         for c in chosen for prop in (rig_io.rotation_property(clip.obj.pose.bones[c.bone]),)
         + (("location",) if c.location else ()))
     played = _played(context, clip, frames) if lacking else None
@@ -669,7 +669,7 @@ def write_controls(context, clip: Clip, channels: anim.Channels, frames: np.ndar
         pb = clip.obj.pose.bones[c.bone]
         prop, values = encode_rotation(pb.rotation_mode, baked.rot[:, k], previous.get(pb.name), follows)
         fill = None
-        if played is not None and channels.find(_bone_path(c.bone, prop), 0) is None:
+        if played is not None and channels.find(bone_path(c.bone, prop), 0) is None:
             at, full, loc_p, rot_p = played
             fill = (at, encode_rotation(pb.rotation_mode, rot_p[:, full.index(c.bone)], None)[1])
         _key_property(clip, channels, pb, prop, frames, values, replace, fill, interpolation)
@@ -771,7 +771,7 @@ def _played(context, clip: Clip, frames: np.ndarray) -> tuple[np.ndarray, list[s
     return at, full.names, loc, rot
 
 
-def _bone_path(bone: str, prop: str) -> str:
+def bone_path(bone: str, prop: str) -> str:
     """The F-curve data path of a pose bone's property."""
     return f'pose.bones["{bpy.utils.escape_identifier(bone)}"].{prop}'
 
@@ -784,7 +784,7 @@ def _key_property(clip: Clip, channels: anim.Channels, pb, prop: str, frames: np
     ``fill`` (frames, values ``[G, n]``: where NLA strips show through the action), those values on those frames,
     so that the new channel keeps the pose the strips play there instead of hiding them. ``interpolation``: that of
     the keys of a channel made here (a channel the action has keeps that of its last key)."""
-    path = _bone_path(pb.name, prop)
+    path = bone_path(pb.name, prop)
     static = np.asarray(getattr(pb, prop), dtype=np.float64)
     edges = np.array([f for f in (frames[0] - 1, frames[-1] + 1) if clip.first <= f <= clip.last])
     for i in range(values.shape[1]):

@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ...model_core.motion.geometry import closing_weights
+from ...model_core.motion.rotations import closing_turns
 from ...model_core.ops.footlock import SETTLE_PASSES
 from ...model_core.ops.loop import least_cycle
 from .. import engine_bridge
@@ -56,6 +58,8 @@ def loop_steps(context, obj, *, frame_start: int | None = None, frame_end: int |
     if root is not None:  # a game rig's root carries the travel: carried with the cycle (in place: it stays)
         carry = (root.bone, np.linalg.inv(pipeline.world_at(context, clip, written)) @ root.track(cycle, 1, fps))
     loc, rot, joints = pipeline.solve_frames(context, clip, written, cycle, carry)
+    # a turn the joints leave free (a head's nod, taken from the take) ends the cycle where it began, as the rest does
+    rot = closing_turns(rot, closing_weights(len(written), loop.blend))
     record = made_by("Make Loop", clip, engine_bridge.model_used(prefs(context)), key_step=step,
                      frame_start=a, frame_end=b, blend=float(blend), match=match, in_place=in_place,
                      foot_lock=foot_lock)

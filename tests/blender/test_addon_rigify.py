@@ -527,13 +527,10 @@ def world_bones(obj, names: list[str], frames) -> np.ndarray:
     return np.array(out)
 
 
-@pytest.fixture
-def baked(rig, addon, tmp_path):
-    """The generated rig walking, its head nodding, with a mesh weighted to every deform bone, exported to FBX with
-    every bone (Blender's exporter bakes each bone and drops the constraints) and imported again, active: it keeps
-    Rigify's control names, but they drive nothing, its DEF- thighs hang from ORG-spine and its face from MCH- and
-    control bones."""
-    nod_head(rig)
+def through_fbx(rig, addon, folder):
+    """``rig`` with a mesh weighted to every deform bone, exported to FBX with every bone (Blender's exporter bakes
+    each bone and drops the constraints) and imported again, active: it keeps Rigify's control names, but they drive
+    nothing, its DEF- thighs hang from ORG-spine and its face from MCH- and control bones."""
     bpy.context.scene.frame_start, bpy.context.scene.frame_end = 1, 60
     bpy.ops.mesh.primitive_cube_add(size=0.3, location=(0, 0, 1))
     body = bpy.context.active_object
@@ -543,7 +540,7 @@ def baked(rig, addon, tmp_path):
             body.vertex_groups.new(name=bone.name).add(range(len(body.data.vertices)), 0.1, "REPLACE")
     for obj in bpy.context.view_layer.objects:
         obj.select_set(obj in (rig, body))
-    path = tmp_path / "baked.fbx"
+    path = folder / "baked.fbx"
     bpy.ops.export_scene.fbx(filepath=str(path), use_selection=True, add_leaf_bones=False,
                              bake_anim_use_all_actions=False, bake_anim_use_nla_strips=False)
     bpy.ops.wm.read_homefile(use_empty=True)
@@ -557,6 +554,13 @@ def baked(rig, addon, tmp_path):
     listed = addon_module(addon, "strnn_addon.scene.controls").listed
     assert listed(baked) == (None, [])  # no preset: its controls are bones like any other
     return baked
+
+
+@pytest.fixture
+def baked(rig, addon, tmp_path):
+    """The generated rig walking, its head nodding, through FBX (:func:`through_fbx`)."""
+    nod_head(rig)
+    return through_fbx(rig, addon, tmp_path)
 
 
 def test_a_rigify_rig_baked_by_an_fbx_exporter_is_keyed_on_its_deform_bones_with_all_its_skin(baked, addon, capfd):
@@ -627,6 +631,44 @@ def test_motion_moved_onto_a_rigify_rig_an_exporter_baked_moves_all_its_skin(bak
     at = np.clip(frames, 1, own_last) - 1
     was = np.linalg.inv(own[at, head])[:, None] @ own[at][:, face]
     assert np.abs(on_head - was).max() < 1e-3
+
+
+def test_a_loop_made_on_a_rigify_rig_an_exporter_baked_plays_on_whole(rig, addon, tmp_path):
+    """Make Loop on a rig an exporter baked (:func:`through_fbx`), its walk leaning further forward as it goes and its
+    head nodding out of step with it, played on past its cycle as Blender repeats it: each cycle is the first
+    carried by the hips' travel, every bone of the skin with it. Keys on the carried and loose bones were set against
+    mechanism bones (Rigify's ``torso``) that lean and travel as the take did, not as the cycle does, and every
+    location repeated with its offset: the skin drifted off the body cycle after cycle (the real walker's face 8 mm
+    further off its head each cycle); and the head's nod, which its joints leave free, came round to the take's at
+    the seam, not to the cycle's start (a 0.34 jump each cycle)."""
+    from mathutils import Euler
+
+    nod_head(rig)
+    torso = rig.pose.bones["torso"]
+    for f in range(1, 61):
+        torso.rotation_quaternion = Euler((0.004 * f, 0.05 * np.sin(2 * np.pi * f / 30.0), 0)).to_quaternion()
+        torso.keyframe_insert("rotation_quaternion", frame=f)
+    baked = through_fbx(rig, addon, tmp_path)
+    skin = sorted(g.name for g in next(o for o in bpy.data.objects if o.type == "MESH").vertex_groups)
+    assert bpy.ops.strnn.make_loop() == {"FINISHED"}
+    new = action_of(baked)
+    cycle = new["strnn"]["cycle"]
+    first, length = cycle["first"], cycle["frames"]
+    assert new.use_cyclic and new["strnn"]["controls"]["set"] == "baked bones"
+    mats = world_bones(baked, skin, range(first, first + 3 * length + 1))
+    hips = skin.index("DEF-spine")
+    travel = mats[length, hips, :3, 3] - mats[0, hips, :3, 3]
+    assert np.linalg.norm(travel[:2]) > 0.2  # it walks
+    one = mats[:length + 1]
+    for k in (1, 2):
+        again = mats[k * length:(k + 1) * length + 1].copy()
+        again[..., :3, 3] -= k * travel
+        place = np.linalg.norm(again[..., :3, 3] - one[..., :3, 3], axis=-1)
+        turn = np.abs(again[..., :3, :3] - one[..., :3, :3]).max(axis=(-2, -1))
+        at = np.unravel_index(int(place.argmax()), place.shape)
+        assert place.max() < 2e-3, (k, skin[at[1]], first + at[0], float(place.max()))
+        at = np.unravel_index(int(turn.argmax()), turn.shape)
+        assert turn.max() < 1e-2, (k, skin[at[1]], first + at[0], float(turn.max()))
 
 
 def test_vertex_groups_that_weigh_nothing_are_not_a_baked_rigs_skin(baked, addon):

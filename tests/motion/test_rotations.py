@@ -67,3 +67,16 @@ def test_euler_continuity_unwraps(order):
     e = R.euler_continuous(R.matrix_to_euler(m, order), order)
     assert np.abs(np.diff(e, axis=0)).max() < 0.5
     assert np.allclose(R.euler_to_matrix(e, order), m, atol=1e-9)
+
+
+def test_closing_turns_bring_the_last_rotation_onto_the_first_by_the_shares_given():
+    """A cycle's rotations (two bones) that end turned away from their start: turned by their shares of the miss,
+    the untouched frames stay, the last lands on the first, and half a share turns half the angle."""
+    rng = np.random.default_rng(5)
+    rot = R.euler_to_matrix(rng.normal(0.0, 0.8, (9, 2, 3)), "XYZ")
+    weights = np.array([0, 0, 0, 0, 0, 0, 0.5, 0.9, 1.0])
+    out = R.closing_turns(rot, weights)
+    assert np.allclose(out[:6], rot[:6]) and np.allclose(out[-1], rot[0], atol=1e-9)
+    full = np.linalg.norm(R.matrix_to_rotvec(rot[0] @ np.swapaxes(rot[-1], -1, -2)), axis=-1)
+    half = np.linalg.norm(R.matrix_to_rotvec(out[6] @ np.swapaxes(rot[6], -1, -2)), axis=-1)
+    assert np.allclose(half, 0.5 * full) and (full > 0.1).all()

@@ -15,9 +15,11 @@ from model_core.rig.controls import (
     SwitchRow,
     as_rows,
     carried_bones,
+    closed_cycle,
     from_rows,
     loose_bones,
     preset_for,
+    visual_local,
 )
 from model_core.rig.rigs import MMD_SPELLINGS, mmd_name
 from model_core.rig.solve import Rig
@@ -258,3 +260,36 @@ def test_a_carried_bone_connected_to_its_parent_has_that_parent_carried_with_the
     pose = _take(rig, {"ORG-neck": "DEF-neck", "ORG-head": "DEF-head", "DEF-face": "DEF-head"})
     assert named(rig, carried_bones(rig, ["DEF-spine", "DEF-neck", "DEF-head"], {"DEF-face"}, pose, 0.9)) == {
         "ORG-neck": "DEF-neck", "ORG-head": "DEF-head"}
+
+
+def test_a_cycle_on_a_baked_control_rig_ends_where_it_began_carried_by_its_travel():
+    """Make Loop on a baked control rig: the written bones hold the cycle (their seam their first pose carried by the
+    travel), but the mechanism bones they hang from (ORG-spine, ORG-head) lean and travel as the take did. Closed,
+    every bone ends the cycle on its first pose carried by the travel, and every local transform below a bone that
+    moves repeats as it is, so that repeating each location with its offset carries the whole rig by the travel
+    alone; the written bones and the root that stays put keep their poses, and the first frame is as it was."""
+    rig = _baked_rig()
+    index = {n: b for b, n in enumerate(rig.names)}
+    pose = _take(rig, {}, frames=21)
+    pose[:, index["root"]] = rig.rest[index["root"]]  # it stays put
+    travel = np.array([0.0, -0.6, 0.02])
+    kept = np.isin(rig.names, WRITTEN)
+    pose[-1, kept] = pose[0, kept]
+    pose[-1, kept, :3, 3] += travel
+    lid, mch = index["DEF-lid"], index["MCH-lid"]  # connected: its head where its parent holds it
+    pose[:, lid, :3, 3] = (pose[:, mch] @ np.linalg.inv(rig.rest[mch]) @ rig.rest[lid])[:, :3, 3]
+    turned = np.ones(len(rig.names), bool)
+    placed = ~rig.connected
+    out = closed_cycle(rig, pose, travel, 4, kept, turned, placed, 1.0)
+    assert np.allclose(out[:, kept], pose[:, kept]) and np.allclose(out[:, index["root"]], pose[:, index["root"]])
+    assert np.allclose(out[0], pose[0])
+    assert np.allclose(out[-1, :, :3, :3], out[0, :, :3, :3], atol=1e-9)
+    assert np.allclose(out[-1, :, :3, 3], out[0, :, :3, 3] + travel * (np.arange(len(rig.names)) != 0)[:, None])
+    loc, rot = visual_local(rig, out)
+    below = rig.parents > 0  # under a bone that moves: its local transform repeats as it is
+    assert np.allclose(loc[-1, below], loc[0, below], atol=1e-9) and np.allclose(rot[-1], rot[0], atol=1e-9)
+    # the turn is eased in over the end: untouched before the last frames; the place's miss spread over the cycle
+    spine = index["ORG-spine"]
+    assert np.allclose(out[:15, spine, :3, :3], pose[:15, spine, :3, :3])
+    miss = pose[0, spine, :3, 3] + travel - pose[-1, spine, :3, 3]
+    assert np.allclose(out[10, spine, :3, 3] - pose[10, spine, :3, 3], 0.5 * miss)
