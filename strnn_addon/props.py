@@ -22,7 +22,7 @@ from ..model_core.ops import options as opts
 from . import engine_bridge
 
 ADDON_ID = __package__.rpartition(".")[0]  # the extension's module, e.g. bl_ext.user_default.strnn_motion
-TAIL_JOINTS = ("l_toe", "r_toe", "l_fingertip", "r_fingertip")
+TAIL_JOINTS = ("hips", "l_toe", "r_toe", "l_fingertip", "r_fingertip")  # an MMD model's hips: its lower body's tail
 
 
 # ------------------------------------------------------------------ options

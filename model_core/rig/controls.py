@@ -445,7 +445,8 @@ def carried_bones(rig: Rig, written: list[str], skinned: set[str], pose: np.ndar
     left behind by keys on the ``written`` bones alone: a baked Rigify rig's face, pelvis and shoulders hang from its
     ORG-, MCH- and control bones, which no longer follow anything. Over the take's poses ``pose`` ``[S, B, 4, 4]``
     (armature space; ``scale``: a length of the rig, its leg), each skinned bone that hangs neither from a written
-    bone nor from a carried one it moved with (:data:`CARRY_TIE`) goes with the written bone it moved with, carried
+    bone (through skinned bones alone) nor from a carried one it moved with (:data:`CARRY_TIE`) goes with the
+    written bone it moved with, carried
     by the highest bone above it that moved with that one too, as did every skinned bone below it that hangs from no
     written bone, and has no written bone below it (Rigify's ORG-spine.006 for the whole face); where that bone is
     connected to its parent (Blender keeps its head on the parent's tail), the parent too, with the bone it moved
@@ -464,7 +465,13 @@ def carried_bones(rig: Rig, written: list[str], skinned: set[str], pose: np.ndar
         if p >= 0:
             below_written[p] |= below_written[b]
             skin_below[p].extend(skin_below[b])
-    under_written = hanging_from(rig, set(written))
+    # a skinned bone follows a written bone above it through skinned bones alone: one that hangs from it through a
+    # bone of no skin (a baked MMD model's FK leg, which its IK turned as the deform copy beside it) is left behind
+    under_written = np.zeros(n, dtype=bool)
+    for b, name in enumerate(rig.names):  # parents first
+        p = int(rig.parents[b])
+        under_written[b] = name in written or (p >= 0 and bool(under_written[p])
+                                               and (rig.names[p] in written or rig.names[p] in skinned))
     heads = rig.rest[:, :3, 3]
     a = heads[w]
     seg = np.einsum("bij,bj->bi", rig.rest[w], np.c_[rig.tails[w], np.ones(len(w))])[:, :3] - a

@@ -52,18 +52,20 @@ def mmd_name(word: str, side: str | None, spelling: str) -> str:
     return word if side is None else spelling.format(w=word, S=side, side="左" if side == "L" else "右")
 
 
-def _mmd_family(spellings: tuple[str, ...]) -> dict[str, list[str]]:
+def _mmd_family(spellings: tuple[str, ...], legs: str = "") -> dict[str, list[str]]:
     """An MMD family's candidates in ``spellings``: the hips at the lower body's tail, the toe at the ankle's (the
-    ankle points at the toe's tip), the finger tip at the middle finger's last bone's tail where it is named."""
+    ankle points at the toe's tip), the finger tip at the middle finger's last bone's tail where it is named;
+    ``legs``: the legs' bones' suffix (``D``: the deform copies, ``足D``, the semi-standard toe ``足先EX`` first)."""
     torso = {"hips": [("下半身", "_end")], "spine": [("上半身", "")], "spine1": [("上半身2", "")],
              "neck": [("首", "")], "head": [("頭", "")]}
     out = {joint: [mmd_name(w, None, sp) + end for w, end in words for sp in spellings]
            for joint, words in torso.items()}
-    limbs = {"upleg": ("足", ""), "knee": ("ひざ", ""), "foot": ("足首", ""), "toe": ("足首", "_end"),
-             "arm": ("腕", ""), "elbow": ("ひじ", ""), "wrist": ("手首", "")}
+    limbs = {"upleg": [("足" + legs, "")], "knee": [("ひざ" + legs, "")], "foot": [("足首" + legs, "")],
+             "toe": [("足先EX", "")] * bool(legs) + [("足首" + legs, "_end")],
+             "arm": [("腕", "")], "elbow": [("ひじ", "")], "wrist": [("手首", "")]}
     for s, side in (("l", "L"), ("r", "R")):
-        out.update({f"{s}_{joint}": [mmd_name(w, side, sp) + end for sp in spellings]
-                    for joint, (w, end) in limbs.items()})
+        out.update({f"{s}_{joint}": [mmd_name(w, side, sp) + end for w, end in words for sp in spellings]
+                    for joint, words in limbs.items()})
         out[f"{s}_fingertip"] = [mmd_name("中指３", side, sp) + "_end" for sp in spellings if sp != "english"]
     return out
 
@@ -146,6 +148,9 @@ RIG_FAMILIES: dict[str, dict[str, list[str]]] = {
     # the bones to: read only where every body joint is found (``bonemap.WHOLE_ONLY``), as other rigs' ``leg`` is the
     # shin.
     "mmd_english": _mmd_family(("english",)),
+    # The same with the legs on their deform copies (``足D``, and the semi-standard toe ``足先EX``): a model whose
+    # constraints an exporter baked (FBX, glTF), its skin on those copies, which no longer follow the legs.
+    "mmd_deform": _mmd_family(("{w}.{S}", "{w}_{S}", "{side}{w}"), "D"),
     # The Second Life (and OpenSimulator) avatar skeleton, Bento's included: ``mPelvis`` > ``mTorso`` > ``mChest``,
     # ``mHipLeft`` > ``mKneeLeft`` > ``mAnkleLeft`` > ``mFootLeft`` (the ball of the foot) > ``mToeLeft``;
     # ``mCollarLeft`` > ``mShoulderLeft`` (the upper arm) > ``mElbowLeft`` > ``mWristLeft``.

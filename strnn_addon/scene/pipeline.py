@@ -163,7 +163,7 @@ def check_evaluated(context, obj, fcurves, found: ControlSet | None) -> None:
 
 # Families of control rigs whose deform bones hang from other bones than each other (Rigify's DEF- limbs from its
 # ORG- bones; Auto-Rig Pro's): once an exporter has baked them, no bone map of theirs fits the hierarchy.
-BAKED_CONTROL_RIGS = {"rigify", "rigify_deform", "auto_rig_pro"}
+BAKED_CONTROL_RIGS = {"rigify", "rigify_deform", "auto_rig_pro", "mmd", "mmd_english", "mmd_deform"}
 # The controls of such a rig: its mapped deform bones, each keyed by the visual bake on the joint skeleton.
 BAKED_BONES = "baked bones"
 
@@ -283,12 +283,16 @@ def joint_positions(context, clip: Clip, frames: np.ndarray) -> np.ndarray:
     read :data:`CHUNK_FRAMES` frames at a time."""
     frames = np.asarray(frames, dtype=np.float64)
     evaluated = rig_io.needs_scene_evaluation(clip.obj, clip.channels.fcurves)
+    # a joint skeleton (a control rig's) is not the armature's hierarchy: its bones' poses are read off the whole rig
+    # (a baked MMD model's lower body hangs from the groove and the centre, which carry its travel)
+    full = rig_io.read_rig(clip.obj) if clip.controls is not None and not evaluated else clip.rig
+    among = [full.names.index(n) for n in clip.rig.names] if full is not clip.rig else slice(None)
     out, cache = np.empty((len(frames), len(JOINTS), 3)), rig_io.KeyCache()
     for part in chunks(len(frames)):
         if evaluated:
             pose, world = rig_io.pose_matrices_evaluated(context, clip.obj, clip.rig, frames[part])
         else:
-            pose = rig_io.pose_matrices_fast(clip.obj, clip.rig, clip.channels.fcurves, frames[part], cache)
+            pose = rig_io.pose_matrices_fast(clip.obj, full, clip.channels.fcurves, frames[part], cache)[:, among]
             world = np.broadcast_to(clip.world, (len(pose), 4, 4))
         local = anchor_positions(clip.rig, clip.anchors, pose)
         out[part] = np.einsum("fij,fkj->fki", world[:, :3, :3], local) + world[:, None, :3, 3]
@@ -414,8 +418,9 @@ def world_matrices(context, obj, names: list[str], frames: np.ndarray) -> np.nda
 def moving_root(context, clip: Clip, frames: np.ndarray, at: float) -> Root | None:
     """The bone above the hips that carries the action's travel over the ground, as a game rig's root does: the
     nearest one the action keys whose head it moves over the ground (the world's X and Y: a rise is no travel) by a
-    tenth of a leg or more over scene ``frames`` (the clip read), with its world matrix on frame ``at``; None where
-    there is none."""
+    tenth of a leg or more over scene ``frames`` (the clip read), as far against the next such bone above it (a baked
+    MMD model's groove only rides the centre, which carries the travel), with its world matrix on frame ``at``; None
+    where there is none."""
     if clip.channels is None:
         return None
     keyed = {bone for bone, prop in rig_io.bone_channels(clip.channels.fcurves) if prop == "location"}
@@ -428,8 +433,13 @@ def moving_root(context, clip: Clip, frames: np.ndarray, at: float) -> Root | No
     heads = read[:-1, :, :2, 3]
     leg = leg_length(joint_positions(context, clip, sample[:1]))
     for k, name in enumerate(above):
-        if np.linalg.norm(heads[:, k] - heads[:1, k], axis=-1).max() >= ROOT_MOTION_SHARE * leg:
-            return Root(name, read[-1, k])
+        if np.linalg.norm(heads[:, k] - heads[:1, k], axis=-1).max() < ROOT_MOTION_SHARE * leg:
+            continue
+        if k + 1 < len(above):  # where it goes, against the bone above it
+            rel = (np.linalg.inv(read[:-1, k + 1]) @ read[:-1, k])[:, :3, 3] * world_scale(clip)
+            if np.linalg.norm(rel - rel[:1], axis=-1).max() < ROOT_MOTION_SHARE * leg:
+                continue
+        return Root(name, read[-1, k])
     return None
 
 

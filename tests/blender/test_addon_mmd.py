@@ -14,7 +14,16 @@ import math
 import bpy
 import numpy as np
 import pytest
-from scenes import _mid, _rest_joints, action_of, build_armature, evaluated_joints, fcurves_of, find_mocap
+from scenes import (
+    _mid,
+    _rest_joints,
+    action_of,
+    addon_module,
+    build_armature,
+    evaluated_joints,
+    fcurves_of,
+    find_mocap,
+)
 
 SIDES = "LR"
 # Canonical joint -> (bone, at its tail) of the model, as the bone map reads it.
@@ -180,6 +189,8 @@ def test_the_bone_map_reads_an_mmd_model_with_its_hips_at_the_lower_bodys_tail(a
     assert m.family == "mmd"
     assert (m.hips, m.spine, m.spine1, m.neck, m.l_upleg, m.r_knee, m.l_foot, m.r_arm, m.l_wrist) == (
         "下半身", "上半身", "上半身2", "首", "足.L", "ひざ.R", "足首.L", "腕.R", "手首.L")
+    assert m.hips_tail  # kept as found (it was not: every operation after Auto Map put the hips at the waist)
+    assert addon_module(addon, "strnn_addon.scene.mapping").stored_map(obj)["hips"] == ("下半身", True)
 
 
 def test_controls_from_preset_fills_the_mmd_controls_with_the_leg_ik_keyed_always(addon):
@@ -397,3 +408,69 @@ def test_follow_curve_after_a_walk_keeps_the_models_chest_and_twist_bones(addon,
     record = action_of(obj)["strnn"]["controls"].to_dict()
     assert record["max_error_cm"] < 1.0, record
     assert off and max(off) < 0.01, off  # metres: every joint where the walk has it
+
+
+def test_a_model_an_exporter_baked_walks_on_with_its_deform_legs(addon, tmp_path, capfd):
+    """A walking model with a mesh skinned as MMD models are (the legs on their deform copies ``足D``, not on the
+    legs the IK turns), through Blender's FBX exporter and importer, which bakes every bone and drops the
+    constraints: the copies no longer follow the legs, and the upper and lower bodies hang side by side from the
+    groove. It was refused (the bone map did not fit the hierarchy); then, keyed on its deform bones, it was read
+    without the centre that carries it (its joints walked in place, and the new frames stood at the origin). Now
+    Extend walks on with all its skin, the centre carrying the travel, the feet on its floor."""
+    obj, source, moved, floor = moved_walk(addon, tmp_path)
+    bpy.data.objects.remove(source)
+    bpy.context.scene.frame_start, bpy.context.scene.frame_end = 1, int(moved.frame_range[1])
+    bpy.ops.mesh.primitive_cube_add(size=0.3, location=(0, 0, 1))
+    body = bpy.context.active_object
+    body.modifiers.new("Armature", "ARMATURE").object = obj
+    unskinned = {"全ての親", "センター", "グルーブ"}
+    unskinned |= {f"{b}.{S}" for b in LEG + ("足ＩＫ", "つま先ＩＫ") for S in SIDES}
+    for bone in obj.data.bones:
+        if bone.name not in unskinned:
+            body.vertex_groups.new(name=bone.name).add(range(len(body.data.vertices)), 0.1, "REPLACE")
+    for o in bpy.context.view_layer.objects:
+        o.select_set(o in (obj, body))
+    path = tmp_path / "baked.fbx"  # with the exporter's leaf bones, which keep the tails of the bones at the ends
+    bpy.ops.export_scene.fbx(filepath=str(path), use_selection=True, bake_anim_use_all_actions=False,
+                             bake_anim_use_nla_strips=False)
+    bpy.ops.wm.read_homefile(use_empty=True)
+    bpy.ops.import_scene.fbx(filepath=str(path))
+    baked = next(o for o in bpy.data.objects if o.type == "ARMATURE")
+    assert not any(len(pb.constraints) for pb in baked.pose.bones) and "足首D.L_end" in baked.data.bones
+    for o in bpy.context.view_layer.objects:
+        o.select_set(o is baked)
+    bpy.context.view_layer.objects.active = baked
+    capfd.readouterr()
+    assert bpy.ops.strnn.auto_map() == {"FINISHED"}
+    assert "(mmd_deform rig); it is a control rig an exporter baked" in capfd.readouterr().out
+    last = int(action_of(baked).frame_range[1])
+    skin = sorted(g.name for g in next(o for o in bpy.data.objects if o.type == "MESH").vertex_groups)
+    hips = skin.index("下半身")
+    took = world_bones(baked, skin, range(last - 40, last + 1))
+    assert bpy.ops.strnn.extend_clip(frames=40) == {"FINISHED"}
+    new = action_of(baked)
+    record = new["strnn"].to_dict()
+    assert record["controls"]["set"] == "baked bones" and record["root_motion"] == {"bone": "センター"}
+    got = world_bones(baked, skin, range(last, last + 41))
+    travel = np.linalg.norm(got[-1, :, :2, 3] - got[0, :, :2, 3], axis=-1)
+    take = np.linalg.norm(took[-1, hips, :2, 3] - took[0, hips, :2, 3])  # over as many frames
+    assert 0.5 * take < travel[hips] < 2.0 * take, (travel[hips], take)  # it walks on, from where it was
+    assert np.linalg.norm(got[0, hips, :2, 3] - took[-1, hips, :2, 3]) < 0.05
+    left = {n: round(float(t), 3) for n, t in zip(skin, travel) if t < 0.6 * travel[hips]}
+    assert not left, f"left behind: {left}"
+    for S in SIDES:  # the deform thighs stay on the lower body
+        gap = np.linalg.norm(got[:, skin.index(f"足D.{S}"), :3, 3] - got[:, hips, :3, 3], axis=-1)
+        assert np.ptp(gap) < 0.01
+    def feet(mats):  # the lowest ankle or toe
+        return np.array([mats[:, skin.index(f"{b}.{S}"), 2, 3] for b in ("足首D", "つま先") for S in SIDES]).min(0)
+
+    assert np.percentile(feet(got), 5) > np.percentile(feet(took), 5) - 0.02 and feet(got).min() < floor + 0.05
+
+
+def world_bones(obj, names, frames) -> np.ndarray:
+    """World matrices ``[F, len(names), 4, 4]`` of ``obj``'s pose bones ``names`` as Blender plays ``frames``."""
+    out = []
+    for f in frames:
+        bpy.context.scene.frame_set(int(f))
+        out.append([np.array(obj.matrix_world) @ np.array(obj.pose.bones[n].matrix) for n in names])
+    return np.array(out)

@@ -296,6 +296,28 @@ def test_an_mmd_model_maps_its_names_with_the_hips_at_the_lower_bodys_tail(spell
     assert mapping["r_fingertip"] == (sided("中指３" if spelling != "english" else "手首", "R"), True)
 
 
+def test_a_baked_mmd_model_whose_skin_is_on_the_deform_legs_is_mapped_on_them():
+    """An MMD model an exporter baked has no constraints: its deform copies of the legs (``足D``, with the
+    semi-standard toe ``足先EX`` where it has one), on which its skin is weighted, no longer follow the legs the IK
+    turned. Told the skin, the map takes them; told nothing (a model as mmd_tools imports it), the legs."""
+    names = ["全ての親", "センター", "グルーブ", "下半身", "上半身", "上半身2", "首", "頭"]
+    parents = [-1, 0, 1, 2, 2, 4, 5, 6]
+    for s in "LR":
+        for word, parent in (("足", "下半身"), ("ひざ", "足"), ("足首", "ひざ"), ("つま先", "足首"),
+                             ("足D", "下半身"), ("ひざD", "足D"), ("足首D", "ひざD"), ("足先EX", "足首D"),
+                             ("肩", "上半身2"), ("腕", "肩"), ("ひじ", "腕"), ("手首", "ひじ")):
+            names.append(f"{word}.{s}")
+            parents.append(names.index(parent if parent in names else f"{parent}.{s}"))
+    skin = {n for n in names if n not in ("全ての親", "センター", "グルーブ") and not n.startswith(("足.", "ひざ.",
+                                                                                            "足首.", "つま先."))}
+    family, mapping = auto_map(names, parents, skin)
+    assert family == "mmd_deform" and not missing(mapping), mapping
+    assert [mapping[j] for j in ("hips", "l_upleg", "r_knee", "l_foot", "r_toe")] == [
+        ("下半身", True), ("足D.L", False), ("ひざD.R", False), ("足首D.L", False), ("足先EX.R", False)]
+    family, mapping = auto_map(names, parents)
+    assert family == "mmd" and mapping["l_upleg"] == ("足.L", False) and mapping["r_toe"] == ("足首.R", True)
+
+
 def test_a_rig_whose_leg_is_its_shin_is_not_read_as_an_mmd_model():
     """``leg_L`` is an MMD model's thigh but many rigs' shin: without the rest of an MMD model's English names the
     bone map reads it by words, as the shin."""

@@ -293,3 +293,21 @@ def test_a_cycle_on_a_baked_control_rig_ends_where_it_began_carried_by_its_trave
     assert np.allclose(out[:15, spine, :3, :3], pose[:15, spine, :3, :3])
     miss = pose[0, spine, :3, 3] + travel - pose[-1, spine, :3, 3]
     assert np.allclose(out[10, spine, :3, 3] - pose[10, spine, :3, 3], 0.5 * miss)
+
+
+def test_skin_below_a_written_bone_through_a_bone_of_no_skin_is_carried_with_the_bone_it_moved_with():
+    """A baked MMD model: its FK ankle (no skin) hangs from the legs that hang from the written lower body, and the
+    toe below it (skin) moved with the written deform ankle beside it, as the IK turned both. Hanging from the lower
+    body through a bone of no skin, it does not follow it: the FK ankle carries it with the deform ankle (and the FK
+    knee, which the connected ankle's head stays on, with the deform knee)."""
+    bones = [("下半身", -1, (0, 0, 1.0), False), ("足", 0, (0.1, 0, 0.9), False), ("ひざ", 1, (0.1, 0, 0.5), True),
+             ("足首", 2, (0.1, 0, 0.1), True), ("つま先", 3, (0.1, -0.12, 0.02), True),
+             ("足D", 0, (0.1, 0, 0.9), False), ("ひざD", 5, (0.1, 0, 0.5), True), ("足首D", 6, (0.1, 0, 0.1), True)]
+    rest = np.repeat(np.eye(4)[None], len(bones), axis=0)
+    rest[:, :3, 3] = [b[2] for b in bones]
+    rig = Rig([b[0] for b in bones], [b[1] for b in bones], rest, np.full(len(bones), 0.2),
+              np.array([b[3] for b in bones]))
+    written = ["下半身", "足D", "ひざD", "足首D"]
+    pose = _take(rig, {"足首": "足首D", "つま先": "足首D", "足": "足D", "ひざ": "ひざD"})
+    found = named(rig, carried_bones(rig, written, set(written) | {"つま先"}, pose, 1.0))
+    assert found == {"足首": "足首D", "ひざ": "ひざD"}, found
