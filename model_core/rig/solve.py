@@ -217,6 +217,19 @@ def facing_and_up(at: dict[str, np.ndarray]):
     return forward, up / np.linalg.norm(up)
 
 
+# A foot this nearly as long as its shin (a share of the shin's length) has the length an importer gives a bone it
+# read no tail for, the bone above's: Blender's glTF importer, and its FBX importer where the exporter wrote no leaf
+# bones, so end a baked MMD model's deform ankle (``足首D``) 0.43 m ahead of it, as long as its shin, where its toe is
+# 0.15 m ahead.
+GUESSED_LENGTH = 1e-3
+
+
+def guessed_foot(rig: Rig, foot: int, shin: int) -> bool:
+    """Whether ``rig``'s ``foot`` bone is as long as its ``shin`` to :data:`GUESSED_LENGTH`: its tail an importer's
+    guess, no toe."""
+    return abs(float(rig.lengths[foot]) - float(rig.lengths[shin])) <= GUESSED_LENGTH * float(rig.lengths[shin])
+
+
 def toe_across(along: np.ndarray, forward: np.ndarray) -> bool:
     """Whether a foot's tail direction ``along`` ``[3]`` is no toe: more than :data:`ACROSS_DEG` off the way the
     body faces (a foot's tail points forward and a little down, which is 70 degrees or so off its shin's line, so the
@@ -235,9 +248,10 @@ def tips_along_the_limb(rig: Rig, anchors: Anchors) -> Rig:
     wrist, turning with the hand (:attr:`Rig.tails`): where the hand has no finger bone, that is where its fingers
     go, as a BVH file's estimated finger tip (:func:`rigs.canonical_positions`). Read at those tails, every hand of
     a Bandai take imported by Blender and moved onto a rig was held a quarter turn off its forearm. Likewise each toe
-    at a foot's tail that points across the way the body faces (:func:`toe_across`) is put at the ball of the foot,
-    :data:`FOOT_FORWARD` of the shin's length forward of the ankle and :data:`FOOT_DROP` down: where the foot has no
-    toe bone, nothing else marks where its toes go, and read at that tail the foot turned a quarter turn."""
+    at a foot's tail that points across the way the body faces (:func:`toe_across`), or that an importer guessed
+    (:func:`guessed_foot`), is put at the ball of the foot, :data:`FOOT_FORWARD` of the shin's length forward of the
+    ankle and :data:`FOOT_DROP` down: where the foot has no toe bone, nothing else marks where its toes go, and read at
+    that tail the foot turned a quarter turn (at a guessed tail, a baked MMD model's toe sank 4 cm)."""
     tails = rig.tails.copy()
     body = None
     for side in "lr":
@@ -246,7 +260,8 @@ def tips_along_the_limb(rig: Rig, anchors: Anchors) -> Rig:
         if not anchors.tail[t] or int(anchors.bone[t]) != foot or anchors.tail[f] or anchors.tail[k]:
             continue
         body = body or _rest_body(rig, anchors)
-        if body is None or not toe_across(rig.rest[foot, :3, :3] @ rig.tails[foot], body[0]):
+        if body is None or not (toe_across(rig.rest[foot, :3, :3] @ rig.tails[foot], body[0])
+                                or guessed_foot(rig, foot, shin)):
             continue
         length = float(np.linalg.norm(rig.rest[foot, :3, 3] - rig.rest[shin, :3, 3]))
         tails[foot] = rig.rest[foot, :3, :3].T @ ((body[0] * FOOT_FORWARD - body[1] * FOOT_DROP) * length)

@@ -410,13 +410,16 @@ def test_follow_curve_after_a_walk_keeps_the_models_chest_and_twist_bones(addon,
     assert off and max(off) < 0.01, off  # metres: every joint where the walk has it
 
 
-def test_a_model_an_exporter_baked_walks_on_with_its_deform_legs(addon, tmp_path, capfd):
+@pytest.mark.parametrize("leaf_bones", [True, False], ids=["leaf_bones", "no_leaf_bones"])
+def test_a_model_an_exporter_baked_walks_on_with_its_deform_legs(addon, tmp_path, capfd, leaf_bones):
     """A walking model with a mesh skinned as MMD models are (the legs on their deform copies ``足D``, not on the
     legs the IK turns), through Blender's FBX exporter and importer, which bakes every bone and drops the
     constraints: the copies no longer follow the legs, and the upper and lower bodies hang side by side from the
     groove. It was refused (the bone map did not fit the hierarchy); then, keyed on its deform bones, it was read
     without the centre that carries it (its joints walked in place, and the new frames stood at the origin). Now
-    Extend walks on with all its skin, the centre carrying the travel, the feet on its floor."""
+    Extend walks on with all its skin, the centre carrying the travel, the feet on its floor; so too exported
+    without the exporter's leaf bones, where the importer gives the deform ankle, at the end of the skeleton, its
+    shin's length for a tail (the toe was read there, and sank 4 cm)."""
     obj, source, moved, floor = moved_walk(addon, tmp_path)
     bpy.data.objects.remove(source)
     bpy.context.scene.frame_start, bpy.context.scene.frame_end = 1, int(moved.frame_range[1])
@@ -430,13 +433,16 @@ def test_a_model_an_exporter_baked_walks_on_with_its_deform_legs(addon, tmp_path
             body.vertex_groups.new(name=bone.name).add(range(len(body.data.vertices)), 0.1, "REPLACE")
     for o in bpy.context.view_layer.objects:
         o.select_set(o in (obj, body))
-    path = tmp_path / "baked.fbx"  # with the exporter's leaf bones, which keep the tails of the bones at the ends
-    bpy.ops.export_scene.fbx(filepath=str(path), use_selection=True, bake_anim_use_all_actions=False,
-                             bake_anim_use_nla_strips=False)
+    path = tmp_path / "baked.fbx"  # the exporter's leaf bones keep the tails of the bones at the ends
+    bpy.ops.export_scene.fbx(filepath=str(path), use_selection=True, add_leaf_bones=leaf_bones,
+                             bake_anim_use_all_actions=False, bake_anim_use_nla_strips=False)
     bpy.ops.wm.read_homefile(use_empty=True)
     bpy.ops.import_scene.fbx(filepath=str(path))
     baked = next(o for o in bpy.data.objects if o.type == "ARMATURE")
-    assert not any(len(pb.constraints) for pb in baked.pose.bones) and "足首D.L_end" in baked.data.bones
+    assert not any(len(pb.constraints) for pb in baked.pose.bones)
+    ankle, shin = baked.data.bones["足首D.L"], baked.data.bones["ひざD.L"]
+    assert ("足首D.L_end" in baked.data.bones) == leaf_bones
+    assert (abs(ankle.length - shin.length) < 1e-4) != leaf_bones  # without them, a tail the importer guessed
     for o in bpy.context.view_layer.objects:
         o.select_set(o is baked)
     bpy.context.view_layer.objects.active = baked

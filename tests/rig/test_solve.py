@@ -401,6 +401,36 @@ def test_a_toe_at_a_foot_tail_across_the_way_the_body_faces_is_placed_forward_of
     assert tips_along_the_limb(moved, anchors) is moved  # the tails now point forward: left as they are
 
 
+def test_a_toe_at_a_foot_tail_an_importer_guessed_is_placed_forward_of_the_ankle(rig_and_motion):
+    """A foot with no toe bone at the end of the skeleton, through glTF or an FBX without leaf bones: the importer
+    gives it its shin's length and points it on (forward, not across), and its tail is no toe: the toe goes to the
+    ball of the foot as for a tail across. A foot shorter than its shin keeps its tail."""
+    rig, anchors, loc, rot = rig_and_motion
+    mapping = {j: (rig.names[b], bool(t)) for j, b, t in zip(JOINTS, anchors.bone, anchors.tail)}
+    for side in "lr":
+        mapping[f"{side}_toe"] = (mapping[f"{side}_foot"][0], True)
+    anchors = Anchors.from_map(rig, mapping)
+
+    def with_feet(share: float) -> Rig:
+        lengths, tails = rig.lengths.copy(), rig.tails.copy()
+        for side in "lr":
+            foot, shin = (int(anchors.bone[JOINT_INDEX[f"{side}_{k}"]]) for k in ("foot", "knee"))
+            lengths[foot] = share * lengths[shin]
+            tails[foot] = rig.rest[foot, :3, :3].T @ np.array([0.0, -0.3, 1.0]) / np.hypot(0.3, 1.0) * lengths[foot]
+        return Rig(rig.names, rig.parents, rig.rest, lengths, rig.connected, tails)
+
+    guessed = with_feet(1.0)
+    moved = tips_along_the_limb(guessed, anchors)
+    at_rest = anchor_positions(moved, anchors, moved.rest[None])[0]
+    forward, up = facing_and_up(dict(zip(JOINTS, at_rest)))
+    for side in "lr":
+        toe, ankle, knee = (at_rest[JOINT_INDEX[f"{side}_{k}"]] for k in ("toe", "foot", "knee"))
+        shin = np.linalg.norm(ankle - knee)
+        np.testing.assert_allclose(toe - ankle, (forward * FOOT_FORWARD - up * FOOT_DROP) * shin, atol=1e-9)
+    real = with_feet(0.4)
+    assert tips_along_the_limb(real, anchors) is real
+
+
 def test_the_way_a_body_faces_is_read_from_its_legs_and_spine():
     """Across the legs crossed with up the spine: Blender's -Y for a character made facing the front view, also where
     both thighs start at the middle of the hips (the knees and ankles apart); none without legs apart or a spine."""
