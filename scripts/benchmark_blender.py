@@ -15,6 +15,8 @@ the peak of the process's resident memory during the run above what it held befo
     python scripts/benchmark_blender.py --operator footlock --frames 30000 --repeat 1   # a long take
     python scripts/benchmark_blender.py --operator footlock --ground   # on a ground mesh, beside the flat floor
     python scripts/benchmark_blender.py --rigify --frames 300   # a generated Rigify rig: IK legs beside FK legs
+    python scripts/benchmark_blender.py --baked --frames 300 --operator denoise   # that rig baked through FBX:
+        # keyed in closed form, beside Blender's visual bake frame by frame in the same run
     python scripts/benchmark_blender.py --model runs/default/release --frames 1000 --repeat 3
     python scripts/benchmark_blender.py --untrained   # timing only: a randomly initialised model
 """
@@ -28,6 +30,7 @@ import shutil
 import sys
 import tempfile
 import time
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -198,6 +201,32 @@ def build_rigify(frames: int, ik_legs: bool):
     return obj
 
 
+def through_fbx(obj, folder: Path):
+    """``obj`` exported to FBX with every bone (Blender's exporter bakes each bone and drops the constraints) and
+    imported into an empty scene at the same frame rate: a control rig an exporter baked, active."""
+    fps = bpy.context.scene.render.fps
+    for other in bpy.context.view_layer.objects:
+        other.select_set(other is obj)
+    path = folder / "baked.fbx"
+    bpy.ops.export_scene.fbx(filepath=str(path), use_selection=True, add_leaf_bones=False,
+                             bake_anim_use_all_actions=False, bake_anim_use_nla_strips=False)
+    bpy.ops.wm.read_homefile(use_empty=True)
+    bpy.context.scene.render.fps = fps
+    bpy.ops.import_scene.fbx(filepath=str(path))
+    baked = next(o for o in bpy.data.objects if o.type == "ARMATURE")
+    for other in bpy.context.view_layer.objects:
+        other.select_set(other is baked)
+    bpy.context.view_layer.objects.active = baked
+    return baked
+
+
+def evaluated_by_blender(obj) -> None:
+    """Make Blender evaluate ``obj`` frame by frame for every read and bake (a bone at an end of the skeleton, outside
+    the body the operators key, set not to take its location in its own space), as on a rig with constraints."""
+    leaf = next(b for b in obj.data.bones if not b.children and b.name.startswith("MCH-"))
+    leaf.use_local_location = False
+
+
 def add_ground_plane() -> str:
     """A 10 km square plane at the world's origin, for Foot Lock's Ground; its name."""
     mesh = bpy.data.meshes.new("BenchGround")
@@ -239,7 +268,7 @@ def action_of(obj):
     return obj.animation_data.action
 
 
-def floor_time(obj, frames: int) -> tuple[float, float]:
+def floor_time(obj) -> tuple[float, float]:
     """Seconds to read all keys of the action, and to write as many keys into a new action."""
     from bpy_extras import anim_utils
 
@@ -258,8 +287,8 @@ def floor_time(obj, frames: int) -> tuple[float, float]:
     slot_obj.animation_data_create().action = new
     for path, index, buf in data:
         fc = fcurve_new(slot_obj, new, path, index, "")
-        fc.keyframe_points.add(frames)
-        fc.keyframe_points.foreach_set("co", buf[: 2 * frames])
+        fc.keyframe_points.add(len(buf) // 2)
+        fc.keyframe_points.foreach_set("co", buf)
         fc.update()
     t2 = time.perf_counter()
     bpy.data.actions.remove(new)
@@ -326,6 +355,25 @@ def stage_times(worker, *args, **kwargs) -> dict:
     return {**times, "total": end - start, "extra_mb": memory.extra_mb, "mb": mb}
 
 
+def operation(args, obj, extend, denoise, inbetween, common, footlock, flat: bool = False) -> tuple:
+    """(runner, its arguments...) for :func:`stage_times`: the operator ``args`` names on ``obj`` (``flat``: Foot
+    Lock on the flat floor, whatever ``--ground`` says)."""
+    if args.operator == "extend":
+        return partial(extend.extend_clip, frames=args.frames), bpy.context, obj
+    if args.operator == "inbetween":
+        start = args.frames // 2 - args.gap // 2
+        clear_keys(obj, start, start + args.gap - 1)
+        return partial(inbetween.fill_gap, frame_start=start, frame_end=start + args.gap - 1), bpy.context, obj
+    if args.operator == "footlock":
+        ground = add_ground_plane() if args.ground and not flat else ""
+
+        def lock(context, o, progress):
+            return common.run(footlock.foot_lock_steps(context, o, ground=ground), progress)
+
+        return lock, bpy.context, obj
+    return denoise.denoise_action, bpy.context, obj
+
+
 def main(argv: list[str] | None = None) -> dict:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--frames", type=int, default=1000, help="clip length and frames to add (default 1000)")
@@ -342,11 +390,17 @@ def main(argv: list[str] | None = None) -> dict:
     parser.add_argument("--rigify", action="store_true",
                         help="Extend on a rig generated by Rigify, its legs stepping on their IK controls (keyed "
                              "there), beside the same rig walking in FK (keyed on its FK controls) in the same run")
+    parser.add_argument("--baked", action="store_true",
+                        help="on that rig walking in FK baked through FBX (a control rig an exporter baked: read and "
+                             "keyed in closed form), beside the same with Blender evaluating it frame by frame and "
+                             "its visual bake in the same run")
     args = parser.parse_args(argv)
     if args.ground and args.operator != "footlock":
         parser.error("--ground is for --operator footlock")
     if args.rigify and args.operator != "extend":
         parser.error("--rigify is for --operator extend")
+    if args.baked and args.rigify:
+        parser.error("--baked and --rigify are two benchmarks: choose one")
     work = Path(tempfile.mkdtemp(prefix="strnn_bench_blender_"))
     try:
         return measure(args, work)
@@ -372,29 +426,27 @@ def measure(args, work: Path) -> dict:
             bpy.context.preferences.addons[package].preferences.model_folder = str(model)
             fk_total = stage_times(extend.extend_clip, bpy.context, obj, frames=args.frames)["total"]
             bridge.forget_results()
-        obj = build_rigify(args.frames, ik_legs=True) if args.rigify else build_scene(args.frames)
-        bpy.context.preferences.addons[package].preferences.model_folder = str(model)
-        read_floor, write_floor = floor_time(obj, args.frames)
-        copy_mb = action_copy_mb(obj)
-        if args.operator == "extend":
-            timings = stage_times(extend.extend_clip, bpy.context, obj, frames=args.frames)
-        elif args.operator == "inbetween":
-            start = args.frames // 2 - args.gap // 2
-            clear_keys(obj, start, start + args.gap - 1)
-            timings = stage_times(inbetween.fill_gap, bpy.context, obj, frame_start=start,
-                                  frame_end=start + args.gap - 1)
-        elif args.operator == "footlock":
-            def lock(context, o, progress, ground=""):
-                return common.run(footlock.foot_lock_steps(context, o, ground=ground), progress)
-
-            timings = stage_times(lock, bpy.context, obj, ground=add_ground_plane() if args.ground else "")
-            if args.ground:  # the same lock on the flat floor: the baseline of the ray casts' cost
-                timings["flat_total"] = stage_times(lock, bpy.context, obj)["total"]
+        if args.baked:  # the baseline first: Blender evaluating the baked rig frame by frame, its visual bake
+            obj = through_fbx(build_rigify(args.frames, ik_legs=False), work)
+            evaluated_by_blender(obj)
+            bpy.context.preferences.addons[package].preferences.model_folder = str(model)
+            evaluated_total = stage_times(*operation(args, obj, extend, denoise, inbetween, common, footlock))["total"]
+            bridge.forget_results()
+            obj = through_fbx(build_rigify(args.frames, ik_legs=False), work)
         else:
-            timings = stage_times(denoise.denoise_action, bpy.context, obj)
+            obj = build_rigify(args.frames, ik_legs=True) if args.rigify else build_scene(args.frames)
+        bpy.context.preferences.addons[package].preferences.model_folder = str(model)
+        read_floor, write_floor = floor_time(obj)
+        copy_mb = action_copy_mb(obj)
+        timings = stage_times(*operation(args, obj, extend, denoise, inbetween, common, footlock))
+        if args.operator == "footlock" and args.ground:  # the same lock on the flat floor: the ray casts' baseline
+            timings["flat_total"] = stage_times(*operation(args, obj, extend, denoise, inbetween, common, footlock,
+                                                           flat=True))["total"]
         timings.update(floor_read=read_floor, floor_write=write_floor, floor_mb=copy_mb)
         if args.rigify:
             timings["fk_total"] = fk_total
+        if args.baked:
+            timings["evaluated_total"] = evaluated_total
         if not best or timings["total"] < best["total"]:
             best = timings
     done = {"extend": f"+ {args.frames} new", "denoise": "denoised", "footlock": "foot-locked",
@@ -408,6 +460,10 @@ def measure(args, work: Path) -> dict:
     if "fk_total" in best:
         print(f"  the rig generated by Rigify, legs keyed on IK (foot_ik, thigh_ik, toe_ik); the same walk keyed on "
               f"FK in the same run: {best['fk_total']:.3f} s; on IK {best['total'] / best['fk_total']:.2f} x")
+    if "evaluated_total" in best:
+        print(f"  the rig generated by Rigify baked through FBX, read and keyed in closed form; with Blender "
+              f"evaluating it frame by frame and its visual bake in the same run: {best['evaluated_total']:.3f} s; "
+              f"in closed form {best['total'] / best['evaluated_total']:.2f} x")
     if "flat_total" in best:
         print(f"  on the flat floor (no ground) in the same run: {best['flat_total']:.3f} s; with the ground "
               f"{best['total'] / best['flat_total']:.2f} x")

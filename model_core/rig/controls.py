@@ -27,7 +27,7 @@ from ..motion.conventions import JOINT_INDEX, JOINTS, PARENT_NAMES
 from ..motion.geometry import closing_weights, nearest_rotation, shortest_arc
 from ..motion.rotations import closing_turns
 from .rigs import MMD_SPELLINGS, mmd_name, normalise_name
-from .solve import Anchors, Rig, SolveError, placed as placed_in
+from .solve import Anchors, Rig, SolveError, compose, placed as placed_in
 
 
 @dataclass(frozen=True)
@@ -571,6 +571,36 @@ def closed_cycle(rig: Rig, pose: np.ndarray, travel: np.ndarray, blend: int, kep
             target[:, :3, 3] = pose[:, b, :3, 3] + ramp[:, None] * (pose[0, b, :3, 3] + travel - pose[-1, b, :3, 3])
         out[:, b] = target
     return out
+
+
+def placed_on_targets(rig: Rig, loc: np.ndarray, rot: np.ndarray, scale: np.ndarray, chosen: list[int],
+                      located: list[bool], targets: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+    """The visual bake in closed form, for a rig on which no bone follows anything but its parent (a rig an exporter
+    baked): each bone of ``chosen``, its own control, turned (and, where ``located``, moved: not where it is
+    connected, which Blender keeps on its parent's tail) so that it lands on its ``targets`` ``[F, C, 4, 4]``
+    (armature space), the others keeping their local ``loc`` ``[F, B, 3]``, ``rot`` ``[F, B, 3, 3]`` and ``scale``
+    ``[F, B, 3]``, parents first. Returns the chosen bones' local ``loc`` ``[F, C, 3]`` and ``rot`` ``[F, C, 3, 3]``,
+    and the largest distance of a chosen bone's head or tail from its target (armature units)."""
+    at = {b: k for k, b in enumerate(chosen)}
+    basis = compose(np.where(rig.connected[None, :, None], 0.0, loc), rot * scale[..., None, :])
+    pose = np.empty(basis.shape)
+    out_loc, out_rot = np.array(loc[:, chosen], dtype=np.float64), np.array(rot[:, chosen], dtype=np.float64)
+    worst = 0.0
+    for b, p in enumerate(rig.parents):  # parents first
+        frame = rig.rel_rest[b] if p < 0 else pose[:, p] @ rig.rel_rest[b]
+        if b in at:
+            k, want = at[b], np.array(targets[:, at[b]], dtype=np.float64)
+            local = np.linalg.inv(frame) @ want
+            out_rot[:, k] = nearest_rotation(local[:, :3, :3])
+            if located[k] and not rig.connected[b]:
+                out_loc[:, k] = local[:, :3, 3]
+            basis[:, b] = compose(np.where(rig.connected[b], 0.0, out_loc[:, k]), out_rot[:, k] * scale[:, b, None, :])
+        pose[:, b] = frame @ basis[:, b]
+        if b in at:
+            tip = np.array([0.0, rig.lengths[b], 0.0, 1.0])
+            worst = max(worst, float(np.linalg.norm(pose[:, b, :3, 3] - want[:, :3, 3], axis=-1).max()),
+                        float(np.linalg.norm((pose[:, b] @ tip - want @ tip)[:, :3], axis=-1).max()))
+    return out_loc, out_rot, worst
 
 
 def visual_local(rig: Rig, pose: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

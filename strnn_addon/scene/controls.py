@@ -20,7 +20,7 @@ from mathutils import Matrix
 from ...model_core.motion.geometry import nearest_rotation, unit
 from ...model_core.rig import controls as rig_controls
 from ...model_core.rig.controls import ControlSet
-from . import anim, mapping
+from . import anim, mapping, rig_io
 
 TOLERANCE = 2e-3  # armature units (metres on most rigs): a frame whose driven bones are further off is baked again
 MAX_SWEEPS = 3
@@ -227,6 +227,11 @@ def bake(context, obj, control_set_: ControlSet, frames: np.ndarray, targets: di
     scene, bones = context.scene, obj.pose.bones
     chosen = [c for c in control_set_.controls if c.drives in targets]
     switches = [s for s in control_set_.switches if s.bone in bones and s.prop in bones[s.bone]]
+    ad = obj.animation_data
+    fcurves = list(anim.Channels(ad.action, ad).fcurves) if ad is not None and ad.action is not None else []
+    if not switches and all(c.bone == c.drives and c.turns and not (c.end or c.pole or c.twist) for c in chosen) \
+            and not rig_io.needs_scene_evaluation(obj, fcurves):  # each bone its own control, on a rig that plays
+        return _bake_closed(obj, chosen, fcurves, frames, targets)  # as its curves say (one an exporter baked)
     keep_frame = (scene.frame_current, scene.frame_subframe)
     keep_basis = {c.bone: bones[c.bone].matrix_basis.copy() for c in chosen}
     keep_switch = {(s.bone, s.prop): bones[s.bone].get(s.prop) for s in switches}
@@ -269,6 +274,22 @@ def bake(context, obj, control_set_: ControlSet, frames: np.ndarray, targets: di
             bones[bone][prop] = value
         scene.frame_set(keep_frame[0], subframe=keep_frame[1])
     return Baked(loc, nearest_rotation(rot), worst)
+
+
+def _bake_closed(obj, chosen: list, fcurves, frames: np.ndarray, targets: dict[str, np.ndarray]) -> Baked:
+    """:func:`bake` without Blender's evaluation, where each control is the bone it drives and no bone of ``obj``
+    follows anything but its parent: its pose at ``frames`` as the action of ``fcurves`` plays it, each control set
+    in turn, parents first (:func:`rig_controls.placed_on_targets`)."""
+    names = [c.bone for c in chosen]
+    rig = rig_io.with_bones_above(rig_io.read_rig(obj), names)
+    loc, rot, scale = rig_io.read_local_pose(obj, rig, fcurves, np.asarray(frames, np.float64))
+    index = {n: b for b, n in enumerate(rig.names)}
+    at = sorted(range(len(chosen)), key=lambda k: index[names[k]])  # parents first
+    loc_k, rot_k, worst = rig_controls.placed_on_targets(
+        rig, loc, rot, scale, [index[names[k]] for k in at], [chosen[k].location for k in at],
+        np.stack([targets[chosen[k].drives] for k in at], axis=1))
+    back = np.argsort(at)
+    return Baked(loc_k[:, back], rot_k[:, back], worst)
 
 
 def key_switches(channels: anim.Channels, obj, control_set_: ControlSet, frames: np.ndarray, edges: np.ndarray):

@@ -130,7 +130,7 @@ def carried(context, clip: Clip) -> dict[str, str]:
     read over the take."""
     full = rig_io.read_rig(clip.obj)
     frames = np.unique(np.linspace(clip.first, clip.last, CARRY_SAMPLES).round())
-    pose, _ = rig_io.pose_matrices_evaluated(context, clip.obj, full, frames)
+    pose, _ = rig_io.pose_matrices(context, clip.obj, full.names, _fcurves(clip), frames)
     leg = leg_length(anchor_positions(clip.rig, clip.anchors, clip.rig.rest[None]))  # armature units
     found = controls_core.carried_bones(full, [clip.rig.names[b] for b in written_bones(clip)],
                                         mapping.skin(clip.obj), pose, leg)
@@ -278,22 +278,21 @@ def chunks(n: int, size: int = CHUNK_FRAMES):
     return [slice(a, min(a + size, n)) for a in range(0, n, size)]
 
 
+def _fcurves(clip: Clip) -> list:
+    """The F-curves of the clip's action (none where the armature has no action)."""
+    return list(clip.channels.fcurves) if clip.channels is not None else []
+
+
 def joint_positions(context, clip: Clip, frames: np.ndarray) -> np.ndarray:
     """World-space canonical joints ``[F, 21, 3]`` at scene ``frames``, Y-up (model axes), scene units;
     read :data:`CHUNK_FRAMES` frames at a time."""
     frames = np.asarray(frames, dtype=np.float64)
-    evaluated = rig_io.needs_scene_evaluation(clip.obj, clip.channels.fcurves)
-    # a joint skeleton (a control rig's) is not the armature's hierarchy: its bones' poses are read off the whole rig
-    # (a baked MMD model's lower body hangs from the groove and the centre, which carry its travel)
-    full = rig_io.read_rig(clip.obj) if clip.controls is not None and not evaluated else clip.rig
-    among = [full.names.index(n) for n in clip.rig.names] if full is not clip.rig else slice(None)
     out, cache = np.empty((len(frames), len(JOINTS), 3)), rig_io.KeyCache()
     for part in chunks(len(frames)):
-        if evaluated:
-            pose, world = rig_io.pose_matrices_evaluated(context, clip.obj, clip.rig, frames[part])
-        else:
-            pose = rig_io.pose_matrices_fast(clip.obj, full, clip.channels.fcurves, frames[part], cache)[:, among]
-            world = np.broadcast_to(clip.world, (len(pose), 4, 4))
+        # (a joint skeleton, a control rig's, is not the armature's hierarchy: its bones are placed by the bones
+        # above them in the armature, as a baked MMD model's lower body by the centre that carries its travel)
+        pose, world = rig_io.pose_matrices(context, clip.obj, clip.rig.names, clip.channels.fcurves, frames[part],
+                                           cache)
         local = anchor_positions(clip.rig, clip.anchors, pose)
         out[part] = np.einsum("fij,fkj->fki", world[:, :3, :3], local) + world[:, None, :3, 3]
     return zup_to_yup(out)
@@ -327,7 +326,7 @@ def reference_pose(context, clip: Clip, frames: np.ndarray,
     ``frames``: the keyed channels (``cache``: their keys, when read already), or on a control rig the
     evaluated (visual) pose of its joint skeleton."""
     if clip.controls is not None:
-        pose, _ = rig_io.pose_matrices_evaluated(context, clip.obj, clip.rig, frames)
+        pose, _ = rig_io.pose_matrices(context, clip.obj, clip.rig.names, _fcurves(clip), frames, cache)
         return visual_local(clip.rig, pose)
     loc, rot, _ = rig_io.read_local_pose(clip.obj, clip.rig, clip.channels.fcurves if clip.channels else [], frames,
                                          cache)
@@ -737,7 +736,7 @@ def _carried_poses(context, clip: Clip, frames: np.ndarray, targets: dict) -> di
         return {}
     names = sorted(set(these) | set(these.values()))
     at = {n: k for k, n in enumerate(names)}
-    now, _ = rig_io.pose_matrices_evaluated(context, clip.obj, names, np.asarray(frames, np.float64))
+    now, _ = rig_io.pose_matrices(context, clip.obj, names, _fcurves(clip), frames)
     return {c: targets[w] @ np.linalg.inv(now[:, at[w]]) @ now[:, at[c]] for c, w in these.items()}
 
 

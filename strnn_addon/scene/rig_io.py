@@ -263,6 +263,41 @@ def pose_matrices_fast(obj, rig: Rig, fcurves, frames: np.ndarray, cache: KeyCac
     return fk(rig, loc, rot, scale)
 
 
+def with_bones_above(rig: Rig, names: list[str]) -> Rig:
+    """The bones ``names`` of ``rig`` and every bone above them, parents first: all that forward kinematics needs to
+    place them."""
+    keep = np.zeros(len(rig.names), dtype=bool)
+    index = {n: b for b, n in enumerate(rig.names)}
+    for name in names:
+        b = index[name]
+        while b >= 0 and not keep[b]:
+            keep[b] = True
+            b = int(rig.parents[b])
+    if keep.all():
+        return rig
+    order = np.flatnonzero(keep)
+    new = np.full(len(rig.names), -1)
+    new[order] = np.arange(len(order))
+    parents = [int(new[p]) if p >= 0 else -1 for p in rig.parents[order]]
+    return Rig([rig.names[b] for b in order], np.array(parents), rig.rest[order], rig.lengths[order],
+               rig.connected[order])
+
+
+def pose_matrices(context, obj, names: list[str], fcurves, frames: np.ndarray,
+                  cache: KeyCache | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Pose matrices ``[F, N, 4, 4]`` of the bones ``names`` and world matrices ``[F, 4, 4]`` at scene ``frames`` as
+    Blender plays the action of F-curves ``fcurves``: by NumPy forward kinematics over them and the bones above them
+    where that plays as Blender does (:func:`needs_scene_evaluation`: a rig an exporter baked), else by letting
+    Blender evaluate each frame (:func:`pose_matrices_evaluated`)."""
+    frames = np.asarray(frames, np.float64)
+    if needs_scene_evaluation(obj, fcurves):
+        return pose_matrices_evaluated(context, obj, names, frames)
+    rig = with_bones_above(read_rig(obj), names)
+    index = {n: b for b, n in enumerate(rig.names)}
+    pose = pose_matrices_fast(obj, rig, fcurves, frames, cache)[:, [index[n] for n in names]]
+    return pose, np.broadcast_to(world_matrix(obj), (len(frames), 4, 4))
+
+
 def pose_matrices_evaluated(context, obj, rig: Rig | list[str], frames: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Pose matrices ``[F, B, 4, 4]`` of the bones of ``rig`` (or of the bones named) and world matrices ``[F, 4, 4]``
     by letting Blender evaluate each frame (constraints, drivers, parents); the scene's current frame is restored."""

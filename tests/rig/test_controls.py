@@ -18,11 +18,12 @@ from model_core.rig.controls import (
     closed_cycle,
     from_rows,
     loose_bones,
+    placed_on_targets,
     preset_for,
     visual_local,
 )
 from model_core.rig.rigs import MMD_SPELLINGS, mmd_name
-from model_core.rig.solve import Rig
+from model_core.rig.solve import Rig, fk
 
 
 def test_auto_rig_pro_fits_with_three_or_two_spine_bones():
@@ -311,3 +312,32 @@ def test_skin_below_a_written_bone_through_a_bone_of_no_skin_is_carried_with_the
     pose = _take(rig, {"足首": "足首D", "つま先": "足首D", "足": "足D", "ひざ": "ひざD"})
     found = named(rig, carried_bones(rig, written, set(written) | {"つま先"}, pose, 1.0))
     assert found == {"足首": "足首D", "ひざ": "ひざD"}, found
+
+
+def test_the_bake_in_closed_form_puts_each_bone_on_its_target_parents_first():
+    """On a rig that follows nothing but its parents (a rig an exporter baked): targets made from a pose are met by
+    the locals of that pose, the chosen bones' (the hips moved and turned, the thigh and the shin turned, the shin
+    connected) found below the others that keep theirs (the mechanism bone above the thigh, moved off its place);
+    a place asked of a bone only turned is missed, and by as much as the error says."""
+    rig = _baked_rig()
+    index = {n: b for b, n in enumerate(rig.names)}
+    rng = np.random.default_rng(7)
+    frames, n = 5, len(rig.names)
+    loc = rng.normal(0.0, 0.05, (frames, n, 3))
+    rot = rotvec_to_matrix(rng.normal(0.0, 0.4, (frames, n, 3)))
+    scale = np.ones((frames, n, 3))
+    pose = fk(rig, loc, rot)
+    chosen = [index[b] for b in ("DEF-spine", "DEF-thigh", "DEF-shin")]
+    targets = pose[:, chosen]
+    kept = loc.copy(), rot.copy()
+    loc[:, chosen[0]], rot[:, chosen] = 0.0, np.eye(3)  # what they had before: anything (the turned keep their place)
+    got_loc, got_rot, error = placed_on_targets(rig, loc, rot, scale, chosen, [True, False, False], targets)
+    assert error < 1e-9
+    np.testing.assert_allclose(got_rot, kept[1][:, chosen], atol=1e-9)
+    np.testing.assert_allclose(got_loc[:, 0], kept[0][:, chosen[0]], atol=1e-9)  # the hips' place, asked
+    np.testing.assert_allclose(got_loc[:, 1:], kept[0][:, chosen[1:]])  # the others keep theirs
+    # the thigh only turned, but asked 5 cm off: missed by that
+    moved = targets.copy()
+    moved[:, 1, :3, 3] += [0.05, 0.0, 0.0]
+    _, _, error = placed_on_targets(rig, loc, rot, scale, chosen, [True, False, False], moved)
+    assert abs(error - 0.05) < 1e-6
