@@ -409,8 +409,10 @@ def above_hips(clip: Clip) -> list[str]:
 
 def world_matrices(context, obj, names: list[str], frames: np.ndarray) -> np.ndarray:
     """World matrices ``[F, N, 4, 4]`` of pose bones ``names`` as Blender plays scene ``frames`` (constraints and
-    all; :func:`rig_io.pose_matrices_evaluated`)."""
-    pose, world = rig_io.pose_matrices_evaluated(context, obj, names, np.asarray(frames, np.float64))
+    all; :func:`rig_io.pose_matrices`)."""
+    ad = obj.animation_data
+    fcurves = list(anim.Channels(ad.action, ad).fcurves) if ad is not None and ad.action is not None else []
+    pose, world = rig_io.pose_matrices(context, obj, names, fcurves, frames)
     return world[:, None] @ pose
 
 
