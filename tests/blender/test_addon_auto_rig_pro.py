@@ -317,6 +317,30 @@ ARP_DEFORM = {"root", "spine_01", "spine_02", "spine_03", "neck", "head", "shoul
               "forearm_twist"}
 
 
+def arp_through_fbx(folder):
+    """The rig walking (:func:`arp_rig`), a mesh weighted to its deform bones, through Blender's FBX exporter and
+    importer with every bone (baked, the constraints dropped), active."""
+    obj = arp_rig()
+    bpy.context.scene.frame_start, bpy.context.scene.frame_end = 1, 60
+    bpy.ops.mesh.primitive_cube_add(size=0.3, location=(0, 0, 1))
+    body = bpy.context.active_object
+    body.modifiers.new("Armature", "ARMATURE").object = obj
+    for bone in obj.data.bones:
+        if bone.name.split(".")[0] in ARP_DEFORM:
+            body.vertex_groups.new(name=bone.name).add(range(len(body.data.vertices)), 0.1, "REPLACE")
+    path = folder / "arp_baked.fbx"
+    bpy.ops.export_scene.fbx(filepath=str(path), use_selection=False, object_types={"ARMATURE", "MESH"},
+                             add_leaf_bones=False, bake_anim_use_all_actions=False, bake_anim_use_nla_strips=False)
+    bpy.ops.wm.read_homefile(use_empty=True)
+    bpy.ops.import_scene.fbx(filepath=str(path))
+    baked = next(o for o in bpy.data.objects if o.type == "ARMATURE")
+    assert not any(len(pb.constraints) for pb in baked.pose.bones)
+    for other in bpy.context.view_layer.objects:
+        other.select_set(other is baked)
+    bpy.context.view_layer.objects.active = baked
+    return baked
+
+
 def test_an_auto_rig_pro_rig_an_exporter_baked_walks_on_with_its_deform_bones(addon, model_calls, tmp_path):
     """The rig walking, a mesh weighted to its deform bones, through Blender's FBX exporter and importer with every
     bone (baked, the constraints dropped): its controls drive nothing, and its deform root (``root.x``) hangs from
@@ -326,25 +350,8 @@ def test_an_auto_rig_pro_rig_an_exporter_baked_walks_on_with_its_deform_bones(ad
     walk on where the model put the joints."""
     from test_addon_rigify import addon_joint_index
 
-    obj = arp_rig()
-    bpy.context.scene.frame_start, bpy.context.scene.frame_end = 1, 60
-    bpy.ops.mesh.primitive_cube_add(size=0.3, location=(0, 0, 1))
-    body = bpy.context.active_object
-    body.modifiers.new("Armature", "ARMATURE").object = obj
-    for bone in obj.data.bones:
-        if bone.name.split(".")[0] in ARP_DEFORM:
-            body.vertex_groups.new(name=bone.name).add(range(len(body.data.vertices)), 0.1, "REPLACE")
-    path = tmp_path / "arp_baked.fbx"
-    bpy.ops.export_scene.fbx(filepath=str(path), use_selection=False, object_types={"ARMATURE", "MESH"},
-                             add_leaf_bones=False, bake_anim_use_all_actions=False, bake_anim_use_nla_strips=False)
-    bpy.ops.wm.read_homefile(use_empty=True)
-    bpy.ops.import_scene.fbx(filepath=str(path))
-    baked = next(o for o in bpy.data.objects if o.type == "ARMATURE")
-    assert not any(len(pb.constraints) for pb in baked.pose.bones)
+    baked = arp_through_fbx(tmp_path)
     assert baked.data.bones["c_root_master.x"].parent.name == "c_traj" == baked.data.bones["root.x"].parent.name
-    for other in bpy.context.view_layer.objects:
-        other.select_set(other is baked)
-    bpy.context.view_layer.objects.active = baked
     last = int(action_of(baked).frame_range[1])
     assert bpy.ops.strnn.extend_clip(frames=30) == {"FINISHED"}
     new = action_of(baked)
@@ -364,3 +371,26 @@ def test_an_auto_rig_pro_rig_an_exporter_baked_walks_on_with_its_deform_bones(ad
             got[j].append((world @ np.r_[getattr(baked.pose.bones[bone], end), 1.0])[:3])
     far = {j: float(np.linalg.norm(np.array(p) - model[:, joints[j]], axis=-1).max()) for j, p in got.items()}
     assert max(far.values()) < 0.01, far
+
+
+def test_a_loop_made_on_an_auto_rig_pro_rig_an_exporter_baked_plays_on_whole(addon, tmp_path):
+    """Make Loop on the rig an exporter baked (:func:`arp_through_fbx`), played three cycles as Blender repeats it:
+    every deform bone in each cycle where it was in the first, carried by the deform root's travel."""
+    baked = arp_through_fbx(tmp_path)
+    skin = sorted(g.name for g in next(o for o in bpy.data.objects if o.type == "MESH").vertex_groups)
+    assert bpy.ops.strnn.make_loop() == {"FINISHED"}
+    cycle = action_of(baked)["strnn"]["cycle"]
+    first, length = cycle["first"], cycle["frames"]
+    mats = []
+    for f in range(first, first + 3 * length + 1):
+        bpy.context.scene.frame_set(f)
+        mats.append([np.array(baked.matrix_world) @ np.array(baked.pose.bones[n].matrix) for n in skin])
+    mats = np.array(mats)
+    root = skin.index("root.x")
+    travel = mats[length, root, :3, 3] - mats[0, root, :3, 3]
+    assert np.linalg.norm(travel[:2]) > 0.2  # it walks
+    for k in (1, 2):
+        again = mats[k * length:(k + 1) * length + 1].copy()
+        again[..., :3, 3] -= k * travel
+        assert np.linalg.norm(again[..., :3, 3] - mats[:length + 1, :, :3, 3], axis=-1).max() < 2e-3
+        assert np.abs(again[..., :3, :3] - mats[:length + 1, :, :3, :3]).max() < 1e-2
