@@ -55,6 +55,12 @@ class Channels:
         return fc
 
 
+def active_fcurves(obj) -> list:
+    """The F-curves of ``obj``'s active action on its slot (none where it has no action)."""
+    ad = obj.animation_data
+    return list(Channels(ad.action, ad).fcurves) if ad is not None and ad.action is not None else []
+
+
 def _slot_for(action, anim_data):
     """The slot of ``action`` the object of ``anim_data`` animates through: its own slot where ``action`` is its
     action; in a copy of its action not yet assigned (a new action being written), the slot named like its own,

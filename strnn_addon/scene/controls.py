@@ -227,8 +227,7 @@ def bake(context, obj, control_set_: ControlSet, frames: np.ndarray, targets: di
     scene, bones = context.scene, obj.pose.bones
     chosen = [c for c in control_set_.controls if c.drives in targets]
     switches = [s for s in control_set_.switches if s.bone in bones and s.prop in bones[s.bone]]
-    ad = obj.animation_data
-    fcurves = list(anim.Channels(ad.action, ad).fcurves) if ad is not None and ad.action is not None else []
+    fcurves = anim.active_fcurves(obj)
     if not switches and all(c.bone == c.drives and c.turns and not (c.end or c.pole or c.twist) for c in chosen) \
             and not rig_io.needs_scene_evaluation(obj, fcurves):  # each bone its own control, on a rig that plays
         return _bake_closed(obj, chosen, fcurves, frames, targets)  # as its curves say (one an exporter baked)

@@ -198,8 +198,7 @@ def rig_of(obj) -> tuple[Rig, Anchors, dict, ControlSet | None]:
         written = [rig.names[b] for b in solved_bones(rig, anchors)]
         loose = controls_core.loose_bones(full, written)
         found = ControlSet(BAKED_BONES, [Control(name, name, name in loose) for name in written])
-    ad = obj.animation_data
-    fcurves = anim.Channels(ad.action, ad).fcurves if ad and ad.action else []
+    ad, fcurves = obj.animation_data, anim.active_fcurves(obj)
     layered = rig_io.nla_beneath(obj, fcurves)
     if layered and ad.action is not None and ad.action_blend_type != "REPLACE":
         raise UserError(f"{obj.name!r}'s action blends over its NLA strips by {ad.action_blend_type.title()}, so new "
@@ -410,9 +409,7 @@ def above_hips(clip: Clip) -> list[str]:
 def world_matrices(context, obj, names: list[str], frames: np.ndarray) -> np.ndarray:
     """World matrices ``[F, N, 4, 4]`` of pose bones ``names`` as Blender plays scene ``frames`` (constraints and
     all; :func:`rig_io.pose_matrices`)."""
-    ad = obj.animation_data
-    fcurves = list(anim.Channels(ad.action, ad).fcurves) if ad is not None and ad.action is not None else []
-    pose, world = rig_io.pose_matrices(context, obj, names, fcurves, frames)
+    pose, world = rig_io.pose_matrices(context, obj, names, anim.active_fcurves(obj), frames)
     return world[:, None] @ pose
 
 
