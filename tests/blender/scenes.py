@@ -400,6 +400,45 @@ def addon_module(addon, name: str):
     return importlib.import_module(f"{addon.__name__}.{name}")
 
 
+def world_bones(obj, names: list[str], frames) -> np.ndarray:
+    """World matrices ``[F, N, 4, 4]`` of pose bones ``names`` as Blender plays ``frames``."""
+    out = []
+    for f in frames:
+        bpy.context.scene.frame_set(int(f))
+        world = np.array(obj.matrix_world)
+        out.append([world @ np.array(obj.pose.bones[n].matrix) for n in names])
+    return np.array(out)
+
+
+def skinned(obj, bones) -> None:
+    """Give armature ``obj`` a skin: a small mesh it deforms, weighted to each bone of ``bones``."""
+    bpy.ops.mesh.primitive_cube_add(size=0.3, location=(0, 0, 1))
+    body = bpy.context.active_object
+    body.modifiers.new("Armature", "ARMATURE").object = obj
+    for bone in bones:
+        body.vertex_groups.new(name=bone).add(range(len(body.data.vertices)), 0.1, "REPLACE")
+
+
+def through_fbx(obj, path: Path, leaf_bones: bool = False):
+    """Armature ``obj`` and the meshes it deforms through Blender's FBX exporter (every bone baked, the constraints
+    dropped; ``leaf_bones``: its *Add Leaf Bones*) to ``path`` and its importer into an empty scene: the imported
+    armature, active and alone selected."""
+    meshes = [o for o in bpy.context.view_layer.objects
+              if any(m.type == "ARMATURE" and m.object is obj for m in getattr(o, "modifiers", ()))]
+    for other in bpy.context.view_layer.objects:
+        other.select_set(other is obj or other in meshes)
+    bpy.ops.export_scene.fbx(filepath=str(path), use_selection=True, add_leaf_bones=leaf_bones,
+                             bake_anim_use_all_actions=False, bake_anim_use_nla_strips=False)
+    bpy.ops.wm.read_homefile(use_empty=True)
+    bpy.ops.import_scene.fbx(filepath=str(path))
+    baked = next(o for o in bpy.data.objects if o.type == "ARMATURE")
+    assert not any(len(pb.constraints) for pb in baked.pose.bones)
+    for other in bpy.context.view_layer.objects:
+        other.select_set(other is baked)
+    bpy.context.view_layer.objects.active = baked
+    return baked
+
+
 def evaluated_joints(addon, obj, frames) -> np.ndarray:
     """World canonical joints ``[F, 21, 3]`` (Blender axes) as Blender evaluates them, frame by frame."""
     pipeline = addon_module(addon, "strnn_addon.scene.pipeline")

@@ -25,8 +25,11 @@ from scenes import (
     key_snapshot,
     same_keys,
     set_pole,
+    skinned,
     switch_driver,
     switch_keys,
+    through_fbx,
+    world_bones,
 )
 
 SIDES = "lr"
@@ -322,23 +325,8 @@ def arp_through_fbx(folder):
     importer with every bone (baked, the constraints dropped), active."""
     obj = arp_rig()
     bpy.context.scene.frame_start, bpy.context.scene.frame_end = 1, 60
-    bpy.ops.mesh.primitive_cube_add(size=0.3, location=(0, 0, 1))
-    body = bpy.context.active_object
-    body.modifiers.new("Armature", "ARMATURE").object = obj
-    for bone in obj.data.bones:
-        if bone.name.split(".")[0] in ARP_DEFORM:
-            body.vertex_groups.new(name=bone.name).add(range(len(body.data.vertices)), 0.1, "REPLACE")
-    path = folder / "arp_baked.fbx"
-    bpy.ops.export_scene.fbx(filepath=str(path), use_selection=False, object_types={"ARMATURE", "MESH"},
-                             add_leaf_bones=False, bake_anim_use_all_actions=False, bake_anim_use_nla_strips=False)
-    bpy.ops.wm.read_homefile(use_empty=True)
-    bpy.ops.import_scene.fbx(filepath=str(path))
-    baked = next(o for o in bpy.data.objects if o.type == "ARMATURE")
-    assert not any(len(pb.constraints) for pb in baked.pose.bones)
-    for other in bpy.context.view_layer.objects:
-        other.select_set(other is baked)
-    bpy.context.view_layer.objects.active = baked
-    return baked
+    skinned(obj, [bone.name for bone in obj.data.bones if bone.name.split(".")[0] in ARP_DEFORM])
+    return through_fbx(obj, folder / "arp_baked.fbx")
 
 
 def test_an_auto_rig_pro_rig_an_exporter_baked_walks_on_with_its_deform_bones(addon, model_calls, tmp_path):
@@ -381,11 +369,7 @@ def test_a_loop_made_on_an_auto_rig_pro_rig_an_exporter_baked_plays_on_whole(add
     assert bpy.ops.strnn.make_loop() == {"FINISHED"}
     cycle = action_of(baked)["strnn"]["cycle"]
     first, length = cycle["first"], cycle["frames"]
-    mats = []
-    for f in range(first, first + 3 * length + 1):
-        bpy.context.scene.frame_set(f)
-        mats.append([np.array(baked.matrix_world) @ np.array(baked.pose.bones[n].matrix) for n in skin])
-    mats = np.array(mats)
+    mats = world_bones(baked, skin, range(first, first + 3 * length + 1))
     root = skin.index("root.x")
     travel = mats[length, root, :3, 3] - mats[0, root, :3, 3]
     assert np.linalg.norm(travel[:2]) > 0.2  # it walks

@@ -23,6 +23,9 @@ from scenes import (
     evaluated_joints,
     fcurves_of,
     find_mocap,
+    skinned,
+    through_fbx,
+    world_bones,
 )
 
 SIDES = "LR"
@@ -423,29 +426,14 @@ def test_a_model_an_exporter_baked_walks_on_with_its_deform_legs(addon, tmp_path
     obj, source, moved, floor = moved_walk(addon, tmp_path)
     bpy.data.objects.remove(source)
     bpy.context.scene.frame_start, bpy.context.scene.frame_end = 1, int(moved.frame_range[1])
-    bpy.ops.mesh.primitive_cube_add(size=0.3, location=(0, 0, 1))
-    body = bpy.context.active_object
-    body.modifiers.new("Armature", "ARMATURE").object = obj
     unskinned = {"全ての親", "センター", "グルーブ"}
     unskinned |= {f"{b}.{S}" for b in LEG + ("足ＩＫ", "つま先ＩＫ") for S in SIDES}
-    for bone in obj.data.bones:
-        if bone.name not in unskinned:
-            body.vertex_groups.new(name=bone.name).add(range(len(body.data.vertices)), 0.1, "REPLACE")
-    for o in bpy.context.view_layer.objects:
-        o.select_set(o in (obj, body))
-    path = tmp_path / "baked.fbx"  # the exporter's leaf bones keep the tails of the bones at the ends
-    bpy.ops.export_scene.fbx(filepath=str(path), use_selection=True, add_leaf_bones=leaf_bones,
-                             bake_anim_use_all_actions=False, bake_anim_use_nla_strips=False)
-    bpy.ops.wm.read_homefile(use_empty=True)
-    bpy.ops.import_scene.fbx(filepath=str(path))
-    baked = next(o for o in bpy.data.objects if o.type == "ARMATURE")
-    assert not any(len(pb.constraints) for pb in baked.pose.bones)
+    skinned(obj, [bone.name for bone in obj.data.bones if bone.name not in unskinned])
+    # the exporter's leaf bones keep the tails of the bones at the ends
+    baked = through_fbx(obj, tmp_path / "baked.fbx", leaf_bones=leaf_bones)
     ankle, shin = baked.data.bones["足首D.L"], baked.data.bones["ひざD.L"]
     assert ("足首D.L_end" in baked.data.bones) == leaf_bones
     assert (abs(ankle.length - shin.length) < 1e-4) != leaf_bones  # without them, a tail the importer guessed
-    for o in bpy.context.view_layer.objects:
-        o.select_set(o is baked)
-    bpy.context.view_layer.objects.active = baked
     capfd.readouterr()
     assert bpy.ops.strnn.auto_map() == {"FINISHED"}
     assert "(mmd_deform rig); it is a control rig an exporter baked" in capfd.readouterr().out
@@ -472,11 +460,3 @@ def test_a_model_an_exporter_baked_walks_on_with_its_deform_legs(addon, tmp_path
 
     assert np.percentile(feet(got), 5) > np.percentile(feet(took), 5) - 0.02 and feet(got).min() < floor + 0.05
 
-
-def world_bones(obj, names, frames) -> np.ndarray:
-    """World matrices ``[F, len(names), 4, 4]`` of ``obj``'s pose bones ``names`` as Blender plays ``frames``."""
-    out = []
-    for f in frames:
-        bpy.context.scene.frame_set(int(f))
-        out.append([np.array(obj.matrix_world) @ np.array(obj.pose.bones[n].matrix) for n in names])
-    return np.array(out)

@@ -27,7 +27,10 @@ from scenes import (
     nod_head,
     retargeted,
     same_keys,
+    skinned,
+    through_fbx,
     walk_bvh,
+    world_bones,
 )
 
 LIMB_SWITCHES = ("thigh_parent.L", "thigh_parent.R", "upper_arm_parent.L", "upper_arm_parent.R")
@@ -517,40 +520,15 @@ def test_check_motion_reads_the_rig_as_the_operators_do(walking_rig, addon, real
 FACE = ("lid", "nose", "lip", "brow", "ear", "jaw", "chin", "cheek", "temple", "forehead", "tongue")
 
 
-def world_bones(obj, names: list[str], frames) -> np.ndarray:
-    """World matrices ``[F, N, 4, 4]`` of pose bones ``names`` as Blender plays ``frames``."""
-    out = []
-    for f in frames:
-        bpy.context.scene.frame_set(int(f))
-        world = np.array(obj.matrix_world)
-        out.append([world @ np.array(obj.pose.bones[n].matrix) for n in names])
-    return np.array(out)
-
-
-def through_fbx(rig, addon, folder):
-    """``rig`` with a mesh weighted to every deform bone, exported to FBX with every bone (Blender's exporter bakes
-    each bone and drops the constraints) and imported again, active: it keeps Rigify's control names, but they drive
-    nothing, its DEF- thighs hang from ORG-spine and its face from MCH- and control bones."""
+def rigify_through_fbx(rig, addon, folder):
+    """``rig`` with a mesh weighted to every deform bone, through FBX (:func:`scenes.through_fbx`): it keeps Rigify's
+    control names, but they drive nothing, its DEF- thighs hang from ORG-spine and its face from MCH- and control
+    bones."""
     bpy.context.scene.frame_start, bpy.context.scene.frame_end = 1, 60
-    bpy.ops.mesh.primitive_cube_add(size=0.3, location=(0, 0, 1))
-    body = bpy.context.active_object
-    body.modifiers.new("Armature", "ARMATURE").object = rig
-    for bone in rig.data.bones:
-        if bone.use_deform:
-            body.vertex_groups.new(name=bone.name).add(range(len(body.data.vertices)), 0.1, "REPLACE")
-    for obj in bpy.context.view_layer.objects:
-        obj.select_set(obj in (rig, body))
-    path = folder / "baked.fbx"
-    bpy.ops.export_scene.fbx(filepath=str(path), use_selection=True, add_leaf_bones=False,
-                             bake_anim_use_all_actions=False, bake_anim_use_nla_strips=False)
-    bpy.ops.wm.read_homefile(use_empty=True)
-    bpy.ops.import_scene.fbx(filepath=str(path))
-    baked = next(o for o in bpy.data.objects if o.type == "ARMATURE")
-    assert "thigh_fk.L" in baked.pose.bones and not any(len(pb.constraints) for pb in baked.pose.bones)
+    skinned(rig, [bone.name for bone in rig.data.bones if bone.use_deform])
+    baked = through_fbx(rig, folder / "baked.fbx")
+    assert "thigh_fk.L" in baked.pose.bones
     assert baked.data.bones["DEF-thigh.L"].parent.name == "ORG-spine"
-    for obj in bpy.context.view_layer.objects:
-        obj.select_set(obj is baked)
-    bpy.context.view_layer.objects.active = baked
     listed = addon_module(addon, "strnn_addon.scene.controls").listed
     assert listed(baked) == (None, [])  # no preset: its controls are bones like any other
     return baked
@@ -558,9 +536,9 @@ def through_fbx(rig, addon, folder):
 
 @pytest.fixture
 def baked(rig, addon, tmp_path):
-    """The generated rig walking, its head nodding, through FBX (:func:`through_fbx`)."""
+    """The generated rig walking, its head nodding, through FBX (:func:`rigify_through_fbx`)."""
     nod_head(rig)
-    return through_fbx(rig, addon, tmp_path)
+    return rigify_through_fbx(rig, addon, tmp_path)
 
 
 def test_a_rigify_rig_baked_by_an_fbx_exporter_is_keyed_on_its_deform_bones_with_all_its_skin(baked, addon, capfd):
@@ -634,8 +612,8 @@ def test_motion_moved_onto_a_rigify_rig_an_exporter_baked_moves_all_its_skin(bak
 
 
 def test_a_loop_made_on_a_rigify_rig_an_exporter_baked_plays_on_whole(rig, addon, tmp_path):
-    """Make Loop on a rig an exporter baked (:func:`through_fbx`), its walk leaning further forward as it goes and its
-    head nodding out of step with it, played on past its cycle as Blender repeats it: each cycle is the first
+    """Make Loop on a rig an exporter baked (:func:`rigify_through_fbx`), its walk leaning further forward as it goes
+    and its head nodding out of step with it, played on past its cycle as Blender repeats it: each cycle is the first
     carried by the hips' travel, every bone of the skin with it. Keys on the carried and loose bones were set against
     mechanism bones (Rigify's ``torso``) that lean and travel as the take did, not as the cycle does, and every
     location repeated with its offset: the skin drifted off the body cycle after cycle (the real walker's face 8 mm
@@ -648,7 +626,7 @@ def test_a_loop_made_on_a_rigify_rig_an_exporter_baked_plays_on_whole(rig, addon
     for f in range(1, 61):
         torso.rotation_quaternion = Euler((0.004 * f, 0.05 * np.sin(2 * np.pi * f / 30.0), 0)).to_quaternion()
         torso.keyframe_insert("rotation_quaternion", frame=f)
-    baked = through_fbx(rig, addon, tmp_path)
+    baked = rigify_through_fbx(rig, addon, tmp_path)
     skin = sorted(g.name for g in next(o for o in bpy.data.objects if o.type == "MESH").vertex_groups)
     assert bpy.ops.strnn.make_loop() == {"FINISHED"}
     new = action_of(baked)
