@@ -522,6 +522,52 @@ def carried_bones(rig: Rig, written: list[str], skinned: set[str], pose: np.ndar
     return {b: int(w[k]) for b, k in sorted(out.items())}
 
 
+# A keyed bone moved with a written bone over the take where the spread of its transform relative to it
+# (:func:`_spreads`) is at most this: kept on it to within millimetres and a fraction of a degree, as an exporter bakes
+# a game rig's IK bones onto its feet and hands; and it moved where its own spread in the armature is at least this.
+FOLLOW_TIE = 0.005
+FOLLOW_MOVED = 0.05
+
+
+def keyed_followers(rig: Rig, written: list[str], keyed: set[str], pose: np.ndarray, scale: float) -> dict[int, int]:
+    """{keyed bone: the written bone it moved with} for the bones of a plain rig that the action keys, that the
+    written bones do not carry and that kept to one of them over the take (:data:`FOLLOW_TIE`) while moving
+    (:data:`FOLLOW_MOVED`): an Unreal rig's ``ik_foot_l`` keyed on ``foot_l`` and ``ik_hand_gun`` on ``hand_r``, a prop
+    keyed in a hand. Where new frames key the written bones alone, such a bone would stay where the take left it.
+    ``pose`` ``[S, B, 4, 4]``: the take's poses (armature space) of ``rig``'s bones; ``scale``: a length of the rig (its
+    leg). A bone that hangs from a written bone (which carries it) or has one below it (a root, which the written
+    bones hang from) is left out."""
+    index = {n: b for b, n in enumerate(rig.names)}
+    w = np.array([index[n] for n in written if n in index])
+    if not len(w):
+        return {}
+    below_written = np.isin(np.arange(len(rig.names)), w)
+    for b in range(len(rig.names) - 1, -1, -1):  # children first
+        if rig.parents[b] >= 0:
+            below_written[rig.parents[b]] |= below_written[b]
+    carried = hanging_from(rig, set(written))
+    bones = np.array([b for b, n in enumerate(rig.names) if n in keyed and not below_written[b] and not carried[b]],
+                     dtype=int)
+    if not len(bones):
+        return {}
+    own = pose[:, bones]  # [S, N, 4, 4]
+    moved = (np.linalg.norm(own[..., :3, 3] - own[..., :3, 3].mean(axis=0), axis=-1).mean(axis=0) / scale
+             + np.linalg.norm(own[..., :3, :3] - own[..., :3, :3].mean(axis=0), axis=(-2, -1)).mean(axis=0))
+    spread = _spreads(pose, bones, w, scale)  # [N, W]
+    heads = rig.rest[:, :3, 3]
+    a = heads[w]
+    seg = np.einsum("bij,bj->bi", rig.rest[w], np.c_[rig.tails[w], np.ones(len(w))])[:, :3] - a
+    out = {}
+    for i, b in enumerate(bones):
+        if moved[i] < FOLLOW_MOVED or spread[i].min() > FOLLOW_TIE:
+            continue
+        # of the written bones it kept to (a hand and its still fingers), the one whose rest segment it lies nearest
+        t = np.clip(np.einsum("wi,wi->w", heads[b] - a, seg) / np.maximum(np.einsum("wi,wi->w", seg, seg), 1e-12), 0, 1)
+        near = np.where(spread[i] <= FOLLOW_TIE, np.linalg.norm(a + t[:, None] * seg - heads[b], axis=-1), np.inf)
+        out[int(b)] = int(w[np.argmin(near)])
+    return out
+
+
 def loose_bones(rig: Rig, written: list[str]) -> list[str]:
     """The ``written`` bones of ``rig`` whose parent is not written and hangs from no written bone (a baked Rigify
     rig's DEF-thigh.L hangs from ORG-spine): keys on their rotation alone would leave their heads where that parent

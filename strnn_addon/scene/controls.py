@@ -230,7 +230,7 @@ def bake(context, obj, control_set_: ControlSet, frames: np.ndarray, targets: di
     fcurves = anim.active_fcurves(obj)
     if not switches and all(c.bone == c.drives and c.turns and not (c.end or c.pole or c.twist) for c in chosen) \
             and not rig_io.needs_scene_evaluation(obj, fcurves):  # each bone its own control, on a rig that plays
-        return _bake_closed(obj, chosen, fcurves, frames, targets)  # as its curves say (one an exporter baked)
+        return bake_closed(obj, chosen, fcurves, frames, targets)  # as its curves say (one an exporter baked)
     keep_frame = (scene.frame_current, scene.frame_subframe)
     keep_basis = {c.bone: bones[c.bone].matrix_basis.copy() for c in chosen}
     keep_switch = {(s.bone, s.prop): bones[s.bone].get(s.prop) for s in switches}
@@ -275,7 +275,7 @@ def bake(context, obj, control_set_: ControlSet, frames: np.ndarray, targets: di
     return Baked(loc, nearest_rotation(rot), worst)
 
 
-def _bake_closed(obj, chosen: list, fcurves, frames: np.ndarray, targets: dict[str, np.ndarray]) -> Baked:
+def bake_closed(obj, chosen: list, fcurves, frames: np.ndarray, targets: dict[str, np.ndarray]) -> Baked:
     """:func:`bake` without Blender's evaluation, where each control is the bone it drives and no bone of ``obj``
     follows anything but its parent: its pose at ``frames`` as the action of ``fcurves`` plays it, each control set
     in turn, parents first (:func:`rig_controls.placed_on_targets`)."""

@@ -52,7 +52,9 @@ class Clip:
     last: int
     controls: ControlSet | None = None  # a control rig's: ``rig`` is then its joint skeleton, written by a bake
     layered: bool = False  # NLA strips under the action show through it (rig_io.nla_beneath)
-    carried: dict[str, str] = field(default_factory=dict)  # a baked control rig's: {bone: deform bone carrying it}
+    # {bone: the written bone carrying it}: a baked control rig's skin (:func:`carried`), a plain rig's keyed
+    # followers (:func:`followers`)
+    carried: dict[str, str] = field(default_factory=dict)
 
 
 def scene_fps(scene) -> float:
@@ -117,6 +119,8 @@ def clip_of(context, obj, action, channels, first: int, last: int) -> Clip:
                 keys_per_second(context, obj), first, last, found, rig_io.nla_beneath(obj, fcurves))
     if found is not None and found.name == BAKED_BONES:
         clip.carried = carried(context, clip)
+    elif found is None and channels is not None:
+        clip.carried = followers(context, clip)
     return clip
 
 
@@ -134,6 +138,24 @@ def carried(context, clip: Clip) -> dict[str, str]:
     leg = leg_length(anchor_positions(clip.rig, clip.anchors, clip.rig.rest[None]))  # armature units
     found = controls_core.carried_bones(full, [clip.rig.names[b] for b in written_bones(clip)],
                                         mapping.skin(clip.obj), pose, leg)
+    return {full.names[c]: full.names[w] for c, w in found.items()}
+
+
+def followers(context, clip: Clip) -> dict[str, str]:
+    """{bone: the written bone it moves with} for a plain rig's keyed bones that kept to a written bone over the take
+    (:func:`controls.keyed_followers`: an Unreal rig's ``ik_foot_l`` on ``foot_l``, a prop keyed in a hand), keyed
+    with it wherever an operation writes (:func:`write_pose`); none on a rig whose curves alone do not say its pose
+    (constraints, drivers: :func:`rig_io.needs_scene_evaluation`)."""
+    fcurves = _fcurves(clip)
+    written = [clip.rig.names[b] for b in written_bones(clip)]
+    keyed = {bone for bone, _ in rig_io.bone_channels(fcurves)} - set(written)
+    if not keyed or rig_io.needs_scene_evaluation(clip.obj, fcurves):
+        return {}
+    full = rig_io.read_rig(clip.obj)
+    frames = np.unique(np.linspace(clip.first, clip.last, CARRY_SAMPLES).round())
+    pose, _ = rig_io.pose_matrices(context, clip.obj, full.names, fcurves, frames)
+    leg = leg_length(anchor_positions(clip.rig, clip.anchors, clip.rig.rest[None]))  # armature units
+    found = controls_core.keyed_followers(full, written, keyed, pose, leg)
     return {full.names[c]: full.names[w] for c, w in found.items()}
 
 
@@ -466,16 +488,18 @@ def keyed_names(clip: Clip) -> list[str]:
 
 def written_paths(clip: Clip, root: str | None = None) -> set[str]:
     """The F-curve data paths :func:`write_pose` keys: each written bone's rotation and the location of the bone
-    the hips' place is keyed on (:func:`located`), and a ``root`` bone's rotation and location; on a control rig its
-    controls' rotations, and the locations of those that move."""
+    the hips' place is keyed on (:func:`located`), a plain rig's followers' (:func:`followers`) rotations and
+    locations, and a ``root`` bone's rotation and location; on a control rig its controls' rotations, and the
+    locations of those that move."""
     carried = ({bone_path(root, rig_io.rotation_property(clip.obj.pose.bones[root])), bone_path(root, "location")}
                if root is not None else set())
     if clip.controls is not None:
         return carried | {bone_path(c.bone, prop) for c in keyed_controls(clip)
                           for prop in (rig_io.rotation_property(clip.obj.pose.bones[c.bone]),)
                           + (("location",) if c.location else ())}
-    paths = {bone_path(clip.rig.names[b], rig_io.rotation_property(clip.obj.pose.bones[clip.rig.names[b]]))
-             for b in written_bones(clip)}
+    paths = {bone_path(name, rig_io.rotation_property(clip.obj.pose.bones[name]))
+             for name in [clip.rig.names[b] for b in written_bones(clip)] + list(clip.carried)}
+    paths |= {bone_path(name, "location") for name in clip.carried if not clip.obj.data.bones[name].use_connect}
     return carried | paths | {bone_path(clip.rig.names[located(clip.rig, clip.anchors)], "location")}
 
 
@@ -633,7 +657,33 @@ def write_pose(context, clip: Clip, action, frames: np.ndarray, loc: np.ndarray,
             _key_property(clip, channels, pb, prop, frames, values, replace, interpolation=interpolation)
         if b in (placed, moved):
             _key_property(clip, channels, pb, "location", frames, loc[:, b], replace, interpolation=interpolation)
+    if clip.carried:
+        _key_followers(context, clip, channels, frames, previous, replace, follows, interpolation)
     return 0.0
+
+
+def _key_followers(context, clip: Clip, channels: anim.Channels, frames: np.ndarray, previous: dict,
+                   replace: tuple[float, float] | None, follows: bool, interpolation: str) -> None:
+    """Key a plain rig's followers (:func:`followers`) at ``frames`` where they keep to the bones they moved with as
+    those are now keyed in ``channels`` (:func:`_carried_poses`), each set in closed form against its parent as the new
+    keys play it (:func:`controls.bake_closed`); ``previous``, ``replace``, ``follows``, ``interpolation`` as
+    :func:`write_pose` has them."""
+    carriers = sorted(set(clip.carried.values()))
+    now, _ = rig_io.pose_matrices(context, clip.obj, carriers, channels.fcurves, frames)
+    carry = _carried_poses(context, clip, frames, {w: now[:, k] for k, w in enumerate(carriers)})
+    bones = clip.obj.data.bones
+    chosen = [Control(name, name, not bones[name].use_connect) for name in carry]
+    baked = controls.bake_closed(clip.obj, chosen, channels.fcurves, frames, carry)
+    chans = rig_io.bone_channels(channels.fcurves)
+    edge = np.array([frames[-1] + 1 if follows else frames[0] - 1], np.float64)
+    for k, c in enumerate(chosen):
+        pb = clip.obj.pose.bones[c.bone]
+        before = previous.get(pb.name, rig_io.rotation_values(chans, pb, edge)[0])
+        prop, values = encode_rotation(pb.rotation_mode, baked.rot[:, k], before, follows)
+        _key_property(clip, channels, pb, prop, frames, values, replace, interpolation=interpolation)
+        if c.location:
+            _key_property(clip, channels, pb, "location", frames, baked.loc[:, k], replace,
+                          interpolation=interpolation)
 
 
 def write_controls(context, clip: Clip, channels: anim.Channels, frames: np.ndarray, loc: np.ndarray,

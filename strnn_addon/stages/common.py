@@ -268,9 +268,12 @@ def report_note(action) -> str:
 
 
 def with_bake(record: dict, clip, error: float, frames) -> dict:
-    """``record``, with the first and last frame written and, on a control rig, how far (cm) the bake left a
-    driven bone from the solve at worst."""
+    """``record``, with the first and last frame written, on a plain rig the keyed bones carried with the written
+    ones they moved with (:func:`pipeline.followers`) and, on a control rig, how far (cm) the bake left a driven bone
+    from the solve at worst."""
     record["frames_written"] = [int(frames[0]), int(frames[-1])]
+    if clip.controls is None and clip.carried:  # a plain rig's keyed followers (an Unreal rig's IK bones)
+        record["followers"] = dict(sorted(clip.carried.items()))
     if clip.controls is not None:
         worst_cm = round(100 * error * pipeline.world_scale(clip), 2)
         record["controls"] = {"set": clip.controls.name, "max_error_cm": worst_cm}

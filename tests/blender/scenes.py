@@ -256,6 +256,42 @@ def genesis8_bones() -> list[tuple]:
     return bones
 
 
+def unreal_bones() -> list[tuple]:
+    """(name, parent, head, tail) of an Unreal Engine 5 mannequin as Blender's FBX importer brings it in: ``root`` at
+    the floor, ``pelvis``, ``spine_01`` to ``spine_05``, two neck bones, twist bones beside the limbs, and the IK bones
+    a game reads (``ik_foot_root`` > ``ik_foot_l``; ``ik_hand_root`` > ``ik_hand_gun`` > ``ik_hand_l``, ``ik_hand_r``),
+    which hang from the root and are keyed onto the feet and hands."""
+    j = _rest_joints()
+    up, fwd = np.array([0, 0, 0.1]), np.array([0, -0.06, 0])
+    spine = [_mid(j["spine"], j["spine1"], t) for t in (0.0, 0.25, 0.5, 0.75, 1.0)] + [j["neck"]]
+    bones = [("root", None, np.zeros(3), up), ("pelvis", "root", j["hips"], j["spine"])]
+    bones += [(f"spine_0{k + 1}", "pelvis" if k == 0 else f"spine_0{k}", spine[k], spine[k + 1]) for k in range(5)]
+    bones += [("neck_01", "spine_05", j["neck"], _mid(j["neck"], j["head"])),
+              ("neck_02", "neck_01", _mid(j["neck"], j["head"]), j["head"]),
+              ("head", "neck_02", j["head"], j["head"] + up * 2),
+              ("ik_foot_root", "root", np.zeros(3), up), ("ik_hand_root", "root", np.zeros(3), up),
+              ("ik_hand_gun", "ik_hand_root", j["r_wrist"], j["r_fingertip"])]
+    for s in "lr":
+        hand = [_mid(j[f"{s}_wrist"], j[f"{s}_fingertip"], t) for t in (0.0, 0.45, 0.65, 0.85, 1.0)]
+        bones += [(f"clavicle_{s}", "spine_05", _mid(j["neck"], j[f"{s}_arm"], 0.3) - up, j[f"{s}_arm"]),
+                  (f"upperarm_{s}", f"clavicle_{s}", j[f"{s}_arm"], j[f"{s}_elbow"]),
+                  (f"upperarm_twist_01_{s}", f"upperarm_{s}", _mid(j[f"{s}_arm"], j[f"{s}_elbow"]), j[f"{s}_elbow"]),
+                  (f"lowerarm_{s}", f"upperarm_{s}", j[f"{s}_elbow"], j[f"{s}_wrist"]),
+                  (f"lowerarm_twist_01_{s}", f"lowerarm_{s}", _mid(j[f"{s}_elbow"], j[f"{s}_wrist"]), j[f"{s}_wrist"]),
+                  (f"hand_{s}", f"lowerarm_{s}", hand[0], hand[1]),
+                  (f"middle_01_{s}", f"hand_{s}", hand[1], hand[2]),
+                  (f"middle_02_{s}", f"middle_01_{s}", hand[2], hand[3]),
+                  (f"middle_03_{s}", f"middle_02_{s}", hand[3], hand[4]),
+                  (f"thigh_{s}", "pelvis", j[f"{s}_upleg"], j[f"{s}_knee"]),
+                  (f"thigh_twist_01_{s}", f"thigh_{s}", _mid(j[f"{s}_upleg"], j[f"{s}_knee"]), j[f"{s}_knee"]),
+                  (f"calf_{s}", f"thigh_{s}", j[f"{s}_knee"], j[f"{s}_foot"]),
+                  (f"foot_{s}", f"calf_{s}", j[f"{s}_foot"], j[f"{s}_toe"]),
+                  (f"ball_{s}", f"foot_{s}", j[f"{s}_toe"], j[f"{s}_toe"] + fwd),
+                  (f"ik_foot_{s}", "ik_foot_root", j[f"{s}_foot"], j[f"{s}_toe"]),
+                  (f"ik_hand_{s}", "ik_hand_gun", hand[0], hand[1])]
+    return bones
+
+
 def smpl_bones() -> list[tuple]:
     """(name, parent, head, tail) of an SMPL skeleton as the SMPL-X add-on and AMASS conversions name it: the ankle
     above ``L_Foot`` (the ball of the foot), the wrist above ``L_Hand`` (the knuckles), ``Spine1..3`` with the arms
@@ -390,6 +426,17 @@ def object_walk(frames: int = 60, step: float = 0.02):
     for f in range(1, frames + 1):
         obj.location = (0.0, -step * f, 0.0)
         obj.keyframe_insert("location", frame=f)
+    return obj
+
+
+def open_rig(path, name: str = "rig"):
+    """Open the .blend at ``path`` and make its armature ``name`` the active, only selected object, at frame 1."""
+    bpy.ops.wm.open_mainfile(filepath=str(path))
+    obj = bpy.data.objects[name]
+    for other in bpy.context.view_layer.objects:
+        other.select_set(other is obj)
+    bpy.context.view_layer.objects.active = obj
+    bpy.context.scene.frame_set(1)
     return obj
 
 

@@ -25,6 +25,7 @@ from scenes import (
     key_snapshot,
     key_walk,
     nod_head,
+    open_rig,
     retargeted,
     same_keys,
     skinned,
@@ -52,17 +53,6 @@ def rigify_file(addon, tmp_path_factory):
     path = tmp_path_factory.mktemp("rigify") / "rigify.blend"
     bpy.ops.wm.save_as_mainfile(filepath=str(path))
     return path
-
-
-def open_rig(path):
-    """Open the .blend at ``path`` and make its rig the active, only selected object."""
-    bpy.ops.wm.open_mainfile(filepath=str(path))
-    obj = bpy.data.objects["rig"]
-    for other in bpy.context.view_layer.objects:
-        other.select_set(other is obj)
-    bpy.context.view_layer.objects.active = obj
-    bpy.context.scene.frame_set(1)
-    return obj
 
 
 @pytest.fixture

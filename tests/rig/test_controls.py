@@ -17,6 +17,7 @@ from model_core.rig.controls import (
     carried_bones,
     closed_cycle,
     from_rows,
+    keyed_followers,
     loose_bones,
     placed_on_targets,
     preset_for,
@@ -312,6 +313,34 @@ def test_skin_below_a_written_bone_through_a_bone_of_no_skin_is_carried_with_the
     pose = _take(rig, {"足首": "足首D", "つま先": "足首D", "足": "足D", "ひざ": "ひざD"})
     found = named(rig, carried_bones(rig, written, set(written) | {"つま先"}, pose, 1.0))
     assert found == {"足首": "足首D", "ひざ": "ひざD"}, found
+
+
+def test_keyed_bones_that_kept_to_a_written_bone_they_do_not_hang_from_follow_it():
+    """An Unreal rig: its IK bones hang from the root and were keyed onto the feet and the hand (the hand's with its
+    still finger too: the hand it lies on carries it); a prop keyed its own way, a bone keyed still, the root above the
+    written bones and a finger that hangs from its written hand are not followers."""
+    bones = [("root", -1, (0, 0, 0.0), False), ("pelvis", 0, (0, 0, 1.0), False),
+             ("thigh_l", 1, (0.1, 0, 0.9), False), ("calf_l", 2, (0.1, 0, 0.5), True),
+             ("foot_l", 3, (0.1, 0, 0.1), True), ("hand_l", 1, (0.4, 0, 1.0), False),
+             ("middle_01_l", 5, (0.45, 0, 1.0), True), ("nail_l", 6, (0.5, 0, 1.0), True),
+             ("ik_foot_root", 0, (0, 0, 0.0), False), ("ik_foot_l", 8, (0.1, 0, 0.1), False),
+             ("ik_hand_l", 0, (0.4, 0, 1.0), False), ("prop", 0, (0.3, 0.3, 0.0), False),
+             ("still", 0, (0, 1, 0.0), False)]
+    rest = np.repeat(np.eye(4)[None], len(bones), axis=0)
+    rest[:, :3, 3] = [b[2] for b in bones]
+    rig = Rig([b[0] for b in bones], [b[1] for b in bones], rest, np.full(len(bones), 0.05),
+              np.array([b[3] for b in bones]))
+    written = ["pelvis", "thigh_l", "calf_l", "foot_l", "hand_l", "middle_01_l"]
+    pose = _take(rig, {"ik_foot_l": "foot_l", "ik_hand_l": "hand_l", "middle_01_l": "hand_l", "nail_l": "middle_01_l",
+                       "ik_foot_root": "root"})
+    pose[:, rig.names.index("still")] = rig.rest[rig.names.index("still")]
+    keyed = {"root", "ik_foot_root", "ik_foot_l", "ik_hand_l", "prop", "still", "nail_l"}
+    found = named(rig, keyed_followers(rig, written, keyed, pose, 1.0))
+    assert found == {"ik_foot_l": "foot_l", "ik_hand_l": "hand_l"}, found
+    # kept to its foot only loosely (2 cm off and on): not a follower
+    loose = pose.copy()
+    loose[::2, rig.names.index("ik_foot_l"), 0, 3] += 0.04
+    assert "ik_foot_l" not in named(rig, keyed_followers(rig, written, keyed, loose, 1.0))
 
 
 def test_the_bake_in_closed_form_puts_each_bone_on_its_target_parents_first():

@@ -1,0 +1,123 @@
+"""An Unreal Engine mannequin (a plain rig): its IK bones, which hang from the root and which Unreal's animations key
+onto the feet and hands, go on with them in the frames the operators write, as a game reading them expects."""
+
+from __future__ import annotations
+
+import bpy
+import numpy as np
+import pytest
+from scenes import (
+    action_of,
+    build_armature,
+    find_mocap,
+    import_bvh,
+    key_snapshot,
+    open_rig,
+    same_keys,
+    unreal_bones,
+    walk_bvh,
+)
+
+WALK = "bandai-namco/dataset-2/dataset-2_walk_normal_001.bvh"  # a real take where the data is unpacked
+# each IK bone and the bone Unreal keys it onto
+FOLLOWERS = {"ik_foot_l": "foot_l", "ik_foot_r": "foot_r", "ik_hand_gun": "hand_r", "ik_hand_l": "hand_l",
+             "ik_hand_r": "hand_r"}
+
+
+def key_ik_bones(obj, frames) -> None:
+    """Key each IK bone of ``obj`` on its bone (:data:`FOLLOWERS`) at ``frames``, as Unreal's animations have them."""
+    scene, bones = bpy.context.scene, obj.pose.bones
+    for f in frames:
+        scene.frame_set(int(f))
+        for ik, on in FOLLOWERS.items():  # parents first: ik_hand_gun before the hands below it
+            bones[ik].matrix = bones[on].matrix.copy()
+            bpy.context.view_layer.update()
+            bones[ik].keyframe_insert("location", frame=int(f))
+            bones[ik].keyframe_insert("rotation_quaternion", frame=int(f))
+
+
+@pytest.fixture(scope="module")
+def unreal_file(addon, tmp_path_factory):
+    """The mannequin walking (a walk moved onto it by Transfer Motion), its IK bones keyed on its feet and hands."""
+    folder = tmp_path_factory.mktemp("unreal")
+    bpy.ops.wm.read_homefile(use_empty=True)
+    mocap = find_mocap()
+    path = mocap / WALK if mocap is not None and (mocap / WALK).exists() else walk_bvh(folder, frames=120)
+    source = import_bvh(path, update_scene_fps=True, update_scene_duration=True)
+    source.location.x = -2.0
+    rig = build_armature("SK_Mannequin", unreal_bones())
+    for obj in bpy.context.view_layer.objects:
+        obj.select_set(obj in (source, rig))
+    bpy.context.view_layer.objects.active = rig
+    assert bpy.ops.strnn.transfer_motion() == {"FINISHED"}
+    bpy.data.objects.remove(source)
+    first, last = (int(f) for f in action_of(rig).frame_range)
+    key_ik_bones(rig, range(first, last + 1))
+    out = folder / "mannequin.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(out))
+    return out
+
+
+@pytest.fixture
+def mannequin(unreal_file):
+    return open_rig(unreal_file, "SK_Mannequin")
+
+
+def off_their_bones(obj, frames) -> np.ndarray:
+    """``[F, len(FOLLOWERS)]``: how far (m) each IK bone's head is from its bone's at ``frames``, as Blender plays the
+    armature's action, plus how far its axes are turned from its bone's (the matrices' largest difference, metres a
+    metre: the IK bones are keyed with their bones' matrices)."""
+    scene, bones, out = bpy.context.scene, obj.pose.bones, []
+    for f in frames:
+        scene.frame_set(int(f))
+        out.append([(bones[ik].head - bones[on].head).length * obj.matrix_world.to_scale()[0]
+                    + np.abs(np.array(bones[ik].matrix.to_3x3()) - np.array(bones[on].matrix.to_3x3())).max()
+                    for ik, on in FOLLOWERS.items()])
+    return np.array(out)
+
+
+def test_extend_keys_the_ik_bones_on_the_feet_and_hands_they_were_keyed_on(mannequin, real_model):
+    obj = mannequin
+    old = action_of(obj)
+    before = key_snapshot(obj)
+    last = int(old.frame_range[1])
+    assert bpy.ops.strnn.extend_clip(frames=60) == {"FINISHED"}
+    new = action_of(obj)
+    assert new is not old and same_keys(before, key_snapshot(obj, old))
+    assert new["strnn"]["followers"].to_dict() == FOLLOWERS
+    new_frames = np.arange(last + 1, last + 61)
+    off = off_their_bones(obj, new_frames)
+    assert off.max() < 1e-3, dict(zip(FOLLOWERS, off.max(0)))
+    # the feet walk on, and the IK bones with them
+    scene, bones = bpy.context.scene, obj.pose.bones
+    heads = []
+    for f in (last, last + 60):
+        scene.frame_set(f)
+        heads.append(np.array(bones["ik_foot_l"].head))
+    assert np.linalg.norm(heads[1] - heads[0]) * obj.matrix_world.to_scale()[0] > 0.5
+    assert off_their_bones(obj, np.arange(1, last + 1, 20)).max() < 1e-3  # the take's frames as they were
+
+
+@pytest.mark.parametrize("op, kw", [("foot_lock", {}), ("make_loop", {})], ids=["foot_lock", "make_loop"])
+def test_the_ik_bones_stay_on_the_feet_and_hands_the_other_operations_move(mannequin, real_model, op, kw):
+    obj = mannequin
+    assert getattr(bpy.ops.strnn, op)(**kw) == {"FINISHED"}
+    new = action_of(obj)
+    assert new["strnn"]["followers"].to_dict() == FOLLOWERS
+    first, last = (int(f) for f in new.frame_range)
+    frames = np.arange(first, last + 1 + (2 * (last - first) if op == "make_loop" else 0), 3)  # a loop played on
+    off = off_their_bones(obj, frames)
+    assert off.max() < 2e-3, dict(zip(FOLLOWERS, off.max(0)))
+
+
+def test_a_bone_keyed_apart_from_the_body_is_left_as_it_was(mannequin, real_model):
+    """A keyed bone that moved on its own over the take (a prop swung about, not held) is not a follower: Extend leaves
+    its keys as they were."""
+    obj = mannequin
+    prop = obj.pose.bones["ik_hand_gun"]
+    first, last = (int(f) for f in action_of(obj).frame_range)
+    for f in range(first, last + 1, 5):
+        prop.location = (0.3 * np.sin(f / 7.0), 0.2 * np.cos(f / 5.0), 0.1 * f / last)
+        prop.keyframe_insert("location", frame=f)
+    assert bpy.ops.strnn.extend_clip(frames=20) == {"FINISHED"}
+    assert "ik_hand_gun" not in action_of(obj)["strnn"]["followers"].to_dict()
