@@ -292,6 +292,21 @@ def unreal_bones() -> list[tuple]:
     return bones
 
 
+def across(bones: list[tuple], unit: float = 100.0) -> list[tuple]:
+    """``bones`` (name, parent, head, tail) in ``unit`` s a metre (an FBX in centimetres), each tail turned across its
+    bone, as Blender's FBX importer leaves bones from Maya or Unreal without *Automatic Bone Orientation*: the bone's
+    length kept, its tail a quarter turn about the vertical from where the bone points (straight ahead where it points
+    up or down)."""
+    out = []
+    for name, parent, head, tail in bones:
+        way = np.asarray(tail, np.float64) - head
+        side = np.cross(way, [0.0, 0.0, 1.0])
+        flat = np.linalg.norm(side) > 1e-3 * np.linalg.norm(way)
+        side = side / np.linalg.norm(side) if flat else np.array([0.0, -1.0, 0.0])
+        out.append((name, parent, np.asarray(head) * unit, (head + side * np.linalg.norm(way)) * unit))
+    return out
+
+
 def smpl_bones() -> list[tuple]:
     """(name, parent, head, tail) of an SMPL skeleton as the SMPL-X add-on and AMASS conversions name it: the ankle
     above ``L_Foot`` (the ball of the foot), the wrist above ``L_Hand`` (the knuckles), ``Spine1..3`` with the arms

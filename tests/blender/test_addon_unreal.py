@@ -7,6 +7,7 @@ import bpy
 import numpy as np
 import pytest
 from scenes import (
+    across,
     action_of,
     build_armature,
     find_mocap,
@@ -45,7 +46,8 @@ def unreal_file(addon, tmp_path_factory):
     path = mocap / WALK if mocap is not None and (mocap / WALK).exists() else walk_bvh(folder, frames=120)
     source = import_bvh(path, update_scene_fps=True, update_scene_duration=True)
     source.location.x = -2.0
-    rig = build_armature("SK_Mannequin", unreal_bones())
+    rig = build_armature("SK_Mannequin", across(unreal_bones()))  # as an FBX from Unreal comes in: centimetres,
+    rig.scale = (0.01, 0.01, 0.01)  # the tails across the bones
     for obj in bpy.context.view_layer.objects:
         obj.select_set(obj in (source, rig))
     bpy.context.view_layer.objects.active = rig
