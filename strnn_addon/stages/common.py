@@ -254,11 +254,12 @@ def stalled_record(stalled: int, edge: int, back: bool = False) -> dict:
 def record_notes(action) -> list[str]:
     """The notes of a new action's record (a toe at a tail across its bone, its stance, pace,
     familiarity, held first window, what Follow the Clip had to follow, where a ground mesh was under no foot, a floor
-    that rose under the clip and a stalled frame the new frames replaced), in that order."""
+    that rose under the clip, a stalled frame the new frames replaced and the keyed bones carried with the written
+    ones), in that order."""
     record = action.get(RECORD, {})
     notes = [record.get(key, {}).get("note", "") for key in ("bone_map", "stance", "pace", "familiarity",
                                                             "first_window", "follow_clip", "ground", "floor_rise",
-                                                            "stalled_end")]
+                                                            "stalled_end", "followers")]
     return [str(note) for note in notes if note]
 
 
@@ -273,7 +274,13 @@ def with_bake(record: dict, clip, error: float, frames) -> dict:
     from the solve at worst."""
     record["frames_written"] = [int(frames[0]), int(frames[-1])]
     if clip.controls is None and clip.carried:  # a plain rig's keyed followers (an Unreal rig's IK bones)
-        record["followers"] = dict(sorted(clip.carried.items()))
+        pairs = sorted(clip.carried.items())
+        shown = ", ".join(f"{bone} on {carrier}" for bone, carrier in pairs[:4]) + (", ..." if len(pairs) > 4 else "")
+        many = len(pairs) > 1
+        record["followers"] = {"bones": dict(pairs), "note": (
+            f"{len(pairs)} keyed bone{'s' if many else ''} outside the bone map followed "
+            f"{'bones' if many else 'a bone'} it writes over the take ({shown}) and {'go' if many else 'goes'} on "
+            f"with {'them' if many else 'it'}")}
     if clip.controls is not None:
         worst_cm = round(100 * error * pipeline.world_scale(clip), 2)
         record["controls"] = {"set": clip.controls.name, "max_error_cm": worst_cm}

@@ -78,7 +78,7 @@ def off_their_bones(obj, frames) -> np.ndarray:
     return np.array(out)
 
 
-def test_extend_keys_the_ik_bones_on_the_feet_and_hands_they_were_keyed_on(mannequin, real_model):
+def test_extend_keys_the_ik_bones_on_the_feet_and_hands_they_were_keyed_on(mannequin, real_model, capfd):
     obj = mannequin
     old = action_of(obj)
     before = key_snapshot(obj)
@@ -86,7 +86,10 @@ def test_extend_keys_the_ik_bones_on_the_feet_and_hands_they_were_keyed_on(manne
     assert bpy.ops.strnn.extend_clip(frames=60) == {"FINISHED"}
     new = action_of(obj)
     assert new is not old and same_keys(before, key_snapshot(obj, old))
-    assert new["strnn"]["followers"].to_dict() == FOLLOWERS
+    assert new["strnn"]["followers"]["bones"].to_dict() == FOLLOWERS
+    assert ("5 keyed bones outside the bone map followed bones it writes over the take (ik_foot_l on foot_l, "
+            "ik_foot_r on foot_r, ik_hand_gun on hand_r, ik_hand_l on hand_l, ...) and go on with them"
+            in capfd.readouterr().out)
     new_frames = np.arange(last + 1, last + 61)
     off = off_their_bones(obj, new_frames)
     assert off.max() < 1e-3, dict(zip(FOLLOWERS, off.max(0)))
@@ -105,7 +108,7 @@ def test_the_ik_bones_stay_on_the_feet_and_hands_the_other_operations_move(manne
     obj = mannequin
     assert getattr(bpy.ops.strnn, op)(**kw) == {"FINISHED"}
     new = action_of(obj)
-    assert new["strnn"]["followers"].to_dict() == FOLLOWERS
+    assert new["strnn"]["followers"]["bones"].to_dict() == FOLLOWERS
     first, last = (int(f) for f in new.frame_range)
     frames = np.arange(first, last + 1 + (2 * (last - first) if op == "make_loop" else 0), 3)  # a loop played on
     off = off_their_bones(obj, frames)
@@ -122,4 +125,4 @@ def test_a_bone_keyed_apart_from_the_body_is_left_as_it_was(mannequin, real_mode
         prop.location = (0.3 * np.sin(f / 7.0), 0.2 * np.cos(f / 5.0), 0.1 * f / last)
         prop.keyframe_insert("location", frame=f)
     assert bpy.ops.strnn.extend_clip(frames=20) == {"FINISHED"}
-    assert "ik_hand_gun" not in action_of(obj)["strnn"]["followers"].to_dict()
+    assert "ik_hand_gun" not in action_of(obj)["strnn"]["followers"]["bones"].to_dict()
