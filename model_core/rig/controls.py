@@ -522,6 +522,15 @@ def carried_bones(rig: Rig, written: list[str], skinned: set[str], pose: np.ndar
     return {b: int(w[k]) for b, k in sorted(out.items())}
 
 
+def _free_bones(rig: Rig, written: np.ndarray) -> np.ndarray:
+    """bool ``[B]``: the bones of ``rig`` that neither hang from a bone of ``written`` (indices) nor have one below."""
+    below = np.isin(np.arange(len(rig.names)), written)
+    for b in range(len(rig.names) - 1, -1, -1):  # children first
+        if rig.parents[b] >= 0:
+            below[rig.parents[b]] |= below[b]
+    return ~below & ~hanging_from(rig, {rig.names[b] for b in written})
+
+
 # A keyed bone moved with a written bone over the take where the spread of its transform relative to it
 # (:func:`_spreads`) is at most this: kept on it to within millimetres and a fraction of a degree, as an exporter bakes
 # a game rig's IK bones onto its feet and hands; and it moved where its own spread in the armature is at least this.
@@ -538,16 +547,11 @@ def keyed_followers(rig: Rig, written: list[str], keyed: set[str], pose: np.ndar
     leg). A bone that hangs from a written bone (which carries it) or has one below it (a root, which the written
     bones hang from) is left out."""
     index = {n: b for b, n in enumerate(rig.names)}
-    w = np.array([index[n] for n in written if n in index])
+    w = np.array([index[n] for n in written if n in index], dtype=int)
     if not len(w):
         return {}
-    below_written = np.isin(np.arange(len(rig.names)), w)
-    for b in range(len(rig.names) - 1, -1, -1):  # children first
-        if rig.parents[b] >= 0:
-            below_written[rig.parents[b]] |= below_written[b]
-    carried = hanging_from(rig, set(written))
-    bones = np.array([b for b, n in enumerate(rig.names) if n in keyed and not below_written[b] and not carried[b]],
-                     dtype=int)
+    free = _free_bones(rig, w)
+    bones = np.array([b for b, n in enumerate(rig.names) if n in keyed and free[b]], dtype=int)
     if not len(bones):
         return {}
     own = pose[:, bones]  # [S, N, 4, 4]
@@ -565,6 +569,30 @@ def keyed_followers(rig: Rig, written: list[str], keyed: set[str], pose: np.ndar
         t = np.clip(np.einsum("wi,wi->w", heads[b] - a, seg) / np.maximum(np.einsum("wi,wi->w", seg, seg), 1e-12), 0, 1)
         near = np.where(spread[i] <= FOLLOW_TIE, np.linalg.norm(a + t[:, None] * seg - heads[b], axis=-1), np.inf)
         out[int(b)] = int(w[np.argmin(near)])
+    return out
+
+
+# A bone sits where a written bone does at rest where its rest place is within this share of the rig's scale of that
+# bone's and its rest axes within this of that bone's (the rotation matrices' largest difference).
+TWIN_TIE = 1e-4
+
+
+def rest_twins(rig: Rig, written: list[str], scale: float) -> dict[int, int]:
+    """{bone: the written bone it sits on at rest} for the bones of a rig without a take to read (Transfer Motion onto a
+    character that has no action yet) that hang from no written bone, have none below them and rest exactly where a
+    written bone rests, axes and all: an Unreal rig's ``ik_foot_l`` on ``foot_l``, ``ik_hand_gun`` on ``hand_r``, which
+    Unreal's animations key on those bones. ``scale``: a length of the rig (its leg)."""
+    index = {n: b for b, n in enumerate(rig.names)}
+    w = np.array([index[n] for n in written if n in index], dtype=int)
+    if not len(w):
+        return {}
+    out = {}
+    for b in np.flatnonzero(_free_bones(rig, w)):
+        place = np.linalg.norm(rig.rest[w, :3, 3] - rig.rest[b, :3, 3], axis=-1) / scale
+        axes = np.abs(rig.rest[w, :3, :3] - rig.rest[b, :3, :3]).max(axis=(-2, -1))
+        near = np.flatnonzero((place <= TWIN_TIE) & (axes <= TWIN_TIE))
+        if len(near):
+            out[int(b)] = int(w[near[0]])
     return out
 
 

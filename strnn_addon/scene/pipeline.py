@@ -119,7 +119,7 @@ def clip_of(context, obj, action, channels, first: int, last: int) -> Clip:
                 keys_per_second(context, obj), first, last, found, rig_io.nla_beneath(obj, fcurves))
     if found is not None and found.name == BAKED_BONES:
         clip.carried = carried(context, clip)
-    elif found is None and channels is not None:
+    elif found is None:
         clip.carried = followers(context, clip)
     return clip
 
@@ -143,19 +143,23 @@ def carried(context, clip: Clip) -> dict[str, str]:
 
 def followers(context, clip: Clip) -> dict[str, str]:
     """{bone: the written bone it moves with} for a plain rig's keyed bones that kept to a written bone over the take
-    (:func:`controls.keyed_followers`: an Unreal rig's ``ik_foot_l`` on ``foot_l``, a prop keyed in a hand), keyed
-    with it wherever an operation writes (:func:`write_pose`); none on a rig whose curves alone do not say its pose
+    (:func:`controls.keyed_followers`: an Unreal rig's ``ik_foot_l`` on ``foot_l``, a prop keyed in a hand), or on a
+    rig with no action yet those that rest where a written bone rests (:func:`controls.rest_twins`), keyed with it
+    wherever an operation writes (:func:`write_pose`); none on a rig whose curves alone do not say its pose
     (constraints, drivers: :func:`rig_io.needs_scene_evaluation`)."""
     fcurves = _fcurves(clip)
     written = [clip.rig.names[b] for b in written_bones(clip)]
     keyed = {bone for bone, _ in rig_io.bone_channels(fcurves)} - set(written)
-    if not keyed or rig_io.needs_scene_evaluation(clip.obj, fcurves):
+    if (clip.channels is not None and not keyed) or rig_io.needs_scene_evaluation(clip.obj, fcurves):
         return {}
     full = rig_io.read_rig(clip.obj)
-    frames = np.unique(np.linspace(clip.first, clip.last, CARRY_SAMPLES).round())
-    pose, _ = rig_io.pose_matrices(context, clip.obj, full.names, fcurves, frames)
     leg = leg_length(anchor_positions(clip.rig, clip.anchors, clip.rig.rest[None]))  # armature units
-    found = controls_core.keyed_followers(full, written, keyed, pose, leg)
+    if clip.channels is None:
+        found = controls_core.rest_twins(full, written, leg)
+    else:
+        frames = np.unique(np.linspace(clip.first, clip.last, CARRY_SAMPLES).round())
+        pose, _ = rig_io.pose_matrices(context, clip.obj, full.names, fcurves, frames)
+        found = controls_core.keyed_followers(full, written, keyed, pose, leg)
     return {full.names[c]: full.names[w] for c, w in found.items()}
 
 

@@ -37,21 +37,29 @@ def key_ik_bones(obj, frames) -> None:
             bones[ik].keyframe_insert("rotation_quaternion", frame=int(f))
 
 
-@pytest.fixture(scope="module")
-def unreal_file(addon, tmp_path_factory):
-    """The mannequin walking (a walk moved onto it by Transfer Motion), its IK bones keyed on its feet and hands."""
-    folder = tmp_path_factory.mktemp("unreal")
-    bpy.ops.wm.read_homefile(use_empty=True)
+def walked_mannequin(folder):
+    """The mannequin as an FBX from Unreal comes in (centimetres, the tails across the bones), with no action, and a
+    walk moved onto it by Transfer Motion; (the mannequin, the source)."""
     mocap = find_mocap()
     path = mocap / WALK if mocap is not None and (mocap / WALK).exists() else walk_bvh(folder, frames=120)
     source = import_bvh(path, update_scene_fps=True, update_scene_duration=True)
     source.location.x = -2.0
-    rig = build_armature("SK_Mannequin", across(unreal_bones()))  # as an FBX from Unreal comes in: centimetres,
-    rig.scale = (0.01, 0.01, 0.01)  # the tails across the bones
+    rig = build_armature("SK_Mannequin", across(unreal_bones()))
+    rig.scale = (0.01, 0.01, 0.01)
     for obj in bpy.context.view_layer.objects:
         obj.select_set(obj in (source, rig))
     bpy.context.view_layer.objects.active = rig
     assert bpy.ops.strnn.transfer_motion() == {"FINISHED"}
+    return rig, source
+
+
+@pytest.fixture(scope="module")
+def unreal_file(addon, tmp_path_factory):
+    """The mannequin walking, its IK bones keyed on its feet and hands on every frame (as Unreal's animations have
+    them; Transfer Motion keys them so already, and here they are keyed again by Blender)."""
+    folder = tmp_path_factory.mktemp("unreal")
+    bpy.ops.wm.read_homefile(use_empty=True)
+    rig, source = walked_mannequin(folder)
     bpy.data.objects.remove(source)
     first, last = (int(f) for f in action_of(rig).frame_range)
     key_ik_bones(rig, range(first, last + 1))
@@ -126,3 +134,14 @@ def test_a_bone_keyed_apart_from_the_body_is_left_as_it_was(mannequin, real_mode
         prop.keyframe_insert("location", frame=f)
     assert bpy.ops.strnn.extend_clip(frames=20) == {"FINISHED"}
     assert "ik_hand_gun" not in action_of(obj)["strnn"]["followers"]["bones"].to_dict()
+
+
+def test_transfer_onto_the_mannequin_keys_its_ik_bones_on_the_feet_and_hands_they_rest_on(real_model, tmp_path):
+    """With no action to read, the IK bones that rest where the feet and hands rest (hanging from the root, not from
+    them) are their twins: Transfer Motion keys them on those bones, as Unreal's own animations have them."""
+    rig, _ = walked_mannequin(tmp_path)
+    new = action_of(rig)
+    assert new["strnn"]["followers"]["bones"].to_dict() == FOLLOWERS
+    first, last = (int(f) for f in new.frame_range)
+    off = off_their_bones(rig, np.arange(first, last + 1, 7))
+    assert off.max() < 1e-3, dict(zip(FOLLOWERS, off.max(0)))

@@ -21,6 +21,7 @@ from model_core.rig.controls import (
     loose_bones,
     placed_on_targets,
     preset_for,
+    rest_twins,
     visual_local,
 )
 from model_core.rig.rigs import MMD_SPELLINGS, mmd_name
@@ -341,6 +342,21 @@ def test_keyed_bones_that_kept_to_a_written_bone_they_do_not_hang_from_follow_it
     loose = pose.copy()
     loose[::2, rig.names.index("ik_foot_l"), 0, 3] += 0.04
     assert "ik_foot_l" not in named(rig, keyed_followers(rig, written, keyed, loose, 1.0))
+
+
+def test_bones_that_rest_on_a_written_bone_without_hanging_from_it_are_its_twins():
+    """With no take to read: an IK bone hanging from the root and resting where the foot rests, axes and all, is the
+    foot's twin; one resting there turned, one a millimetre off, a bone below the foot and the root are not."""
+    bones = [("root", -1, (0, 0, 0.0)), ("pelvis", 0, (0, 0, 1.0)), ("thigh_l", 1, (0.1, 0, 0.9)),
+             ("calf_l", 2, (0.1, 0, 0.5)), ("foot_l", 3, (0.1, 0, 0.1)), ("ball_l", 4, (0.1, -0.1, 0.02)),
+             ("ik_foot_root", 0, (0, 0, 0.0)), ("ik_foot_l", 6, (0.1, 0, 0.1)), ("ik_turned", 6, (0.1, 0, 0.1)),
+             ("ik_off", 6, (0.1, 0.001, 0.1)), ("heel_l", 4, (0.1, 0, 0.1))]
+    rest = np.repeat(np.eye(4)[None], len(bones), axis=0)
+    rest[:, :3, 3] = [b[2] for b in bones]
+    rest[8, :3, :3] = rotvec_to_matrix(np.array([0.0, 0.0, 0.1]))
+    rig = Rig([b[0] for b in bones], [b[1] for b in bones], rest, np.full(len(bones), 0.05))
+    found = named(rig, rest_twins(rig, ["pelvis", "thigh_l", "calf_l", "foot_l", "ball_l"], 0.9))
+    assert found == {"ik_foot_l": "foot_l"}, found
 
 
 def test_the_bake_in_closed_form_puts_each_bone_on_its_target_parents_first():
