@@ -279,8 +279,8 @@ def every_take(obj, fbx: list) -> list:
 
 def inspect(bpy, obj, fbx: list, imported: list[str]) -> list[str]:
     """``inspect``: what the operators would run on in the imported file, as notes (the armature, how its bones map
-    and which controls are keyed, its takes and their rate), or a :class:`BatchError` with the reason they would
-    refuse it (the sidebar's own check, ``pipeline.prepare``)."""
+    and which controls are keyed, or which bones go with the bones they follow, its takes and their rate), or a
+    :class:`BatchError` with the reason they would refuse it (the sidebar's own check, ``pipeline.prepare``)."""
     pipeline = importlib.import_module(f"{ADDON}.strnn_addon.scene.pipeline")
     try:
         clip = pipeline.prepare(bpy.context, obj)
@@ -297,6 +297,9 @@ def inspect(bpy, obj, fbx: list, imported: list[str]) -> list[str]:
                  f"{len(clip.carried)} more carried with them so that none of its skin is left behind")
         notes.append({pipeline.OWN_BONES: "results keyed on its bones by a visual bake", pipeline.BAKED_BONES: baked}
                      .get(clip.controls.name, f"results keyed on its {clip.controls.name} controls"))
+    elif clip.carried:  # a game rig's IK bones, keyed on the feet and hands they follow
+        pairs = ", ".join(f"{bone} on {carrier}" for bone, carrier in sorted(clip.carried.items()))
+        notes.append(f"{len(clip.carried)} bones outside the bone map keyed with the bones they follow ({pairs})")
     takes = every_take(obj, fbx)
     notes.append(f"{len(takes)} takes, the first plays" if len(takes) > 1 else "1 take")
     notes[-1] += f", at {clip.fps:g} keys a second"

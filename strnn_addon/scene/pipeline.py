@@ -146,11 +146,11 @@ def followers(context, clip: Clip) -> dict[str, str]:
     (:func:`controls.keyed_followers`: an Unreal rig's ``ik_foot_l`` on ``foot_l``, a prop keyed in a hand), or on a
     rig with no action yet those that rest where a written bone rests (:func:`controls.rest_twins`), keyed with it
     wherever an operation writes (:func:`write_pose`); none on a rig whose curves alone do not say its pose
-    (constraints, drivers: :func:`rig_io.needs_scene_evaluation`)."""
+    (constraints, drivers: :func:`rig_io.pose_needs_evaluation`)."""
     fcurves = _fcurves(clip)
     written = [clip.rig.names[b] for b in written_bones(clip)]
     keyed = {bone for bone, _ in rig_io.bone_channels(fcurves)} - set(written)
-    if (clip.channels is not None and not keyed) or rig_io.needs_scene_evaluation(clip.obj, fcurves):
+    if (clip.channels is not None and not keyed) or rig_io.pose_needs_evaluation(clip.obj, fcurves):
         return {}
     full = rig_io.read_rig(clip.obj)
     leg = leg_length(anchor_positions(clip.rig, clip.anchors, clip.rig.rest[None]))  # armature units
@@ -158,7 +158,7 @@ def followers(context, clip: Clip) -> dict[str, str]:
         found = controls_core.rest_twins(full, written, leg)
     else:
         frames = np.unique(np.linspace(clip.first, clip.last, CARRY_SAMPLES).round())
-        pose, _ = rig_io.pose_matrices(context, clip.obj, full.names, fcurves, frames)
+        pose = rig_io.armature_poses(context, clip.obj, full.names, fcurves, frames)
         found = controls_core.keyed_followers(full, written, keyed, pose, leg)
     return {full.names[c]: full.names[w] for c, w in found.items()}
 
@@ -673,7 +673,7 @@ def _key_followers(context, clip: Clip, channels: anim.Channels, frames: np.ndar
     keys play it (:func:`controls.bake_closed`); ``previous``, ``replace``, ``follows``, ``interpolation`` as
     :func:`write_pose` has them."""
     carriers = sorted(set(clip.carried.values()))
-    now, _ = rig_io.pose_matrices(context, clip.obj, carriers, channels.fcurves, frames)
+    now = rig_io.armature_poses(context, clip.obj, carriers, channels.fcurves, frames)  # closed form: no constraints
     carry = _carried_poses(context, clip, frames, {w: now[:, k] for k, w in enumerate(carriers)})
     bones = clip.obj.data.bones
     chosen = [Control(name, name, not bones[name].use_connect) for name in carry]
@@ -789,7 +789,7 @@ def _carried_poses(context, clip: Clip, frames: np.ndarray, targets: dict) -> di
         return {}
     names = sorted(set(these) | set(these.values()))
     at = {n: k for k, n in enumerate(names)}
-    now, _ = rig_io.pose_matrices(context, clip.obj, names, _fcurves(clip), frames)
+    now = rig_io.armature_poses(context, clip.obj, names, _fcurves(clip), frames)
     return {c: targets[w] @ np.linalg.inv(now[:, at[w]]) @ now[:, at[c]] for c, w in these.items()}
 
 

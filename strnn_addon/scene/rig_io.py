@@ -169,7 +169,21 @@ def world_matrix(obj) -> np.ndarray:
 
 
 def needs_scene_evaluation(obj, fcurves) -> str:
-    """Why NumPy forward kinematics would not match Blender for this rig ('' when it does)."""
+    """Why NumPy forward kinematics would not match Blender for this rig ('' when it does), its place in the world
+    included."""
+    why = pose_needs_evaluation(obj, fcurves)
+    if why:
+        return why
+    if any(not fc.data_path.startswith("pose.bones") for fc in fcurves):
+        return "the action animates the object itself"
+    if obj.constraints or obj.parent:
+        return "the object has constraints or a parent"
+    return ""
+
+
+def pose_needs_evaluation(obj, fcurves) -> str:
+    """Why NumPy forward kinematics would not match Blender for this rig's pose in armature space ('' when it does:
+    the object's own motion, parent and constraints do not change it)."""
     for pb in obj.pose.bones:
         if len(pb.constraints):
             return f"bone {pb.name!r} has constraints"
@@ -181,11 +195,19 @@ def needs_scene_evaluation(obj, fcurves) -> str:
         return "the object has drivers"
     if nla_beneath(obj, fcurves):
         return "NLA strips play under its action"
-    if any(not fc.data_path.startswith("pose.bones") for fc in fcurves):
-        return "the action animates the object itself"
-    if obj.constraints or obj.parent:
-        return "the object has constraints or a parent"
     return ""
+
+
+def armature_poses(context, obj, names: list[str], fcurves, frames: np.ndarray) -> np.ndarray:
+    """Armature-space pose matrices ``[F, N, 4, 4]`` of the bones ``names`` at scene ``frames`` as the action of
+    ``fcurves`` plays them: by NumPy forward kinematics where that plays as Blender does
+    (:func:`pose_needs_evaluation`; the object may move), else by letting Blender evaluate each frame."""
+    frames = np.asarray(frames, np.float64)
+    if pose_needs_evaluation(obj, fcurves):
+        return pose_matrices_evaluated(context, obj, names, frames)[0]
+    rig = with_bones_above(read_rig(obj), names)
+    index = {n: b for b, n in enumerate(rig.names)}
+    return pose_matrices_fast(obj, rig, fcurves, frames)[:, [index[n] for n in names]]
 
 
 def disabled_in_viewports(obj, scene) -> bool:

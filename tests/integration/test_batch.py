@@ -1324,6 +1324,65 @@ def test_inspect_tells_motion_the_model_knows_from_motion_it_does_not(mocap_root
     assert "unlike what the model learnt" in rows[fight.name], rows[fight.name]
 
 
+def test_an_unreal_mannequin_from_fbx_is_extended_with_its_ik_bones_on_its_feet_and_hands(tmp_path, extension,
+                                                                                            capsys):
+    """An Unreal Engine mannequin walking, its IK bones (hanging from the root) keyed on its feet and hands on every
+    frame as Unreal's animations have them, written by Blender's FBX exporter: ``inspect`` names the bones that go with
+    the bones they follow, and the extension written back as FBX keeps each IK bone on its foot or hand over the new
+    frames (they stayed where the take ended before)."""
+    take = tmp_path / "mannequin.fbx"
+    run_bpy(f"""
+import sys
+sys.path.insert(0, "tests/blender")
+from scenes import build_armature, key_walk, unreal_bones
+bpy.ops.wm.read_factory_settings(use_empty=True)
+bpy.context.scene.render.fps = 30
+rig = build_armature("SK_Mannequin", unreal_bones())
+key_walk(rig, 60, "pelvis", ("thigh_l", "thigh_r"), ("calf_l", "calf_r"), ("upperarm_l", "upperarm_r"))
+bones = rig.pose.bones
+for f in range(1, 61):
+    bpy.context.scene.frame_set(f)
+    for ik, on in {FOLLOWED!r}.items():
+        bones[ik].matrix = bones[on].matrix.copy()
+        bpy.context.view_layer.update()
+        bones[ik].keyframe_insert("location", frame=f)
+        bones[ik].keyframe_insert("rotation_quaternion", frame=f)
+bpy.context.scene.frame_start, bpy.context.scene.frame_end = 1, 60
+bpy.ops.export_scene.fbx(filepath={str(take)!r}, add_leaf_bones=False, bake_anim_use_all_actions=True,
+                         bake_anim_use_nla_strips=False)
+print(json.dumps(0))
+""")
+    code, rows = batch_rows(capsys, extension, tmp_path / "inspect.json", "inspect", str(take))
+    assert code == 0, rows
+    notes = "; ".join(rows["mannequin.fbx"]["notes"])
+    assert "5 bones outside the bone map keyed with the bones they follow (ik_foot_l on foot_l, " \
+                         "ik_foot_r on foot_r, ik_hand_gun on hand_r" in notes, notes
+    code, rows = batch_rows(capsys, extension, tmp_path / "report.json", "extend", "--frames", "20", str(take),
+                            "--out", str(tmp_path / "out"))
+    assert code == 0, rows
+    got = run_bpy(f"""
+bpy.ops.wm.read_factory_settings(use_empty=True)
+bpy.ops.import_scene.fbx(filepath={str(tmp_path / "out" / "mannequin.extend.fbx")!r})
+arm = next(o for o in bpy.data.objects if o.type == "ARMATURE")
+first, last = (int(round(x)) for x in arm.animation_data.action.frame_range)
+off, travel = [], []
+for f in range(first, last + 1):
+    bpy.context.scene.frame_set(f)
+    bones = arm.pose.bones
+    off.append(max((arm.matrix_world @ bones[ik].head - arm.matrix_world @ bones[on].head).length
+                   for ik, on in {FOLLOWED!r}.items()))
+    travel.append(list(arm.matrix_world @ bones["ik_foot_l"].head))
+print(json.dumps({{"first": first, "last": last, "off": off, "travel": travel}}))
+""")
+    assert (got["first"], got["last"]) == (1, 80)
+    assert max(got["off"]) < 2e-3, got["off"]
+    assert np.linalg.norm(np.subtract(got["travel"][-1], got["travel"][59])) > 0.1  # the feet walk on, and with them
+
+
+FOLLOWED = {"ik_foot_l": "foot_l", "ik_foot_r": "foot_r", "ik_hand_gun": "hand_r", "ik_hand_l": "hand_l",
+            "ik_hand_r": "hand_r"}
+
+
 def test_a_rigify_character_from_a_gltf_file_is_extended_with_all_its_skin(tmp_path, extension, capsys):
     """A generated Rigify rig walking, its head nodding, a skin of its own (a small tetrahedron at each deform bone,
     weighted to it alone), written as glTF with every bone, as a character from a model store comes: the exporter
