@@ -662,17 +662,20 @@ def write_pose(context, clip: Clip, action, frames: np.ndarray, loc: np.ndarray,
         if b in (placed, moved):
             _key_property(clip, channels, pb, "location", frames, loc[:, b], replace, interpolation=interpolation)
     if clip.carried:
-        _key_followers(context, clip, channels, frames, previous, replace, follows, interpolation)
+        _key_followers(context, clip, channels, frames, previous, replace, follows, interpolation, turned)
     return 0.0
 
 
 def _key_followers(context, clip: Clip, channels: anim.Channels, frames: np.ndarray, previous: dict,
-                   replace: tuple[float, float] | None, follows: bool, interpolation: str) -> None:
-    """Key a plain rig's followers (:func:`followers`) at ``frames`` where they keep to the bones they moved with as
-    those are now keyed in ``channels`` (:func:`_carried_poses`), each set in closed form against its parent as the new
-    keys play it (:func:`controls.bake_closed`); ``previous``, ``replace``, ``follows``, ``interpolation`` as
-    :func:`write_pose` has them."""
-    carriers = sorted(set(clip.carried.values()))
+                   replace: tuple[float, float] | None, follows: bool, interpolation: str, turned: list[int]) -> None:
+    """Key a plain rig's followers (:func:`followers`) whose bones moved (``turned``, the bones keyed, or a bone above
+    them) at ``frames`` where they keep to those bones as they are now keyed in ``channels`` (:func:`_carried_poses`),
+    each set in closed form against its parent as the new keys play it (:func:`controls.bake_closed`); ``previous``,
+    ``replace``, ``follows``, ``interpolation`` as :func:`write_pose` has them."""
+    index = {n: b for b, n in enumerate(clip.rig.names)}
+    carriers = sorted({w for w in clip.carried.values() if any(clip.rig.is_ancestor(t, index[w]) for t in turned)})
+    if not carriers:
+        return
     now = rig_io.armature_poses(context, clip.obj, carriers, channels.fcurves, frames)  # closed form: no constraints
     carry = _carried_poses(context, clip, frames, {w: now[:, k] for k, w in enumerate(carriers)})
     bones = clip.obj.data.bones

@@ -145,3 +145,23 @@ def test_transfer_onto_the_mannequin_keys_its_ik_bones_on_the_feet_and_hands_the
     first, last = (int(f) for f in new.frame_range)
     off = off_their_bones(rig, np.arange(first, last + 1, 7))
     assert off.max() < 1e-3, dict(zip(FOLLOWERS, off.max(0)))
+
+
+def test_with_only_the_left_leg_selected_only_the_left_foots_ik_bone_is_keyed_again(mannequin, real_model):
+    """Foot Lock with Only Selected Bones on the left leg: of the IK bones only `ik_foot_l`, which follows the left
+    foot, gets new keys (on the locked foot); the others keep theirs as they were."""
+    obj = mannequin
+    left = {"thigh_l", "calf_l", "foot_l", "ball_l"}
+    for pb in obj.pose.bones:
+        if hasattr(pb, "select"):  # Blender 5 keeps pose selection on the pose bone, 4.x on the bone
+            pb.select = pb.name in left
+        else:
+            pb.bone.select = pb.name in left
+    old = action_of(obj)
+    before = key_snapshot(obj, old)
+    assert bpy.ops.strnn.foot_lock(only_selected=True) == {"FINISHED"}
+    after = key_snapshot(obj, action_of(obj))
+    changed = {key[0].split('"')[1] for key, co in before.items() if not np.array_equal(co, after[key])}
+    assert "ik_foot_l" in changed and not changed & (set(FOLLOWERS) - {"ik_foot_l"}), changed
+    first, last = (int(f) for f in old.frame_range)
+    assert off_their_bones(obj, np.arange(first, last + 1, 3)).max() < 2e-3
