@@ -205,9 +205,7 @@ def armature_poses(context, obj, names: list[str], fcurves, frames: np.ndarray) 
     frames = np.asarray(frames, np.float64)
     if pose_needs_evaluation(obj, fcurves):
         return pose_matrices_evaluated(context, obj, names, frames)[0]
-    rig = with_bones_above(read_rig(obj), names)
-    index = {n: b for b, n in enumerate(rig.names)}
-    return pose_matrices_fast(obj, rig, fcurves, frames)[:, [index[n] for n in names]]
+    return _closed_form(obj, names, fcurves, frames)
 
 
 def disabled_in_viewports(obj, scene) -> bool:
@@ -314,10 +312,15 @@ def pose_matrices(context, obj, names: list[str], fcurves, frames: np.ndarray,
     frames = np.asarray(frames, np.float64)
     if needs_scene_evaluation(obj, fcurves):
         return pose_matrices_evaluated(context, obj, names, frames)
+    return _closed_form(obj, names, fcurves, frames, cache), np.broadcast_to(world_matrix(obj), (len(frames), 4, 4))
+
+
+def _closed_form(obj, names: list[str], fcurves, frames: np.ndarray, cache: KeyCache | None = None) -> np.ndarray:
+    """Armature-space pose matrices ``[F, N, 4, 4]`` of the bones ``names`` by NumPy forward kinematics over them and
+    the bones above them, from the F-curves ``fcurves``."""
     rig = with_bones_above(read_rig(obj), names)
     index = {n: b for b, n in enumerate(rig.names)}
-    pose = pose_matrices_fast(obj, rig, fcurves, frames, cache)[:, [index[n] for n in names]]
-    return pose, np.broadcast_to(world_matrix(obj), (len(frames), 4, 4))
+    return pose_matrices_fast(obj, rig, fcurves, frames, cache)[:, [index[n] for n in names]]
 
 
 def pose_matrices_evaluated(context, obj, rig: Rig | list[str], frames: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
