@@ -431,6 +431,15 @@ def hanging_from(rig: Rig, moved: set[str]) -> np.ndarray:
     return out
 
 
+def _segment_distances(rig: Rig, written: np.ndarray, b: int) -> np.ndarray:
+    """``[W]``: how far bone ``b``'s rest head lies from each ``written`` bone's rest segment (head to tail)."""
+    heads = rig.rest[:, :3, 3]
+    a = heads[written]
+    seg = np.einsum("bij,bj->bi", rig.rest[written], np.c_[rig.tails[written], np.ones(len(written))])[:, :3] - a
+    t = np.clip(np.einsum("wi,wi->w", heads[b] - a, seg) / np.maximum(np.einsum("wi,wi->w", seg, seg), 1e-12), 0, 1)
+    return np.linalg.norm(a + t[:, None] * seg - heads[b], axis=-1)
+
+
 def _spreads(pose: np.ndarray, bones: np.ndarray, written: np.ndarray, scale: float) -> np.ndarray:
     """``[len(bones), W]``: how far each bone's transform relative to each written bone varies over the take's poses
     ``pose`` ``[S, B, 4, 4]`` (:data:`CARRY_TIE`)."""
@@ -472,9 +481,6 @@ def carried_bones(rig: Rig, written: list[str], skinned: set[str], pose: np.ndar
         p = int(rig.parents[b])
         under_written[b] = name in written or (p >= 0 and bool(under_written[p])
                                                and (rig.names[p] in written or rig.names[p] in skinned))
-    heads = rig.rest[:, :3, 3]
-    a = heads[w]
-    seg = np.einsum("bij,bj->bi", rig.rest[w], np.c_[rig.tails[w], np.ones(len(w))])[:, :3] - a
     spread: dict[int, np.ndarray] = {}
 
     def spread_of(b: int) -> np.ndarray:
@@ -502,9 +508,7 @@ def carried_bones(rig: Rig, written: list[str], skinned: set[str], pose: np.ndar
 
     def best(b: int) -> int:
         """The written bone (index into ``w``) ``b`` moved with; of several, the one whose rest segment it lies on."""
-        t = np.clip(np.einsum("wi,wi->w", heads[b] - a, seg) / np.maximum(np.einsum("wi,wi->w", seg, seg), 1e-12),
-                    0, 1)
-        near = np.linalg.norm(a + t[:, None] * seg - heads[b], axis=-1)
+        near = _segment_distances(rig, w, b)
         near[[not moves_with(b, k) for k in range(len(w))]] = np.inf
         return int(np.argmin(near))
 
@@ -558,16 +562,12 @@ def keyed_followers(rig: Rig, written: list[str], keyed: set[str], pose: np.ndar
     moved = (np.linalg.norm(own[..., :3, 3] - own[..., :3, 3].mean(axis=0), axis=-1).mean(axis=0) / scale
              + np.linalg.norm(own[..., :3, :3] - own[..., :3, :3].mean(axis=0), axis=(-2, -1)).mean(axis=0))
     spread = _spreads(pose, bones, w, scale)  # [N, W]
-    heads = rig.rest[:, :3, 3]
-    a = heads[w]
-    seg = np.einsum("bij,bj->bi", rig.rest[w], np.c_[rig.tails[w], np.ones(len(w))])[:, :3] - a
     out = {}
     for i, b in enumerate(bones):
         if moved[i] < FOLLOW_MOVED or spread[i].min() > FOLLOW_TIE:
             continue
         # of the written bones it kept to (a hand and its still fingers), the one whose rest segment it lies nearest
-        t = np.clip(np.einsum("wi,wi->w", heads[b] - a, seg) / np.maximum(np.einsum("wi,wi->w", seg, seg), 1e-12), 0, 1)
-        near = np.where(spread[i] <= FOLLOW_TIE, np.linalg.norm(a + t[:, None] * seg - heads[b], axis=-1), np.inf)
+        near = np.where(spread[i] <= FOLLOW_TIE, _segment_distances(rig, w, int(b)), np.inf)
         out[int(b)] = int(w[np.argmin(near)])
     return out
 

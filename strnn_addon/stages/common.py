@@ -277,10 +277,14 @@ def with_bake(record: dict, clip, error: float, frames) -> dict:
         pairs = sorted(clip.carried.items())
         shown = ", ".join(f"{bone} on {carrier}" for bone, carrier in pairs[:4]) + (", ..." if len(pairs) > 4 else "")
         many = len(pairs) > 1
+        if clip.channels is not None:  # read from the take's keys
+            how = f"keyed bone{'s' if many else ''} outside the bone map followed {'bones' if many else 'a bone'} " \
+                  "it writes over the take"
+        else:  # no take: where they rest
+            how = f"bone{'s' if many else ''} outside the bone map rest{'' if many else 's'} on " \
+                  f"{'bones' if many else 'a bone'} it writes"
         record["followers"] = {"bones": dict(pairs), "note": (
-            f"{len(pairs)} keyed bone{'s' if many else ''} outside the bone map followed "
-            f"{'bones' if many else 'a bone'} it writes over the take ({shown}) and {'go' if many else 'goes'} on "
-            f"with {'them' if many else 'it'}")}
+            f"{len(pairs)} {how} ({shown}) and {'go' if many else 'goes'} on with {'them' if many else 'it'}")}
     if clip.controls is not None:
         worst_cm = round(100 * error * pipeline.world_scale(clip), 2)
         record["controls"] = {"set": clip.controls.name, "max_error_cm": worst_cm}

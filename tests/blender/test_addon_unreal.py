@@ -142,6 +142,7 @@ def test_transfer_onto_the_mannequin_keys_its_ik_bones_on_the_feet_and_hands_the
     rig, _ = walked_mannequin(tmp_path)
     new = action_of(rig)
     assert new["strnn"]["followers"]["bones"].to_dict() == FOLLOWERS
+    assert new["strnn"]["followers"]["note"].startswith("5 bones outside the bone map rest on bones it writes")
     first, last = (int(f) for f in new.frame_range)
     off = off_their_bones(rig, np.arange(first, last + 1, 7))
     assert off.max() < 1e-3, dict(zip(FOLLOWERS, off.max(0)))
