@@ -55,6 +55,11 @@ class Channels:
         return fc
 
 
+def bone_path(bone: str, prop: str) -> str:
+    """The F-curve data path of a pose bone's property."""
+    return f'pose.bones["{bpy.utils.escape_identifier(bone)}"].{prop}'
+
+
 def active_fcurves(obj) -> list:
     """The F-curves of ``obj``'s active action on its slot (none where it has no action)."""
     ad = obj.animation_data

@@ -84,7 +84,7 @@ def close_baked(clip, action, frames: np.ndarray, blend: int) -> set[str]:
         for prop, values in keys:
             for i, fc in chans[(name, prop)].items():
                 anim.write_keys(fc, frames, values[:, i], (frames[0], frames[-1]))
-            paths.add(pipeline.bone_path(name, prop))
+            paths.add(anim.bone_path(name, prop))
     return paths
 
 

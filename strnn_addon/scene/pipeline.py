@@ -30,6 +30,7 @@ from ...model_core.rig.controls import Control, ControlSet, chains_on_joints, vi
 from ...model_core.rig.rigs import leg_length
 from ...model_core.rig.solve import Anchors, Rig, anchor_positions, fk, hips_carrier, solve, solved_bones
 from . import anim, controls, mapping, rig_io
+from .anim import bone_path
 
 
 class UserError(ValueError):
@@ -834,11 +835,6 @@ def _played(context, clip: Clip, frames: np.ndarray) -> tuple[np.ndarray, list[s
     pose, _ = rig_io.pose_matrices_evaluated(context, clip.obj, full, at)
     loc, rot = visual_local(full, pose)
     return at, full.names, loc, rot
-
-
-def bone_path(bone: str, prop: str) -> str:
-    """The F-curve data path of a pose bone's property."""
-    return f'pose.bones["{bpy.utils.escape_identifier(bone)}"].{prop}'
 
 
 def _key_property(clip: Clip, channels: anim.Channels, pb, prop: str, frames: np.ndarray, values: np.ndarray,

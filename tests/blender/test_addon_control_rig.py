@@ -23,12 +23,12 @@ from scenes import (
 CTRL = "CTRL_"
 
 
-def control_rig(frames: int = 60):
+def control_rig(frames: int = 60, rotation_mode: str = "QUATERNION"):
     """Deform bones (``mixamorig:``) copying the transforms of a parallel control chain (``CTRL_``),
-    with a walk keyed on the controls."""
+    with a walk keyed on the controls (rotations in ``rotation_mode``)."""
     deform = mixamo_bones()
     controls = [(CTRL + n.split(":")[1], p and CTRL + p.split(":")[1], h, t) for n, p, h, t in deform]
-    obj = build_armature("ControlRig", deform + controls)
+    obj = build_armature("ControlRig", deform + controls, rotation_mode=rotation_mode)
     for name, *_ in deform:
         con = obj.pose.bones[name].constraints.new("COPY_TRANSFORMS")
         con.target, con.subtarget = obj, CTRL + name.split(":")[1]
@@ -92,3 +92,28 @@ def test_with_controls_extend_keys_them_and_the_deform_bones_follow(addon, model
     err = np.linalg.norm(pos - model_calls.extended(), axis=-1)  # the deform bones follow the model
     assert err.max() < 0.01, err.max()
     assert new["strnn"]["controls"]["set"] == "custom"
+
+
+@pytest.mark.parametrize("mode", ["AXIS_ANGLE", "ZXY"])
+def test_controls_turned_by_axis_angle_or_euler_are_baked_and_nothing_is_left_behind(addon, model_calls, mode):
+    """The bake sets the controls through a stand-in action while Blender evaluates the rig: controls in any rotation
+    mode are keyed where the deform bones follow the model; afterwards the file holds the take and the new action
+    alone, the take as it was and still holding its keys, and the controls not keyed by the take (the spine, the
+    feet) as they were."""
+    obj = control_rig(rotation_mode=mode)
+    set_controls(obj)
+    old = action_of(obj)
+    unkeyed = {pb.name: pb.matrix_basis.copy() for pb in obj.pose.bones
+               if pb.name.startswith(CTRL) and not any(pb.name in fc.data_path for fc in fcurves_of(obj, old))}
+    assert unkeyed
+    before = key_snapshot(obj)
+    actions = set(bpy.data.actions)
+    assert bpy.ops.strnn.extend_clip(frames=30) == {"FINISHED"}
+    new = action_of(obj)
+    assert set(bpy.data.actions) == actions | {new}
+    assert same_keys(before, key_snapshot(obj, old))
+    assert all(np.allclose(obj.pose.bones[n].matrix_basis, m) for n, m in unkeyed.items())
+    err = np.linalg.norm(evaluated_joints(addon, obj, np.arange(61, 91)) - model_calls.extended(), axis=-1)
+    assert err.max() < 0.01, err.max()
+    rot = {fc.data_path.rsplit(".", 1)[1] for fc in fcurves_of(obj, new) if "rotation" in fc.data_path}
+    assert rot == {"rotation_axis_angle" if mode == "AXIS_ANGLE" else "rotation_euler"}
