@@ -2,12 +2,14 @@
 
 For each frame the rig is evaluated by Blender, and each control is turned (the body's root
 control also moved) by the correction that takes the bone it drives from where it is to where
-the solve put it. Controls are set in waves: a control waits for the controls that move its
-driven bone (found once per bake by nudging each control, so that constraints count as well as
-parents), and the rig is evaluated once per wave. The controls are set through a stand-in action of one key
-per channel (:class:`_StandIn`), which Blender evaluates at the cost of the pose alone. The result
-is read back off the controls' local transforms and keyed; the action, the controls and switches
-are put back as they were, so until the new action is assigned nothing in the file has changed.
+the solve put it. Controls are set in waves (:class:`Waves`): a control waits for the controls
+that move its driven bone (found once per bake by nudging each control, so that constraints count
+as well as parents), but for those it rides on rigidly (an FK forearm on its upper arm), which
+carry it where they set it; the rig is evaluated once per wave. The controls are set through a
+stand-in action of one key per channel (:class:`_StandIn`), which Blender evaluates at the cost of
+the pose alone. The result is read back off the controls' local transforms and keyed; the action,
+the controls and switches are put back as they were, so until the new action is assigned nothing
+in the file has changed.
 """
 
 from __future__ import annotations
@@ -122,31 +124,69 @@ def _scale(m: np.ndarray) -> float:
     return float(np.linalg.norm(m[:3, 1]))
 
 
-def _waves(obj, chosen: list, update) -> tuple[list[list], dict[str, set[str]]]:
-    """``chosen`` controls grouped so that no control's driven bone moves with a control of its own
-    or a later wave (found by nudging each control once at the current frame); where two controls
-    move each other's bones, the one lower in the hierarchy waits, and a second sweep settles them.
-    Also {control: the driven bones it moves}."""
-    bones = obj.pose.bones
-    update()
-    before = {c.drives: _matrix(bones[c.drives]) for c in chosen}
-    moves: dict[int, set[str]] = {}
-    for k, c in enumerate(chosen):
-        pb = bones[c.bone]
-        keep = pb.matrix_basis.copy()
-        pb.matrix_basis = keep @ Matrix.Rotation(0.3, 4, "X") @ Matrix.Translation((0.0, 0.01 * c.location, 0.0))
+# A nudge of a control that turns it about every axis (and moves a control that moves along each): what one control
+# does to the bones of others is read off it once per bake.
+_NUDGE_AXIS = (0.2673, 0.5345, 0.8018)
+_NUDGE_MOVE = (0.01, 0.02, 0.03)
+RIGID = 1e-5  # armature units: a bone that moved with a nudged control's driven bone within this rides on it
+
+
+def _plain(c) -> bool:
+    """Whether control ``c`` is set by the correction of its driven bone alone (not an IK chain's end, pole or
+    twist, whose setting reads the chain)."""
+    return not (c.end or c.pole or c.twist)
+
+
+def _carried_by(bones, c) -> tuple[str, ...]:
+    """What must move with a control for it to ride on another: its driven bone, itself and its parent (the
+    space its local transform is set in)."""
+    pb = bones[c.bone]
+    return (c.drives, c.bone) + ((pb.parent.name,) if pb.parent is not None else ())
+
+
+class Waves:
+    """``chosen`` controls grouped so that no control's driven bone moves with a control of its own wave but one it
+    rides on, or with a later wave (found by nudging each control once at the current frame); where two controls
+    move each other's bones, the one lower in the hierarchy waits, and a second sweep settles them. A control
+    rides on another that moves its driven bone, itself and its parent rigidly, as that moves its own driven bone
+    (an FK forearm on its upper arm, the arms on the chest): it is set in the same wave, after it, from where that
+    one's setting puts it (:func:`_place`), so Blender evaluates the rig once for the chain. ``moves``: {control:
+    the driven bones it moves}; ``rides``: {control: the controls of its wave riding on it}."""
+
+    def __init__(self, obj, chosen: list, update):
+        bones = obj.pose.bones
         update()
-        moves[k] = {d for d, m in before.items() if np.abs(_matrix(bones[d]) - m).max() > 1e-6}
-        pb.matrix_basis = keep
-    update()
-    rank = [(_depth(bones[c.bone]), k) for k, c in enumerate(chosen)]  # a cycle (neck and head) is cut here
-    depth = [0] * len(chosen)
-    for k in sorted(range(len(chosen)), key=lambda k: rank[k]):
-        above = [depth[j] + 1 for j in range(len(chosen)) if rank[j] < rank[k] and chosen[k].drives in moves[j]]
-        depth[k] = max([0] + above)
-    waves = [wave for d in range(max(depth, default=0) + 1)
-             if (wave := [c for k, c in enumerate(chosen) if depth[k] == d])]
-    return waves, {c.bone: moves[k] for k, c in enumerate(chosen)}
+        watched = {n for c in chosen for n in _carried_by(bones, c)}
+        before = {n: _matrix(bones[n]) for n in watched}
+        moves: dict[int, set[str]] = {}
+        rides: dict[int, set[int]] = {}
+        for k, c in enumerate(chosen):
+            pb = bones[c.bone]
+            keep = pb.matrix_basis.copy()
+            pb.matrix_basis = keep @ Matrix.Rotation(0.3, 4, _NUDGE_AXIS) @ Matrix.Translation(
+                tuple(c.location * x for x in _NUDGE_MOVE))
+            update()
+            after = {n: _matrix(bones[n]) for n in watched}
+            moved = {n for n in watched if np.abs(after[n] - before[n]).max() > 1e-6}
+            moves[k] = {d.drives for d in chosen if d.drives in moved}
+            turn = after[c.drives] @ np.linalg.inv(before[c.drives])
+            rigid = {n for n in watched if np.abs(after[n] - turn @ before[n]).max() < RIGID}
+            rides[k] = {j for j, d in enumerate(chosen) if j != k and d.drives in moved and _plain(d)
+                        and rigid.issuperset(_carried_by(bones, d))} if _plain(c) and c.bone in rigid else set()
+            pb.matrix_basis = keep
+        update()
+        rank = [(_depth(bones[c.bone]), k) for k, c in enumerate(chosen)]  # a cycle (neck and head) is cut here
+        depth = [0] * len(chosen)
+        for k in sorted(range(len(chosen)), key=lambda k: rank[k]):
+            above = [depth[j] + (k not in rides[j]) for j in range(len(chosen))
+                     if rank[j] < rank[k] and chosen[k].drives in moves[j]]
+            depth[k] = max([0] + above)
+        order = sorted(range(len(chosen)), key=lambda k: rank[k])  # in a wave, a control after those it rides on
+        self.waves = [wave for d in range(max(depth, default=0) + 1)
+                      if (wave := [chosen[k] for k in order if depth[k] == d])]
+        self.moves = {c.bone: moves[k] for k, c in enumerate(chosen)}
+        self.rides = {c.bone: {chosen[j].bone for j in rides[k] if depth[j] == depth[k] and rank[k] < rank[j]}
+                      for k, c in enumerate(chosen)}
 
 
 def _depth(pb) -> int:
@@ -268,16 +308,18 @@ class _StandIn:
         bpy.data.actions.remove(self.stand_in)
 
 
-def _place(obj, c, target: np.ndarray, first: bool = False, put=None) -> None:
+def _place(obj, c, target: np.ndarray, first: bool, put, carried: np.ndarray | None = None) -> np.ndarray | None:
     """Turn (and, for a root control, move) control ``c`` so its driven bone goes to ``target``,
-    taking the rig as last evaluated (``first``: the frame's first sweep); ``put(pose bone, local matrix)`` sets it
-    (default: its ``matrix_basis``)."""
+    taking the rig as last evaluated (``first``: the frame's first sweep), and set it by ``put(pose bone, local
+    matrix)``. ``carried``: where controls it rides on were set since (:class:`Waves`), the move (armature space)
+    they gave it and its driven bone and parent. Returns the control's own move (armature space), which carries
+    the controls riding on it (None for a twist, which carries none)."""
     bones = obj.pose.bones
     pb = bones[c.bone]
-    put = put or _set_basis
-    driven = _matrix(bones[c.drives])
+    carried = np.eye(4) if carried is None else carried
+    driven = carried @ _matrix(bones[c.drives])
     delta = target @ np.linalg.inv(driven)
-    now = _matrix(pb)
+    now = carried @ _matrix(pb)
     want = now.copy()
     if c.end and first:  # where the chain may not reach it yet: as the control and the bone stand at rest
         want = target @ np.linalg.inv(np.array(bones[c.drives].bone.matrix_local)) @ np.array(pb.bone.matrix_local)
@@ -285,20 +327,18 @@ def _place(obj, c, target: np.ndarray, first: bool = False, put=None) -> None:
         want[:3, 3] = _pole_at(bones[c.drives], driven, target, now)
     elif c.twist:  # the knee's turn about the line from hip to ankle that the solve asks for, added to the chain
         # base's own turn about its axis (on its keyed transform: the chain takes that turn as its start)
-        want = pb.matrix_basis @ Matrix.Rotation(_bend_turn(bones[c.drives], driven, target), 4, "Y")
-        put(pb, want)
-        return
+        put(pb, pb.matrix_basis @ Matrix.Rotation(_bend_turn(bones[c.drives], driven, target), 4, "Y"))
+        return None
     elif c.location and not c.turns:  # moved as far as its driven bone is off, not turned
         want[:3, 3] = now[:3, 3] + target[:3, 3] - driven[:3, 3]
     elif c.location:
         want = delta @ now
     else:
         want[:3, :3] = delta[:3, :3] @ now[:3, :3]
-    put(pb, obj.convert_space(pose_bone=pb, matrix=Matrix(want.tolist()), from_space="POSE", to_space="LOCAL"))
-
-
-def _set_basis(pb, basis: Matrix) -> None:
-    pb.matrix_basis = basis
+    # its parent is where the last evaluation put it, carried as it rides: set against that
+    put(pb, obj.convert_space(pose_bone=pb, matrix=Matrix((np.linalg.inv(carried) @ want).tolist()),
+                              from_space="POSE", to_space="LOCAL"))
+    return want @ np.linalg.inv(now)
 
 
 def _bend_turn(pb, driven: np.ndarray, target: np.ndarray) -> float:
@@ -355,7 +395,7 @@ def bake(context, obj, control_set_: ControlSet, frames: np.ndarray, targets: di
     try:
         scene.frame_set(int(frames[0]))
         switch_on()
-        waves, moves = _waves(obj, chosen, layer.update)
+        waves = Waves(obj, chosen, layer.update)
         stand_in = _StandIn(obj, chosen, switches, frames)
         try:
             for i, f in enumerate(frames):
@@ -364,18 +404,21 @@ def bake(context, obj, control_set_: ControlSet, frames: np.ndarray, targets: di
                 want = {d: m[i] for d, m in targets.items()}
                 last, again = np.inf, None
                 for sweep in range(MAX_SWEEPS):
-                    for wave in waves:
+                    for wave in waves.waves:
                         layer.update()  # nothing to evaluate where the wave before set nothing
+                        carried: dict[str, np.ndarray] = {}
                         for c in wave:
                             if again is None or c.bone in again:
-                                _place(obj, c, want[c.drives], first=sweep == 0, put=stand_in.put)
+                                move = _place(obj, c, want[c.drives], sweep == 0, stand_in.put, carried.get(c.bone))
+                                for rider in waves.rides[c.bone] if move is not None else ():
+                                    carried[rider] = move @ carried.get(rider, np.eye(4))
                     layer.update()
                     err, off = _error(obj, chosen, want)
                     if err < TOLERANCE or last - err < TOLERANCE / 4:  # there, or no nearer than the sweep before
                         break
                     # the next sweep sets again only the controls still off and those they move (a control within
                     # the tolerance is left as the first sweep set it, as on a frame where every control is)
-                    last, again = err, _reached(off, chosen, moves)
+                    last, again = err, _reached(off, chosen, waves.moves)
                 worst = max(worst, err)
                 for k, c in enumerate(chosen):
                     basis = np.array(bones[c.bone].matrix_basis, dtype=np.float64)

@@ -178,6 +178,31 @@ def test_extend_keys_the_controls_and_the_deform_bones_follow(rig, addon, model_
         assert rig.pose.bones[bone]["IK_FK"] == pytest.approx(1.0)
 
 
+def test_fk_chains_riding_on_a_control_are_set_from_where_it_puts_them_in_one_evaluation(rig, addon, monkeypatch):
+    """The bake sets a control riding rigidly on another (an FK arm on its shoulder, each FK leg on the torso) in
+    that one's wave, from where its setting puts it: the FK walk's pose 20 frames on, asked of its controls, is
+    reached in one sweep (no second evaluation of the chains to settle them) in three waves where there were six,
+    within the bake's tolerance."""
+    controls = addon_module(addon, "strnn_addon.scene.controls")
+    pipeline = addon_module(addon, "strnn_addon.scene.pipeline")
+    rig_io = addon_module(addon, "strnn_addon.scene.rig_io")
+    clip = pipeline.prepare(bpy.context, rig)
+    chosen = list(clip.controls.controls)
+    frames = np.arange(10.0, 21.0)
+    driven = [c.drives for c in chosen]
+    poses = rig_io.pose_matrices_evaluated(bpy.context, rig, driven, frames + 20)[0]
+    targets = {d: poses[:, k] for k, d in enumerate(driven)}
+    waves = controls.Waves(rig, chosen, bpy.context.view_layer.update)
+    assert len(waves.waves) == 3, [[c.bone for c in w] for w in waves.waves]
+    assert {"upper_arm_fk.L", "forearm_fk.L", "hand_fk.L"} <= waves.rides["shoulder.L"]
+    assert {"thigh_fk.R", "shin_fk.R", "foot_fk.R"} <= waves.rides["torso"]
+    before = key_snapshot(rig)
+    monkeypatch.setattr(controls, "MAX_SWEEPS", 1)
+    baked = controls.bake(bpy.context, rig, clip.controls, frames, targets)
+    assert baked.error < controls.TOLERANCE, baked.error
+    assert same_keys(before, key_snapshot(rig)) and set(bpy.data.actions) == {action_of(rig)}
+
+
 def test_limbs_animated_in_ik_are_extended_on_their_ik_controls(ik_rig, addon, model_calls):
     """Legs animated in IK (the generated rig's default) are keyed on foot_ik, thigh_ik (turned only about its own
     axis, as its locks allow) and toe_ik, and stay in IK; the arms, animated in FK, on their FK controls. The feet
