@@ -212,6 +212,16 @@ def _error(obj, chosen: list, targets: dict[str, np.ndarray]) -> tuple[float, se
     return worst, off
 
 
+def _untwisted(obj, c, target: np.ndarray) -> bool:
+    """Whether twist control ``c``'s chain is already turned as ``target`` asks: turning it again would move its
+    bend (the knee) less than a quarter of :data:`TOLERANCE`, so what is left off is the chain's length, which Blender
+    plays (an IK chain that may stretch plays shorter than its bones) and no turn changes."""
+    pb = obj.pose.bones[c.drives]
+    driven = _matrix(pb)
+    reach = float(np.linalg.norm(_tail(pb, driven) - driven[:3, 3]))
+    return abs(_bend_turn(pb, driven, target)) * reach < TOLERANCE / 4
+
+
 def _reached(off: set[str], chosen: list, moves: dict[str, set[str]]) -> set[str]:
     """The controls ``off`` and every control whose driven bone they move, and so on: what setting them again
     may disturb."""
@@ -414,8 +424,9 @@ def bake(context, obj, control_set_: ControlSet, frames: np.ndarray, targets: di
                                     carried[rider] = move @ carried.get(rider, np.eye(4))
                     layer.update()
                     err, off = _error(obj, chosen, want)
-                    if err < TOLERANCE or last - err < TOLERANCE / 4:  # there, or no nearer than the sweep before
-                        break
+                    off -= {c.bone for c in chosen if c.twist and c.bone in off and _untwisted(obj, c, want[c.drives])}
+                    if err < TOLERANCE or last - err < TOLERANCE / 4 or not off:  # there, or no nearer than the
+                        break  # sweep before, or off only where setting it again would not bring it nearer
                     # the next sweep sets again only the controls still off and those they move (a control within
                     # the tolerance is left as the first sweep set it, as on a frame where every control is)
                     last, again = err, _reached(off, chosen, waves.moves)

@@ -14,6 +14,7 @@ import addon_utils
 import bpy
 import numpy as np
 import pytest
+from mathutils import Matrix
 from scenes import (
     action_of,
     addon_module,
@@ -201,6 +202,28 @@ def test_fk_chains_riding_on_a_control_are_set_from_where_it_puts_them_in_one_ev
     baked = controls.bake(bpy.context, rig, clip.controls, frames, targets)
     assert baked.error < controls.TOLERANCE, baked.error
     assert same_keys(before, key_snapshot(rig)) and set(bpy.data.actions) == {action_of(rig)}
+
+
+def test_an_ik_leg_off_only_by_its_length_is_not_turned_again(ik_rig, addon):
+    """A frame's bake sweeps again where a driven bone is off, but not for an IK leg whose knee is off only because
+    Blender plays the stretching chain shorter than its bones: its twist control would not bring it nearer. A thigh
+    asked to be longer is left; one asked to turn its knee 10 degrees about the hip-ankle line is set again."""
+    controls = addon_module(addon, "strnn_addon.scene.controls")
+    pipeline = addon_module(addon, "strnn_addon.scene.pipeline")
+    clip = pipeline.prepare(bpy.context, ik_rig)
+    twist = next(c for c in clip.controls.controls if c.twist and c.bone == "thigh_ik.L")
+    bpy.context.scene.frame_set(20)
+    pb = ik_rig.pose.bones[twist.drives]
+    now = np.array(pb.matrix, np.float64)
+    longer = now.copy()
+    longer[:3, 1] *= 1.03  # the bone 3 % longer along its axis, its head where it is
+    assert controls._untwisted(ik_rig, twist, longer)
+    ankle = np.array(ik_rig.pose.bones["ORG-shin.L"].tail, np.float64)
+    axis = ankle - now[:3, 3]
+    turned = np.eye(4)
+    turned[:3, :3] = np.array(Matrix.Rotation(np.radians(10), 3, axis / np.linalg.norm(axis)))
+    turned[:3, 3] = now[:3, 3] - turned[:3, :3] @ now[:3, 3]
+    assert not controls._untwisted(ik_rig, twist, turned @ now)
 
 
 def test_limbs_animated_in_ik_are_extended_on_their_ik_controls(ik_rig, addon, model_calls):
