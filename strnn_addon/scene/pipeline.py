@@ -146,20 +146,27 @@ def followers(context, clip: Clip) -> dict[str, str]:
     """{bone: the written bone it moves with} for a plain rig's keyed bones that kept to a written bone over the take
     (:func:`controls.keyed_followers`: an Unreal rig's ``ik_foot_l`` on ``foot_l``, a prop keyed in a hand), or on a
     rig with no action yet those that rest where a written bone rests (:func:`controls.rest_twins`), keyed with it
-    wherever an operation writes (:func:`write_pose`); none on a rig whose curves alone do not say its pose
-    (constraints, drivers: :func:`rig_io.pose_needs_evaluation`)."""
+    wherever an operation writes (:func:`write_pose`). Only bones whose pose their curves alone say, as those of the
+    written bones (no constraint, driver or unusual inheritance on them or above them:
+    :func:`rig_io.chain_needs_evaluation`; a twist bone's constraint elsewhere does not count), are read and set so."""
     fcurves = _fcurves(clip)
     written = [clip.rig.names[b] for b in written_bones(clip)]
-    keyed = {bone for bone, _ in rig_io.bone_channels(fcurves)} - set(written)
-    if (clip.channels is not None and not keyed) or rig_io.pose_needs_evaluation(clip.obj, fcurves):
+    plain = rig_io.plain_bones(clip.obj, fcurves)
+    if not plain.issuperset(written):
         return {}
+    plain -= set(written)
     full = rig_io.read_rig(clip.obj)
     leg = leg_length(anchor_positions(clip.rig, clip.anchors, clip.rig.rest[None]))  # armature units
     if clip.channels is None:
-        found = controls_core.rest_twins(full, written, leg)
+        found = {c: w for c, w in controls_core.rest_twins(full, written, leg).items() if full.names[c] in plain}
     else:
+        keyed = {bone for bone, _ in rig_io.bone_channels(fcurves)} & plain
+        if not keyed:
+            return {}
         frames = np.unique(np.linspace(clip.first, clip.last, CARRY_SAMPLES).round())
-        pose = rig_io.armature_poses(context, clip.obj, full.names, fcurves, frames)
+        read = sorted(keyed | set(written), key=full.names.index)
+        pose = np.broadcast_to(np.eye(4), (len(frames), len(full.names), 4, 4)).copy()  # only those read are used
+        pose[:, [full.names.index(n) for n in read]] = rig_io.armature_poses(context, clip.obj, read, fcurves, frames)
         found = controls_core.keyed_followers(full, written, keyed, pose, leg)
     return {full.names[c]: full.names[w] for c, w in found.items()}
 

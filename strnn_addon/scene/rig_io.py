@@ -184,26 +184,66 @@ def needs_scene_evaluation(obj, fcurves) -> str:
 def pose_needs_evaluation(obj, fcurves) -> str:
     """Why NumPy forward kinematics would not match Blender for this rig's pose in armature space ('' when it does:
     the object's own motion, parent and constraints do not change it)."""
-    for pb in obj.pose.bones:
-        if len(pb.constraints):
-            return f"bone {pb.name!r} has constraints"
-        b = pb.bone
-        if not b.use_inherit_rotation or b.inherit_scale != "FULL" or not b.use_local_location:
-            return f"bone {b.name!r} has non-default inheritance"
+    why = chain_needs_evaluation(obj, obj.data.bones.keys(), fcurves)
     ad = obj.animation_data
-    if ad and len(ad.drivers):
-        return "the object has drivers"
+    return why or ("the object has drivers" if ad and len(ad.drivers) else "")
+
+
+def _driven_bones(obj) -> set[str]:
+    """The bones a driver of ``obj`` sets a transform channel of."""
+    ad = obj.animation_data
+    found = (BONE_PATH.fullmatch(d.data_path) for d in (ad.drivers if ad else ()))
+    return {bpy.utils.unescape_identifier(m[1]) for m in found if m}
+
+
+def _own_reason(obj, bone, driven: set[str]) -> str:
+    """Why a bone's own setup keeps NumPy forward kinematics from playing it as Blender does ('' when nothing)."""
+    if len(obj.pose.bones[bone.name].constraints):
+        return f"bone {bone.name!r} has constraints"
+    if not bone.use_inherit_rotation or bone.inherit_scale != "FULL" or not bone.use_local_location:
+        return f"bone {bone.name!r} has non-default inheritance"
+    return f"bone {bone.name!r} has a driver" if bone.name in driven else ""
+
+
+def chain_needs_evaluation(obj, names, fcurves) -> str:
+    """Why NumPy forward kinematics would not match Blender for the pose in armature space of the bones ``names``
+    ('' when it does): a constraint, an inheritance other than the usual or a driver on one of them or a bone above
+    them, or NLA strips under the action. Constraints and drivers elsewhere in the rig (its twist bones') do not
+    change these bones' pose."""
+    bones, seen, driven = obj.data.bones, set(), _driven_bones(obj)
+    for name in names:
+        b = bones[name]
+        while b is not None and b.name not in seen:
+            seen.add(b.name)
+            why = _own_reason(obj, b, driven)
+            if why:
+                return why
+            b = b.parent
+    return "NLA strips play under its action" if nla_beneath(obj, fcurves) else ""
+
+
+def plain_bones(obj, fcurves) -> set[str]:
+    """The bones whose pose in armature space NumPy forward kinematics plays as Blender does
+    (:func:`chain_needs_evaluation` finds nothing for them)."""
     if nla_beneath(obj, fcurves):
-        return "NLA strips play under its action"
-    return ""
+        return set()
+    driven, plain = _driven_bones(obj), {}
+
+    def is_plain(b) -> bool:
+        if b.name not in plain:
+            plain[b.name] = not _own_reason(obj, b, driven) and (b.parent is None or is_plain(b.parent))
+        return plain[b.name]
+
+    return {b.name for b in obj.data.bones if is_plain(b)}
 
 
 def armature_poses(context, obj, names: list[str], fcurves, frames: np.ndarray) -> np.ndarray:
     """Armature-space pose matrices ``[F, N, 4, 4]`` of the bones ``names`` at scene ``frames`` as the action of
-    ``fcurves`` plays them: by NumPy forward kinematics where that plays as Blender does
-    (:func:`pose_needs_evaluation`; the object may move), else by letting Blender evaluate each frame."""
+    ``fcurves`` plays them: by NumPy forward kinematics where that plays as Blender does for them
+    (:func:`chain_needs_evaluation`; the object may move), else by letting Blender evaluate each frame (the action
+    the object plays)."""
     frames = np.asarray(frames, np.float64)
-    if pose_needs_evaluation(obj, fcurves):
+    if chain_needs_evaluation(obj, names, fcurves):
         return pose_matrices_evaluated(context, obj, names, frames)[0]
     return _closed_form(obj, names, fcurves, frames)
 

@@ -166,3 +166,22 @@ def test_with_only_the_left_leg_selected_only_the_left_foots_ik_bone_is_keyed_ag
     assert "ik_foot_l" in changed and not changed & (set(FOLLOWERS) - {"ik_foot_l"}), changed
     first, last = (int(f) for f in old.frame_range)
     assert off_their_bones(obj, np.arange(first, last + 1, 3)).max() < 2e-3
+
+
+def test_with_its_twist_bones_constrained_the_ik_bones_still_follow(mannequin, real_model):
+    """A game rig set up in Blender turns its twist bones by constraints (half the turn of the bone below about the
+    limb, as Unreal's own rigs do): the IK bones and the bones they follow have none, so they are still read and
+    keyed in closed form, and go on with the feet and hands; the constrained twist bones are left to their
+    constraints."""
+    obj = mannequin
+    for bone, source in (("lowerarm_twist_01_l", "hand_l"), ("lowerarm_twist_01_r", "hand_r"),
+                         ("thigh_twist_01_l", "calf_l"), ("thigh_twist_01_r", "calf_r")):
+        con = obj.pose.bones[bone].constraints.new("COPY_ROTATION")
+        con.target, con.subtarget, con.use_x, con.use_z = obj, source, False, False
+        con.target_space = con.owner_space = "LOCAL"
+        con.influence = 0.5
+    last = int(action_of(obj).frame_range[1])
+    assert bpy.ops.strnn.extend_clip(frames=60) == {"FINISHED"}
+    assert action_of(obj)["strnn"]["followers"]["bones"].to_dict() == FOLLOWERS
+    off = off_their_bones(obj, np.arange(last + 1, last + 61))
+    assert off.max() < 1e-3, dict(zip(FOLLOWERS, off.max(0)))
