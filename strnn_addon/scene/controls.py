@@ -311,10 +311,11 @@ class _StandIn:
             self._set(k, float(value))
 
     def close(self) -> None:
-        if self.obj.animation_data is not None and self.obj.animation_data.action == self.stand_in:
+        ad = self.obj.animation_data
+        if ad is not None and ad.action == self.stand_in:
             anim.assign_action(self.obj, self.action, self.slot)
-            if self.made:
-                self.obj.animation_data_clear()
+        if self.made and self.obj.animation_data is not None:
+            self.obj.animation_data_clear()
         bpy.data.actions.remove(self.stand_in)
 
 

@@ -13,11 +13,13 @@ from scenes import (
     build_armature,
     evaluated_joints,
     fcurves_of,
+    import_bvh,
     key_snapshot,
     key_walk,
     mixamo_bones,
     mixamo_walk,
     same_keys,
+    walk_bvh,
 )
 
 CTRL = "CTRL_"
@@ -117,3 +119,23 @@ def test_controls_turned_by_axis_angle_or_euler_are_baked_and_nothing_is_left_be
     assert err.max() < 0.01, err.max()
     rot = {fc.data_path.rsplit(".", 1)[1] for fc in fcurves_of(obj, new) if "rotation" in fc.data_path}
     assert rot == {"rotation_axis_angle" if mode == "AXIS_ANGLE" else "rotation_euler"}
+
+
+def test_transfer_onto_a_control_rig_with_no_animation_data_bakes_its_controls_and_leaves_no_trace(addon, tmp_path):
+    """A control rig that was never animated (no animation data at all) gets the motion baked on its controls
+    through the stand-in action; afterwards it holds the new action alone and the file no other action but the
+    source's."""
+    obj = control_rig()
+    set_controls(obj)
+    bpy.data.actions.remove(action_of(obj))
+    obj.animation_data_clear()
+    source = import_bvh(walk_bvh(tmp_path, frames=60))
+    for other in bpy.context.view_layer.objects:
+        other.select_set(other in (source, obj))
+    bpy.context.view_layer.objects.active = obj
+    assert bpy.ops.strnn.transfer_motion() == {"FINISHED"}
+    new = action_of(obj)
+    assert set(bpy.data.actions) == {new, action_of(source)}
+    assert not obj.animation_data.drivers and new["strnn"]["controls"]["set"] == "custom"
+    paths = {fc.data_path for fc in fcurves_of(obj, new)}
+    assert paths and all(CTRL in p for p in paths), paths
