@@ -403,47 +403,55 @@ def bake(context, obj, control_set_: ControlSet, frames: np.ndarray, targets: di
     loc = np.zeros((len(frames), len(chosen), 3))
     rot = np.zeros((len(frames), len(chosen), 3, 3))
     worst = 0.0
-    try:
-        scene.frame_set(int(frames[0]))
-        switch_on()
-        waves = Waves(obj, chosen, layer.update)
-        stand_in = _StandIn(obj, chosen, switches, frames)
+    with rig_io.skin_paused(context, obj):  # the meshes it deforms are not evaluated with it meanwhile
         try:
-            for i, f in enumerate(frames):
-                stand_in.at(i)
-                scene.frame_set(int(np.floor(f)), subframe=float(f - np.floor(f)))
-                want = {d: m[i] for d, m in targets.items()}
-                last, again = np.inf, None
-                for sweep in range(MAX_SWEEPS):
-                    for wave in waves.waves:
-                        layer.update()  # nothing to evaluate where the wave before set nothing
-                        carried: dict[str, np.ndarray] = {}
-                        for c in wave:
-                            if again is None or c.bone in again:
-                                move = _place(obj, c, want[c.drives], sweep == 0, stand_in.put, carried.get(c.bone))
-                                for rider in waves.rides[c.bone] if move is not None else ():
-                                    carried[rider] = move @ carried.get(rider, np.eye(4))
-                    layer.update()
-                    err, off = _error(obj, chosen, want)
-                    off -= {c.bone for c in chosen if c.twist and c.bone in off and _untwisted(obj, c, want[c.drives])}
-                    if err < TOLERANCE or last - err < TOLERANCE / 4 or not off:  # there, or no nearer than the
-                        break  # sweep before, or off only where setting it again would not bring it nearer
-                    # the next sweep sets again only the controls still off and those they move (a control within
-                    # the tolerance is left as the first sweep set it, as on a frame where every control is)
-                    last, again = err, _reached(off, chosen, waves.moves)
-                worst = max(worst, err)
-                for k, c in enumerate(chosen):
-                    basis = np.array(bones[c.bone].matrix_basis, dtype=np.float64)
-                    loc[i, k], rot[i, k] = basis[:3, 3], basis[:3, :3]
+            scene.frame_set(int(frames[0]))
+            switch_on()
+            waves = Waves(obj, chosen, layer.update)
+            stand_in = _StandIn(obj, chosen, switches, frames)
+            try:
+                for i, f in enumerate(frames):
+                    stand_in.at(i)
+                    scene.frame_set(int(np.floor(f)), subframe=float(f - np.floor(f)))
+                    worst = max(worst, _bake_frame(obj, chosen, waves, {d: m[i] for d, m in targets.items()},
+                                                   stand_in, layer))
+                    for k, c in enumerate(chosen):
+                        basis = np.array(bones[c.bone].matrix_basis, dtype=np.float64)
+                        loc[i, k], rot[i, k] = basis[:3, 3], basis[:3, :3]
+            finally:
+                stand_in.close()
         finally:
-            stand_in.close()
-    finally:
-        for name, basis in keep_basis.items():
-            bones[name].matrix_basis = basis
-        for (bone, prop), value in keep_switch.items():
-            bones[bone][prop] = value
-        scene.frame_set(keep_frame[0], subframe=keep_frame[1])
+            for name, basis in keep_basis.items():
+                bones[name].matrix_basis = basis
+            for (bone, prop), value in keep_switch.items():
+                bones[bone][prop] = value
+            scene.frame_set(keep_frame[0], subframe=keep_frame[1])
     return Baked(loc, nearest_rotation(rot), worst)
+
+
+def _bake_frame(obj, chosen: list, waves: Waves, want: dict[str, np.ndarray], stand_in: _StandIn, layer) -> float:
+    """Set the ``chosen`` controls, wave by wave, so that their driven bones go to ``want`` {bone: armature-space
+    matrix} on the frame Blender has evaluated, sweeping again while that brings them nearer; the worst distance
+    left (:func:`_error`)."""
+    last, again = np.inf, None
+    for sweep in range(MAX_SWEEPS):
+        for wave in waves.waves:
+            layer.update()  # nothing to evaluate where the wave before set nothing
+            carried: dict[str, np.ndarray] = {}
+            for c in wave:
+                if again is None or c.bone in again:
+                    move = _place(obj, c, want[c.drives], sweep == 0, stand_in.put, carried.get(c.bone))
+                    for rider in waves.rides[c.bone] if move is not None else ():
+                        carried[rider] = move @ carried.get(rider, np.eye(4))
+        layer.update()
+        err, off = _error(obj, chosen, want)
+        off -= {c.bone for c in chosen if c.twist and c.bone in off and _untwisted(obj, c, want[c.drives])}
+        if err < TOLERANCE or last - err < TOLERANCE / 4 or not off:  # there, or no nearer than the sweep before,
+            break  # or off only where setting it again would not bring it nearer
+        # the next sweep sets again only the controls still off and those they move (a control within the tolerance
+        # is left as the first sweep set it, as on a frame where every control is)
+        last, again = err, _reached(off, chosen, waves.moves)
+    return err
 
 
 def bake_closed(obj, chosen: list, fcurves, frames: np.ndarray, targets: dict[str, np.ndarray]) -> Baked:

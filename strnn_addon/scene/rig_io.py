@@ -8,6 +8,7 @@ are the scene's; world space is Blender's Z-up in scene units.
 from __future__ import annotations
 
 import re
+from contextlib import contextmanager
 
 import bpy
 import numpy as np
@@ -302,18 +303,57 @@ def object_moves(obj, fcurves) -> bool:
     return bool(obj.parent or len(obj.constraints) or any(not p.startswith("pose.bones") for p in paths))
 
 
+def _read_by(obj) -> set[str]:
+    """The objects ``obj``'s pose or place is read from: its parent, its and its bones' constraints' targets, its
+    drivers' (and its armature's) variables' objects."""
+    out = {obj.parent.name} if obj.parent is not None else set()
+    cons = list(obj.constraints) + [c for pb in getattr(obj.pose, "bones", ()) for c in pb.constraints]
+    for con in cons:
+        for target in [getattr(con, "target", None), getattr(con, "pole_target", None)] + [
+                t.target for t in getattr(con, "targets", ())]:
+            if target is not None:
+                out.add(target.name)
+    for ad in (obj.animation_data, obj.data.animation_data):
+        for d in ad.drivers if ad else ():
+            out |= {t.id.name for v in d.driver.variables for t in v.targets if isinstance(t.id, bpy.types.Object)}
+    return out
+
+
+@contextmanager
+def skin_paused(context, obj):
+    """While Blender evaluates armature ``obj`` frame by frame for a read or a bake, the meshes it deforms (each
+    Armature modifier on it shown in viewports) are left undeformed, so each evaluation costs the rig alone and not
+    every skinned mesh too (a 30,000-vertex body adds half a generated Rigify rig's own evaluation). A mesh the rig's
+    pose or place is read from (:func:`_read_by`) and a linked or overridden one are left as they are. Every
+    modifier is put back as it was, whatever happens; nothing in between is drawn."""
+    needed, paused = _read_by(obj), []
+    try:
+        for other in context.scene.objects:
+            if other.name in needed or other.library is not None or other.override_library is not None:
+                continue
+            for md in getattr(other, "modifiers", ()):
+                if md.type == "ARMATURE" and md.object == obj and md.show_viewport:
+                    md.show_viewport = False
+                    paused.append(md)
+        yield
+    finally:
+        for md in paused:
+            md.show_viewport = True
+
+
 def world_matrices_evaluated(context, obj, frames: np.ndarray) -> np.ndarray:
-    """The object's world matrices ``[F, 4, 4]`` at scene ``frames``, Blender evaluating each frame; the scene's
-    current frame is restored."""
+    """The object's world matrices ``[F, 4, 4]`` at scene ``frames``, Blender evaluating each frame (its skin
+    paused: :func:`skin_paused`); the scene's current frame is restored."""
     scene = context.scene
     keep = (scene.frame_current, scene.frame_subframe)
     world = np.empty((len(frames), 4, 4))
-    try:
-        for k, f in enumerate(frames):
-            scene.frame_set(int(np.floor(f)), subframe=float(f - np.floor(f)))
-            world[k] = world_matrix(obj)
-    finally:
-        scene.frame_set(keep[0], subframe=keep[1])
+    with skin_paused(context, obj):
+        try:
+            for k, f in enumerate(frames):
+                scene.frame_set(int(np.floor(f)), subframe=float(f - np.floor(f)))
+                world[k] = world_matrix(obj)
+        finally:
+            scene.frame_set(keep[0], subframe=keep[1])
     return world
 
 
@@ -365,7 +405,8 @@ def _closed_form(obj, names: list[str], fcurves, frames: np.ndarray, cache: KeyC
 
 def pose_matrices_evaluated(context, obj, rig: Rig | list[str], frames: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Pose matrices ``[F, B, 4, 4]`` of the bones of ``rig`` (or of the bones named) and world matrices ``[F, 4, 4]``
-    by letting Blender evaluate each frame (constraints, drivers, parents); the scene's current frame is restored."""
+    by letting Blender evaluate each frame (constraints, drivers, parents; its skin paused: :func:`skin_paused`); the
+    scene's current frame is restored."""
     scene = context.scene
     keep = (scene.frame_current, scene.frame_subframe)
     names = rig.names if isinstance(rig, Rig) else list(rig)
@@ -373,11 +414,12 @@ def pose_matrices_evaluated(context, obj, rig: Rig | list[str], frames: np.ndarr
     perm = [order[n] for n in names]
     out = np.empty((len(frames), len(names), 4, 4))
     world = np.empty((len(frames), 4, 4))
-    try:
-        for k, f in enumerate(frames):
-            scene.frame_set(int(np.floor(f)), subframe=float(f - np.floor(f)))
-            out[k] = matrices(obj.pose.bones, "matrix", len(order))[perm]
-            world[k] = world_matrix(obj)
-    finally:
-        scene.frame_set(keep[0], subframe=keep[1])
+    with skin_paused(context, obj):
+        try:
+            for k, f in enumerate(frames):
+                scene.frame_set(int(np.floor(f)), subframe=float(f - np.floor(f)))
+                out[k] = matrices(obj.pose.bones, "matrix", len(order))[perm]
+                world[k] = world_matrix(obj)
+        finally:
+            scene.frame_set(keep[0], subframe=keep[1])
     return out, world

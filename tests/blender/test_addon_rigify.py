@@ -204,6 +204,35 @@ def test_fk_chains_riding_on_a_control_are_set_from_where_it_puts_them_in_one_ev
     assert same_keys(before, key_snapshot(rig)) and set(bpy.data.actions) == {action_of(rig)}
 
 
+def test_the_meshes_the_rig_deforms_wait_while_it_is_read_and_baked(rig, addon, model_calls):
+    """Every frame Blender evaluates for a read or the bake would deform each mesh the rig skins too: those wait
+    (their Armature modifier off) while the operation reads and bakes, and are as they were after it; a mesh the rig
+    reads (a driver's variable on it) is evaluated as ever."""
+    skinned(rig, ["DEF-spine", "DEF-thigh.L"])
+    body = bpy.context.active_object
+    skinned(rig, ["DEF-spine"])
+    read = bpy.context.active_object
+    rig["probe"] = 0.0
+    driver = rig.driver_add('["probe"]').driver
+    variable = driver.variables.new()
+    variable.targets[0].id = read
+    variable.targets[0].data_path = "location.x"
+    driver.expression = variable.name
+    bpy.context.view_layer.objects.active = rig
+    seen = []
+
+    def watch(scene, depsgraph=None):
+        seen.append((body.modifiers["Armature"].show_viewport, read.modifiers["Armature"].show_viewport))
+
+    bpy.app.handlers.frame_change_post.append(watch)
+    try:
+        assert bpy.ops.strnn.extend_clip(frames=30) == {"FINISHED"}
+    finally:
+        bpy.app.handlers.frame_change_post.remove(watch)
+    assert len(seen) > 60 and set(seen) == {(False, True)}, set(seen)
+    assert body.modifiers["Armature"].show_viewport and read.modifiers["Armature"].show_viewport
+
+
 def test_an_ik_leg_off_only_by_its_length_is_not_turned_again(ik_rig, addon):
     """A frame's bake sweeps again where a driven bone is off, but not for an IK leg whose knee is off only because
     Blender plays the stretching chain shorter than its bones: its twist control would not bring it nearer. A thigh
