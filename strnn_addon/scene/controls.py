@@ -388,7 +388,7 @@ def bake(context, obj, control_set_: ControlSet, frames: np.ndarray, targets: di
     chosen = [c for c in control_set_.controls if c.drives in targets]
     switches = [s for s in control_set_.switches if s.bone in bones and s.prop in bones[s.bone]]
     fcurves = anim.active_fcurves(obj)
-    if not switches and all(c.bone == c.drives and c.turns and not (c.end or c.pole or c.twist) for c in chosen) \
+    if not switches and all(c.bone == c.drives and c.turns and _plain(c) for c in chosen) \
             and not rig_io.pose_needs_evaluation(obj, fcurves):  # each bone its own control, on a rig that plays
         return bake_closed(obj, chosen, fcurves, frames, targets)  # as its curves say (one an exporter baked)
     keep_frame = (scene.frame_current, scene.frame_subframe)

@@ -164,9 +164,10 @@ def followers(context, clip: Clip) -> dict[str, str]:
         if not keyed:
             return {}
         frames = np.unique(np.linspace(clip.first, clip.last, CARRY_SAMPLES).round())
-        read = sorted(keyed | set(written), key=full.names.index)
+        index = {n: b for b, n in enumerate(full.names)}
+        read = sorted(keyed | set(written), key=index.__getitem__)
         pose = np.broadcast_to(np.eye(4), (len(frames), len(full.names), 4, 4)).copy()  # only those read are used
-        pose[:, [full.names.index(n) for n in read]] = rig_io.armature_poses(context, clip.obj, read, fcurves, frames)
+        pose[:, [index[n] for n in read]] = rig_io.armature_poses(context, clip.obj, read, fcurves, frames)
         found = controls_core.keyed_followers(full, written, keyed, pose, leg)
     return {full.names[c]: full.names[w] for c, w in found.items()}
 
@@ -684,7 +685,7 @@ def _key_followers(context, clip: Clip, channels: anim.Channels, frames: np.ndar
     carriers = sorted({w for w in clip.carried.values() if any(clip.rig.is_ancestor(t, index[w]) for t in turned)})
     if not carriers:
         return
-    now = rig_io.armature_poses(context, clip.obj, carriers, channels.fcurves, frames)  # closed form: no constraints
+    now = rig_io.armature_poses(context, clip.obj, carriers, channels.fcurves, frames)  # closed form: plain chains
     carry = _carried_poses(context, clip, frames, {w: now[:, k] for k, w in enumerate(carriers)})
     bones = clip.obj.data.bones
     chosen = [Control(name, name, not bones[name].use_connect) for name in carry]
