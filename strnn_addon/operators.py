@@ -12,7 +12,7 @@ from .scene.curves import find_curve
 from .scene.pipeline import BAKED_BONES, OWN_BONES, UserError, check_object, rig_of
 from .scene.simplify import simplify_keys
 from .stages.check import check_motion
-from .stages.common import RECORD, STAGES, report_note, run
+from .stages.common import RECORD, STAGES, Unwritten, report_note, run
 from .stages.denoise import denoise_steps
 from .stages.extend import extend_steps
 from .stages.follow import follow_curve_steps
@@ -28,7 +28,8 @@ class _Staged:
     """Runs a worker generator (see stages/common.py): all at once in ``execute`` (scripts, redo panel),
     stage by stage from a timer in ``modal`` when invoked from the UI, with progress in the status
     bar and Esc to cancel between stages, or between the steps of a stage that yields its fraction
-    done as it goes (Follow Curve's model windows). Nothing is written before the last stage.
+    done as it goes (Follow Curve's model windows, a control rig's bake). Nothing is written before the last stage,
+    and Esc within it puts back what it wrote.
 
     With ``many`` the operation runs on every selected armature, the active one first (a crowd, a cast: as
     Blender's own operators act on the selection): each is read and computed before any is written, so an
@@ -110,13 +111,18 @@ class _Staged:
                     self._left.append(f"{obj.name!r} ({e})")
                     continue
                 ready.append((obj, steps, None))
-            made = []
-            for i, (obj, steps, result) in enumerate(ready):
-                self._at = (i, len(ready), obj.name)
-                if steps is not None:
-                    yield "write"
-                    result = run(steps)
-                made.append((obj, result))
+            made, kept = [], [Unwritten(context, obj) for obj, _, _ in ready]
+            try:
+                for i, (obj, steps, result) in enumerate(ready):
+                    self._at = (i, len(ready), obj.name)
+                    if steps is not None:
+                        yield "write"
+                        result = yield from steps  # a control rig's bake yields its fractions done
+                    made.append((obj, result))
+            except BaseException:  # Esc or a failure while writing: the armatures written before are put back
+                for (_, action), unwritten in reversed(list(zip(made, kept))):
+                    unwritten.undo(action)
+                raise
             return made
         finally:
             for _, steps, _ in ready:

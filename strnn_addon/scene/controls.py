@@ -14,12 +14,14 @@ in the file has changed.
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
 
 import bpy
 import numpy as np
 from mathutils import Matrix
 
+from ...model_core.inference.steps import drive
 from ...model_core.motion.geometry import nearest_rotation, unit
 from ...model_core.rig import controls as rig_controls
 from ...model_core.rig.controls import ControlSet
@@ -27,6 +29,7 @@ from . import anim, mapping, rig_io
 
 TOLERANCE = 2e-3  # armature units (metres on most rigs): a frame whose driven bones are further off is baked again
 MAX_SWEEPS = 3
+STEP_SECONDS = 0.2  # the bake hands back (progress, Esc) about this often
 
 
 @dataclass
@@ -381,9 +384,19 @@ def _pole_at(pb, driven: np.ndarray, target: np.ndarray, now: np.ndarray) -> np.
 
 
 def bake(context, obj, control_set_: ControlSet, frames: np.ndarray, targets: dict[str, np.ndarray]) -> Baked:
+    """:func:`bake_steps` run to the end."""
+    return drive(bake_steps(context, obj, control_set_, frames, targets))
+
+
+def bake_steps(context, obj, control_set_: ControlSet, frames: np.ndarray, targets: dict[str, np.ndarray]):
     """The controls' local transforms that put each driven bone on ``targets`` {bone: ``[F, 4, 4]``
     armature-space pose matrices} at scene ``frames``, with the switches on. Only controls whose
-    driven bone is in ``targets`` move (in the order of ``control_set_.controls``)."""
+    driven bone is in ``targets`` move (in the order of ``control_set_.controls``).
+
+    A step generator: yields the fraction of the frames baked about every :data:`STEP_SECONDS`, so that an operator
+    can show progress and stop on Esc; returns the :class:`Baked`. In between, the meshes the rig deforms are
+    deformed again (they are paused only while the frames are baked, :func:`rig_io.skin_paused`) and the rig shows the
+    frame reached; closed part way (Esc), or on any failure, the action, controls, switches and frame are put back."""
     scene, bones = context.scene, obj.pose.bones
     chosen = [c for c in control_set_.controls if c.drives in targets]
     switches = [s for s in control_set_.switches if s.bone in bones and s.prop in bones[s.bone]]
@@ -395,36 +408,42 @@ def bake(context, obj, control_set_: ControlSet, frames: np.ndarray, targets: di
     keep_basis = {c.bone: bones[c.bone].matrix_basis.copy() for c in chosen}
     keep_switch = {(s.bone, s.prop): bones[s.bone].get(s.prop) for s in switches}
     layer = context.view_layer
-
-    def switch_on():
-        for s in switches:
-            bones[s.bone][s.prop] = s.value
-
     loc = np.zeros((len(frames), len(chosen), 3))
     rot = np.zeros((len(frames), len(chosen), 3, 3))
-    worst = 0.0
-    with rig_io.skin_paused(context, obj):  # the meshes it deforms are not evaluated with it meanwhile
-        try:
+    worst, i = 0.0, 0
+    try:
+        with rig_io.skin_paused(context, obj):  # the meshes it deforms are not evaluated with it meanwhile
             scene.frame_set(int(frames[0]))
-            switch_on()
+            for s in switches:
+                bones[s.bone][s.prop] = s.value
             waves = Waves(obj, chosen, layer.update)
-            stand_in = _StandIn(obj, chosen, switches, frames)
-            try:
-                for i, f in enumerate(frames):
-                    stand_in.at(i)
-                    scene.frame_set(int(np.floor(f)), subframe=float(f - np.floor(f)))
-                    worst = max(worst, _bake_frame(obj, chosen, waves, {d: m[i] for d, m in targets.items()},
-                                                   stand_in, layer))
-                    for k, c in enumerate(chosen):
-                        basis = np.array(bones[c.bone].matrix_basis, dtype=np.float64)
-                        loc[i, k], rot[i, k] = basis[:3, 3], basis[:3, :3]
-            finally:
-                stand_in.close()
+        stand_in = _StandIn(obj, chosen, switches, frames)
+        try:
+            while i < len(frames):
+                since = time.perf_counter()
+                with rig_io.skin_paused(context, obj):
+                    while i < len(frames):  # frames for about STEP_SECONDS, at least one
+                        f = frames[i]
+                        stand_in.at(i)
+                        scene.frame_set(int(np.floor(f)), subframe=float(f - np.floor(f)))
+                        worst = max(worst, _bake_frame(obj, chosen, waves, {d: m[i] for d, m in targets.items()},
+                                                       stand_in, layer))
+                        for k, c in enumerate(chosen):
+                            basis = np.array(bones[c.bone].matrix_basis, dtype=np.float64)
+                            loc[i, k], rot[i, k] = basis[:3, 3], basis[:3, :3]
+                        i += 1
+                        if time.perf_counter() - since >= STEP_SECONDS:
+                            break
+                if i < len(frames):
+                    yield i / len(frames)
         finally:
-            for name, basis in keep_basis.items():
-                bones[name].matrix_basis = basis
-            for (bone, prop), value in keep_switch.items():
-                bones[bone][prop] = value
+            stand_in.close()
+    finally:
+        for name, basis in keep_basis.items():
+            bones[name].matrix_basis = basis
+        for (bone, prop), value in keep_switch.items():
+            bones[bone][prop] = value
+        with rig_io.skin_paused(context, obj):
             scene.frame_set(keep_frame[0], subframe=keep_frame[1])
     return Baked(loc, nearest_rotation(rot), worst)
 

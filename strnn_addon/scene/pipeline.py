@@ -642,12 +642,12 @@ def leg_bones(clip: Clip) -> list[int]:
 def write_pose(context, clip: Clip, action, frames: np.ndarray, loc: np.ndarray, rot: np.ndarray,
                previous: dict, replace: tuple[float, float] | None, bones: list[int] | None = None,
                follows: bool = False, interpolation: str = "", root: tuple[str, np.ndarray] | None = None,
-               joints: np.ndarray | None = None) -> float:
+               joints: np.ndarray | None = None):
     """Key the solved rotations of mapped bones (and the hips' place: :func:`located`) at ``frames``, and the rotation
     and location of a ``root`` bone carrying the travel ((name, its armature-space pose ``[F, 4, 4]``):
     :func:`moving_root`, already in ``loc``, ``rot`` on a plain rig); on a control rig, key its controls by a visual
-    bake instead (:func:`write_controls`). Returns how far (armature units) a written bone ends up from the solve at
-    worst (0 when keyed directly).
+    bake instead (:func:`write_controls`). A step generator (the bake's fractions done, :func:`controls.bake_steps`);
+    returns how far (armature units) a written bone ends up from the solve at worst (0 when keyed directly).
 
     ``loc`` ``[F, B, 3]``, ``rot`` ``[F, B, 3, 3]``; ``previous`` {bone: raw channel values} keeps
     Euler angles and quaternion signs continuous with the keys before (``follows``: after, frames added before
@@ -657,8 +657,8 @@ def write_pose(context, clip: Clip, action, frames: np.ndarray, loc: np.ndarray,
     (:func:`write_controls`)."""
     channels = anim.Channels(action, clip.obj.animation_data, ensure=True)
     if clip.controls is not None:
-        return write_controls(context, clip, channels, frames, loc, rot, previous, replace, bones, follows,
-                              interpolation, root, joints)
+        return (yield from write_controls(context, clip, channels, frames, loc, rot, previous, replace, bones,
+                                          follows, interpolation, root, joints))
     placed = located(clip.rig, clip.anchors)  # the hips bone, or the bone that carries it
     moved = clip.rig.names.index(root[0]) if root is not None else None
     turned = (written_bones(clip) if bones is None else bones) + ([moved] if moved is not None else [])
@@ -705,11 +705,11 @@ def _key_followers(context, clip: Clip, channels: anim.Channels, frames: np.ndar
 def write_controls(context, clip: Clip, channels: anim.Channels, frames: np.ndarray, loc: np.ndarray,
                    rot: np.ndarray, previous: dict, replace: tuple[float, float] | None,
                    bones: list[int] | None, follows: bool = False, interpolation: str = "",
-                   root: tuple[str, np.ndarray] | None = None, joints: np.ndarray | None = None) -> float:
+                   root: tuple[str, np.ndarray] | None = None, joints: np.ndarray | None = None):
     """Key a control rig's controls (and switches) so that its joint skeleton takes the solved pose; a ``root``
     control carrying the travel ((name, armature-space pose ``[F, 4, 4]``)) is set there first and keyed too. An IK
     chain Blender plays shorter than its bones has its end (a foot on its IK control) where ``joints`` (the joints
-    solved for, armature space) put it (:func:`_ends_on_joints`)."""
+    solved for, armature space) put it (:func:`_ends_on_joints`). A step generator, as :func:`write_pose`."""
     pose = fk(clip.rig, loc, rot)
     chosen = keyed_controls(clip, bones)
     index = {n: b for b, n in enumerate(clip.rig.names)}
@@ -738,7 +738,7 @@ def write_controls(context, clip: Clip, channels: anim.Channels, frames: np.ndar
         extra = [Control(name, name, True) for name in carry]
         chosen, targets = chosen + extra, targets | carry
         control_set = replace_set(control_set, controls=list(control_set.controls) + extra)
-    baked = controls.bake(context, clip.obj, control_set, frames, targets)
+    baked = yield from controls.bake_steps(context, clip.obj, control_set, frames, targets)
     for k, c in enumerate(chosen):
         pb = clip.obj.pose.bones[c.bone]
         prop, values = encode_rotation(pb.rotation_mode, baked.rot[:, k], previous.get(pb.name), follows)

@@ -7,7 +7,9 @@ solve, write) before running it, and may yield the fraction of a stage done as i
 Curve, window by window), so the operators can show progress and stop on Esc in between;
 :func:`run` drives one to the end. Every check, read and all the computing happen before it yields
 ``write``, and the new action is created after, so a failure or a cancel leaves the file unchanged, and an
-operator on several armatures can take each to its ``write`` before writing any.
+operator on several armatures can take each to its ``write`` before writing any. On a control rig the write stage
+yields the fraction of its bake done as it goes; closed there, the new action is removed and the rig put back, and
+:class:`Unwritten` puts back armatures written before it.
 """
 
 from __future__ import annotations
@@ -301,14 +303,15 @@ def write_new(context, clip, suffix, frames, loc, rot, previous, replace, record
     (widening the scene's range to it with ``scene_range``; ``root``: a root bone carrying the travel, keyed too);
     on failure remove it again. An action on twos (``record``'s ``key_step``) gets Constant keys in the channels this
     makes, as its own hold theirs. ``joints``: the joints ``loc``, ``rot`` were solved for
-    (:func:`pipeline.write_pose`)."""
+    (:func:`pipeline.write_pose`). A step generator (the fractions of a control rig's bake) that returns the action;
+    closed part way (Esc), it removes the action again."""
     action = pipeline.new_action_from(clip, suffix)
     made = "CONSTANT" if record.get("key_step", 1) > 1 else ""
     try:
         if first is not None:
             first(action)
-        error = pipeline.write_pose(context, clip, action, frames, loc, rot, previous, replace, bones, follows, made,
-                                    root, joints)
+        error = yield from pipeline.write_pose(context, clip, action, frames, loc, rot, previous, replace, bones,
+                                               follows, made, root, joints)
         action[RECORD] = with_bake(record, clip, error, frames)
         if action.use_frame_range:  # a manual frame range the animator set: widened to hold the written frames
             action.frame_start = min(action.frame_start, float(frames[0]))
@@ -316,7 +319,7 @@ def write_new(context, clip, suffix, frames, loc, rot, previous, replace, record
         if shape is not None:
             shape(action)
         pipeline.finish(context, clip, action, scene_range)
-    except Exception:
+    except BaseException:  # a failure, or closed part way
         bpy.data.actions.remove(action)
         raise
     return action
@@ -327,20 +330,20 @@ def write_fresh(context, clip, name: str, frames, loc, rot, record: dict, scene_
     """A new action ``name`` holding only the new frames (keys of ``interpolation``, default Linear: Constant for a
     source on twos; ``root``: a root bone carrying the travel, keyed too): keyed, labelled, assigned, the scene's
     range widened (with ``scene_range``); an action the armature had is kept (fake user). ``joints``: the joints
-    ``loc``, ``rot`` were solved for (:func:`pipeline.write_pose`)."""
+    ``loc``, ``rot`` were solved for (:func:`pipeline.write_pose`). A step generator, as :func:`write_new`."""
     action = bpy.data.actions.new(name)
     clip.first, clip.last = int(frames[0]), int(frames[-1])  # no static keys outside the new frames
     old = clip.obj.animation_data.action if clip.obj.animation_data else None
     try:
-        error = pipeline.write_pose(context, clip, action, frames, loc, rot, {}, None, interpolation=interpolation,
-                                    root=root, joints=joints)
+        error = yield from pipeline.write_pose(context, clip, action, frames, loc, rot, {}, None,
+                                               interpolation=interpolation, root=root, joints=joints)
         pipeline.hold(clip, action, frames, interpolation)
         action[RECORD] = with_bake(record, clip, error, frames)
         anim.assign_action(clip.obj, action, None)
         ad = clip.obj.animation_data
         if getattr(ad, "action_slot", True) is None and len(action.slots):
             ad.action_slot = action.slots[0]
-    except Exception:
+    except BaseException:  # a failure, or closed part way
         bpy.data.actions.remove(action)
         raise
     if old is not None:
@@ -348,3 +351,42 @@ def write_fresh(context, clip, name: str, frames, loc, rot, record: dict, scene_
     if scene_range:
         context.scene.frame_end = max(context.scene.frame_end, clip.last)
     return action
+
+
+class Unwritten:
+    """What writing an armature's new action changes besides the action itself (:func:`write_new`,
+    :func:`write_fresh`): its animation data (the action and slot it plays, or none at all), the fake user of that
+    action, its saved bone map, and the scene's frame range, taken before the writing; :meth:`undo` puts them back
+    and removes the new action. An operator on several armatures that stops while writing a later one (Esc, a
+    failure) so leaves the ones already written as they were too."""
+
+    def __init__(self, context, obj):
+        self.obj, self.scene = obj, context.scene
+        ad = obj.animation_data
+        self.had_data = ad is not None
+        self.action = ad.action if ad else None
+        slot = anim.slot_of(obj)
+        self.slot = slot.identifier if slot else None
+        self.fake_user = self.action.use_fake_user if self.action else False
+        props = obj.strnn_map
+        self.map = {p.identifier: getattr(props, p.identifier) for p in props.bl_rna.properties
+                    if p.identifier != "rna_type"}
+        self.frames = (self.scene.frame_start, self.scene.frame_end)
+
+    def undo(self, made) -> None:
+        """Put back what was taken, removing the new action ``made`` (None: nothing was made)."""
+        obj = self.obj
+        if not self.had_data:
+            if obj.animation_data is not None:
+                obj.animation_data_clear()
+        elif obj.animation_data.action is not self.action:
+            anim.assign_action(obj, self.action, self.slot)
+        if self.action is not None:
+            self.action.use_fake_user = self.fake_user
+        props = obj.strnn_map
+        for name, value in self.map.items():
+            if getattr(props, name) != value:
+                setattr(props, name, value)
+        if made is not None and any(a == made for a in bpy.data.actions):  # (a failure may have removed it)
+            bpy.data.actions.remove(made)
+        self.scene.frame_start, self.scene.frame_end = self.frames

@@ -58,4 +58,5 @@ def denoise_steps(context, obj, *, frame_start: int | None = None, frame_end: in
     record.update(familiarity_record(found, denoised=True))
     record.update(pace_record(context, clip))
     yield "write"  # every check and every read done: only the writing is left
-    return write_new(context, clip, "denoised", frames, loc, rot, previous, (a, b), record, bones=bones, joints=joints)
+    return (yield from write_new(context, clip, "denoised", frames, loc, rot, previous, (a, b), record, bones=bones,
+                                 joints=joints))

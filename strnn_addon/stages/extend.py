@@ -182,6 +182,6 @@ def extend_steps(context, obj, *, frames: int = 120, context_frames: int = 0, fo
     yield "write"  # every check and every read done: only the writing is left
     unrepeat = (lambda action: cycles.bake_cycles(anim.Channels(action, clip.obj.animation_data), baked)) \
         if cycled else None
-    return write_new(context, clip, "extended", new_frames, loc, rot, previous, replace, record,
-                     scene_range=scene_range, follows=back, first=unrepeat,
-                     root=(root.bone, carry) if root is not None else None, joints=targets)
+    return (yield from write_new(context, clip, "extended", new_frames, loc, rot, previous, replace, record,
+                                 scene_range=scene_range, follows=back, first=unrepeat,
+                                 root=(root.bone, carry) if root is not None else None, joints=targets))

@@ -110,10 +110,10 @@ def follow_curve_steps(context, obj, *, curve: str = "", frames: int = 0, speed:
         unrepeat = (lambda action: cycles.bake_cycles(anim.Channels(action, clip.obj.animation_data), [])) \
             if cycles.repeats(clip) else None
         # keys past a manual range's end go
-        return write_new(context, clip, "curve", new_frames, loc, rot, previous, (edge + 0.5, float("inf")),
-                         record, scene_range=scene_range, first=unrepeat,
-                         root=(root.bone, carry) if root is not None else None, joints=targets)
-    return write_fresh(context, clip, f"{clip.obj.name}.curve", new_frames, loc, rot, record, scene_range,
-                       joints=targets)
+        return (yield from write_new(context, clip, "curve", new_frames, loc, rot, previous, (edge + 0.5, float("inf")),
+                                     record, scene_range=scene_range, first=unrepeat,
+                                     root=(root.bone, carry) if root is not None else None, joints=targets))
+    return (yield from write_fresh(context, clip, f"{clip.obj.name}.curve", new_frames, loc, rot, record, scene_range,
+                                   joints=targets))
 
 

@@ -56,5 +56,5 @@ def foot_lock_steps(context, obj, *, frame_start: int | None = None, frame_end: 
         record.update(ground_record(surface, bare, len(frames)))
     record.update(pace_record(context, clip))
     yield "write"  # every check and every read done: only the writing is left
-    return write_new(context, clip, "footlocked", frames[inside], loc[inside], rot[inside], previous, (a, b),
-                     record, bones=bones, joints=joints[inside])
+    return (yield from write_new(context, clip, "footlocked", frames[inside], loc[inside], rot[inside], previous,
+                                 (a, b), record, bones=bones, joints=joints[inside]))

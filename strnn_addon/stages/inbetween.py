@@ -140,4 +140,5 @@ def inbetween_steps(context, obj, *, frame_start: int | None = None, frame_end: 
                                                     fps)))
     record.update(pace_record(context, clip))
     yield "write"  # every check and every read done: only the writing is left
-    return write_new(context, clip, "filled", gap, loc, rot, previous, (start - 0.5, end + 0.5), record, joints=joints)
+    return (yield from write_new(context, clip, "filled", gap, loc, rot, previous, (start - 0.5, end + 0.5), record,
+                                 joints=joints))

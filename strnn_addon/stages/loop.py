@@ -73,6 +73,6 @@ def loop_steps(context, obj, *, frame_start: int | None = None, frame_end: int |
         previous.update(pipeline.raw_rotations(clip, frames[0], [root.bone]))
     yield "write"  # every check and every read done: only the writing is left
     made = pipeline.written_paths(clip, root.bone if root is not None else None)
-    return write_new(context, clip, "loop", written, loc, rot, previous, (-np.inf, np.inf), record,
-                     scene_range=False, root=carry, joints=joints,
-                     shape=lambda action: cycles.make_cyclic(clip, action, written, loop.blend, made))
+    return (yield from write_new(context, clip, "loop", written, loc, rot, previous, (-np.inf, np.inf), record,
+                                 scene_range=False, root=carry, joints=joints,
+                                 shape=lambda action: cycles.make_cyclic(clip, action, written, loop.blend, made)))

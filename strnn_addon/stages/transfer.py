@@ -86,8 +86,9 @@ def transfer_steps(context, obj, *, source: str = "", foot_lock: bool = True, sc
         record.update(ground_record(surface, bare, n))
     if root is not None:
         record["root_motion"] = {"bone": root.bone}
-    return write_fresh(context, target, f"{src.action.name}.transfer", frames, loc, rot, record, scene_range,
-                       "CONSTANT" if step > 1 else "", (root.bone, carry) if root is not None else None, joints)
+    return (yield from write_fresh(context, target, f"{src.action.name}.transfer", frames, loc, rot, record,
+                                   scene_range, "CONSTANT" if step > 1 else "",
+                                   (root.bone, carry) if root is not None else None, joints))
 
 
 def _root_of(context, target) -> pipeline.Root:

@@ -144,7 +144,8 @@ def test_an_error_on_the_active_armature_changes_no_armature(tmp_path, model_cal
 
 def test_stopping_part_way_changes_no_armature(tmp_path, model_calls, addon):
     """What Esc does in the operator's modal: the work closed after every armature was read and computed, before
-    the first is written, leaves all of them as they were; run to the end, it writes each."""
+    the first is written, or after the first was written, leaves all of them as they were; run to the end, it writes
+    each."""
     objs = cast(tmp_path)
     operators = addon_module(addon, "strnn_addon.operators")
     extend = addon_module(addon, "strnn_addon.stages.extend")
@@ -163,6 +164,18 @@ def test_stopping_part_way_changes_no_armature(tmp_path, model_calls, addon):
     assert seen == [(stage, (i, 3)) for i in range(3) for stage in ("read", "model", "solve")] + [("write", (0, 3))]
     work.close()
     assert unchanged(objs, before)
+    # stopped after the first armature was written, before the second: the first is put back too
+    scene = bpy.context.scene
+    scene.frame_start, scene.frame_end = 5, 50
+    before, fake = snapshot(objs), {o.name: action_of(o).use_fake_user for o in objs}
+    op = Extend()
+    work, seen = op.work(bpy.context), []
+    while len(seen) < 2 or seen[-1] != ("write", (1, 3)):
+        seen.append((next(work), op._at[:2]))
+    assert action_of(objs[0]) is not before[objs[0].name][0] and scene.frame_end > 50  # the first was written
+    work.close()
+    assert unchanged(objs, before) and (scene.frame_start, scene.frame_end) == (5, 50)
+    assert {o.name: action_of(o).use_fake_user for o in objs} == fake
     made = addon_module(addon, "strnn_addon.stages.common").run(Extend().work(bpy.context))
     assert [obj for obj, _ in made] == [objs[0], *sorted(objs[1:], key=lambda o: o.name)]
     assert all(action_of(obj) is new and new is not before[obj.name][0] for obj, new in made)

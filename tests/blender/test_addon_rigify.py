@@ -233,6 +233,42 @@ def test_the_meshes_the_rig_deforms_wait_while_it_is_read_and_baked(rig, addon, 
     assert body.modifiers["Armature"].show_viewport and read.modifiers["Armature"].show_viewport
 
 
+def test_the_bake_says_how_far_it_is_and_stopped_part_way_leaves_the_rig_as_it_was(rig, addon, model_calls,
+                                                                                      monkeypatch):
+    """The bake of the controls, the longest stage on a control rig, yields the fraction of its frames done (the
+    operator's progress, and Esc in between); closed part way, the rig, its take, its switches, the frame and the
+    meshes it deforms are as they were and no action is left behind. Run to the end, its fractions rise to the end."""
+    controls = addon_module(addon, "strnn_addon.scene.controls")
+    extend = addon_module(addon, "strnn_addon.stages.extend")
+    drive = addon_module(addon, "model_core.inference.steps").drive
+    monkeypatch.setattr(controls, "STEP_SECONDS", 0.0)  # hand back after every frame
+    skinned(rig, ["DEF-spine", "DEF-thigh.L"])
+    body = bpy.context.active_object
+    bpy.context.view_layer.objects.active = rig
+    scene = bpy.context.scene
+    played = deform_heads(rig, [20, 45])
+    scene.frame_set(33)
+    old, keys, actions = action_of(rig), key_snapshot(rig), set(bpy.data.actions)
+    switches = {b: rig.pose.bones[b]["IK_FK"] for b in LIMB_SWITCHES}
+    steps = extend.extend_steps(bpy.context, rig, frames=30)
+    while next(steps) != "write":
+        pass
+    fractions = [next(steps) for _ in range(5)]
+    assert all(isinstance(f, float) for f in fractions) and fractions == sorted(fractions), fractions
+    assert 0 < fractions[0] < fractions[-1] < 0.5, fractions
+    assert body.modifiers["Armature"].show_viewport  # in between, the body is deformed again
+    steps.close()
+    assert action_of(rig) is old and set(bpy.data.actions) == actions and same_keys(keys, key_snapshot(rig))
+    assert scene.frame_current == 33 and body.modifiers["Armature"].show_viewport
+    assert {b: rig.pose.bones[b]["IK_FK"] for b in LIMB_SWITCHES} == switches
+    assert np.abs(deform_heads(rig, [20, 45]) - played).max() < 1e-6
+    seen = []
+    new = drive(extend.extend_steps(bpy.context, rig, frames=30), seen.append)
+    after = seen[seen.index("write") + 1:]
+    assert len(after) >= 29 and after == sorted(after) and after[-1] < 1, after
+    assert action_of(rig) is new and new is not old and new["strnn"]["controls"]["max_error_cm"] < 1.0
+
+
 def test_an_ik_leg_off_only_by_its_length_is_not_turned_again(ik_rig, addon):
     """A frame's bake sweeps again where a driven bone is off, but not for an IK leg whose knee is off only because
     Blender plays the stretching chain shorter than its bones: its twist control would not bring it nearer. A thigh

@@ -44,7 +44,8 @@ def test_solve_round_trip_real_clip(addon, family):
     ref_loc[:, solved], ref_rot[:, solved] = ref_loc[:1, solved], ref_rot[:1, solved]
     loc, rot = solve.solve(clip.rig, clip.anchors, pipeline.to_armature(clip, pos), ref_loc, ref_rot)
     new = pipeline.new_action_from(clip, "roundtrip")
-    pipeline.write_pose(bpy.context, clip, new, frames, loc, rot, {}, (frames[0], frames[-1]))
+    drive = importlib.import_module(pkg + ".model_core.inference.steps").drive
+    drive(pipeline.write_pose(bpy.context, clip, new, frames, loc, rot, {}, (frames[0], frames[-1])))
     pipeline.finish(bpy.context, clip, new)
     assert action_of(obj) == new
     conv = importlib.import_module(pkg + ".model_core.motion.conventions")
