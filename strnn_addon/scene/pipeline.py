@@ -56,6 +56,9 @@ class Clip:
     # {bone: the written bone carrying it}: a baked control rig's skin (:func:`carried`), a plain rig's keyed
     # followers (:func:`followers`)
     carried: dict[str, str] = field(default_factory=dict)
+    # {scene frame: (pose matrices [B, 4, 4], world matrix [4, 4])} of ``rig`` as Blender evaluated it during this
+    # operation (:func:`skeleton_pose`): a frame read for the joints is not evaluated again for the solve
+    evaluated: dict = field(default_factory=dict, repr=False)
 
 
 def scene_fps(scene) -> float:
@@ -304,6 +307,7 @@ def check_keys(action, fcurves) -> None:
                             "or delete that key in the Graph Editor and run again")
 
 
+EVALUATED_BYTES = 64 << 20  # a clip remembers the frames Blender evaluated for it up to this size
 CHUNK_FRAMES = 1024  # frames read or solved at a time: a long take's per-bone arrays never all at once
 
 
@@ -317,6 +321,31 @@ def _fcurves(clip: Clip) -> list:
     return list(clip.channels.fcurves) if clip.channels is not None else []
 
 
+def skeleton_pose(context, clip: Clip, frames: np.ndarray,
+                  cache: rig_io.KeyCache | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Armature-space pose matrices ``[F, B, 4, 4]`` of the clip's rig (a control rig's joint skeleton) and world
+    matrices ``[F, 4, 4]`` at scene ``frames`` as its action plays (:func:`rig_io.pose_matrices`). Where Blender
+    evaluates each frame, the frames are remembered on the clip (:attr:`Clip.evaluated`, up to
+    :data:`EVALUATED_BYTES`) and a frame read before is not evaluated again: an operation reads the take for the
+    joints, then for the solve's reference pose and the pace, and each evaluation of a control rig costs the rig's
+    constraints and drivers. Nothing in the file changes between an operation's reads."""
+    fcurves = _fcurves(clip)
+    if not rig_io.needs_scene_evaluation(clip.obj, fcurves):
+        return rig_io.pose_matrices(context, clip.obj, clip.rig.names, fcurves, frames, cache)
+    frames = np.asarray(frames, np.float64)
+    memo = clip.evaluated
+    new = np.array(sorted({float(f) for f in frames} - memo.keys()), np.float64)
+    fresh = {}
+    if len(new):
+        pose, world = rig_io.pose_matrices_evaluated(context, clip.obj, clip.rig.names, new)
+        fresh = {float(f): (pose[k], world[k]) for k, f in enumerate(new)}
+        per_frame = pose[0].nbytes + world[0].nbytes
+        if (len(memo) + len(new)) * per_frame <= EVALUATED_BYTES:
+            memo.update(fresh)
+    at = [fresh.get(float(f)) or memo[float(f)] for f in frames]
+    return np.stack([p for p, _ in at]), np.stack([w for _, w in at])
+
+
 def joint_positions(context, clip: Clip, frames: np.ndarray) -> np.ndarray:
     """World-space canonical joints ``[F, 21, 3]`` at scene ``frames``, Y-up (model axes), scene units;
     read :data:`CHUNK_FRAMES` frames at a time."""
@@ -325,8 +354,7 @@ def joint_positions(context, clip: Clip, frames: np.ndarray) -> np.ndarray:
     for part in chunks(len(frames)):
         # (a joint skeleton, a control rig's, is not the armature's hierarchy: its bones are placed by the bones
         # above them in the armature, as a baked MMD model's lower body by the centre that carries its travel)
-        pose, world = rig_io.pose_matrices(context, clip.obj, clip.rig.names, clip.channels.fcurves, frames[part],
-                                           cache)
+        pose, world = skeleton_pose(context, clip, frames[part], cache)
         local = anchor_positions(clip.rig, clip.anchors, pose)
         out[part] = np.einsum("fij,fkj->fki", world[:, :3, :3], local) + world[:, None, :3, 3]
     return zup_to_yup(out)
@@ -360,7 +388,7 @@ def reference_pose(context, clip: Clip, frames: np.ndarray,
     ``frames``: the keyed channels (``cache``: their keys, when read already), or on a control rig the
     evaluated (visual) pose of its joint skeleton."""
     if clip.controls is not None:
-        pose, _ = rig_io.pose_matrices(context, clip.obj, clip.rig.names, _fcurves(clip), frames, cache)
+        pose, _ = skeleton_pose(context, clip, frames, cache)
         return visual_local(clip.rig, pose)
     loc, rot, _ = rig_io.read_local_pose(clip.obj, clip.rig, clip.channels.fcurves if clip.channels else [], frames,
                                          cache)

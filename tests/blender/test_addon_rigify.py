@@ -269,6 +269,31 @@ def test_the_bake_says_how_far_it_is_and_stopped_part_way_leaves_the_rig_as_it_w
     assert action_of(rig) is new and new is not old and new["strnn"]["controls"]["max_error_cm"] < 1.0
 
 
+def test_an_operation_has_blender_evaluate_each_frame_of_the_take_once(rig, addon, model_calls):
+    """Denoise reads the take's joints, then the solve's reference pose and the pace from the same frames: on a
+    control rig, where Blender evaluates every frame read, each frame of the take is evaluated once before the
+    writing (and the frame put back after each read), not once for each read."""
+    denoise = addon_module(addon, "strnn_addon.stages.denoise")
+    seen = []
+
+    def watch(scene, depsgraph=None):
+        seen.append(scene.frame_current)
+
+    steps = denoise.denoise_steps(bpy.context, rig)
+    bpy.app.handlers.frame_change_post.append(watch)
+    try:
+        while next(steps) != "write":
+            pass
+    finally:
+        bpy.app.handlers.frame_change_post.remove(watch)
+    take = set(range(1, 61))
+    assert take <= set(seen), sorted(take - set(seen))
+    again = [f for f in seen if f != 1]  # (frame 1: the scene's frame, put back after each read)
+    assert len(again) == len(set(again)), sorted(f for f in set(again) if again.count(f) > 1)
+    new = addon_module(addon, "model_core.inference.steps").drive(steps)
+    assert action_of(rig) is new and "denoised" in new.name
+
+
 def test_an_ik_leg_off_only_by_its_length_is_not_turned_again(ik_rig, addon):
     """A frame's bake sweeps again where a driven bone is off, but not for an IK leg whose knee is off only because
     Blender plays the stretching chain shorter than its bones: its twist control would not bring it nearer. A thigh
