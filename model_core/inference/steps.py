@@ -23,3 +23,17 @@ def drive(steps: Generator[Any, None, R], report: Callable[[Any], object] | None
             return stop.value
         if report is not None:
             report(value)
+
+
+def share(steps: Generator[Any, None, R], start: float, width: float) -> Generator[Any, None, R]:
+    """``yield from`` ``steps``, a part of larger work: each fraction it yields mapped to ``start + width *
+    fraction`` (other values as they are); returns its result. Closed, it closes ``steps``."""
+    try:
+        while True:
+            try:
+                value = next(steps)
+            except StopIteration as stop:
+                return stop.value
+            yield start + width * value if isinstance(value, float) else value
+    finally:
+        steps.close()

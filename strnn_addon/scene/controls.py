@@ -14,7 +14,6 @@ in the file has changed.
 
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass
 
 import bpy
@@ -29,7 +28,6 @@ from . import anim, mapping, rig_io
 
 TOLERANCE = 2e-3  # armature units (metres on most rigs): a frame whose driven bones are further off is baked again
 MAX_SWEEPS = 3
-STEP_SECONDS = 0.2  # the bake hands back (progress, Esc) about this often
 
 
 @dataclass
@@ -393,8 +391,8 @@ def bake_steps(context, obj, control_set_: ControlSet, frames: np.ndarray, targe
     armature-space pose matrices} at scene ``frames``, with the switches on. Only controls whose
     driven bone is in ``targets`` move (in the order of ``control_set_.controls``).
 
-    A step generator: yields the fraction of the frames baked about every :data:`STEP_SECONDS`, so that an operator
-    can show progress and stop on Esc; returns the :class:`Baked`. In between, the meshes the rig deforms are
+    A step generator: yields the fraction of the frames baked about every :data:`rig_io.STEP_SECONDS`, so that an
+    operator can show progress and stop on Esc; returns the :class:`Baked`. In between, the meshes the rig deforms are
     deformed again (they are paused only while the frames are baked, :func:`rig_io.skin_paused`) and the rig shows the
     frame reached; closed part way (Esc), or on any failure, the action, controls, switches and frame are put back."""
     scene, bones = context.scene, obj.pose.bones
@@ -410,7 +408,18 @@ def bake_steps(context, obj, control_set_: ControlSet, frames: np.ndarray, targe
     layer = context.view_layer
     loc = np.zeros((len(frames), len(chosen), 3))
     rot = np.zeros((len(frames), len(chosen), 3, 3))
-    worst, i = 0.0, 0
+    worst = 0.0
+
+    def bake_frame(i: int) -> None:
+        nonlocal worst
+        f = frames[i]
+        stand_in.at(i)
+        scene.frame_set(int(np.floor(f)), subframe=float(f - np.floor(f)))
+        worst = max(worst, _bake_frame(obj, chosen, waves, {d: m[i] for d, m in targets.items()}, stand_in, layer))
+        for k, c in enumerate(chosen):
+            basis = np.array(bones[c.bone].matrix_basis, dtype=np.float64)
+            loc[i, k], rot[i, k] = basis[:3, 3], basis[:3, :3]
+
     try:
         with rig_io.skin_paused(context, obj):  # the meshes it deforms are not evaluated with it meanwhile
             scene.frame_set(int(frames[0]))
@@ -419,23 +428,7 @@ def bake_steps(context, obj, control_set_: ControlSet, frames: np.ndarray, targe
             waves = Waves(obj, chosen, layer.update)
         stand_in = _StandIn(obj, chosen, switches, frames)
         try:
-            while i < len(frames):
-                since = time.perf_counter()
-                with rig_io.skin_paused(context, obj):
-                    while i < len(frames):  # frames for about STEP_SECONDS, at least one
-                        f = frames[i]
-                        stand_in.at(i)
-                        scene.frame_set(int(np.floor(f)), subframe=float(f - np.floor(f)))
-                        worst = max(worst, _bake_frame(obj, chosen, waves, {d: m[i] for d, m in targets.items()},
-                                                       stand_in, layer))
-                        for k, c in enumerate(chosen):
-                            basis = np.array(bones[c.bone].matrix_basis, dtype=np.float64)
-                            loc[i, k], rot[i, k] = basis[:3, 3], basis[:3, :3]
-                        i += 1
-                        if time.perf_counter() - since >= STEP_SECONDS:
-                            break
-                if i < len(frames):
-                    yield i / len(frames)
+            yield from rig_io.in_steps(context, obj, len(frames), bake_frame)
         finally:
             stand_in.close()
     finally:

@@ -13,6 +13,7 @@ from dataclasses import dataclass, field, replace as replace_set
 import bpy
 import numpy as np
 
+from ...model_core.inference.steps import drive, share
 from ...model_core.motion import rotations
 from ...model_core.motion.conventions import (  # noqa: F401  (MIN_MODEL_FRAMES, min_scene_frames: the stages')
     JOINT_INDEX,
@@ -323,12 +324,18 @@ def _fcurves(clip: Clip) -> list:
 
 def skeleton_pose(context, clip: Clip, frames: np.ndarray,
                   cache: rig_io.KeyCache | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`skeleton_pose_steps` run to the end."""
+    return drive(skeleton_pose_steps(context, clip, frames, cache))
+
+
+def skeleton_pose_steps(context, clip: Clip, frames: np.ndarray, cache: rig_io.KeyCache | None = None):
     """Armature-space pose matrices ``[F, B, 4, 4]`` of the clip's rig (a control rig's joint skeleton) and world
     matrices ``[F, 4, 4]`` at scene ``frames`` as its action plays (:func:`rig_io.pose_matrices`). Where Blender
-    evaluates each frame, the frames are remembered on the clip (:attr:`Clip.evaluated`, up to
-    :data:`EVALUATED_BYTES`) and a frame read before is not evaluated again: an operation reads the take for the
-    joints, then for the solve's reference pose and the pace, and each evaluation of a control rig costs the rig's
-    constraints and drivers. Nothing in the file changes between an operation's reads."""
+    evaluates each frame, a step generator of the fraction read (:func:`rig_io.pose_matrices_evaluated_steps`), and
+    the frames are remembered on the clip (:attr:`Clip.evaluated`, up to :data:`EVALUATED_BYTES`): a frame read
+    before is not evaluated again, as an operation reads the take for the joints, then for the solve's reference
+    pose and the pace, and each evaluation of a control rig costs the rig's constraints and drivers. Nothing in the
+    file changes between an operation's reads."""
     fcurves = _fcurves(clip)
     if not rig_io.needs_scene_evaluation(clip.obj, fcurves):
         return rig_io.pose_matrices(context, clip.obj, clip.rig.names, fcurves, frames, cache)
@@ -337,7 +344,7 @@ def skeleton_pose(context, clip: Clip, frames: np.ndarray,
     new = np.array(sorted({float(f) for f in frames} - memo.keys()), np.float64)
     fresh = {}
     if len(new):
-        pose, world = rig_io.pose_matrices_evaluated(context, clip.obj, clip.rig.names, new)
+        pose, world = yield from rig_io.pose_matrices_evaluated_steps(context, clip.obj, clip.rig.names, new)
         fresh = {float(f): (pose[k], world[k]) for k, f in enumerate(new)}
         per_frame = pose[0].nbytes + world[0].nbytes
         if (len(memo) + len(new)) * per_frame <= EVALUATED_BYTES:
@@ -347,14 +354,21 @@ def skeleton_pose(context, clip: Clip, frames: np.ndarray,
 
 
 def joint_positions(context, clip: Clip, frames: np.ndarray) -> np.ndarray:
+    """:func:`joint_positions_steps` run to the end."""
+    return drive(joint_positions_steps(context, clip, frames))
+
+
+def joint_positions_steps(context, clip: Clip, frames: np.ndarray):
     """World-space canonical joints ``[F, 21, 3]`` at scene ``frames``, Y-up (model axes), scene units;
-    read :data:`CHUNK_FRAMES` frames at a time."""
+    read :data:`CHUNK_FRAMES` frames at a time. A step generator: on a rig Blender evaluates frame by frame, the
+    fraction of the frames read (:func:`skeleton_pose_steps`)."""
     frames = np.asarray(frames, dtype=np.float64)
     out, cache = np.empty((len(frames), len(JOINTS), 3)), rig_io.KeyCache()
     for part in chunks(len(frames)):
         # (a joint skeleton, a control rig's, is not the armature's hierarchy: its bones are placed by the bones
         # above them in the armature, as a baked MMD model's lower body by the centre that carries its travel)
-        pose, world = skeleton_pose(context, clip, frames[part], cache)
+        pose, world = yield from share(skeleton_pose_steps(context, clip, frames[part], cache),
+                                       part.start / len(frames), len(frames[part]) / len(frames))
         local = anchor_positions(clip.rig, clip.anchors, pose)
         out[part] = np.einsum("fij,fkj->fki", world[:, :3, :3], local) + world[:, None, :3, 3]
     return zup_to_yup(out)

@@ -8,16 +8,19 @@ are the scene's; world space is Blender's Z-up in scene units.
 from __future__ import annotations
 
 import re
+import time
 from contextlib import contextmanager
 
 import bpy
 import numpy as np
 
+from ...model_core.inference.steps import drive
 from ...model_core.motion import rotations
 from ...model_core.rig.solve import Rig, fk
 from . import anim
 
 _ROT_PATHS = {"QUATERNION": "rotation_quaternion", "AXIS_ANGLE": "rotation_axis_angle"}
+STEP_SECONDS = 0.2  # a frame-by-frame read or bake hands back (progress, Esc) about this often
 
 
 def matrices(coll, attr: str, n: int) -> np.ndarray:
@@ -341,6 +344,24 @@ def skin_paused(context, obj):
             md.show_viewport = True
 
 
+def in_steps(context, obj, count: int, each):
+    """Call ``each(i)`` for ``i`` in ``range(count)``, frame by frame of a read or bake of armature ``obj``, the
+    meshes it deforms paused meanwhile (:func:`skin_paused`): a step generator that hands back after about
+    :data:`STEP_SECONDS` of them (at least one) with the fraction done, so that an operator shows progress and stops
+    on Esc; in between the meshes are deformed again, as Blender then draws the scene."""
+    i = 0
+    while i < count:
+        since = time.perf_counter()
+        with skin_paused(context, obj):
+            while i < count:
+                each(i)
+                i += 1
+                if time.perf_counter() - since >= STEP_SECONDS:
+                    break
+        if i < count:
+            yield i / count
+
+
 def world_matrices_evaluated(context, obj, frames: np.ndarray) -> np.ndarray:
     """The object's world matrices ``[F, 4, 4]`` at scene ``frames``, Blender evaluating each frame (its skin
     paused: :func:`skin_paused`); the scene's current frame is restored."""
@@ -404,9 +425,14 @@ def _closed_form(obj, names: list[str], fcurves, frames: np.ndarray, cache: KeyC
 
 
 def pose_matrices_evaluated(context, obj, rig: Rig | list[str], frames: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`pose_matrices_evaluated_steps` run to the end."""
+    return drive(pose_matrices_evaluated_steps(context, obj, rig, frames))
+
+
+def pose_matrices_evaluated_steps(context, obj, rig: Rig | list[str], frames: np.ndarray):
     """Pose matrices ``[F, B, 4, 4]`` of the bones of ``rig`` (or of the bones named) and world matrices ``[F, 4, 4]``
-    by letting Blender evaluate each frame (constraints, drivers, parents; its skin paused: :func:`skin_paused`); the
-    scene's current frame is restored."""
+    by letting Blender evaluate each frame (constraints, drivers, parents; its skin paused); the scene's current frame
+    is restored, closed part way too. A step generator (:func:`in_steps`: the fraction of the frames read)."""
     scene = context.scene
     keep = (scene.frame_current, scene.frame_subframe)
     names = rig.names if isinstance(rig, Rig) else list(rig)
@@ -414,12 +440,16 @@ def pose_matrices_evaluated(context, obj, rig: Rig | list[str], frames: np.ndarr
     perm = [order[n] for n in names]
     out = np.empty((len(frames), len(names), 4, 4))
     world = np.empty((len(frames), 4, 4))
-    with skin_paused(context, obj):
-        try:
-            for k, f in enumerate(frames):
-                scene.frame_set(int(np.floor(f)), subframe=float(f - np.floor(f)))
-                out[k] = matrices(obj.pose.bones, "matrix", len(order))[perm]
-                world[k] = world_matrix(obj)
-        finally:
+
+    def read(k: int) -> None:
+        f = frames[k]
+        scene.frame_set(int(np.floor(f)), subframe=float(f - np.floor(f)))
+        out[k] = matrices(obj.pose.bones, "matrix", len(order))[perm]
+        world[k] = world_matrix(obj)
+
+    try:
+        yield from in_steps(context, obj, len(frames), read)
+    finally:
+        with skin_paused(context, obj):
             scene.frame_set(keep[0], subframe=keep[1])
     return out, world

@@ -42,7 +42,7 @@ def denoise_steps(context, obj, *, frame_start: int | None = None, frame_end: in
         step, keys = 1, np.arange(a, b + 1)
     frames, fps = keys.astype(np.float64), clip.fps / step
     yield "read"
-    pos = pipeline.joint_positions(context, clip, frames)
+    pos = yield from pipeline.joint_positions_steps(context, clip, frames)
     previous = pipeline.raw_rotations(clip, a)
     yield "model"
     clean = yield from model_steps(engine_bridge.run_denoise(prefs(context), pos, fps, float(strength)))

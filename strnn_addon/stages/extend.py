@@ -110,7 +110,7 @@ def extend_steps(context, obj, *, frames: int = 120, context_frames: int = 0, fo
     # following the clip, up to 20 s of it; otherwise what the floor is judged on (extend.FLOOR_S)
     mem_frames = memory_range(clip, ctx_frames, MEMORY_S if follow_clip else FLOOR_S, step, back)
     order = np.argsort(mem_frames)  # read in time order, then as the model reads them
-    read = pipeline.joint_positions(context, clip, mem_frames[order])
+    read = yield from pipeline.joint_positions_steps(context, clip, mem_frames[order])
     memory = np.empty_like(read)
     memory[order] = read
     seen = memory[len(mem_frames) - len(ctx_frames):]  # the context as it is

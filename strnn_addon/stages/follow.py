@@ -60,7 +60,7 @@ def follow_curve_steps(context, obj, *, curve: str = "", frames: int = 0, speed:
         if clip.last - clip.first >= need and not cycles.repeats(clip) and stalls(context, clip, edge):
             stalled, edge = edge, edge - 1
         ctx = np.arange(edge - need + 1, edge + 1, dtype=np.float64)
-        context_pos, rest = pipeline.joint_positions(context, clip, ctx), None
+        context_pos, rest = (yield from pipeline.joint_positions_steps(context, clip, ctx)), None
         held_loc, held_rot = pipeline.reference_pose(context, clip, ctx[-1:])
         previous = pipeline.raw_rotations(clip, edge)
     else:

@@ -36,7 +36,7 @@ def foot_lock_steps(context, obj, *, frame_start: int | None = None, frame_end: 
     inside = (frames >= a) & (frames <= b)  # plus one untouched frame (key) either side to continue from
     fps = clip.fps / step
     yield "read"
-    pos = pipeline.joint_positions(context, clip, frames)
+    pos = yield from pipeline.joint_positions_steps(context, clip, frames)
     previous = pipeline.raw_rotations(clip, a)
     heights, bare = ground_heights(context, surface, pos) if surface is not None else (None, 0)
     yield "model"

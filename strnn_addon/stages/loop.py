@@ -39,7 +39,7 @@ def loop_steps(context, obj, *, frame_start: int | None = None, frame_end: int |
     lead = frames[0] - step * np.arange(pipeline.min_scene_frames(fps), 0, -1, dtype=np.float64)
     lead = lead[lead >= clip.first]  # the take before the range, which the in-between reads as well
     yield "read"
-    pos = pipeline.joint_positions(context, clip, frames)
+    pos = yield from pipeline.joint_positions_steps(context, clip, frames)
     before = pipeline.joint_positions(context, clip, lead) if len(lead) else None
     previous = pipeline.raw_rotations(clip, frames[0])
     yield "model"

@@ -59,7 +59,7 @@ def transfer_steps(context, obj, *, source: str = "", foot_lock: bool = True, sc
     if step > 1:
         frames = keys.astype(np.float64)
     yield "read"
-    pos = pipeline.joint_positions(context, src, frames)
+    pos = yield from pipeline.joint_positions_steps(context, src, frames)
     ref_loc, ref_rot = pipeline.reference_pose(context, target, np.array([float(context.scene.frame_current)]))
     rest = pipeline.pose_joints(target, ref_loc, ref_rot)
     yield "model"

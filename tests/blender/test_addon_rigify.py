@@ -233,15 +233,17 @@ def test_the_meshes_the_rig_deforms_wait_while_it_is_read_and_baked(rig, addon, 
     assert body.modifiers["Armature"].show_viewport and read.modifiers["Armature"].show_viewport
 
 
-def test_the_bake_says_how_far_it_is_and_stopped_part_way_leaves_the_rig_as_it_was(rig, addon, model_calls,
-                                                                                      monkeypatch):
-    """The bake of the controls, the longest stage on a control rig, yields the fraction of its frames done (the
-    operator's progress, and Esc in between); closed part way, the rig, its take, its switches, the frame and the
-    meshes it deforms are as they were and no action is left behind. Run to the end, its fractions rise to the end."""
-    controls = addon_module(addon, "strnn_addon.scene.controls")
+def test_reads_and_the_bake_say_how_far_they_are_and_stopped_part_way_leave_the_rig_as_it_was(rig, addon,
+                                                                                              model_calls,
+                                                                                              monkeypatch):
+    """On a control rig, where Blender evaluates every frame, the read of the take and the bake of the controls (the
+    longest stages) yield the fraction of their frames done (the operator's progress, and Esc in between); closed
+    part way, the rig, its take, its switches, the frame and the meshes it deforms are as they were and no action is
+    left behind. Run to the end, the bake's fractions rise to the end."""
+    rig_io = addon_module(addon, "strnn_addon.scene.rig_io")
     extend = addon_module(addon, "strnn_addon.stages.extend")
     drive = addon_module(addon, "model_core.inference.steps").drive
-    monkeypatch.setattr(controls, "STEP_SECONDS", 0.0)  # hand back after every frame
+    monkeypatch.setattr(rig_io, "STEP_SECONDS", 0.0)  # hand back after every frame
     skinned(rig, ["DEF-spine", "DEF-thigh.L"])
     body = bpy.context.active_object
     bpy.context.view_layer.objects.active = rig
@@ -250,18 +252,31 @@ def test_the_bake_says_how_far_it_is_and_stopped_part_way_leaves_the_rig_as_it_w
     scene.frame_set(33)
     old, keys, actions = action_of(rig), key_snapshot(rig), set(bpy.data.actions)
     switches = {b: rig.pose.bones[b]["IK_FK"] for b in LIMB_SWITCHES}
+
+    def as_it_was():
+        assert action_of(rig) is old and set(bpy.data.actions) == actions and same_keys(keys, key_snapshot(rig))
+        assert scene.frame_current == 33 and body.modifiers["Armature"].show_viewport
+        assert {b: rig.pose.bones[b]["IK_FK"] for b in LIMB_SWITCHES} == switches
+        assert np.abs(deform_heads(rig, [20, 45]) - played).max() < 1e-6
+        scene.frame_set(33)
+
+    steps = extend.extend_steps(bpy.context, rig, frames=30)
+    assert next(steps) == "read"
+    fractions = [next(steps) for _ in range(5)]
+    assert all(isinstance(f, float) for f in fractions) and fractions == sorted(fractions), fractions
+    assert 0 < fractions[0] < fractions[-1] < 0.5, fractions
+    assert body.modifiers["Armature"].show_viewport  # in between, the body is deformed again
+    steps.close()
+    as_it_was()
     steps = extend.extend_steps(bpy.context, rig, frames=30)
     while next(steps) != "write":
         pass
     fractions = [next(steps) for _ in range(5)]
     assert all(isinstance(f, float) for f in fractions) and fractions == sorted(fractions), fractions
     assert 0 < fractions[0] < fractions[-1] < 0.5, fractions
-    assert body.modifiers["Armature"].show_viewport  # in between, the body is deformed again
+    assert body.modifiers["Armature"].show_viewport
     steps.close()
-    assert action_of(rig) is old and set(bpy.data.actions) == actions and same_keys(keys, key_snapshot(rig))
-    assert scene.frame_current == 33 and body.modifiers["Armature"].show_viewport
-    assert {b: rig.pose.bones[b]["IK_FK"] for b in LIMB_SWITCHES} == switches
-    assert np.abs(deform_heads(rig, [20, 45]) - played).max() < 1e-6
+    as_it_was()
     seen = []
     new = drive(extend.extend_steps(bpy.context, rig, frames=30), seen.append)
     after = seen[seen.index("write") + 1:]
