@@ -20,7 +20,9 @@ from ...model_core.rig.solve import Rig, fk
 from . import anim
 
 _ROT_PATHS = {"QUATERNION": "rotation_quaternion", "AXIS_ANGLE": "rotation_axis_angle"}
-STEP_SECONDS = 0.2  # a frame-by-frame read or bake hands back (progress, Esc) about this often
+STEP_SECONDS = 0.2  # a frame-by-frame read or bake hands back (progress, Esc) about this often, at the least
+AWAY_SHARE = 0.1  # ... or so that the time the caller takes in between (drawing the scene) is at most this share
+LONGEST_STEP = 5.0  # ... up to this many seconds a step
 
 
 def matrices(coll, attr: str, n: int) -> np.ndarray:
@@ -348,18 +350,23 @@ def in_steps(context, obj, count: int, each):
     """Call ``each(i)`` for ``i`` in ``range(count)``, frame by frame of a read or bake of armature ``obj``, the
     meshes it deforms paused meanwhile (:func:`skin_paused`): a step generator that hands back after about
     :data:`STEP_SECONDS` of them (at least one) with the fraction done, so that an operator shows progress and stops
-    on Esc; in between the meshes are deformed again, as Blender then draws the scene."""
-    i = 0
+    on Esc; in between the meshes are deformed again, as Blender then draws the scene. Where the caller keeps it
+    waiting longer (a heavy scene to draw), each step lasts longer in proportion, so that the time away stays at most
+    :data:`AWAY_SHARE` of the whole (a step at most :data:`LONGEST_STEP` seconds)."""
+    i, step = 0, STEP_SECONDS
     while i < count:
         since = time.perf_counter()
         with skin_paused(context, obj):
             while i < count:
                 each(i)
                 i += 1
-                if time.perf_counter() - since >= STEP_SECONDS:
+                if time.perf_counter() - since >= step:
                     break
         if i < count:
+            left = time.perf_counter()
             yield i / count
+            away = time.perf_counter() - left
+            step = min(max(STEP_SECONDS, away * (1.0 - AWAY_SHARE) / AWAY_SHARE), LONGEST_STEP)
 
 
 def world_matrices_evaluated(context, obj, frames: np.ndarray) -> np.ndarray:

@@ -284,6 +284,31 @@ def test_reads_and_the_bake_say_how_far_they_are_and_stopped_part_way_leave_the_
     assert action_of(rig) is new and new is not old and new["strnn"]["controls"]["max_error_cm"] < 1.0
 
 
+def test_a_read_or_bake_keeps_the_time_its_caller_takes_in_between_to_a_tenth(addon, monkeypatch):
+    """The steps of a frame-by-frame read or bake last about 0.2 s; where the operator keeps them waiting longer in
+    between (Blender drawing a heavy scene), each step lasts nine times that (the time away a tenth of the whole), up
+    to 5 s, and goes back to 0.2 s when the wait does. (A clock of its own: each frame 1/64 s.)"""
+    rig_io = addon_module(addon, "strnn_addon.scene.rig_io")
+    clock = type("Clock", (), {"t": 0.0, "perf_counter": lambda self: self.t})()
+    monkeypatch.setattr(rig_io, "time", clock)
+    monkeypatch.setattr(rig_io, "STEP_SECONDS", 0.25)
+    obj = bpy.data.objects.new("Armature", bpy.data.armatures.new("Armature"))
+    bpy.context.scene.collection.objects.link(obj)
+
+    def frame(i):
+        clock.t += 1 / 64
+
+    steps = rig_io.in_steps(bpy.context, obj, 1000, frame)
+    done = []
+    for away in (0.125, 1.0, 0.0, 0.0):
+        done.append(round(next(steps) * 1000))
+        clock.t += away
+    runs = np.diff([0] + done)
+    assert runs[0] == 16 and abs(runs[1] - 72) <= 1 and runs[2] == 320 and runs[3] == 16, runs
+    rest = [round(f * 1000) for f in steps]  # to the end, 16 frames a step (no step after the last frame)
+    assert set(np.diff([done[-1]] + rest)) == {16} and 1000 - 16 <= rest[-1] < 1000, rest
+
+
 def test_an_operation_has_blender_evaluate_each_frame_of_the_take_once(rig, addon, model_calls):
     """Denoise reads the take's joints, then the solve's reference pose and the pace from the same frames: on a
     control rig, where Blender evaluates every frame read, each frame of the take is evaluated once before the
