@@ -6,7 +6,7 @@ the solve put it. Controls are set in waves (:class:`Waves`): a control waits fo
 that move its driven bone (found once per bake by nudging each control, so that constraints count
 as well as parents), but for those it rides on rigidly (an FK forearm on its upper arm), which
 carry it where they set it; the rig is evaluated once per wave. The controls are set through a
-stand-in action of one key per channel (:class:`_StandIn`), which Blender evaluates at the cost of
+stand-in action of one key per channel (:class:`rig_io.StandIn`), which Blender evaluates at the cost of
 the pose alone. The result is read back off the controls' local transforms and keyed; the action,
 the controls and switches are put back as they were, so until the new action is assigned nothing
 in the file has changed.
@@ -233,93 +233,6 @@ def _reached(off: set[str], chosen: list, moves: dict[str, set[str]]) -> set[str
     return out
 
 
-class _StandIn:
-    """The object's action played, while its controls are baked, through a stand-in action of one key per channel:
-    at each frame (:meth:`at`) every channel the action animates takes its value there (sampled once, F-curve
-    modifiers and all), and a control is set by its keys (:meth:`put`). Blender re-evaluates the pose after a key of
-    a small action changes at the cost of the pose alone, where a pose bone's transform set directly has it copy the
-    whole object first, and a key of a long action the whole action (a generated Rigify rig: about 3 ms against 6 to
-    9). Where the object had no action (nothing keyed yet), the controls' channels alone. :meth:`close` puts the
-    action (or none) back and removes the stand-in."""
-
-    def __init__(self, obj, chosen: list, switches: list, frames: np.ndarray):
-        self.obj, self.made = obj, obj.animation_data is None
-        ad = obj.animation_data or obj.animation_data_create()
-        self.action, self.slot = ad.action, getattr(anim.slot_of(obj), "identifier", None)
-        source = [fc for fc in anim.active_fcurves(obj) if not fc.mute]
-        self.stand_in = bpy.data.actions.new("STRNN bake")
-        try:
-            channels = anim.Channels(self.stand_in, ad, ensure=True)
-            on = {f'pose.bones["{bpy.utils.escape_identifier(s.bone)}"]["{bpy.utils.escape_identifier(s.prop)}"]':
-                  s.value for s in switches}
-            self.curves, columns = [], []
-            for fc in source:
-                self.curves.append(self._curve(channels, fc.data_path, fc.array_index, frames[0]))
-                value = on.get(fc.data_path)
-                columns.append(np.full(len(frames), value, np.float64) if value is not None
-                               else np.array([fc.evaluate(float(f)) for f in frames], np.float64))
-            index = {(fc.data_path, fc.array_index): k for k, fc in enumerate(source)}
-            self.channels: dict[str, tuple[list[int], list[int]]] = {}  # bone: (location, rotation) columns
-            for c in chosen:
-                pb = obj.pose.bones[c.bone]
-                ks = []
-                for prop in ("location", rig_io.rotation_property(pb)):
-                    path = anim.bone_path(c.bone, prop)
-                    for i in range(len(getattr(pb, prop))):
-                        if (path, i) not in index:  # not keyed: it starts where the frame before left it
-                            index[path, i] = len(self.curves)
-                            self.curves.append(self._curve(channels, path, i, frames[0], getattr(pb, prop)[i]))
-                            columns.append(np.full(len(frames), np.nan))
-                        ks.append(index[path, i])
-                self.channels[c.bone] = (ks[:3], ks[3:])
-            self.values = np.stack(columns, axis=1) if columns else np.zeros((len(frames), 0))
-            self.now = np.array([fc.keyframe_points[0].co[1] for fc in self.curves], np.float64)
-            slots = getattr(self.stand_in, "slots", ())
-            anim.assign_action(obj, self.stand_in, slots[0].identifier if len(slots) else None)
-        except Exception:
-            self.close()
-            raise
-
-    @staticmethod
-    def _curve(channels: anim.Channels, path: str, index: int, frame: float, value: float = 0.0):
-        fc = channels.ensure(path, index, "STRNN")
-        fc.keyframe_points.insert(float(frame), float(value), options={"FAST"})
-        return fc
-
-    def _set(self, k: int, value: float) -> None:
-        if value != self.now[k]:
-            self.curves[k].keyframe_points[0].co[1] = value
-            self.now[k] = value
-
-    def at(self, i: int) -> None:
-        """Every channel at the ``i``-th frame's value; a control's channel the action does not key, as it is."""
-        for k, value in enumerate(self.values[i]):
-            if not np.isnan(value):
-                self._set(k, float(value))
-
-    def put(self, pb, basis: Matrix) -> None:
-        """Key pose bone ``pb`` (a chosen control) to the local transform ``basis`` (its scale as it is)."""
-        loc_ks, rot_ks = self.channels[pb.name]
-        loc, quat, _ = basis.decompose()
-        if pb.rotation_mode == "QUATERNION":
-            rot = tuple(quat)
-        elif pb.rotation_mode == "AXIS_ANGLE":
-            axis, angle = quat.to_axis_angle()
-            rot = (angle, *axis)
-        else:
-            rot = tuple(quat.to_euler(pb.rotation_mode, pb.rotation_euler))
-        for k, value in zip(loc_ks + rot_ks, tuple(loc) + rot):
-            self._set(k, float(value))
-
-    def close(self) -> None:
-        ad = self.obj.animation_data
-        if ad is not None and ad.action == self.stand_in:
-            anim.assign_action(self.obj, self.action, self.slot)
-        if self.made and self.obj.animation_data is not None:
-            self.obj.animation_data_clear()
-        bpy.data.actions.remove(self.stand_in)
-
-
 def _place(obj, c, target: np.ndarray, first: bool, put, carried: np.ndarray | None = None) -> np.ndarray | None:
     """Turn (and, for a root control, move) control ``c`` so its driven bone goes to ``target``,
     taking the rig as last evaluated (``first``: the frame's first sweep), and set it by ``put(pose bone, local
@@ -405,7 +318,7 @@ def bake_steps(context, obj, control_set_: ControlSet, frames: np.ndarray, targe
     keep_frame = (scene.frame_current, scene.frame_subframe)
     keep_basis = {c.bone: bones[c.bone].matrix_basis.copy() for c in chosen}
     keep_switch = {(s.bone, s.prop): bones[s.bone].get(s.prop) for s in switches}
-    layer = context.view_layer
+    layer, alone = context.view_layer, rig_io.plays_alone(obj)
     loc = np.zeros((len(frames), len(chosen), 3))
     rot = np.zeros((len(frames), len(chosen), 3, 3))
     worst = 0.0
@@ -414,7 +327,10 @@ def bake_steps(context, obj, control_set_: ControlSet, frames: np.ndarray, targe
         nonlocal worst
         f = frames[i]
         stand_in.at(i)
-        scene.frame_set(int(np.floor(f)), subframe=float(f - np.floor(f)))
+        if alone:  # the rig alone evaluated, not every animated object of the scene
+            layer.update()
+        else:
+            scene.frame_set(int(np.floor(f)), subframe=float(f - np.floor(f)))
         worst = max(worst, _bake_frame(obj, chosen, waves, {d: m[i] for d, m in targets.items()}, stand_in, layer))
         for k, c in enumerate(chosen):
             basis = np.array(bones[c.bone].matrix_basis, dtype=np.float64)
@@ -426,7 +342,7 @@ def bake_steps(context, obj, control_set_: ControlSet, frames: np.ndarray, targe
             for s in switches:
                 bones[s.bone][s.prop] = s.value
             waves = Waves(obj, chosen, layer.update)
-        stand_in = _StandIn(obj, chosen, switches, frames)
+        stand_in = rig_io.StandIn(obj, chosen, switches, frames)
         try:
             yield from rig_io.in_steps(context, obj, len(frames), bake_frame)
         finally:
@@ -441,7 +357,8 @@ def bake_steps(context, obj, control_set_: ControlSet, frames: np.ndarray, targe
     return Baked(loc, nearest_rotation(rot), worst)
 
 
-def _bake_frame(obj, chosen: list, waves: Waves, want: dict[str, np.ndarray], stand_in: _StandIn, layer) -> float:
+def _bake_frame(obj, chosen: list, waves: Waves, want: dict[str, np.ndarray], stand_in: rig_io.StandIn,
+                layer) -> float:
     """Set the ``chosen`` controls, wave by wave, so that their driven bones go to ``want`` {bone: armature-space
     matrix} on the frame Blender has evaluated, sweeping again while that brings them nearer; the worst distance
     left (:func:`_error`)."""

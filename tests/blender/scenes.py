@@ -502,12 +502,19 @@ def through_fbx(obj, path: Path, leaf_bones: bool = False):
 
 
 def evaluated_joints(addon, obj, frames) -> np.ndarray:
-    """World canonical joints ``[F, 21, 3]`` (Blender axes) as Blender evaluates them, frame by frame."""
+    """World canonical joints ``[F, 21, 3]`` (Blender axes) as Blender evaluates them, frame by frame: the scene set
+    to each frame, as playback does (not the extension's own reads); the scene's frame put back."""
     pipeline = addon_module(addon, "strnn_addon.scene.pipeline")
-    rig_io = addon_module(addon, "strnn_addon.scene.rig_io")
     solve = addon_module(addon, "model_core.rig.solve")
     clip = pipeline.prepare_any(bpy.context, obj)
-    pose, world = rig_io.pose_matrices_evaluated(bpy.context, obj, clip.rig, np.asarray(frames, dtype=np.float64))
+    scene, keep = bpy.context.scene, bpy.context.scene.frame_current
+    pose, world = [], []
+    for f in np.asarray(frames, dtype=np.float64):
+        scene.frame_set(int(np.floor(f)), subframe=float(f - np.floor(f)))
+        pose.append([np.array(obj.pose.bones[n].matrix) for n in clip.rig.names])
+        world.append(np.array(obj.matrix_world))
+    scene.frame_set(keep)
+    pose, world = np.array(pose), np.array(world)
     local = solve.anchor_positions(clip.rig, clip.anchors, pose)
     return np.einsum("fij,fkj->fki", world[:, :3, :3], local) + world[:, None, :3, 3]
 

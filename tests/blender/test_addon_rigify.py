@@ -309,11 +309,101 @@ def test_a_read_or_bake_keeps_the_time_its_caller_takes_in_between_to_a_tenth(ad
     assert set(np.diff([done[-1]] + rest)) == {16} and 1000 - 16 <= rest[-1] < 1000, rest
 
 
-def test_an_operation_has_blender_evaluate_each_frame_of_the_take_once(rig, addon, model_calls):
+def test_a_rig_that_plays_alone_is_read_and_baked_without_setting_the_scenes_frame(rig, addon, model_calls,
+                                                                                      monkeypatch):
+    """The generated rig's pose is its action's channels alone (its constraints and drivers read only itself): Extend
+    reads and bakes it through a stand-in action with Blender evaluating the rig alone, and sets the scene's frame
+    only to put it back (every frame set would evaluate every other animated character of a shot). Its keys are those
+    of the same Extend read and baked by setting the scene to each frame."""
+    rig_io = addon_module(addon, "strnn_addon.scene.rig_io")
+    assert rig_io.plays_alone(rig)
+    old = action_of(rig)
+    seen = []
+
+    def watch(scene, depsgraph=None):
+        seen.append(scene.frame_current)
+
+    bpy.app.handlers.frame_change_post.append(watch)
+    try:
+        with monkeypatch.context() as m:
+            m.setattr(rig_io, "plays_alone", lambda obj: False)
+            assert bpy.ops.strnn.extend_clip(frames=30) == {"FINISHED"}
+        by_frame, frame_sets = key_snapshot(rig), len(seen)
+        rig.animation_data.action = old
+        seen.clear()
+        assert bpy.ops.strnn.extend_clip(frames=30) == {"FINISHED"}
+    finally:
+        bpy.app.handlers.frame_change_post.remove(watch)
+    assert frame_sets > 60 and len(seen) <= 8, (frame_sets, seen)
+    alone = key_snapshot(rig)
+    assert action_of(rig) is not old and alone.keys() == by_frame.keys()
+    worst = max(float(np.abs(alone[k] - by_frame[k]).max()) for k in alone)
+    assert worst < 1e-4, worst
+
+
+def test_a_rig_plays_alone_only_where_nothing_but_its_action_moves_it(addon, tmp_path):
+    """What makes a rig's pose depend on more than its action's channels (so it is read and baked by setting the
+    scene's frame): a parent, a constraint or driver reading another object, a driver reading the frame or running
+    Python, NLA strips playing, its armature animated. And a rig parented to a moving empty is read where the empty
+    takes it."""
+    rig_io = addon_module(addon, "strnn_addon.scene.rig_io")
+    pipeline = addon_module(addon, "strnn_addon.scene.pipeline")
+    obj = import_bvh(walk_bvh(tmp_path, frames=40))
+    assert rig_io.plays_alone(obj)
+    empty = bpy.data.objects.new("Mover", None)
+    bpy.context.scene.collection.objects.link(empty)
+    bone = obj.pose.bones[0]
+
+    def driven(expression: str, target=None) -> None:
+        fc = bone.driver_add("location", 0)
+        fc.driver.type, fc.driver.expression = "SCRIPTED", expression
+        if target is not None:
+            var = fc.driver.variables.new()
+            var.targets[0].id, var.targets[0].data_path = target, "location.x"
+            fc.driver.expression = expression.replace("T", var.name)
+
+    cases = {
+        "parent": (lambda: setattr(obj, "parent", empty), lambda: setattr(obj, "parent", None)),
+        "constraint": (lambda: setattr(bone.constraints.new("COPY_ROTATION"), "target", empty),
+                       lambda: bone.constraints.remove(bone.constraints[0])),
+        "driver on another object": (lambda: driven("T * 0.1", empty), lambda: bone.driver_remove("location", 0)),
+        "driver on the frame": (lambda: driven("frame / 100"), lambda: bone.driver_remove("location", 0)),
+        "Python in a driver": (lambda: driven("bpy.context.scene.frame_current * 0.0"),
+                               lambda: bone.driver_remove("location", 0)),
+        "NLA": (lambda: obj.animation_data.nla_tracks.new().strips.new("walk", 1, action_of(obj)),
+                lambda: obj.animation_data.nla_tracks.remove(obj.animation_data.nla_tracks[0])),
+    }
+    for why, (make, unmake) in cases.items():
+        make()
+        assert not rig_io.plays_alone(obj), why
+        unmake()
+        assert rig_io.plays_alone(obj), why
+    driven("T * 0.0 + 0.0", obj)  # a driver reading the rig itself (as Rigify's do) leaves it alone
+    assert rig_io.plays_alone(obj)
+    bone.driver_remove("location", 0)
+    obj.data["fold"] = 0.0
+    obj.data.keyframe_insert('["fold"]', frame=1)
+    assert not rig_io.plays_alone(obj)
+    obj.data.animation_data_clear()
+    for f, x in ((1, 0.0), (40, 2.0)):
+        empty.location.x = x
+        empty.keyframe_insert("location", index=0, frame=f)
+    obj.parent = empty
+    clip = pipeline.prepare(bpy.context, obj)
+    frames = np.array([5.0, 20.0, 35.0])
+    read = pipeline.joint_positions(bpy.context, clip, frames)
+    zup = addon_module(addon, "model_core.motion.conventions").zup_to_yup
+    assert np.abs(read - zup(evaluated_joints(addon, obj, frames))).max() < 1e-5
+    assert np.ptp(read[:, 0, 0]) > 1.0  # the empty carried it
+
+
+def test_an_operation_has_blender_evaluate_each_frame_of_the_take_once(rig, addon, model_calls, monkeypatch):
     """Denoise reads the take's joints, then the solve's reference pose and the pace from the same frames: on a
     control rig, where Blender evaluates every frame read, each frame of the take is evaluated once before the
-    writing (and the frame put back after each read), not once for each read."""
+    writing (and the frame put back after each read), not once for each read. (The rig read by setting the scene's
+    frame, as one whose pose more than its action moves is: every evaluation is then a frame set.)"""
     denoise = addon_module(addon, "strnn_addon.stages.denoise")
+    monkeypatch.setattr(addon_module(addon, "strnn_addon.scene.rig_io"), "plays_alone", lambda obj: False)
     seen = []
 
     def watch(scene, depsgraph=None):
