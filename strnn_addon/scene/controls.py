@@ -307,7 +307,9 @@ def bake_steps(context, obj, control_set_: ControlSet, frames: np.ndarray, targe
     A step generator: yields the fraction of the frames baked about every :data:`rig_io.STEP_SECONDS`, so that an
     operator can show progress and stop on Esc; returns the :class:`Baked`. In between, the meshes the rig deforms are
     deformed again (they are paused only while the frames are baked, :func:`rig_io.skin_paused`) and the rig shows the
-    frame reached; closed part way (Esc), or on any failure, the action, controls, switches and frame are put back."""
+    frame reached; closed part way (Esc), or on any failure, the action, controls, switches and frame are put back.
+    A rig that plays alone (:func:`rig_io.plays_alone`) is evaluated alone at each frame, its stand-in's keys changed
+    and the scene's frame left as it is; any other by setting the scene to each frame."""
     scene, bones = context.scene, obj.pose.bones
     chosen = [c for c in control_set_.controls if c.drives in targets]
     switches = [s for s in control_set_.switches if s.bone in bones and s.prop in bones[s.bone]]

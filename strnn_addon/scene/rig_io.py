@@ -327,9 +327,10 @@ def _read_by(obj) -> set[str]:
 
 
 class StandIn:
-    """The object's action played, while its controls are baked, through a stand-in action of one key per channel:
-    at each frame (:meth:`at`) every channel the action animates takes its value there (sampled once, F-curve
-    modifiers and all), and a control is set by its keys (:meth:`put`). Blender re-evaluates the pose after a key of
+    """The object's action played through a stand-in action of one key per channel, while its controls are baked or
+    while a rig that plays alone (:func:`plays_alone`) is read: at each frame (:meth:`at`) every channel the action
+    animates takes its value there (sampled once, F-curve modifiers and all; not a muted channel or group), and a
+    control is set by its keys (:meth:`put`). Blender re-evaluates the pose after a key of
     a small action changes at the cost of the pose alone, where a pose bone's transform set directly has it copy the
     whole object first, and a key of a long action the whole action (a generated Rigify rig: about 3 ms against 6 to
     9). Where the object had no action (nothing keyed yet), the controls' channels alone. :meth:`close` puts the
