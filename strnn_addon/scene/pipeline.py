@@ -423,10 +423,14 @@ def world_scale(clip: Clip) -> float:
 def world_at(context, clip: Clip, frames: np.ndarray) -> np.ndarray:
     """The armature object's world matrices ``[F, 4, 4]`` at scene ``frames``: its matrix now where the object
     stays put, else as Blender evaluates it frame by frame (an action that moves the object itself, a parent,
-    constraints), so that new frames land where the object will be, wherever the playhead stands."""
+    constraints), so that new frames land where the object will be, wherever the playhead stands; frames the
+    operation has had Blender evaluate already (:attr:`Clip.evaluated`) are not evaluated again."""
     frames = np.asarray(frames, dtype=np.float64)
     if not rig_io.object_moves(clip.obj, clip.channels.fcurves if clip.channels else []):
         return np.broadcast_to(clip.world, (len(frames), 4, 4))
+    memo = clip.evaluated
+    if len(frames) and all(float(f) in memo for f in frames):
+        return np.stack([memo[float(f)][1] for f in frames])
     return rig_io.world_matrices_evaluated(context, clip.obj, frames)
 
 

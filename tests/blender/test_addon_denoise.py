@@ -351,3 +351,40 @@ def test_only_selected_bones_get_new_keys(real_model, addon, tmp_path):
     with pytest.raises(RuntimeError, match="No bone that Denoise writes is selected"):
         bpy.ops.strnn.denoise_action(only_selected=True)
     assert same_keys(snapshot, key_snapshot(obj))
+
+
+def test_a_rig_carried_by_a_moving_parent_is_evaluated_once_a_frame_and_denoised_where_the_parent_takes_it(
+        tmp_path, addon, model_calls):
+    """A rig parented to a keyed empty (a character on a moving vehicle) is read by setting the scene to each frame;
+    the solve takes the rig's place at each frame from that read (not a second pass over the take), and the
+    denoised take plays where the parent carries it."""
+    obj = import_bvh(walk_bvh(tmp_path, frames=60))
+    empty = bpy.data.objects.new("Vehicle", None)
+    bpy.context.scene.collection.objects.link(empty)
+    for f, x in ((1, 0.0), (60, 3.0)):
+        empty.location.x = x
+        empty.keyframe_insert("location", index=0, frame=f)
+    obj.parent = empty
+    bpy.context.view_layer.objects.active = obj
+    bpy.context.scene.frame_set(1)
+    steps = addon_module(addon, "strnn_addon.stages.denoise").denoise_steps(bpy.context, obj)
+    seen = []
+
+    def watch(scene, depsgraph=None):
+        seen.append(scene.frame_current)
+
+    bpy.app.handlers.frame_change_post.append(watch)
+    try:
+        while next(steps) != "write":
+            pass
+    finally:
+        bpy.app.handlers.frame_change_post.remove(watch)
+    again = [f for f in seen if f != 1]  # (frame 1: the scene's frame, put back after each read)
+    assert set(range(2, 61)) <= set(again) and len(again) == len(set(again)), sorted(
+        f for f in set(again) if again.count(f) > 1)
+    new = addon_module(addon, "model_core.inference.steps").drive(steps)
+    assert action_of(obj) is new
+    frames = np.arange(1, 61)
+    played = evaluated_joints(addon, obj, frames)
+    assert np.linalg.norm(played - model_calls.denoised(), axis=-1).max() < PLAYED_CM / 100
+    assert np.ptp(played[:, 0, 0]) > 2.5  # the parent carried it
