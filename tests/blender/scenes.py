@@ -675,3 +675,20 @@ def set_pole(obj, ik, pole: str) -> None:
         if best is None or off < best[0]:
             best = (off, angle)
     ik.pole_angle = best[1]
+
+
+def frames_set_until(steps, stage: str = "write") -> list[int]:
+    """The scene frames Blender is set to (each ``frame_change_post``) while the operation's ``steps`` run up to
+    ``stage``."""
+    seen = []
+
+    def watch(scene, depsgraph=None):
+        seen.append(scene.frame_current)
+
+    bpy.app.handlers.frame_change_post.append(watch)
+    try:
+        while next(steps) != stage:
+            pass
+    finally:
+        bpy.app.handlers.frame_change_post.remove(watch)
+    return seen

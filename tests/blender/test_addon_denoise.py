@@ -14,6 +14,7 @@ from scenes import (
     evaluated_joints,
     fcurves_of,
     find_mocap,
+    frames_set_until,
     import_bvh,
     key_snapshot,
     mixamo_walk,
@@ -368,18 +369,7 @@ def test_a_rig_carried_by_a_moving_parent_is_evaluated_once_a_frame_and_denoised
     bpy.context.view_layer.objects.active = obj
     bpy.context.scene.frame_set(1)
     steps = addon_module(addon, "strnn_addon.stages.denoise").denoise_steps(bpy.context, obj)
-    seen = []
-
-    def watch(scene, depsgraph=None):
-        seen.append(scene.frame_current)
-
-    bpy.app.handlers.frame_change_post.append(watch)
-    try:
-        while next(steps) != "write":
-            pass
-    finally:
-        bpy.app.handlers.frame_change_post.remove(watch)
-    again = [f for f in seen if f != 1]  # (frame 1: the scene's frame, put back after each read)
+    again = [f for f in frames_set_until(steps) if f != 1]  # (frame 1: the scene's frame, put back after each read)
     assert set(range(2, 61)) <= set(again) and len(again) == len(set(again)), sorted(
         f for f in set(again) if again.count(f) > 1)
     new = addon_module(addon, "model_core.inference.steps").drive(steps)

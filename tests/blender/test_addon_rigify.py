@@ -21,6 +21,7 @@ from scenes import (
     evaluated_joints,
     fcurves_of,
     find_mocap,
+    frames_set_until,
     import_bvh,
     key_ik_walk,
     key_snapshot,
@@ -404,18 +405,8 @@ def test_an_operation_has_blender_evaluate_each_frame_of_the_take_once(rig, addo
     frame, as one whose pose more than its action moves is: every evaluation is then a frame set.)"""
     denoise = addon_module(addon, "strnn_addon.stages.denoise")
     monkeypatch.setattr(addon_module(addon, "strnn_addon.scene.rig_io"), "plays_alone", lambda obj: False)
-    seen = []
-
-    def watch(scene, depsgraph=None):
-        seen.append(scene.frame_current)
-
     steps = denoise.denoise_steps(bpy.context, rig)
-    bpy.app.handlers.frame_change_post.append(watch)
-    try:
-        while next(steps) != "write":
-            pass
-    finally:
-        bpy.app.handlers.frame_change_post.remove(watch)
+    seen = frames_set_until(steps)
     take = set(range(1, 61))
     assert take <= set(seen), sorted(take - set(seen))
     again = [f for f in seen if f != 1]  # (frame 1: the scene's frame, put back after each read)
