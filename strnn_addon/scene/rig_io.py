@@ -584,12 +584,13 @@ def pose_matrices_evaluated_steps(context, obj, rig: Rig | list[str], frames: np
         world[k] = world_matrix(obj)
 
     try:
-        if len(frames) and plays_alone(obj) and not anim.active_fcurves(obj):  # nothing plays: one pose
+        alone = len(frames) > 0 and plays_alone(obj)
+        if alone and not anim.active_fcurves(obj):  # nothing plays: one pose
             with skin_paused(context, obj):
                 layer.update()
                 out[:], world[:] = matrices(obj.pose.bones, "matrix", len(order))[perm], world_matrix(obj)
             return out, world
-        if len(frames) and plays_alone(obj):
+        if alone:
             stand_in = StandIn(obj, [], [], frames)
         try:
             yield from in_steps(context, obj, len(frames), read)
