@@ -374,22 +374,24 @@ def joint_positions_steps(context, clip: Clip, frames: np.ndarray):
     return zup_to_yup(out)
 
 
-def solve_frames(context, clip: Clip, frames: np.ndarray, positions: np.ndarray,
-                 root: tuple[str, np.ndarray] | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def solve_frames_steps(context, clip: Clip, frames: np.ndarray, positions: np.ndarray,
+                       root: tuple[str, np.ndarray] | None = None):
     """The rig's local pose ``loc`` ``[F, B, 3]``, ``rot`` ``[F, B, 3, 3]`` (float32), and the joints it was solved
     for in armature space ``[F, 21, 3]`` (:func:`write_pose`'s ``joints``), that puts its joints on
     ``positions`` ``[F, 21, 3]`` (Y-up, scene units) at scene ``frames``, each frame starting from its own
-    reference pose (:func:`reference_pose`; ``root``: (a root bone carrying the travel, its armature-space pose
+    reference pose (:func:`reference_pose_steps`; ``root``: (a root bone carrying the travel, its armature-space pose
     ``[F, 4, 4]`` there), :func:`root_carried`): read and solved :data:`CHUNK_FRAMES` frames at a time, so a
-    long take never holds more than one chunk's reference and working arrays."""
+    long take never holds more than one chunk's reference and working arrays. A step generator: where Blender
+    evaluates frames the read did not (the object's place, a control rig's pose), the fraction done."""
     frames = np.asarray(frames, dtype=np.float64)
-    arm_world = world_at(context, clip, frames)
+    arm_world = yield from share(world_at_steps(context, clip, frames), 0.0, 0.5)
     targets = to_armature(clip, positions, arm_world)
     n, b = len(frames), len(clip.rig.names)
     loc, rot = np.empty((n, b, 3), np.float32), np.empty((n, b, 3, 3), np.float32)
     cache = rig_io.KeyCache()
     for part in chunks(n):
-        ref_loc, ref_rot = reference_pose(context, clip, frames[part], cache)
+        ref_loc, ref_rot = yield from share(reference_pose_steps(context, clip, frames[part], cache),
+                                            0.5 + 0.5 * part.start / n, 0.5 * len(frames[part]) / n)
         if root is not None:
             ref_loc, ref_rot = root_carried(clip, root[0], ref_loc, ref_rot, root[1][part])
         loc[part], rot[part] = solve(clip.rig, clip.anchors, targets[part], ref_loc, ref_rot)
@@ -398,11 +400,16 @@ def solve_frames(context, clip: Clip, frames: np.ndarray, positions: np.ndarray,
 
 def reference_pose(context, clip: Clip, frames: np.ndarray,
                    cache: rig_io.KeyCache | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`reference_pose_steps` run to the end."""
+    return drive(reference_pose_steps(context, clip, frames, cache))
+
+
+def reference_pose_steps(context, clip: Clip, frames: np.ndarray, cache: rig_io.KeyCache | None = None):
     """The local pose ``loc`` ``[F, B, 3]``, ``rot`` ``[F, B, 3, 3]`` the solve starts from at scene
     ``frames``: the keyed channels (``cache``: their keys, when read already), or on a control rig the
-    evaluated (visual) pose of its joint skeleton."""
+    evaluated (visual) pose of its joint skeleton (a step generator there: :func:`skeleton_pose_steps`)."""
     if clip.controls is not None:
-        pose, _ = skeleton_pose(context, clip, frames, cache)
+        pose, _ = yield from skeleton_pose_steps(context, clip, frames, cache)
         return visual_local(clip.rig, pose)
     loc, rot, _ = rig_io.read_local_pose(clip.obj, clip.rig, clip.channels.fcurves if clip.channels else [], frames,
                                          cache)
@@ -420,23 +427,24 @@ def world_scale(clip: Clip) -> float:
     return float(abs(np.linalg.det(clip.world[:3, :3])) ** (1 / 3))
 
 
-def world_at(context, clip: Clip, frames: np.ndarray) -> np.ndarray:
+def world_at_steps(context, clip: Clip, frames: np.ndarray):
     """The armature object's world matrices ``[F, 4, 4]`` at scene ``frames``: its matrix now where the object
     stays put, else as Blender evaluates it frame by frame (an action that moves the object itself, a parent,
     constraints), so that new frames land where the object will be, wherever the playhead stands; frames the
-    operation has had Blender evaluate already (:attr:`Clip.evaluated`) are not evaluated again."""
+    operation has had Blender evaluate already (:attr:`Clip.evaluated`) are not evaluated again. A step generator
+    where Blender evaluates frames (:func:`rig_io.world_matrices_evaluated_steps`)."""
     frames = np.asarray(frames, dtype=np.float64)
     if not rig_io.object_moves(clip.obj, clip.channels.fcurves if clip.channels else []):
         return np.broadcast_to(clip.world, (len(frames), 4, 4))
     memo = clip.evaluated
     if len(frames) and all(float(f) in memo for f in frames):
         return np.stack([memo[float(f)][1] for f in frames])
-    return rig_io.world_matrices_evaluated(context, clip.obj, frames)
+    return (yield from rig_io.world_matrices_evaluated_steps(context, clip.obj, frames))
 
 
 def to_armature(clip: Clip, pos_yup: np.ndarray, world: np.ndarray | None = None) -> np.ndarray:
     """World Y-up positions ``[F, 21, 3]`` -> armature space (Blender axes), through the object's world matrix
-    now or ``world`` ``[F, 4, 4]``, frame by frame (:func:`world_at`)."""
+    now or ``world`` ``[F, 4, 4]``, frame by frame (:func:`world_at_steps`)."""
     inv = np.linalg.inv(np.broadcast_to(clip.world if world is None else world, (len(pos_yup), 4, 4)))
     return np.einsum("fij,fkj->fki", inv[:, :3, :3], yup_to_zup(pos_yup)) + inv[:, None, :3, 3]
 

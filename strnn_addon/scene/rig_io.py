@@ -491,19 +491,12 @@ def in_steps(context, obj, count: int, each):
             step = min(max(STEP_SECONDS, away * (1.0 - AWAY_SHARE) / AWAY_SHARE), LONGEST_STEP)
 
 
-def world_matrices_evaluated(context, obj, frames: np.ndarray) -> np.ndarray:
-    """The object's world matrices ``[F, 4, 4]`` at scene ``frames``, Blender evaluating each frame (its skin
-    paused: :func:`skin_paused`); the scene's current frame is restored."""
-    scene = context.scene
-    keep = (scene.frame_current, scene.frame_subframe)
-    world = np.empty((len(frames), 4, 4))
-    with skin_paused(context, obj):
-        try:
-            for k, f in enumerate(frames):
-                scene.frame_set(int(np.floor(f)), subframe=float(f - np.floor(f)))
-                world[k] = world_matrix(obj)
-        finally:
-            scene.frame_set(keep[0], subframe=keep[1])
+def world_matrices_evaluated_steps(context, obj, frames: np.ndarray):
+    """The object's world matrices ``[F, 4, 4]`` at scene ``frames`` as Blender evaluates each frame (a parent,
+    constraints, its own channels): :func:`pose_matrices_evaluated_steps` reading no bone, so a step generator the
+    same way (the fraction of the frames read; closed part way, the scene's frame put back), and an object that plays
+    alone is evaluated alone."""
+    _, world = yield from pose_matrices_evaluated_steps(context, obj, [], frames)
     return world
 
 
@@ -580,7 +573,8 @@ def pose_matrices_evaluated_steps(context, obj, rig: Rig | list[str], frames: np
         else:
             f = frames[k]
             scene.frame_set(int(np.floor(f)), subframe=float(f - np.floor(f)))
-        out[k] = matrices(obj.pose.bones, "matrix", len(order))[perm]
+        if perm:
+            out[k] = matrices(obj.pose.bones, "matrix", len(order))[perm]
         world[k] = world_matrix(obj)
 
     try:

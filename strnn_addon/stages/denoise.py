@@ -51,7 +51,7 @@ def denoise_steps(context, obj, *, frame_start: int | None = None, frame_end: in
     if foot_lock:
         clean = lock(clean, fps)
     yield "solve"
-    loc, rot, joints = pipeline.solve_frames(context, clip, frames, clean)
+    loc, rot, joints = yield from pipeline.solve_frames_steps(context, clip, frames, clean)
     record = made_by("Denoise Action", clip, engine_bridge.model_used(prefs(context), "denoise"), key_step=step,
                      frame_start=a, frame_end=b, strength=float(strength), foot_lock=foot_lock,
                      only_selected=only_selected)

@@ -138,7 +138,7 @@ def extend_steps(context, obj, *, frames: int = 120, context_frames: int = 0, fo
     new_frames = key + sign * step * (1 + np.arange(count, dtype=np.float64))
     yield "solve"
     ref_loc, ref_rot = np.repeat(held_loc, count, 0), np.repeat(held_rot, count, 0)
-    arm_world = pipeline.world_at(context, clip, new_frames)
+    arm_world = yield from pipeline.world_at_steps(context, clip, new_frames)
     # a game rig's root carries the travel: on with the body
     root, carry = pipeline.moving_root(context, clip, mem_frames, ctx_frames[-1]), None
     if root is not None:

@@ -82,7 +82,7 @@ def follow_curve_steps(context, obj, *, curve: str = "", frames: int = 0, speed:
     n = len(new_pos)
     start = edge + 1 if edge is not None else context.scene.frame_start
     new_frames = start + np.arange(n, dtype=np.float64)
-    arm_world = pipeline.world_at(context, clip, new_frames)
+    arm_world = yield from pipeline.world_at_steps(context, clip, new_frames)
     ref_loc, ref_rot = np.repeat(held_loc, n, 0), np.repeat(held_rot, n, 0)
     root = pipeline.moving_root(context, clip, ctx, edge) if context_pos is not None else None
     carry = None

@@ -49,7 +49,7 @@ def foot_lock_steps(context, obj, *, frame_start: int | None = None, frame_end: 
     locked = lock(pos, fps, contacts=contacts, fixed=~inside, blend=blend, lower_body=False,
                   passes=footlock.SETTLE_PASSES, ground=heights)
     yield "solve"
-    loc, rot, joints = pipeline.solve_frames(context, clip, frames, locked)
+    loc, rot, joints = yield from pipeline.solve_frames_steps(context, clip, frames, locked)
     record = made_by("Foot Lock", clip, key_step=step, frame_start=a, frame_end=b, blend=float(blend),
                      only_selected=only_selected)
     if surface is not None:

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ...model_core.inference.steps import share
 from ...model_core.ops.extend import MEMORY_S
 from ...model_core.ops.footlock import SETTLE_PASSES
 from ...model_core.ops.inbetween import MAX_GAP_S
@@ -116,8 +117,9 @@ def inbetween_steps(context, obj, *, frame_start: int | None = None, frame_end: 
     read_before, read_after = take_ranges(clip, start, end, follow_take, step)
     gap = np.arange(start - 1 + step, end + 1, step, dtype=np.float64)
     yield "read"
-    taken_before = pipeline.joint_positions(context, clip, read_before)
-    taken_after = pipeline.joint_positions(context, clip, read_after)
+    before = len(read_before) / max(1, len(read_before) + len(read_after))  # each read's share of the stage
+    taken_before = yield from share(pipeline.joint_positions_steps(context, clip, read_before), 0.0, before)
+    taken_after = yield from share(pipeline.joint_positions_steps(context, clip, read_after), before, 1.0 - before)
     previous = pipeline.raw_rotations(clip, start - 1)
     yield "model"
     new_pos = model_call(engine_bridge.run_inbetween, prefs(context), taken_before, taken_after, fps, len(gap),
@@ -131,7 +133,7 @@ def inbetween_steps(context, obj, *, frame_start: int | None = None, frame_end: 
         fixed[len(before):len(before) + len(gap)] = False
         new_pos = lock(seq, fps, fixed=fixed, passes=SETTLE_PASSES)[len(before):len(before) + len(gap)]
     yield "solve"
-    loc, rot, joints = pipeline.solve_frames(context, clip, gap, new_pos)
+    loc, rot, joints = yield from pipeline.solve_frames_steps(context, clip, gap, new_pos)
     record = made_by("Fill Gap", clip, engine_bridge.model_used(prefs(context)), key_step=step,
                      frame_start=start, frame_end=end,
                      follow_take_frames=len(read_before) + len(read_after) if follow_take else 0, foot_lock=foot_lock)

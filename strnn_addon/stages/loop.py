@@ -56,8 +56,9 @@ def loop_steps(context, obj, *, frame_start: int | None = None, frame_end: int |
     root = pipeline.moving_root(context, clip, frames, written[0])
     carry = None
     if root is not None:  # a game rig's root carries the travel: carried with the cycle (in place: it stays)
-        carry = (root.bone, np.linalg.inv(pipeline.world_at(context, clip, written)) @ root.track(cycle, 1, fps))
-    loc, rot, joints = pipeline.solve_frames(context, clip, written, cycle, carry)
+        arm_world = yield from pipeline.world_at_steps(context, clip, written)
+        carry = (root.bone, np.linalg.inv(arm_world) @ root.track(cycle, 1, fps))
+    loc, rot, joints = yield from pipeline.solve_frames_steps(context, clip, written, cycle, carry)
     # a turn the joints leave free (a head's nod, taken from the take) ends the cycle where it began, as the rest does
     rot = closing_turns(rot, closing_weights(len(written), loop.blend))
     record = made_by("Make Loop", clip, engine_bridge.model_used(prefs(context)), key_step=step,

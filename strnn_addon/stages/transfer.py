@@ -71,7 +71,7 @@ def transfer_steps(context, obj, *, source: str = "", foot_lock: bool = True, sc
         new_pos = lock(new_pos, src.fps / step, ground=heights, standing=standing)
     yield "solve"
     n = len(frames)
-    arm_world = pipeline.world_at(context, target, frames)
+    arm_world = yield from pipeline.world_at_steps(context, target, frames)
     ref_loc, ref_rot = np.repeat(ref_loc, n, 0), np.repeat(ref_rot, n, 0)
     carry = None
     if root is not None:  # the root, where it stands now under the body, carried with it from the first frame on

@@ -692,3 +692,30 @@ def frames_set_until(steps, stage: str = "write") -> list[int]:
     finally:
         bpy.app.handlers.frame_change_post.remove(watch)
     return seen
+
+
+def first_fractions(steps, stage: str, count: int = 5) -> list[float]:
+    """The first ``count`` values the operation's ``steps`` yield after ``stage``, each checked to be a fraction of
+    that stage, rising, and all under half of it."""
+    while next(steps) != stage:
+        pass
+    fractions = [next(steps) for _ in range(count)]
+    assert all(isinstance(f, float) for f in fractions) and fractions == sorted(fractions), fractions
+    assert 0 < fractions[0] < fractions[-1] < 0.5, fractions
+    return fractions
+
+
+def on_moving_parent(obj, travel: float = 3.0, frames: int = 60, linear: bool = False):
+    """Parent ``obj`` to an empty ("Vehicle") keyed ``travel`` m along X over ``frames`` frames from frame 1 (a rider
+    on a moving vehicle); ``linear``: at a steady pace up to its last key."""
+    empty = bpy.data.objects.new("Vehicle", None)
+    bpy.context.scene.collection.objects.link(empty)
+    for f, x in ((1, 0.0), (frames, travel)):
+        empty.location.x = x
+        empty.keyframe_insert("location", index=0, frame=f)
+    if linear:
+        for key in fcurves_of(empty)[0].keyframe_points:
+            key.interpolation = "LINEAR"
+    obj.parent = empty
+    return empty
+

@@ -19,6 +19,7 @@ from scenes import (
     key_snapshot,
     mixamo_walk,
     object_walk,
+    on_moving_parent,
     on_steps,
     same_keys,
     walk_bvh,
@@ -360,12 +361,7 @@ def test_a_rig_carried_by_a_moving_parent_is_evaluated_once_a_frame_and_denoised
     the solve takes the rig's place at each frame from that read (not a second pass over the take), and the
     denoised take plays where the parent carries it."""
     obj = import_bvh(walk_bvh(tmp_path, frames=60))
-    empty = bpy.data.objects.new("Vehicle", None)
-    bpy.context.scene.collection.objects.link(empty)
-    for f, x in ((1, 0.0), (60, 3.0)):
-        empty.location.x = x
-        empty.keyframe_insert("location", index=0, frame=f)
-    obj.parent = empty
+    on_moving_parent(obj)
     bpy.context.view_layer.objects.active = obj
     bpy.context.scene.frame_set(1)
     steps = addon_module(addon, "strnn_addon.stages.denoise").denoise_steps(bpy.context, obj)

@@ -17,11 +17,14 @@ from scenes import (
     evaluated_joints,
     fcurves_of,
     find_mocap,
+    first_fractions,
+    frames_set_until,
     import_bvh,
     key_snapshot,
     makehuman_walk,
     mixamo_walk,
     object_walk,
+    on_moving_parent,
     on_steps,
     ramp,
     rigify_walk,
@@ -222,6 +225,45 @@ def test_an_action_that_moves_the_object_itself_is_extended_from_where_it_ends(r
     step = np.linalg.norm(np.diff(pos[:, 0], axis=0), axis=-1)  # the hips' world step, a frame
     assert step.max() < 0.05, step  # 2 cm a frame before the seam; no jump
     assert pos[0, 0, 1] - pos[-1, 0, 1] > 0.3  # and it walks on along -Y, as the take
+
+
+def test_where_an_action_moves_the_object_itself_its_new_frames_place_is_had_without_setting_the_scenes_frame(
+        real_model, addon):
+    """The object's own channels carry the walk and nothing else of the scene moves it: where it stands at each new
+    frame is evaluated with the rig alone (as its read is), not by setting the whole scene to each new frame."""
+    obj = object_walk(60)
+    bpy.context.scene.frame_set(30)
+    steps = addon_module(addon, "strnn_addon.stages.extend").extend_steps(bpy.context, obj, frames=30)
+    assert set(frames_set_until(steps)) <= {30}  # (the scene's own frame, put back after a read)
+    steps.close()
+
+
+def test_a_rig_on_a_moving_parent_is_extended_in_steps_where_the_parent_takes_it(tmp_path, addon, model_calls,
+                                                                                 monkeypatch):
+    """A rig parented to a keyed empty (a rider on a moving vehicle): where the parent takes it at each new frame is
+    had from Blender frame by frame, in steps the operator shows and Esc stops at (closed there, the rig, its take
+    and the scene's frame as they were, no action left behind); run to the end, the new frames ride with the
+    parent, as the model made them."""
+    rig_io = addon_module(addon, "strnn_addon.scene.rig_io")
+    stages = addon_module(addon, "strnn_addon.stages.extend")
+    drive = addon_module(addon, "model_core.inference.steps").drive
+    monkeypatch.setattr(rig_io, "STEP_SECONDS", 0.0)  # hand back after every frame
+    obj = import_bvh(walk_bvh(tmp_path, frames=60))
+    on_moving_parent(obj, 6.0, 120, linear=True)
+    bpy.context.view_layer.objects.active = obj
+    scene = bpy.context.scene
+    scene.frame_set(20)
+    old, keys, actions = action_of(obj), key_snapshot(obj), set(bpy.data.actions)
+    steps = stages.extend_steps(bpy.context, obj, frames=60)
+    first_fractions(steps, "solve")
+    steps.close()
+    assert action_of(obj) is old and set(bpy.data.actions) == actions and same_keys(keys, key_snapshot(obj))
+    assert scene.frame_current == 20
+    new = drive(stages.extend_steps(bpy.context, obj, frames=60))
+    assert action_of(obj) is new and new is not old
+    played = evaluated_joints(addon, obj, np.arange(61, 121))
+    assert np.linalg.norm(played - model_calls.extended(), axis=-1).max() < FOLLOW_CM / 100
+    assert np.ptp(played[:, 0, 0]) > 2.5  # the parent carried it 3 m along X
 
 
 def test_an_action_shared_by_two_armatures_each_on_its_own_slot_is_extended_on_the_right_slot(real_model, addon):

@@ -21,6 +21,7 @@ from scenes import (
     evaluated_joints,
     fcurves_of,
     find_mocap,
+    first_fractions,
     frames_set_until,
     import_bvh,
     key_ik_walk,
@@ -262,19 +263,12 @@ def test_reads_and_the_bake_say_how_far_they_are_and_stopped_part_way_leave_the_
         scene.frame_set(33)
 
     steps = extend.extend_steps(bpy.context, rig, frames=30)
-    assert next(steps) == "read"
-    fractions = [next(steps) for _ in range(5)]
-    assert all(isinstance(f, float) for f in fractions) and fractions == sorted(fractions), fractions
-    assert 0 < fractions[0] < fractions[-1] < 0.5, fractions
+    first_fractions(steps, "read")
     assert body.modifiers["Armature"].show_viewport  # in between, the body is deformed again
     steps.close()
     as_it_was()
     steps = extend.extend_steps(bpy.context, rig, frames=30)
-    while next(steps) != "write":
-        pass
-    fractions = [next(steps) for _ in range(5)]
-    assert all(isinstance(f, float) for f in fractions) and fractions == sorted(fractions), fractions
-    assert 0 < fractions[0] < fractions[-1] < 0.5, fractions
+    first_fractions(steps, "write")
     assert body.modifiers["Armature"].show_viewport
     steps.close()
     as_it_was()
@@ -283,6 +277,30 @@ def test_reads_and_the_bake_say_how_far_they_are_and_stopped_part_way_leave_the_
     after = seen[seen.index("write") + 1:]
     assert len(after) >= 29 and after == sorted(after) and after[-1] < 1, after
     assert action_of(rig) is new and new is not old and new["strnn"]["controls"]["max_error_cm"] < 1.0
+
+
+def test_fill_gaps_reads_on_a_control_rig_say_how_far_they_are_and_stopped_part_way_change_nothing(
+        rig, addon, real_model, monkeypatch):
+    """Fill Gap reads the take either side of the gap (and, following the take, where it did what the gap must) frame
+    by frame on a control rig: the read yields the fraction done, rising over both sides; closed part way, the take
+    and the frame are as they were."""
+    rig_io = addon_module(addon, "strnn_addon.scene.rig_io")
+    stages = addon_module(addon, "strnn_addon.stages.inbetween")
+    monkeypatch.setattr(rig_io, "STEP_SECONDS", 0.0)  # hand back after every frame
+    scene = bpy.context.scene
+    scene.frame_set(12)
+    old, keys, actions = action_of(rig), key_snapshot(rig), set(bpy.data.actions)
+    steps = stages.inbetween_steps(bpy.context, rig, frame_start=25, frame_end=40)
+    assert next(steps) == "read"
+    read = []
+    while isinstance(value := next(steps), float):
+        read.append(value)
+    assert value == "model" and len(read) >= 20 and read == sorted(read) and 0 < read[0] < 0.2 < 0.8 < read[-1] < 1
+    steps.close()
+    first_fractions(steps := stages.inbetween_steps(bpy.context, rig, frame_start=25, frame_end=40), "read")
+    steps.close()
+    assert action_of(rig) is old and set(bpy.data.actions) == actions and same_keys(keys, key_snapshot(rig))
+    assert scene.frame_current == 12
 
 
 def test_a_read_or_bake_keeps_the_time_its_caller_takes_in_between_to_a_tenth(addon, monkeypatch):
