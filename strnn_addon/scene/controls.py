@@ -14,6 +14,7 @@ in the file has changed.
 
 from __future__ import annotations
 
+from contextlib import nullcontext
 from dataclasses import dataclass
 
 import bpy
@@ -346,7 +347,8 @@ def bake_steps(context, obj, control_set_: ControlSet, frames: np.ndarray, targe
             waves = Waves(obj, chosen, layer.update)
         stand_in = rig_io.StandIn(obj, chosen, switches, frames)
         try:
-            yield from rig_io.in_steps(context, obj, len(frames), bake_frame)
+            with rig_io.evaluated_alone(context, obj) if alone else nullcontext(layer) as layer:
+                yield from rig_io.in_steps(context, obj, len(frames), bake_frame)
         finally:
             stand_in.close()
     finally:

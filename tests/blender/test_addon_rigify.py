@@ -360,6 +360,40 @@ def test_a_rig_that_plays_alone_is_read_and_baked_without_setting_the_scenes_fra
     assert worst < 1e-4, worst
 
 
+def test_a_rig_that_plays_alone_is_evaluated_in_a_scene_of_its_own_while_it_is_read_and_baked(rig, addon,
+                                                                                               real_model,
+                                                                                               monkeypatch):
+    """While the generated rig is read and baked, Blender evaluates it in a scene of its own holding it alone (the
+    update of the shot's own scene pays for every object in it); the scene goes when the read or the bake ends, run to
+    the end or closed part way, and the rig then plays in its own scene as before."""
+    rig_io = addon_module(addon, "strnn_addon.scene.rig_io")
+    stages = addon_module(addon, "strnn_addon.stages.extend")
+    drive = addon_module(addon, "model_core.inference.steps").drive
+    monkeypatch.setattr(rig_io, "STEP_SECONDS", 0.0)  # hand back after every frame
+    prop = bpy.data.objects.new("Prop", None)
+    bpy.context.scene.collection.objects.link(prop)
+    scenes = set(bpy.data.scenes)
+
+    def evaluated_alone() -> None:
+        (own,) = set(rig.users_scene) - scenes
+        assert list(own.objects) == [rig]
+        names = {o.name for o in own.view_layers[0].depsgraph.objects}
+        assert rig.name in names and prop.name not in names and "metarig" not in names, names
+
+    steps = stages.extend_steps(bpy.context, rig, frames=30)
+    for stage in ("read", "write"):
+        first_fractions(steps, stage, 2)
+        evaluated_alone()
+    steps.close()
+    assert set(bpy.data.scenes) == scenes and set(rig.users_scene) <= scenes
+    new = drive(stages.extend_steps(bpy.context, rig, frames=30))
+    assert set(bpy.data.scenes) == scenes and action_of(rig) is new
+    bpy.context.scene.frame_set(70)
+    tip = np.array(rig.pose.bones["DEF-hand.L"].tail)
+    bpy.context.scene.frame_set(80)
+    assert np.linalg.norm(np.array(rig.pose.bones["DEF-hand.L"].tail) - tip) > 1e-3  # it plays on in its scene
+
+
 def test_a_rig_plays_alone_only_where_nothing_but_its_action_moves_it(addon, tmp_path):
     """What makes a rig's pose depend on more than its action's channels (so it is read and baked by setting the
     scene's frame): a parent, a constraint or driver reading another object, a driver reading the frame or running
