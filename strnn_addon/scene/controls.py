@@ -341,13 +341,18 @@ def bake_steps(context, obj, control_set_: ControlSet, frames: np.ndarray, targe
 
     try:
         with rig_io.skin_paused(context, obj):  # the meshes it deforms are not evaluated with it meanwhile
-            scene.frame_set(int(frames[0]))
+            if not alone:
+                scene.frame_set(int(frames[0]))
             for s in switches:
                 bones[s.bone][s.prop] = s.value
-            waves = Waves(obj, chosen, layer.update)
+            if not alone:
+                waves = Waves(obj, chosen, layer.update)
         stand_in = rig_io.StandIn(obj, chosen, switches, frames)
         try:
             with rig_io.evaluated_alone(context, obj) if alone else nullcontext(layer) as layer:
+                if alone:  # the rig alone at the first frame, its controls nudged there
+                    stand_in.at(0)
+                    waves = Waves(obj, chosen, layer.update)
                 yield from rig_io.in_steps(context, obj, len(frames), bake_frame)
         finally:
             stand_in.close()
@@ -356,8 +361,7 @@ def bake_steps(context, obj, control_set_: ControlSet, frames: np.ndarray, targe
             bones[name].matrix_basis = basis
         for (bone, prop), value in keep_switch.items():
             bones[bone][prop] = value
-        with rig_io.skin_paused(context, obj):
-            scene.frame_set(keep_frame[0], subframe=keep_frame[1])
+        rig_io.back_in_its_scene(context, obj, None if alone else keep_frame)
     return Baked(loc, nearest_rotation(rot), worst)
 
 

@@ -453,14 +453,26 @@ def evaluated_alone(context, obj):
     :class:`StandIn`: updating the scene's own view layer pays for every object of the shot at each update (a
     generated Rigify rig, 2 ms a frame alone in its scene, 9 ms beside three more characters and a set of 2,000
     objects), this one for the rig alone. Its update makes its evaluation the one Blender writes back to the rig (as
-    the scene's would); on exit the scene's own view layer is updated, and that is again the one."""
+    the scene's would); after it, :func:`back_in_its_scene` makes the scene's own the one again."""
     alone = bpy.data.scenes.new("STRNN evaluation")
     try:
         alone.collection.objects.link(obj)
         yield alone.view_layers[0]
     finally:
         bpy.data.scenes.remove(alone)
+
+
+def back_in_its_scene(context, obj, frame: tuple[int, float] | None) -> None:
+    """After a frame-by-frame read or bake of ``obj``, the scene evaluated as it stands: set back to ``frame`` (frame,
+    subframe) where the read set the scene's frame (the meshes ``obj`` deforms paused meanwhile: they are evaluated
+    once, after), else (the rig evaluated alone, :func:`evaluated_alone`; the scene's frame never moved) its view
+    layer updated, which evaluates the rig with its own action again and makes the scene's evaluation the one Blender
+    writes back to it. Either costs one evaluation of the shot."""
+    if frame is None:
         context.view_layer.update()
+        return
+    with skin_paused(context, obj):
+        context.scene.frame_set(frame[0], subframe=frame[1])
 
 
 @contextmanager
@@ -594,8 +606,8 @@ def pose_matrices_evaluated_steps(context, obj, rig: Rig | list[str], frames: np
             out[k] = matrices(obj.pose.bones, "matrix", len(order))[perm]
         world[k] = world_matrix(obj)
 
+    alone = len(frames) > 0 and plays_alone(obj)
     try:
-        alone = len(frames) > 0 and plays_alone(obj)
         if alone and not anim.active_fcurves(obj):  # nothing plays: one pose
             with skin_paused(context, obj):
                 layer.update()
@@ -610,6 +622,5 @@ def pose_matrices_evaluated_steps(context, obj, rig: Rig | list[str], frames: np
             if stand_in is not None:
                 stand_in.close()
     finally:
-        with skin_paused(context, obj):
-            scene.frame_set(keep[0], subframe=keep[1])
+        back_in_its_scene(context, obj, None if alone else keep)
     return out, world

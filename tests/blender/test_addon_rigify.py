@@ -365,7 +365,7 @@ def test_a_rig_that_plays_alone_is_evaluated_in_a_scene_of_its_own_while_it_is_r
                                                                                                monkeypatch):
     """While the generated rig is read and baked, Blender evaluates it in a scene of its own holding it alone (the
     update of the shot's own scene pays for every object in it); the scene goes when the read or the bake ends, run to
-    the end or closed part way, and the rig then plays in its own scene as before."""
+    the end or closed part way, and the rig then stands and plays in its own scene as before."""
     rig_io = addon_module(addon, "strnn_addon.scene.rig_io")
     stages = addon_module(addon, "strnn_addon.stages.extend")
     drive = addon_module(addon, "model_core.inference.steps").drive
@@ -380,12 +380,21 @@ def test_a_rig_that_plays_alone_is_evaluated_in_a_scene_of_its_own_while_it_is_r
         names = {o.name for o in own.view_layers[0].depsgraph.objects}
         assert rig.name in names and prop.name not in names and "metarig" not in names, names
 
+    bpy.context.scene.frame_set(12)
+
+    def posed() -> np.ndarray:  # as the rig stands now
+        return np.array([rig.pose.bones[n].matrix for n in ("DEF-hand.L", "DEF-foot.R", "DEF-spine")])
+
+    here = posed()
     steps = stages.extend_steps(bpy.context, rig, frames=30)
     for stage in ("read", "write"):
         first_fractions(steps, stage, 2)
         evaluated_alone()
     steps.close()
     assert set(bpy.data.scenes) == scenes and set(rig.users_scene) <= scenes
+    # the rig as its scene plays it at its frame, without the frame set again
+    assert bpy.context.scene.frame_current == 12
+    assert np.abs(posed() - here).max() < 1e-6
     new = drive(stages.extend_steps(bpy.context, rig, frames=30))
     assert set(bpy.data.scenes) == scenes and action_of(rig) is new
     bpy.context.scene.frame_set(70)
