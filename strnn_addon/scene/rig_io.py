@@ -310,6 +310,24 @@ def object_moves(obj, fcurves) -> bool:
     return bool(obj.parent or len(obj.constraints) or any(not p.startswith("pose.bones") for p in paths))
 
 
+def stays_put(obj) -> bool:
+    """Whether ``obj`` is an empty that nothing moves: no animation (action, NLA strips, drivers), no constraint, and a
+    parent, if any, that stays put too. Its place is the same at every frame."""
+    while obj is not None:
+        ad = obj.animation_data
+        if obj.type != "EMPTY" or len(obj.constraints) or (ad is not None and (
+                ad.action is not None or len(ad.nla_tracks) or len(ad.drivers))):
+            return False
+        obj = obj.parent
+    return True
+
+
+def _read_others(obj) -> list:
+    """The objects but ``obj`` itself that it reads (:func:`_read_by`); None for a name not found (a linked
+    library's object of the same name as a local one)."""
+    return [bpy.data.objects.get(n) for n in sorted(_read_by(obj) - {obj.name})]
+
+
 def _read_by(obj) -> set[str]:
     """The objects ``obj``'s pose or place is read from: its parent, its and its bones' constraints' targets, its
     drivers' (and its armature's) variables' objects."""
@@ -421,11 +439,13 @@ TIMED_CONSTRAINTS = {"FOLLOW_TRACK", "CAMERA_SOLVER", "OBJECT_SOLVER", "TRANSFOR
 
 def plays_alone(obj) -> bool:
     """Whether armature ``obj``'s pose and place at a frame are its action's channels there and nothing else of the
-    scene: no parent, no constraint or driver reading another object or the scene's time, no NLA strips playing,
-    its armature not animated. Such a rig can be played frame by frame through a :class:`StandIn` and Blender made to
-    evaluate it alone, where setting the scene's frame evaluates every animated object in it (the other characters
-    of a shot). Where unsure (a driver's Python expression), not."""
-    if obj.parent is not None or _read_by(obj) - {obj.name}:
+    scene: no parent or constraint reading another object (but an empty that stays put, below), no driver reading
+    another object or the scene's time, no NLA strips playing, its armature not animated. Such a rig can be played frame
+    by frame through a :class:`StandIn` and Blender made to evaluate it alone, where setting the scene's frame evaluates
+    every animated object in it (the other characters of a shot). A parent or a constraint's target that stays put
+    (:func:`stays_put`: an empty nothing moves, as a character's root or an IK target left where it was placed) is not
+    the scene moving it. Where unsure (a driver's Python expression), not."""
+    if any(o is None or not stays_put(o) for o in _read_others(obj)):  # (a driver reading one: below)
         return False
     cons = list(obj.constraints) + [c for pb in obj.pose.bones for c in pb.constraints]
     if any(c.type in TIMED_CONSTRAINTS for c in cons):
@@ -449,14 +469,16 @@ def plays_alone(obj) -> bool:
 @contextmanager
 def evaluated_alone(context, obj):
     """A view layer where Blender evaluates ``obj`` and nothing else: a scene of its own (removed on exit) in which the
-    object is linked, not copied. For a rig that plays alone (:func:`plays_alone`), played through a
-    :class:`StandIn`: updating the scene's own view layer pays for every object of the shot at each update (a
-    generated Rigify rig, 2 ms a frame alone in its scene, 9 ms beside three more characters and a set of 2,000
-    objects), this one for the rig alone. Its update makes its evaluation the one Blender writes back to the rig (as
-    the scene's would); after it, :func:`back_in_its_scene` makes the scene's own the one again."""
+    object is linked, not copied (with the empties that stay put it hangs from or aims at). For a rig that plays alone
+    (:func:`plays_alone`), played through a :class:`StandIn`: updating the scene's own view layer pays for every object
+    of the shot at each update (a generated Rigify rig, 2 ms a frame alone in its scene, 9 ms beside three more
+    characters and a set of 2,000 objects), this one for the rig alone. Its update makes its evaluation the one Blender
+    writes back to the rig (as the scene's would); after it, :func:`back_in_its_scene` makes the scene's own the one
+    again."""
     alone = bpy.data.scenes.new("STRNN evaluation")
     try:
-        alone.collection.objects.link(obj)
+        for o in [obj] + _read_others(obj):  # the rig, and the empties that stay put it hangs from or aims at
+            alone.collection.objects.link(o)
         yield alone.view_layers[0]
     finally:
         bpy.data.scenes.remove(alone)

@@ -414,6 +414,9 @@ def test_a_rig_plays_alone_only_where_nothing_but_its_action_moves_it(addon, tmp
     assert rig_io.plays_alone(obj)
     empty = bpy.data.objects.new("Mover", None)
     bpy.context.scene.collection.objects.link(empty)
+    for f, x in ((1, 0.0), (40, 2.0)):  # an empty that moves
+        empty.location.x = x
+        empty.keyframe_insert("location", index=0, frame=f)
     bone = obj.pose.bones[0]
 
     def driven(expression: str, target=None) -> None:
@@ -447,14 +450,31 @@ def test_a_rig_plays_alone_only_where_nothing_but_its_action_moves_it(addon, tmp
     obj.data.keyframe_insert('["fold"]', frame=1)
     assert not rig_io.plays_alone(obj)
     obj.data.animation_data_clear()
-    for f, x in ((1, 0.0), (40, 2.0)):
-        empty.location.x = x
-        empty.keyframe_insert("location", index=0, frame=f)
+    # an empty that stays put (a character's root, an IK target left where it was placed) is not the scene moving it
+    root = bpy.data.objects.new("Root", None)
+    bpy.context.scene.collection.objects.link(root)
+    root.location, root.rotation_euler = (3.0, 1.0, 0.0), (0.0, 0.0, 0.7)
+    obj.parent = root
+    bone.constraints.new("COPY_ROTATION").target = root
+    assert rig_io.plays_alone(obj)
+    root.constraints.new("COPY_LOCATION").target = empty
+    assert not rig_io.plays_alone(obj)
+    root.constraints.remove(root.constraints[0])
+    bone.constraints.remove(bone.constraints[0])
+    seen = []
+    bpy.app.handlers.frame_change_post.append(watch := lambda scene, depsgraph=None: seen.append(scene.frame_current))
+    try:  # read as a rig alone: the scene's frame never set
+        still = pipeline.joint_positions(bpy.context, pipeline.prepare(bpy.context, obj), np.array([5.0, 20.0, 35.0]))
+    finally:
+        bpy.app.handlers.frame_change_post.remove(watch)
+    assert seen == [], seen
+    zup = addon_module(addon, "model_core.motion.conventions").zup_to_yup
+    assert np.abs(still - zup(evaluated_joints(addon, obj, [5.0, 20.0, 35.0]))).max() < 1e-5
+    assert still[:, 0, 0].min() > 2.0  # where the root puts it
     obj.parent = empty
     clip = pipeline.prepare(bpy.context, obj)
     frames = np.array([5.0, 20.0, 35.0])
     read = pipeline.joint_positions(bpy.context, clip, frames)
-    zup = addon_module(addon, "model_core.motion.conventions").zup_to_yup
     assert np.abs(read - zup(evaluated_joints(addon, obj, frames))).max() < 1e-5
     assert np.ptp(read[:, 0, 0]) > 1.0  # the empty carried it
 
