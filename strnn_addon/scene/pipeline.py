@@ -375,16 +375,17 @@ def joint_positions_steps(context, clip: Clip, frames: np.ndarray):
 
 
 def solve_frames_steps(context, clip: Clip, frames: np.ndarray, positions: np.ndarray,
-                       root: tuple[str, np.ndarray] | None = None):
+                       root: tuple[str, np.ndarray] | None = None, world: np.ndarray | None = None):
     """The rig's local pose ``loc`` ``[F, B, 3]``, ``rot`` ``[F, B, 3, 3]`` (float32), and the joints it was solved
     for in armature space ``[F, 21, 3]`` (:func:`write_pose`'s ``joints``), that puts its joints on
     ``positions`` ``[F, 21, 3]`` (Y-up, scene units) at scene ``frames``, each frame starting from its own
     reference pose (:func:`reference_pose_steps`; ``root``: (a root bone carrying the travel, its armature-space pose
     ``[F, 4, 4]`` there), :func:`root_carried`): read and solved :data:`CHUNK_FRAMES` frames at a time, so a
-    long take never holds more than one chunk's reference and working arrays. A step generator: where Blender
+    long take never holds more than one chunk's reference and working arrays. ``world``: the object's world
+    matrices there (:func:`world_at_steps`), where the caller has them already. A step generator: where Blender
     evaluates frames the read did not (the object's place, a control rig's pose), the fraction done."""
     frames = np.asarray(frames, dtype=np.float64)
-    arm_world = yield from share(world_at_steps(context, clip, frames), 0.0, 0.5)
+    arm_world = world if world is not None else (yield from share(world_at_steps(context, clip, frames), 0.0, 0.5))
     targets = to_armature(clip, positions, arm_world)
     n, b = len(frames), len(clip.rig.names)
     loc, rot = np.empty((n, b, 3), np.float32), np.empty((n, b, 3, 3), np.float32)

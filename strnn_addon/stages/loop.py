@@ -54,11 +54,11 @@ def loop_steps(context, obj, *, frame_start: int | None = None, frame_end: int |
     written = frames[0] + step * np.arange(loop.seam + 1, dtype=np.float64)
     yield "solve"
     root = pipeline.moving_root(context, clip, frames, written[0])
-    carry = None
+    carry, arm_world = None, None
     if root is not None:  # a game rig's root carries the travel: carried with the cycle (in place: it stays)
         arm_world = yield from pipeline.world_at_steps(context, clip, written)
         carry = (root.bone, np.linalg.inv(arm_world) @ root.track(cycle, 1, fps))
-    loc, rot, joints = yield from pipeline.solve_frames_steps(context, clip, written, cycle, carry)
+    loc, rot, joints = yield from pipeline.solve_frames_steps(context, clip, written, cycle, carry, arm_world)
     # a turn the joints leave free (a head's nod, taken from the take) ends the cycle where it began, as the rest does
     rot = closing_turns(rot, closing_weights(len(written), loop.blend))
     record = made_by("Make Loop", clip, engine_bridge.model_used(prefs(context)), key_step=step,
